@@ -8,6 +8,7 @@ from __future__ import annotations
 
 from . import _requests as requests
 from ._bcc import bcc
+from ._bus import MUTATING_COMMANDS, Bus, open_bus
 from ._codes import (
     Direction,
     NakCode,
@@ -19,6 +20,7 @@ from ._codes import (
 )
 from ._commands import COMMAND_SPECS, Command, CommandSpec, ReplyKind, RequestData
 from ._constants import BROADCAST, MAX_NODE, MIN_NODE
+from ._drive import Broadcast, Drive
 from ._errors import (
     BusClosedError,
     LocalProtocolError,
@@ -43,6 +45,8 @@ from ._events import (
     Reply,
 )
 from ._framing import ParserStats
+from ._line import LineSettings
+from ._link import ReconnectPolicy
 from ._matching import answers
 from ._parameters import (
     PARAMETERS,
@@ -71,7 +75,12 @@ from ._reply_encoding import (
 )
 from ._request_parser import NAK_FOR_BAD_REQUEST, RequestParser
 from ._requests import Request, encode_request
+from ._stats import BusStats, StatsSnapshot, TransactionStats
 from ._terminals import InputMonitor, InputTerminal, OutputTerminal
+from ._timing import BusTiming
+from ._trace import TraceHook, TraceRecord
+from ._url import BusAddress, parse_bus_url, parse_node_list
+from .transports import LineFaults
 
 __version__ = "0.1.0"
 
@@ -80,22 +89,31 @@ __all__ = [
     "COMMAND_SPECS",
     "MAX_NODE",
     "MIN_NODE",
+    "MUTATING_COMMANDS",
     "NAK_FOR_BAD_REQUEST",
     "PARAMETERS",
     "AckDataReply",
     "AckReply",
     "BadFrame",
     "BadFrameReason",
+    "Broadcast",
+    "Bus",
+    "BusAddress",
     "BusClosedError",
+    "BusStats",
+    "BusTiming",
     "Command",
     "CommandSpec",
     "DataReply",
     "Direction",
     "DiscardReason",
     "Discarded",
+    "Drive",
     "InputMonitor",
     "InputTerminal",
     "InverterStatus",
+    "LineFaults",
+    "LineSettings",
     "LocalProtocolError",
     "MonitorData",
     "NakCode",
@@ -107,6 +125,7 @@ __all__ = [
     "ParserStats",
     "ProtocolError",
     "ReadOnlyError",
+    "ReconnectPolicy",
     "RemoteProtocolError",
     "Reply",
     "ReplyKind",
@@ -116,9 +135,13 @@ __all__ = [
     "RequestData",
     "RequestParser",
     "SJ300Error",
+    "StatsSnapshot",
     "StatusA",
     "StatusB",
     "StatusC",
+    "TraceHook",
+    "TraceRecord",
+    "TransactionStats",
     "TransportError",
     "TripHistory",
     "TripRecord",
@@ -139,6 +162,9 @@ __all__ = [
     "encode_trip_history",
     "motor_capacity_kw",
     "normalize_code",
+    "open_bus",
     "parameter_info",
+    "parse_bus_url",
+    "parse_node_list",
     "requests",
 ]

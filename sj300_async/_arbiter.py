@@ -1,0 +1,257 @@
+"""The bus arbiter: exactly one transaction on the half-duplex line at a time.
+
+A transaction runs in the caller's own task, while it holds the line
+(:class:`LineQueue`): cancelling the caller cancels exactly its own
+transaction, with no worker task to leak or to desynchronize. The rules,
+each of which has its own test:
+
+1. The line is taken in arrival order; ``urgent`` requests (stop) go first.
+2. Before writing, the line must be clean: after a failed transaction it is
+   drained (see :mod:`._timing`), and after every reply or broadcast it rests
+   for the guard interval.
+3. The reply waiter is registered *before* the request is written, so an
+   answer can never arrive unobserved.
+4. While waiting, every frame that is not an answer to this request (another
+   node, the wrong shape for the command) is counted and discarded; the wait
+   goes on until the deadline. A corrupted frame is remembered: if no valid
+   answer comes, the attempt fails with :class:`RemoteProtocolError` rather
+   than a plain time-out.
+5. An attempt that ends without its answer — time-out, corrupted answer,
+   transport error, or the caller's cancellation — leaves the line dirty: the
+   next transaction drains it first.
+6. Retries (time-outs, corrupted answers, NAK 01..08; never NAK 11/13/16, and
+   never a transport error, which must fail promptly) release the line and
+   queue again at the back, so one failing drive cannot starve the others.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import logging
+from dataclasses import dataclass
+
+from ._codes import NakCode
+from ._errors import NakError, RemoteProtocolError, ReplyTimeoutError, TransportError
+from ._events import BadFrame, Discarded, NakReply, ParserEvent, Reply
+from ._line import LineSettings
+from ._linequeue import LineQueue
+from ._link import Link
+from ._matching import answers
+from ._requests import Request
+from ._stats import BusStats, TransactionStats
+from ._timing import BusTiming
+
+__all__ = ["Arbiter"]
+
+_log = logging.getLogger("sj300_async.arbiter")
+
+
+@dataclass(slots=True)
+class _Outstanding:
+    """The transaction currently on the line."""
+
+    request: Request
+    waiter: asyncio.Future[Reply | None]
+    stats: TransactionStats
+    bad_frame: BadFrame | None = None
+
+
+class Arbiter:
+    """Serializes transactions on one line and enforces the timing rules."""
+
+    def __init__(self, link: Link, line: LineSettings, timing: BusTiming, stats: BusStats) -> None:
+        self.link = link
+        self.line = line
+        self.timing = timing
+        self.stats = stats
+        self.queue = LineQueue()
+        self._loop = asyncio.get_running_loop()
+        self._outstanding: _Outstanding | None = None
+        # Loop time before which nothing may be written (guard interval).
+        self._rest_until = 0.0
+        # After a failure: how long the line must be quiet before the next write.
+        self._drain_quiet: float | None = None
+        self._failed_at = 0.0
+        self._last_rx = 0.0
+
+    # -- LineListener ------------------------------------------------------------
+
+    def bytes_received(self, now: float) -> None:
+        self._last_rx = now
+
+    def event_received(self, event: ParserEvent, now: float) -> None:
+        out = self._outstanding
+        if isinstance(event, Discarded):
+            return  # counted by the protocol adapter
+        if isinstance(event, BadFrame):
+            if out is not None and out.bad_frame is None:
+                out.bad_frame = event
+            return
+        if out is None or out.waiter.done():
+            self.stats.unsolicited_frames += 1
+            _log.debug("unsolicited frame discarded: %s", event)
+            return
+        if answers(out.request, event):
+            out.waiter.set_result(event)
+            return
+        self.stats.stray_frames += 1
+        out.stats.discarded_frames += 1
+        _log.debug("stray frame while waiting for node %02d: %s", out.request.node, event)
+
+    def connection_lost(self, exc: BaseException | None) -> None:
+        out = self._outstanding
+        if out is not None and not out.waiter.done():
+            out.waiter.set_exception(
+                TransportError(f"connection lost while waiting for node {out.request.node:02d}")
+            )
+
+    # -- transactions ----------------------------------------------------------------
+
+    async def transact(
+        self,
+        request: Request,
+        stats: TransactionStats,
+        *,
+        wait_s: float = 0.0,
+        timeout_s: float | None = None,
+        retries: int = 0,
+        urgent: bool = False,
+    ) -> Reply | None:
+        """Run *request* on the line; return its positive answer (None for a broadcast).
+
+        Raises:
+            NakError: the drive refused (after retries for transmission errors).
+            ReplyTimeoutError: no answer in time, on every attempt.
+            RemoteProtocolError: only corrupted answers, on every attempt.
+            TransportError: the link is down or dropped (never retried).
+            BusClosedError: the bus is closed.
+        """
+        attempt = 0
+        while True:
+            self.link.require()  # fail promptly, before queueing, while the link is down
+            await self.queue.acquire(urgent)
+            try:
+                return await self._attempt(request, stats, wait_s, timeout_s)
+            except (ReplyTimeoutError, RemoteProtocolError, NakError) as exc:
+                if attempt >= retries or not _retryable(exc):
+                    raise
+                attempt += 1
+                stats.retries += 1
+                if stats is not self.stats.transactions:
+                    self.stats.transactions.retries += 1
+                _log.debug("retry %d of %s: %s", attempt, request.frame.hex(" "), exc)
+            finally:
+                self.queue.release()
+
+    async def _attempt(
+        self,
+        request: Request,
+        stats: TransactionStats,
+        wait_s: float,
+        timeout_s: float | None,
+    ) -> Reply | None:
+        protocol = self.link.require()
+        if self._drain_quiet is not None:
+            await self._drain()
+            protocol = self.link.require()
+        delay = self._rest_until - self._loop.time()
+        if delay > 0:
+            await asyncio.sleep(delay)
+            protocol = self.link.require()
+        await protocol.wait_writable()
+        totals = self.stats.transactions
+        if request.is_broadcast:
+            protocol.write(request.frame)
+            self._count(stats, totals, "broadcasts")
+            self._rest_until = self._loop.time() + self.timing.after_broadcast(request, self.line)
+            return None
+
+        timeout = timeout_s or self.timing.response_timeout(request, self.line, wait_s)
+        waiter: asyncio.Future[Reply | None] = self._loop.create_future()
+        out = _Outstanding(request, waiter, stats)
+        self._outstanding = out  # registered before the write: no answer goes unseen
+        sent = self._loop.time()
+        timer = self._loop.call_at(sent + timeout, _expire, waiter)
+        answered = False
+        try:
+            protocol.write(request.frame)
+            self._count(stats, totals, "requests")
+            reply = await waiter
+            if reply is None:  # the deadline passed
+                if out.bad_frame is not None:
+                    self._count(stats, totals, "protocol_errors")
+                    raise RemoteProtocolError(
+                        f"node {request.node:02d}: no valid answer to command "
+                        f"{request.command.wire.decode()}, only a corrupted frame "
+                        f"({out.bad_frame.reason.value}: {out.bad_frame.body!r})"
+                    )
+                self._count(stats, totals, "timeouts")
+                raise ReplyTimeoutError(
+                    f"node {request.node:02d} did not answer command "
+                    f"{request.command.wire.decode()} within {timeout * 1000:.0f} ms"
+                )
+            answered = True
+            latency = self._loop.time() - sent
+            self._count(stats, totals, "replies")
+            stats.record_latency(latency)
+            if stats is not totals:
+                totals.record_latency(latency)
+            if isinstance(reply, NakReply):
+                stats.naks[reply.code] += 1
+                if stats is not totals:
+                    totals.naks[reply.code] += 1
+                raise NakError(reply.node, reply.code)
+            return reply
+        except TransportError:
+            self._count(stats, totals, "transport_errors")
+            raise
+        except asyncio.CancelledError:
+            self._count(stats, totals, "cancelled")
+            raise
+        finally:
+            timer.cancel()
+            self._outstanding = None
+            if answered:
+                self._rest_until = self._loop.time() + self.timing.guard(self.line)
+            else:
+                quiet = self.timing.drain_quiet(timeout, self.line)
+                self._drain_quiet = max(self._drain_quiet or 0.0, quiet)
+                self._failed_at = self._loop.time()
+
+    async def _drain(self) -> None:
+        """Wait until the line has been quiet long enough; discard what arrives meanwhile."""
+        assert self._drain_quiet is not None
+        quiet = self._drain_quiet
+        start = self._loop.time()
+        give_up = start + self.timing.drain_max_s
+        self.stats.drains += 1
+        while True:
+            now = self._loop.time()
+            ready = max(self._last_rx, self._failed_at) + quiet
+            if now >= ready:
+                break
+            if now >= give_up:
+                _log.warning("line did not go quiet within %.1f s; going on", quiet)
+                break
+            await asyncio.sleep(min(ready, give_up) - now)
+        protocol = self.link.protocol
+        if protocol is not None:
+            protocol.reset_parser()
+        self._drain_quiet = None
+
+    @staticmethod
+    def _count(stats: TransactionStats, totals: TransactionStats, name: str) -> None:
+        setattr(stats, name, getattr(stats, name) + 1)
+        if stats is not totals:
+            setattr(totals, name, getattr(totals, name) + 1)
+
+
+def _expire(waiter: asyncio.Future[Reply | None]) -> None:
+    if not waiter.done():
+        waiter.set_result(None)
+
+
+def _retryable(exc: BaseException) -> bool:
+    if isinstance(exc, NakError):
+        return NakCode(exc.code).is_transmission_error
+    return True

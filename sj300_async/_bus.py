@@ -1,0 +1,303 @@
+"""The Bus: one line, its link, its arbiter, and the drives on it; and ``open_bus``."""
+
+from __future__ import annotations
+
+import asyncio
+import logging
+from collections.abc import AsyncIterator
+from contextlib import asynccontextmanager
+from typing import TYPE_CHECKING, Final
+
+from ._arbiter import Arbiter
+from ._commands import Command
+from ._drive import Broadcast, Drive
+from ._errors import BusClosedError, LocalProtocolError, ReadOnlyError
+from ._events import Reply
+from ._line import INSTANT_LINE, LineSettings
+from ._link import Connector, Link, ReconnectPolicy
+from ._parser import ReplyParser
+from ._protocol import LineProtocol
+from ._requests import Request
+from ._stats import BusStats, TransactionStats
+from ._timing import BusTiming
+from ._trace import TraceHook
+from ._url import BusAddress, parse_bus_url, parse_flag
+from .transports import LineFaults, loopback_connector, serial_connector, tcp_connector
+
+if TYPE_CHECKING:
+    from .simulator import SimulatedBus
+
+__all__ = ["MUTATING_COMMANDS", "Bus", "open_bus"]
+
+_log = logging.getLogger("sj300_async.bus")
+
+#: Commands that change a drive; a read-only bus refuses them.
+MUTATING_COMMANDS: Final = frozenset(
+    {
+        Command.RUN,
+        Command.SET_FREQUENCY,
+        Command.SET_TERMINALS,
+        Command.WRITE_PARAMETER,
+        Command.INITIALIZE,
+        Command.STORE,
+        Command.RECALCULATE,
+    }
+)
+
+#: A TCP bridge adds network latency on top of the line's wire time.
+_TCP_MARGIN_S: Final = 0.1
+
+
+class Bus:
+    """One RS-485 line and the drives on it. Open it with :func:`open_bus`.
+
+    Attributes:
+        stats: counters of the whole bus.
+        line: the line settings used for wire-time arithmetic.
+        timing: the timing policy.
+        retries: attempts after the first for transmission errors and time-outs.
+        read_only: refuse every command that changes a drive.
+    """
+
+    def __init__(
+        self,
+        connector: Connector,
+        *,
+        description: str,
+        line: LineSettings,
+        timing: BusTiming,
+        retries: int = 2,
+        strip_echo: bool = False,
+        read_only: bool = False,
+        trace: TraceHook | None = None,
+        reconnect: ReconnectPolicy | None = None,
+    ) -> None:
+        if isinstance(retries, bool) or not isinstance(retries, int) or retries < 0:
+            raise LocalProtocolError(f"retries must be an int >= 0, got {retries!r}")
+        self.description = description
+        self.stats = BusStats()
+        self.line = line
+        self.timing = timing
+        self.retries = retries
+        self.read_only = read_only
+        self._trace = trace
+        self._strip_echo = strip_echo
+        self._parser = ReplyParser()
+        self.link = Link(
+            connector, self._make_protocol, self.stats, description=description, policy=reconnect
+        )
+        self._arbiter = Arbiter(self.link, line, timing, self.stats)
+        self._drives: dict[int, Drive] = {}
+        self._broadcast = Broadcast(self)
+        self._closed = False
+        #: The in-memory simulator behind a sim:// bus (None otherwise): tests use its
+        #: fault hooks, demos trip its drives.
+        self.simulator: SimulatedBus | None = None
+
+    def _make_protocol(self) -> LineProtocol:
+        # A new connection starts with a clean parser: bytes of the old one are gone.
+        self._parser.reset()
+        return LineProtocol(
+            self._parser,
+            self._arbiter,
+            self.stats,
+            strip_echo=self._strip_echo,
+            trace=self._trace,
+        )
+
+    @property
+    def trace(self) -> TraceHook | None:
+        """The hook that sees every frame; set it to None to stop tracing."""
+        return self._trace
+
+    @trace.setter
+    def trace(self, hook: TraceHook | None) -> None:
+        self._trace = hook
+        protocol = self.link.protocol
+        if protocol is not None:
+            protocol.trace = hook
+
+    @property
+    def connected(self) -> bool:
+        """True while the link is up."""
+        return self.link.connected
+
+    @property
+    def closed(self) -> bool:
+        """True once the bus is closed."""
+        return self._closed
+
+    def drive(self, node: int, *, wait_time_s: float | None = None) -> Drive:
+        """Return the :class:`Drive` at *node* (the same object each time).
+
+        Args:
+            wait_time_s: the drive's C078 wait time in seconds, if known.
+
+        Raises:
+            LocalProtocolError: *node* is not 1..32.
+        """
+        drive = self._drives.get(node)
+        if drive is None:
+            drive = Drive(self, node)
+            self._drives[node] = drive
+        if wait_time_s is not None:
+            if not 0 <= wait_time_s <= 1.0:
+                raise LocalProtocolError(f"C078 wait time is 0..1 s, got {wait_time_s!r}")
+            drive.wait_time_s = wait_time_s
+        return drive
+
+    @property
+    def drives(self) -> dict[int, Drive]:
+        """The drives handed out so far, by node."""
+        return dict(self._drives)
+
+    @property
+    def broadcast(self) -> Broadcast:
+        """Commands to every drive at once (no reply)."""
+        return self._broadcast
+
+    async def _execute(
+        self,
+        request: Request,
+        stats: TransactionStats,
+        *,
+        wait_s: float = 0.0,
+        timeout_s: float | None = None,
+        urgent: bool = False,
+    ) -> Reply | None:
+        if self._closed:
+            raise BusClosedError(f"bus {self.description} is closed")
+        if self.read_only and request.command in MUTATING_COMMANDS:
+            raise ReadOnlyError(
+                f"bus {self.description} is read-only: command "
+                f"{request.command.wire.decode()} ({request.command.name}) refused"
+            )
+        return await self._arbiter.transact(
+            request, stats, wait_s=wait_s, timeout_s=timeout_s, retries=self.retries, urgent=urgent
+        )
+
+    def close(self) -> None:
+        """Close the bus: the link closes, waiting requests fail. Idempotent."""
+        self._closed = True
+        self.link.close()
+
+
+def _sim_connector(
+    address: BusAddress,
+    line: LineSettings,
+    faults: tuple[LineFaults | None, LineFaults | None] | None,
+) -> tuple[Connector, SimulatedBus]:
+    from .simulator import LinePacing, SimulatedBus, SimulatorEndpoint
+
+    options = address.sim_options
+    sim = SimulatedBus(
+        nodes=address.nodes,
+        factory_defaults=parse_flag("factory_defaults", options.get("factory_defaults", "0")),
+    )
+    if "wait_ms" in options:
+        try:
+            wait_ms = int(options["wait_ms"])
+        except ValueError:
+            raise LocalProtocolError(
+                f"wait_ms must be an integer, got {options['wait_ms']!r}"
+            ) from None
+        for drive in sim.drives.values():
+            drive.set_wait_ms(wait_ms)
+    pacing = None
+    if parse_flag("pace", options.get("pace", "0")):
+        pacing = LinePacing(line.baudrate, line.bytesize, line.parity, line.stopbits)
+    to_peer, to_host = faults or (None, None)
+    connector = loopback_connector(
+        lambda send: SimulatorEndpoint(sim, send=send, pacing=pacing),
+        to_peer=to_peer,
+        to_host=to_host,
+    )
+    return connector, sim
+
+
+@asynccontextmanager
+async def open_bus(
+    url: str,
+    *,
+    timeout: float | None = None,  # noqa: ASYNC109 - the response time-out, not a deadline
+    retries: int = 2,
+    strip_echo: bool | None = None,
+    read_only: bool = False,
+    line: LineSettings | None = None,
+    timing: BusTiming | None = None,
+    trace: TraceHook | None = None,
+    reconnect: ReconnectPolicy | None = None,
+    faults: tuple[LineFaults | None, LineFaults | None] | None = None,
+) -> AsyncIterator[Bus]:
+    """Open a bus, connect, and close everything on exit (also on error and cancellation).
+
+    Args:
+        url: ``tcp://host:port``, ``serial:///dev/ttyUSB0?baudrate=19200&parity=E``,
+            a bare device path, or ``sim://?nodes=1-8`` (see :mod:`sj300_async._url`).
+        timeout: a fixed response time-out in seconds for every request
+            (default: computed from the line settings, the drive's wait time
+            and a margin).
+        retries: attempts after the first, for time-outs and transmission errors.
+        strip_echo: remove the RS-485 adapter's local echo (default: the URL's ``echo``).
+        read_only: refuse every command that changes a drive.
+        line: line settings (default: the URL's, else 19200 8N1; instant for sim://).
+        timing: the full timing policy (``timeout`` overrides its fixed time-out).
+        trace: a hook that sees every frame.
+        reconnect: when to reconnect a dropped link.
+        faults: (to-drive, to-host) line faults, for sim:// only (tests and soaks).
+
+    Raises:
+        LocalProtocolError: a bad URL or setting (nothing is opened).
+        TransportError: the first connection failed.
+    """
+    address = parse_bus_url(url)
+    if line is None:
+        line = address.line or (INSTANT_LINE if address.scheme == "sim" else LineSettings())
+    if timing is None:
+        timing = BusTiming(margin_s=_TCP_MARGIN_S) if address.scheme == "tcp" else BusTiming()
+    if timeout is not None:
+        timing = BusTiming(
+            margin_s=timing.margin_s,
+            fixed_timeout_s=timeout,
+            guard_chars=timing.guard_chars,
+            broadcast_processing_s=timing.broadcast_processing_s,
+            drain_max_s=timing.drain_max_s,
+        )
+    if faults is not None and address.scheme != "sim":
+        raise LocalProtocolError("faults= is for sim:// buses only")
+    connector: Connector
+    simulator = None
+    if address.scheme == "tcp":
+        connector = tcp_connector(address.host, address.port)
+    elif address.scheme == "serial":
+        connector = serial_connector(address.device, line)
+    else:
+        connector, simulator = _sim_connector(address, line, faults)
+    bus = Bus(
+        connector,
+        description=address.description,
+        line=line,
+        timing=timing,
+        retries=retries,
+        strip_echo=bool(address.echo) if strip_echo is None else strip_echo,
+        read_only=read_only,
+        trace=trace,
+        reconnect=reconnect,
+    )
+    bus.simulator = simulator
+    # The reconnect supervisor is a plain task owned here, not an anyio task
+    # group held across the yield: a task group would wrap the caller's own
+    # exceptions (a NakError raised in the body) in an ExceptionGroup.
+    supervisor: asyncio.Task[None] | None = None
+    try:
+        await bus.link.connect()
+        supervisor = asyncio.create_task(bus.link.supervise(), name=f"sj300 link {address}")
+        yield bus
+    finally:
+        bus.close()
+        if supervisor is not None:
+            supervisor.cancel()
+            # wait() neither raises the supervisor's CancelledError nor hides ours.
+            await asyncio.wait([supervisor])
+            if not supervisor.cancelled() and supervisor.exception() is not None:
+                _log.error("link supervisor failed", exc_info=supervisor.exception())

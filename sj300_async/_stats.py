@@ -1,0 +1,136 @@
+"""Counters for a bus and for each drive on it.
+
+Live objects, updated by the arbiter; :meth:`TransactionStats.snapshot`
+gives a frozen copy for reporting.
+"""
+
+from __future__ import annotations
+
+import math
+from collections import Counter
+from dataclasses import dataclass, field
+
+__all__ = ["BusStats", "StatsSnapshot", "TransactionStats"]
+
+
+@dataclass(frozen=True, slots=True)
+class StatsSnapshot:
+    """A frozen copy of :class:`TransactionStats`."""
+
+    requests: int
+    replies: int
+    broadcasts: int
+    timeouts: int
+    retries: int
+    naks: dict[int, int]
+    transport_errors: int
+    protocol_errors: int
+    cancelled: int
+    discarded_frames: int
+    latency_min_s: float | None
+    latency_mean_s: float | None
+    latency_max_s: float | None
+
+
+class TransactionStats:
+    """Counters of the transactions one drive (or a whole bus) took part in."""
+
+    __slots__ = (
+        "_latency_sum",
+        "broadcasts",
+        "cancelled",
+        "discarded_frames",
+        "latency_max_s",
+        "latency_min_s",
+        "naks",
+        "protocol_errors",
+        "replies",
+        "requests",
+        "retries",
+        "timeouts",
+        "transport_errors",
+    )
+
+    def __init__(self) -> None:
+        #: Requests written to the line (each attempt counts once).
+        self.requests = 0
+        #: Valid answers received (positive or NAK).
+        self.replies = 0
+        #: Broadcasts written.
+        self.broadcasts = 0
+        #: Attempts that ended without an answer.
+        self.timeouts = 0
+        #: Attempts that were repeated after a transmission error or time-out.
+        self.retries = 0
+        #: Negative replies by error code.
+        self.naks: Counter[int] = Counter()
+        #: Attempts failed because the link was down or dropped.
+        self.transport_errors = 0
+        #: Attempts that ended with a corrupted answer (bad BCC, bad characters).
+        self.protocol_errors = 0
+        #: Attempts abandoned because the caller was cancelled while on the line.
+        self.cancelled = 0
+        #: Frames received during this drive's transactions that were not its answer.
+        self.discarded_frames = 0
+        self.latency_min_s = math.inf
+        self.latency_max_s = 0.0
+        self._latency_sum = 0.0
+
+    def record_latency(self, seconds: float) -> None:
+        """Add one round-trip time (write to answer)."""
+        self._latency_sum += seconds
+        if seconds < self.latency_min_s:
+            self.latency_min_s = seconds
+        if seconds > self.latency_max_s:
+            self.latency_max_s = seconds
+
+    @property
+    def latency_mean_s(self) -> float | None:
+        """Mean round-trip time of the answered requests, or None before the first."""
+        return self._latency_sum / self.replies if self.replies else None
+
+    def snapshot(self) -> StatsSnapshot:
+        """Return a frozen copy of the counters."""
+        answered = self.replies > 0
+        return StatsSnapshot(
+            requests=self.requests,
+            replies=self.replies,
+            broadcasts=self.broadcasts,
+            timeouts=self.timeouts,
+            retries=self.retries,
+            naks=dict(self.naks),
+            transport_errors=self.transport_errors,
+            protocol_errors=self.protocol_errors,
+            cancelled=self.cancelled,
+            discarded_frames=self.discarded_frames,
+            latency_min_s=self.latency_min_s if answered else None,
+            latency_mean_s=self.latency_mean_s,
+            latency_max_s=self.latency_max_s if answered else None,
+        )
+
+
+@dataclass(slots=True)
+class BusStats:
+    """Counters of a whole bus: the transaction totals plus what only the line sees."""
+
+    #: Totals over all drives (and broadcasts).
+    transactions: TransactionStats = field(default_factory=TransactionStats)
+    #: Bytes thrown away by the reply parser (garbage, cut-off and overlong frames).
+    discarded_bytes: int = 0
+    #: Complete frames rejected by the parser (bad BCC, bad characters...).
+    bad_frames: int = 0
+    #: Valid frames received during a transaction that were not its answer (other node,
+    #: wrong shape for the command).
+    stray_frames: int = 0
+    #: Valid frames received while no transaction was waiting (late replies, drained).
+    unsolicited_frames: int = 0
+    #: Drains performed after failed transactions.
+    drains: int = 0
+    #: Local-echo bytes removed (when echo stripping is on).
+    echo_bytes: int = 0
+    #: Echoes that did not match what was sent (the rest went to the parser).
+    echo_mismatches: int = 0
+    #: Successful (re)connections of the link.
+    connects: int = 0
+    #: Times the link was lost.
+    disconnects: int = 0

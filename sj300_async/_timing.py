@@ -1,0 +1,94 @@
+"""How long to wait for a reply, and how long the line must rest between transactions.
+
+Sans-IO arithmetic from the line settings; the arbiter applies it.
+
+Response time-out = request wire time + the drive's wait time (C078)
++ reply wire time + margin. The margin covers the drive's own processing
+time and, for a TCP bridge, the network; it is the one number a user
+normally tunes. A fixed time-out can replace the whole sum.
+
+Guard interval: after every reply the line rests ``guard_chars`` character
+times (the RS-485 driver of the drive must release the line before the host
+talks; 3.5 characters is the figure Modbus RTU made familiar). After a
+broadcast nobody answers, but every drive is busy for its processing time:
+the host waits the broadcast's own wire time plus ``broadcast_processing_s``.
+
+Drain after a failure: when a transaction ends without its answer (time-out,
+transport error, cancellation), a reply may still be on its way. Nothing is
+sent until the line has been quiet for the failed transaction's whole
+response time-out (at least the guard interval); every byte that arrives
+meanwhile restarts the quiet period and is discarded and counted. So a late
+reply is never taken as the answer to a later request, unless a drive
+answers more than twice its time-out late — which the protocol, having no
+sequence numbers, cannot detect; ``drain_max_s`` bounds a babbling line.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+from ._commands import Command, ReplyKind
+from ._errors import LocalProtocolError
+from ._line import LineSettings
+from ._requests import Request
+
+__all__ = ["BusTiming", "reply_frame_length"]
+
+# Frame lengths STX..CR: ACK reply 7, NAK reply 9.
+_ACK_FRAME = 7
+_NAK_FRAME = 9
+
+
+def reply_frame_length(command: Command) -> int:
+    """Length of the longest reply (positive or NAK) the command can get, STX to CR."""
+    spec = command.spec
+    if spec.reply is ReplyKind.ACK:
+        positive = _ACK_FRAME
+    elif spec.reply is ReplyKind.ACK_DATA:
+        positive = _ACK_FRAME + spec.reply_length
+    else:
+        positive = 6 + spec.reply_length
+    return max(positive, _NAK_FRAME)
+
+
+@dataclass(frozen=True, slots=True)
+class BusTiming:
+    """Timing policy of one bus. Every field is in seconds unless named otherwise."""
+
+    #: Added to the computed wire and wait times: drive processing, network, scheduling.
+    margin_s: float = 0.05
+    #: If set, the response time-out of every request, replacing the computed sum.
+    fixed_timeout_s: float | None = None
+    #: Rest after every reply, in character times of the line.
+    guard_chars: float = 3.5
+    #: Rest after a broadcast, on top of its wire time.
+    broadcast_processing_s: float = 0.01
+    #: Upper bound of a drain, so a line that never goes quiet cannot stall the bus.
+    drain_max_s: float = 5.0
+
+    def __post_init__(self) -> None:
+        for name in ("margin_s", "guard_chars", "broadcast_processing_s", "drain_max_s"):
+            value = getattr(self, name)
+            if not value >= 0:
+                raise LocalProtocolError(f"{name} must be >= 0, got {value!r}")
+        if self.fixed_timeout_s is not None and not self.fixed_timeout_s > 0:
+            raise LocalProtocolError(f"timeout must be > 0, got {self.fixed_timeout_s!r}")
+
+    def response_timeout(self, request: Request, line: LineSettings, wait_s: float) -> float:
+        """Seconds from the write of *request* until its answer must have arrived."""
+        if self.fixed_timeout_s is not None:
+            return self.fixed_timeout_s
+        wire = line.wire_time_s(len(request.frame) + reply_frame_length(request.command))
+        return wire + wait_s + self.margin_s
+
+    def guard(self, line: LineSettings) -> float:
+        """Seconds the line rests after a reply."""
+        return self.guard_chars * line.char_time_s
+
+    def after_broadcast(self, request: Request, line: LineSettings) -> float:
+        """Seconds the line rests after a broadcast was written."""
+        return line.wire_time_s(len(request.frame)) + self.broadcast_processing_s
+
+    def drain_quiet(self, failed_timeout: float, line: LineSettings) -> float:
+        """Quiet time required after a failed transaction before the next request."""
+        return max(failed_timeout, self.guard(line))

@@ -1,0 +1,169 @@
+"""Bus URLs: which transport, where, and with which line settings.
+
+Forms::
+
+    tcp://HOST:PORT[?baudrate=19200&bytesize=8&parity=N&stopbits=1]
+        raw TCP to a serial device server; the query describes the RS-485 line
+        behind it (used for wire-time arithmetic only)
+    serial:///dev/ttyUSB0?baudrate=19200&bytesize=8&parity=E&stopbits=1
+    /dev/ttyUSB0, COM3                  a bare device path: serial, default settings
+    sim://?nodes=1-8[&wait_ms=0&factory_defaults=1&pace=1&baudrate=19200...]
+        the in-memory simulator (an instant line unless pace=1)
+
+Common query options: ``echo=1`` strips the RS-485 adapter's local echo.
+Any other query key is refused, so a typo cannot be silently ignored.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Final, Literal
+from urllib.parse import parse_qsl, urlsplit
+
+from ._constants import MAX_NODE, MIN_NODE
+from ._errors import LocalProtocolError
+from ._line import LineSettings
+
+__all__ = ["BusAddress", "parse_bus_url", "parse_node_list"]
+
+Scheme = Literal["tcp", "serial", "sim"]
+
+_LINE_KEYS: Final = ("baudrate", "bytesize", "parity", "stopbits")
+_ALLOWED_KEYS: Final[dict[str, frozenset[str]]] = {
+    "tcp": frozenset((*_LINE_KEYS, "echo")),
+    "serial": frozenset((*_LINE_KEYS, "echo")),
+    "sim": frozenset((*_LINE_KEYS, "echo", "nodes", "wait_ms", "factory_defaults", "pace")),
+}
+_TRUE: Final = frozenset(("1", "true", "yes", "on"))
+_FALSE: Final = frozenset(("0", "false", "no", "off", ""))
+
+
+@dataclass(frozen=True, slots=True)
+class BusAddress:
+    """A parsed bus URL."""
+
+    scheme: Scheme
+    #: tcp: host and port.
+    host: str = ""
+    port: int = 0
+    #: serial: device path or pyserial URL.
+    device: str = ""
+    #: Line settings given in the URL (None: the transport's default).
+    line: LineSettings | None = None
+    #: Strip local echo (None: not given).
+    echo: bool | None = None
+    #: sim: the simulated nodes and options.
+    nodes: tuple[int, ...] = ()
+    sim_options: dict[str, str] = field(default_factory=dict)
+
+    @property
+    def description(self) -> str:
+        """Short human-readable form for messages."""
+        if self.scheme == "tcp":
+            return f"tcp://{self.host}:{self.port}"
+        if self.scheme == "serial":
+            return f"serial://{self.device}"
+        return f"sim://(nodes {format_node_list(self.nodes)})"
+
+
+def parse_node_list(text: str) -> tuple[int, ...]:
+    """Parse ``"1-8,12,20-22"`` into sorted unique node numbers 1..32.
+
+    Raises:
+        LocalProtocolError: malformed, empty, or a node outside 1..32.
+    """
+    nodes: set[int] = set()
+    for part in text.replace(" ", "").split(","):
+        if not part:
+            continue
+        lo_text, sep, hi_text = part.partition("-")
+        try:
+            lo = int(lo_text)
+            hi = int(hi_text) if sep else lo
+        except ValueError:
+            raise LocalProtocolError(f"bad node list {text!r}: {part!r} is not N or N-M") from None
+        if not (MIN_NODE <= lo <= hi <= MAX_NODE):
+            raise LocalProtocolError(
+                f"bad node list {text!r}: {part!r} is not within {MIN_NODE}..{MAX_NODE}"
+            )
+        nodes.update(range(lo, hi + 1))
+    if not nodes:
+        raise LocalProtocolError(f"bad node list {text!r}: no nodes")
+    return tuple(sorted(nodes))
+
+
+def format_node_list(nodes: tuple[int, ...]) -> str:
+    """Inverse of :func:`parse_node_list` (``(1, 2, 3, 5)`` → ``"1-3,5"``)."""
+    parts: list[str] = []
+    for n in nodes:
+        if parts and parts[-1].split("-")[-1] == str(n - 1):
+            parts[-1] = f"{parts[-1].split('-')[0]}-{n}"
+        else:
+            parts.append(str(n))
+    return ",".join(parts)
+
+
+def parse_flag(key: str, value: str) -> bool:
+    """Parse a boolean query value.
+
+    Raises:
+        LocalProtocolError: not one of 1/0, true/false, yes/no, on/off.
+    """
+    lowered = value.lower()
+    if lowered in _TRUE:
+        return True
+    if lowered in _FALSE:
+        return False
+    raise LocalProtocolError(f"{key} must be true or false, got {value!r}")
+
+
+def parse_bus_url(url: str) -> BusAddress:
+    """Parse a bus URL (see the module docstring).
+
+    Raises:
+        LocalProtocolError: unknown scheme, missing host/port/device, unknown
+            query key, or a line setting the protocol does not allow.
+    """
+    if not isinstance(url, str) or not url.strip():
+        raise LocalProtocolError(f"bus URL must be a non-empty string, got {url!r}")
+    url = url.strip()
+    if "://" not in url:
+        return BusAddress("serial", device=url, line=LineSettings())
+    parts = urlsplit(url)
+    scheme = parts.scheme.lower()
+    if scheme not in _ALLOWED_KEYS:
+        raise LocalProtocolError(
+            f"unknown bus URL scheme {parts.scheme!r} in {url!r} (use tcp://, serial:// or sim://)"
+        )
+    query = dict(parse_qsl(parts.query, keep_blank_values=True))
+    unknown = set(query) - _ALLOWED_KEYS[scheme]
+    if unknown:
+        raise LocalProtocolError(
+            f"unknown option(s) {', '.join(sorted(unknown))} in {url!r}; "
+            f"allowed: {', '.join(sorted(_ALLOWED_KEYS[scheme]))}"
+        )
+    line = None
+    if any(k in query for k in _LINE_KEYS):
+        line = LineSettings.parse(
+            query.get("baudrate", "19200"),
+            query.get("bytesize", "8"),
+            query.get("parity", "N"),
+            query.get("stopbits", "1"),
+        )
+    echo = parse_flag("echo", query["echo"]) if "echo" in query else None
+    if scheme == "tcp":
+        try:
+            host, port = parts.hostname, parts.port
+        except ValueError as exc:
+            raise LocalProtocolError(f"bad port in {url!r}: {exc}") from None
+        if not host or port is None:
+            raise LocalProtocolError(f"tcp URL needs a host and a port: {url!r}")
+        return BusAddress("tcp", host=host, port=port, line=line, echo=echo)
+    if scheme == "serial":
+        device = parts.netloc + parts.path
+        if not device:
+            raise LocalProtocolError(f"serial URL needs a device path: {url!r}")
+        return BusAddress("serial", device=device, line=line or LineSettings(), echo=echo)
+    nodes = parse_node_list(query.pop("nodes", "1-8"))
+    options = {k: v for k, v in query.items() if k in ("wait_ms", "factory_defaults", "pace")}
+    return BusAddress("sim", line=line, echo=echo, nodes=nodes, sim_options=options)

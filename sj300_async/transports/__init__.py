@@ -1,0 +1,21 @@
+"""Transports under the protocol adapter: in-memory loopback, serial, TCP bridge.
+
+Each module provides a *connector*: an async callable that opens the
+transport for a protocol factory (see :data:`sj300_async._link.Connector`).
+They share one contract, tested by one suite run against each.
+"""
+
+from __future__ import annotations
+
+from ._faults import LineFaults
+from ._loopback import LoopbackTransport, loopback_connector
+from ._serial import serial_connector
+from ._tcp import tcp_connector
+
+__all__ = [
+    "LineFaults",
+    "LoopbackTransport",
+    "loopback_connector",
+    "serial_connector",
+    "tcp_connector",
+]

@@ -1,0 +1,49 @@
+"""Serial transport through pyserial-asyncio-fast.
+
+pyserial-asyncio-fast is the maintained fork of pyserial-asyncio: it opens
+and closes the port off the event loop (0.6 blocks the loop on both), and it
+is a real asyncio.Transport. pyserial is imported only when a serial bus is
+opened, so the rest of the library works where it is not installed.
+"""
+
+from __future__ import annotations
+
+import asyncio
+from collections.abc import Callable
+from typing import Any
+
+from .._errors import TransportError
+from .._line import LineSettings
+
+__all__ = ["serial_connector"]
+
+_PARITY = {"N": "N", "E": "E", "O": "O"}
+
+
+def serial_connector(
+    device: str, line: LineSettings
+) -> Callable[[Callable[[], asyncio.Protocol]], Any]:
+    """Return a connector that opens *device* (a path or a pyserial URL) with *line*'s settings."""
+    if line.baudrate == 0:
+        raise TransportError("a serial line needs a baud rate")
+
+    async def connect(protocol_factory: Callable[[], asyncio.Protocol]) -> asyncio.BaseTransport:
+        import serial
+        import serial_asyncio_fast
+
+        loop = asyncio.get_running_loop()
+        try:
+            transport, _ = await serial_asyncio_fast.create_serial_connection(
+                loop,
+                protocol_factory,
+                device,
+                baudrate=line.baudrate,
+                bytesize=line.bytesize,
+                parity=_PARITY[line.parity],
+                stopbits=line.stopbits,
+            )
+        except serial.SerialException as exc:
+            raise TransportError(f"cannot open serial port {device}: {exc}") from exc
+        return transport
+
+    return connect
