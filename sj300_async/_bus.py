@@ -93,6 +93,7 @@ class Bus:
         #: The in-memory simulator behind a sim:// bus (None otherwise): tests use its
         #: fault hooks, demos trip its drives.
         self.simulator: SimulatedBus | None = None
+        self._supervisor: asyncio.Task[None] | None = None
 
     def _make_protocol(self) -> LineProtocol:
         # A new connection starts with a clean parser: bytes of the old one are gone.
@@ -176,10 +177,45 @@ class Bus:
             request, stats, wait_s=wait_s, timeout_s=timeout_s, retries=self.retries, urgent=urgent
         )
 
+    async def start(self) -> None:
+        """Connect, and keep the link up from now on (``open_bus`` calls this).
+
+        The reconnect supervisor is a plain task owned by the bus, not an anyio
+        task group held across ``open_bus``'s yield: a task group would wrap
+        the caller's own exceptions (a NakError raised in the body) in an
+        ExceptionGroup.
+
+        Raises:
+            TransportError: the first connection failed.
+        """
+        await self.link.connect()
+        self._supervisor = asyncio.create_task(
+            self.link.supervise(), name=f"sj300 link {self.description}"
+        )
+
     def close(self) -> None:
         """Close the bus: the link closes, waiting requests fail. Idempotent."""
         self._closed = True
         self.link.close()
+        if self._supervisor is not None:
+            self._supervisor.cancel()
+
+    async def aclose(self) -> None:
+        """Close the bus and wait until its background task has ended. Idempotent."""
+        self.close()
+        supervisor, self._supervisor = self._supervisor, None
+        if supervisor is not None:
+            # wait() neither raises the supervisor's CancelledError nor hides ours.
+            await asyncio.wait([supervisor])
+            if not supervisor.cancelled() and supervisor.exception() is not None:
+                _log.error("link supervisor failed", exc_info=supervisor.exception())
+
+    async def __aenter__(self) -> Bus:
+        await self.start()
+        return self
+
+    async def __aexit__(self, *exc_info: object) -> None:
+        await self.aclose()
 
 
 def _sim_connector(
@@ -285,19 +321,8 @@ async def open_bus(
         reconnect=reconnect,
     )
     bus.simulator = simulator
-    # The reconnect supervisor is a plain task owned here, not an anyio task
-    # group held across the yield: a task group would wrap the caller's own
-    # exceptions (a NakError raised in the body) in an ExceptionGroup.
-    supervisor: asyncio.Task[None] | None = None
     try:
-        await bus.link.connect()
-        supervisor = asyncio.create_task(bus.link.supervise(), name=f"sj300 link {address}")
+        await bus.start()
         yield bus
     finally:
-        bus.close()
-        if supervisor is not None:
-            supervisor.cancel()
-            # wait() neither raises the supervisor's CancelledError nor hides ours.
-            await asyncio.wait([supervisor])
-            if not supervisor.cancelled() and supervisor.exception() is not None:
-                _log.error("link supervisor failed", exc_info=supervisor.exception())
+        await bus.aclose()
