@@ -29,5 +29,6 @@ TRIP_HISTORY_DATA_LEN: Final = 440
 #: Anything longer cannot be a reply, so a parser never buffers more than this.
 MAX_REPLY_BODY: Final = 2 + TRIP_HISTORY_DATA_LEN + 2
 
-#: The longest legal request body between STX and CR: node + "07" + code + value + BCC.
-MAX_REQUEST_BODY: Final = 2 + 2 + 4 + 8 + 2
+#: The longest legal request body between STX and CR: node + "02" + 16 hex digits + BCC
+#: (command 07's code + value is 12 characters, four fewer).
+MAX_REQUEST_BODY: Final = 2 + 2 + 16 + 2

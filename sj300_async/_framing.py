@@ -74,8 +74,8 @@ class FrameSplitter(Generic[FrameT]):
     def reset(self) -> list[FrameT | BadFrame | Discarded]:
         """Forget any partial frame (e.g. after draining the line); return it as discarded."""
         events: list[FrameT | BadFrame | Discarded] = []
-        if self._in_frame and self._partial:
-            self._discard(events, DiscardReason.RESTARTED, bytes(self._partial))
+        if self._in_frame:
+            self._discard(events, DiscardReason.RESTARTED, STX_BYTE + bytes(self._partial))
             self.stats.restarted_frames += 1
         self._partial.clear()
         self._in_frame = False
@@ -124,20 +124,27 @@ class FrameSplitter(Generic[FrameT]):
             cr = data.find(CR_BYTE, pos)
             stop = cr if cr >= 0 else end
             stx = data.find(STX_BYTE, pos, stop)
-            if stx >= 0:
-                # A new frame starts before this one ended: the partial frame is lost.
-                self._discard(events, DiscardReason.RESTARTED, bytes(partial) + data[pos:stx])
-                self.stats.restarted_frames += 1
-                partial.clear()
-                pos = stx + 1
-                continue
-            if len(partial) + (stop - pos) > max_body:
-                # Longer than any legal frame: abandon it and hunt for the next STX.
-                self._discard(events, DiscardReason.OVERLONG, bytes(partial) + data[pos:stop])
+            limit = stx if stx >= 0 else stop
+            if len(partial) + (limit - pos) > max_body:
+                # Longer than any legal frame: abandon it at byte max_body + 1, as a
+                # byte-by-byte feed would, and hunt for the next STX.
+                cut = pos + max_body + 1 - len(partial)
+                self._discard(
+                    events, DiscardReason.OVERLONG, STX_BYTE + bytes(partial) + data[pos:cut]
+                )
                 self.stats.overlong_frames += 1
                 partial.clear()
                 self._in_frame = False
-                pos = stop
+                pos = cut
+                continue
+            if stx >= 0:
+                # A new frame starts before this one ended: the partial frame is lost.
+                self._discard(
+                    events, DiscardReason.RESTARTED, STX_BYTE + bytes(partial) + data[pos:stx]
+                )
+                self.stats.restarted_frames += 1
+                partial.clear()
+                pos = stx + 1
                 continue
             if cr < 0:
                 partial += data[pos:]

@@ -152,6 +152,8 @@ def decode_trip_history(data: bytes) -> TripHistory:
     """
     _check(data, TRIP_HISTORY_DATA_LEN, "trip history")
     values = _fields(data)
+    if any(values[3 + i * _TRIP_RECORD_FIELDS] < 0 for i in range(_TRIP_RECORDS)):
+        raise RemoteProtocolError(f"negative status B bit field in trip history: {data!r}")
     records = []
     for i in range(_TRIP_RECORDS):
         f = values[1 + i * _TRIP_RECORD_FIELDS : 1 + (i + 1) * _TRIP_RECORD_FIELDS]

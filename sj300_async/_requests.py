@@ -108,6 +108,8 @@ def validate_request(node: int, command: Command | int, data: bytes = b"") -> tu
         LocalProtocolError: unknown command, node out of range, broadcast of a
             command that may not be broadcast, or data of the wrong shape.
     """
+    if isinstance(command, bool) or not isinstance(command, int):
+        raise LocalProtocolError(f"command must be a Command or its number, got {command!r}")
     try:
         command = Command(command)
     except ValueError:

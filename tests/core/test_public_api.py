@@ -1,0 +1,294 @@
+"""The public names of the core: present in ``__all__``, with the reference's values.
+
+More names will join ``__all__`` as the async layers land, so the core names
+are pinned as a subset, not as the whole list.
+"""
+
+from __future__ import annotations
+
+import pickle
+
+import pytest
+
+import sj300_async
+from sj300_async import (
+    BROADCAST,
+    BusClosedError,
+    Command,
+    InputTerminal,
+    LocalProtocolError,
+    NakCode,
+    NakError,
+    ProtocolError,
+    ReadOnlyError,
+    RemoteProtocolError,
+    ReplyTimeoutError,
+    SJ300Error,
+    TransportError,
+)
+
+CORE_NAMES = {
+    # codec
+    "encode_request",
+    "bcc",
+    "BROADCAST",
+    "MIN_NODE",
+    "MAX_NODE",
+    "Command",
+    "CommandSpec",
+    "COMMAND_SPECS",
+    "ReplyKind",
+    "RequestData",
+    "Request",
+    "requests",
+    # parsers and events
+    "ReplyParser",
+    "RequestParser",
+    "NAK_FOR_BAD_REQUEST",
+    "ParserStats",
+    "AckReply",
+    "AckDataReply",
+    "DataReply",
+    "NakReply",
+    "Reply",
+    "BadFrame",
+    "BadFrameReason",
+    "Discarded",
+    "DiscardReason",
+    "ParserEvent",
+    "answers",
+    # payloads
+    "decode_status",
+    "decode_monitor",
+    "decode_trip_history",
+    "decode_parameter_value",
+    "decode_can_store",
+    "encode_reply",
+    "encode_status",
+    "encode_monitor",
+    "encode_trip_history",
+    "InverterStatus",
+    "MonitorData",
+    "TripHistory",
+    "TripRecord",
+    # codes and terminals
+    "Direction",
+    "NakCode",
+    "StatusA",
+    "StatusB",
+    "StatusC",
+    "TripStatusB",
+    "TripStatusC",
+    "InputTerminal",
+    "InputMonitor",
+    "OutputTerminal",
+    # parameters
+    "PARAMETERS",
+    "ParameterInfo",
+    "parameter_info",
+    "normalize_code",
+    "motor_capacity_kw",
+    # errors
+    "SJ300Error",
+    "ProtocolError",
+    "LocalProtocolError",
+    "RemoteProtocolError",
+    "ReadOnlyError",
+    "NakError",
+    "ReplyTimeoutError",
+    "TransportError",
+    "BusClosedError",
+}
+
+REQUEST_BUILDERS = {
+    "encode_request",
+    "run",
+    "set_frequency",
+    "set_terminals",
+    "read_monitor",
+    "read_status",
+    "read_trip_history",
+    "read_parameter",
+    "write_parameter",
+    "write_parameter_raw",
+    "initialize",
+    "can_store",
+    "store",
+    "recalculate",
+}
+
+
+def test_core_names_are_exported() -> None:
+    missing = CORE_NAMES - set(sj300_async.__all__)
+    assert not missing
+
+
+def test_every_exported_name_exists_once() -> None:
+    assert len(sj300_async.__all__) == len(set(sj300_async.__all__))
+    for name in sj300_async.__all__:
+        assert hasattr(sj300_async, name), name
+
+
+def test_star_import_gives_the_core_names() -> None:
+    namespace: dict[str, object] = {}
+    exec("from sj300_async import *", namespace)
+    assert set(namespace) >= CORE_NAMES
+
+
+def test_request_builders() -> None:
+    assert set(sj300_async.requests.__all__) >= REQUEST_BUILDERS
+    for name in REQUEST_BUILDERS:
+        assert callable(getattr(sj300_async.requests, name))
+
+
+def test_broadcast_is_ff() -> None:
+    assert BROADCAST == 0xFF
+    assert sj300_async.MIN_NODE == 1
+    assert sj300_async.MAX_NODE == 32
+
+
+def test_commands() -> None:
+    assert {c.name: c.value for c in Command} == {
+        "RUN": 0x00,
+        "SET_FREQUENCY": 0x01,
+        "SET_TERMINALS": 0x02,
+        "READ_MONITOR": 0x03,
+        "READ_STATUS": 0x04,
+        "READ_TRIP_HISTORY": 0x05,
+        "READ_PARAMETER": 0x06,
+        "WRITE_PARAMETER": 0x07,
+        "INITIALIZE": 0x08,
+        "CAN_STORE": 0x09,
+        "STORE": 0x0A,
+        "RECALCULATE": 0x0B,
+    }
+    assert [c.wire for c in Command] == [b"%02X" % v for v in range(12)]
+
+
+def test_command_specs_follow_the_command_table() -> None:
+    broadcast = {c for c in Command if c.spec.broadcast}
+    assert broadcast == {
+        Command.RUN,
+        Command.SET_FREQUENCY,
+        Command.SET_TERMINALS,
+        Command.WRITE_PARAMETER,
+        Command.INITIALIZE,
+        Command.STORE,
+    }
+    lengths = {c: c.spec.reply_length for c in Command if c.spec.reply_length}
+    assert lengths == {
+        Command.READ_MONITOR: 104,
+        Command.READ_STATUS: 8,
+        Command.READ_TRIP_HISTORY: 440,
+        Command.READ_PARAMETER: 8,
+        Command.CAN_STORE: 2,
+    }
+
+
+#: The reference's command 02 table, verbatim (bit masks as printed).
+INPUT_TERMINAL_TABLE = {
+    "FW": "0000000000000001",
+    "RV": "0000000000000002",
+    "CF1": "0000000000000004",
+    "CF2": "0000000000000008",
+    "CF3": "0000000000000010",
+    "CF4": "0000000000000020",
+    "JG": "0000000000000040",
+    "DB": "0000000000000080",
+    "SET": "0000000000000100",
+    "TWO_CH": "0000000000000200",  # "2CH" in the manual
+    "FRS": "0000000000000800",
+    "EXT": "0000000000001000",
+    "USP": "0000000000002000",
+    "CS": "0000000000004000",
+    "SFT": "0000000000008000",
+    "AT": "0000000000010000",
+    "SET3": "0000000000020000",
+    "RS": "0000000000040000",
+    "STA": "0000000000100000",
+    "STP": "0000000000200000",
+    "FR": "0000000000400000",  # "F/R" in the manual
+    "PID": "0000000000800000",
+    "PIDC": "0000000001000000",
+    "CAS": "0000000004000000",
+    "UP": "0000000008000000",
+    "DWN": "0000000010000000",
+    "UDC": "0000000020000000",
+    "OPE": "0000000080000000",
+    "SF1": "0000000100000000",
+    "SF2": "0000000200000000",
+    "SF3": "0000000400000000",
+    "SF4": "0000000800000000",
+    "SF5": "0000001000000000",
+    "SF6": "0000002000000000",
+    "SF7": "0000004000000000",
+    "OLR": "0000008000000000",
+    "TL": "0000010000000000",
+    "TRQ1": "0000020000000000",
+    "TRQ2": "0000040000000000",
+    "PPI": "0000080000000000",
+    "BOK": "0000100000000000",
+    "ORT": "0000200000000000",
+    "LAC": "0000400000000000",
+    "PCLR": "0000800000000000",
+    "STAT": "0001000000000000",
+}
+
+
+def test_input_terminals_follow_the_reference_table() -> None:
+    assert {t.name: b"%016X" % t.value for t in InputTerminal} == {
+        name: mask.encode() for name, mask in INPUT_TERMINAL_TABLE.items()
+    }
+
+
+def test_input_terminals_leave_the_unassigned_bits_free() -> None:
+    used = 0
+    for terminal in InputTerminal:
+        used |= terminal.value
+    for bit in (10, 19, 25, 30, *range(49, 64)):
+        assert not used & (1 << bit)
+
+
+# -- errors ----------------------------------------------------------------------
+
+
+@pytest.mark.parametrize(
+    ("error", "bases"),
+    [
+        (ProtocolError, (SJ300Error,)),
+        (LocalProtocolError, (ProtocolError, ValueError)),
+        (ReadOnlyError, (LocalProtocolError,)),
+        (RemoteProtocolError, (ProtocolError,)),
+        (NakError, (SJ300Error,)),
+        (ReplyTimeoutError, (SJ300Error, TimeoutError)),
+        (TransportError, (SJ300Error, ConnectionError)),
+        (BusClosedError, (TransportError,)),
+    ],
+)
+def test_error_hierarchy(error: type[Exception], bases: tuple[type[Exception], ...]) -> None:
+    for base in (*bases, SJ300Error, Exception):
+        assert issubclass(error, base)
+
+
+def test_remote_protocol_error_is_not_a_value_error() -> None:
+    # the line's garbage is not the caller's mistake
+    assert not issubclass(RemoteProtocolError, ValueError)
+
+
+def test_nak_error_carries_node_and_code() -> None:
+    error = NakError(5, NakCode.ABNORMAL_PARAMETER)
+    assert error.node == 5
+    assert error.code is NakCode.ABNORMAL_PARAMETER
+    assert "16" in str(error)
+    assert "05" in str(error)
+
+
+def test_nak_error_with_unknown_code() -> None:
+    error = NakError(1, NakCode(42))
+    assert error.code == 42
+    assert "42" in str(error)
+
+
+def test_nak_error_pickles() -> None:
+    error = pickle.loads(pickle.dumps(NakError(3, NakCode.CHECKSUM)))
+    assert (error.node, error.code) == (3, NakCode.CHECKSUM)
