@@ -222,14 +222,16 @@ def _sim_connector(
     address: BusAddress,
     line: LineSettings,
     faults: tuple[LineFaults | None, LineFaults | None] | None,
+    sim: SimulatedBus | None,
 ) -> tuple[Connector, SimulatedBus]:
     from .simulator import LinePacing, SimulatedBus, SimulatorEndpoint
 
     options = address.sim_options
-    sim = SimulatedBus(
-        nodes=address.nodes,
-        factory_defaults=parse_flag("factory_defaults", options.get("factory_defaults", "0")),
-    )
+    if sim is None:
+        sim = SimulatedBus(
+            nodes=address.nodes,
+            factory_defaults=parse_flag("factory_defaults", options.get("factory_defaults", "0")),
+        )
     if "wait_ms" in options:
         try:
             wait_ms = int(options["wait_ms"])
@@ -264,6 +266,7 @@ async def open_bus(
     trace: TraceHook | None = None,
     reconnect: ReconnectPolicy | None = None,
     faults: tuple[LineFaults | None, LineFaults | None] | None = None,
+    simulator: SimulatedBus | None = None,
 ) -> AsyncIterator[Bus]:
     """Open a bus, connect, and close everything on exit (also on error and cancellation).
 
@@ -281,6 +284,8 @@ async def open_bus(
         trace: a hook that sees every frame.
         reconnect: when to reconnect a dropped link.
         faults: (to-drive, to-host) line faults, for sim:// only (tests and soaks).
+        simulator: for sim://, serve this simulated bus instead of a new one (its
+            nodes replace the URL's).
 
     Raises:
         LocalProtocolError: a bad URL or setting (nothing is opened).
@@ -299,16 +304,15 @@ async def open_bus(
             broadcast_processing_s=timing.broadcast_processing_s,
             drain_max_s=timing.drain_max_s,
         )
-    if faults is not None and address.scheme != "sim":
-        raise LocalProtocolError("faults= is for sim:// buses only")
+    if (faults is not None or simulator is not None) and address.scheme != "sim":
+        raise LocalProtocolError("faults= and simulator= are for sim:// buses only")
     connector: Connector
-    simulator = None
     if address.scheme == "tcp":
         connector = tcp_connector(address.host, address.port)
     elif address.scheme == "serial":
         connector = serial_connector(address.device, line)
     else:
-        connector, simulator = _sim_connector(address, line, faults)
+        connector, simulator = _sim_connector(address, line, faults, simulator)
     bus = Bus(
         connector,
         description=address.description,

@@ -133,6 +133,7 @@ class Link:
         try:
             async with asyncio.timeout(self.policy.connect_timeout_s):
                 transport = await self._connector(factory)
+                await made[-1].made
         except TimeoutError:
             self._last_error = TimeoutError("connection attempt timed out")
             raise TransportError(

@@ -58,6 +58,9 @@ class LineProtocol(asyncio.Protocol):
         self._loop = asyncio.get_running_loop()
         self._writable = asyncio.Event()
         self._writable.set()
+        #: Set when the transport hands itself over (some transports, like
+        #: pyserial-asyncio's, do so a loop iteration after they are created).
+        self.made: asyncio.Future[None] = self._loop.create_future()
         #: Set when the connection is lost; carries the exception (None for a clean close).
         self.lost: asyncio.Future[BaseException | None] = self._loop.create_future()
 
@@ -66,6 +69,8 @@ class LineProtocol(asyncio.Protocol):
     def connection_made(self, transport: asyncio.BaseTransport) -> None:
         assert isinstance(transport, asyncio.Transport)
         self._transport = transport
+        if not self.made.done():
+            self.made.set_result(None)
 
     def data_received(self, data: bytes) -> None:
         now = self._loop.time()

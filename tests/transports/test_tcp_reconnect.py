@@ -1,0 +1,54 @@
+"""The TCP bridge recovers when the device server goes away and comes back."""
+
+from __future__ import annotations
+
+import asyncio
+
+import pytest
+
+import sj300_async as sj
+from sj300_async.simulator import SimulatedBus, serve_tcp
+
+FAST = sj.ReconnectPolicy(initial_s=0.02, max_s=0.1, connect_timeout_s=1.0)
+
+
+async def test_requests_fail_promptly_while_down_and_work_after_restart():
+    sim = SimulatedBus(nodes=[1])
+    server = await serve_tcp(sim)
+    port = server.port
+    async with sj.open_bus(f"tcp://127.0.0.1:{port}", timeout=0.3, reconnect=FAST) as bus:
+        drive = bus.drive(1)
+        assert (await drive.read_status()).b is sj.StatusB.STOPPED
+        for cycle in range(3):
+            server.close()
+            await server.wait_closed()
+            loop = asyncio.get_running_loop()
+            # While the server is down every request fails fast and typed.
+            for _ in range(5):
+                start = loop.time()
+                with pytest.raises((sj.TransportError, sj.ReplyTimeoutError)):
+                    await drive.read_status()
+                assert loop.time() - start < 0.35
+            server = await serve_tcp(sim, port=port)
+            for _ in range(100):
+                if bus.connected:
+                    break
+                await asyncio.sleep(0.02)
+            assert bus.connected, f"no reconnect in cycle {cycle}"
+            assert (await drive.read_status()).b is sj.StatusB.STOPPED
+        assert bus.stats.connects == 4
+        assert bus.stats.disconnects == 3
+    server.close()
+    await server.wait_closed()
+
+
+async def test_unreachable_bridge_fails_at_open():
+    sim = SimulatedBus(nodes=[1])
+    server = await serve_tcp(sim)
+    port = server.port
+    server.close()
+    await server.wait_closed()
+    with pytest.raises(sj.TransportError, match="could not connect") as info:
+        async with sj.open_bus(f"tcp://127.0.0.1:{port}"):
+            pass
+    assert isinstance(info.value, ConnectionError)
