@@ -1,0 +1,43 @@
+"""Benchmarks of sj300_async against pymodbus, measured in the same run.
+
+Run them all with ``python -m benchmarks`` from the repository root
+(``--quick`` for a smoke run, ``--only NAME`` for one of :data:`BENCHMARKS`).
+
+Each benchmark is a module with ``TITLE`` and ``run(config) -> Section``
+(see :mod:`benchmarks._harness`); add a new one by writing the module and
+naming it in :data:`BENCHMARKS`. Modules are imported only when chosen.
+"""
+
+from __future__ import annotations
+
+import importlib
+from typing import Protocol
+
+from ._harness import Config, Section
+
+__all__ = ["BENCHMARKS", "Benchmark", "load"]
+
+#: name -> module, in the order they run and print.
+BENCHMARKS: dict[str, str] = {
+    "codec": "benchmarks.bench_codec",
+}
+
+
+class Benchmark(Protocol):
+    """What a benchmark module provides."""
+
+    TITLE: str
+
+    def run(self, config: Config) -> Section:
+        """Measure ours and the peer; return the rows and the notes that describe the input."""
+        ...
+
+
+def load(name: str) -> Benchmark:
+    """Import the benchmark called *name*.
+
+    Raises:
+        KeyError: no benchmark has that name.
+    """
+    module: Benchmark = importlib.import_module(BENCHMARKS[name])
+    return module
