@@ -1,7 +1,7 @@
 """One-shot calls: open a bus, command a drive, read it back, close.
 
-    python examples/one_shot.py                      # the in-memory simulator
-    python examples/one_shot.py tcp://127.0.0.1:4001 # a device server or `sj300 simulate`
+python examples/one_shot.py                      # the in-memory simulator
+python examples/one_shot.py tcp://127.0.0.1:4001 # a device server or `sj300 simulate`
 """
 
 from __future__ import annotations
@@ -21,8 +21,10 @@ async def main(url: str) -> None:
         await asyncio.sleep(0.5)
         monitor = await drive.read_monitor()
         status = await drive.read_status()
-        print(f"node 1: {status.a.name}, {monitor.output_frequency_hz:.2f} Hz, "
-              f"{monitor.output_current_a:.1f} A")
+        print(
+            f"node 1: {status.a.name}, {monitor.output_frequency_hz:.2f} Hz, "
+            f"{monitor.output_current_a:.1f} A"
+        )
         await drive.stop()
         try:
             await bus.drive(1).read_parameter_raw("Z999")

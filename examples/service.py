@@ -64,8 +64,10 @@ async def main(url: str, port: int, run_for: float | None) -> None:
             await bus.drive(node).set_frequency(10.0 * node)
             await bus.drive(node).run_forward()
         server = await asyncio.start_server(service.handle, "127.0.0.1", port)
-        print(f"serving drive state on http://127.0.0.1:{server.sockets[0].getsockname()[1]}/",
-              flush=True)
+        print(
+            f"serving drive state on http://127.0.0.1:{server.sockets[0].getsockname()[1]}/",
+            flush=True,
+        )
         poller = asyncio.create_task(service.poll_forever())
         try:
             async with server:

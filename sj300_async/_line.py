@@ -15,8 +15,12 @@ __all__ = ["BAUDRATES", "INSTANT_LINE", "LineSettings", "Parity"]
 
 Parity = Literal["N", "E", "O"]
 
-#: Speeds an SJ300 supports (C071 = 02..06: 2400 is not on every firmware but harmless).
+#: Speeds an SJ300 supports (C071 = 03..06). Other speeds are accepted: the
+#: FR-700 and many RS-485 converters use them; the drive must match the host.
 BAUDRATES: Final = (2400, 4800, 9600, 19200)
+#: What a UART can be asked for; anything outside is a typo, not a setting.
+MIN_BAUDRATE: Final = 50
+MAX_BAUDRATE: Final = 4_000_000
 _PARITY_NAMES: Final = {"N": "N", "E": "E", "O": "O", "NONE": "N", "EVEN": "E", "ODD": "O"}
 
 
@@ -33,15 +37,18 @@ class LineSettings:
     stopbits: int = 1
 
     def __post_init__(self) -> None:
-        if self.baudrate != 0 and self.baudrate not in BAUDRATES:
+        if isinstance(self.baudrate, bool) or not isinstance(self.baudrate, int):
+            raise LocalProtocolError(f"baud rate must be an int, got {self.baudrate!r}")
+        if self.baudrate != 0 and not MIN_BAUDRATE <= self.baudrate <= MAX_BAUDRATE:
             raise LocalProtocolError(
-                f"baud rate must be one of {', '.join(map(str, BAUDRATES))}, got {self.baudrate!r}"
+                f"baud rate must be {MIN_BAUDRATE}..{MAX_BAUDRATE} bps "
+                f"(an SJ300 uses {', '.join(map(str, BAUDRATES))}), got {self.baudrate!r}"
             )
-        if self.bytesize not in (7, 8):
+        if isinstance(self.bytesize, bool) or self.bytesize not in (7, 8):
             raise LocalProtocolError(f"data bits must be 7 or 8, got {self.bytesize!r}")
         if self.parity not in ("N", "E", "O"):
             raise LocalProtocolError(f"parity must be N, E or O, got {self.parity!r}")
-        if self.stopbits not in (1, 2):
+        if isinstance(self.stopbits, bool) or self.stopbits not in (1, 2):
             raise LocalProtocolError(f"stop bits must be 1 or 2, got {self.stopbits!r}")
 
     @classmethod

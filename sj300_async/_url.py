@@ -82,9 +82,11 @@ def parse_node_list(text: str) -> tuple[int, ...]:
             hi = int(hi_text) if sep else lo
         except ValueError:
             raise LocalProtocolError(f"bad node list {text!r}: {part!r} is not N or N-M") from None
-        if not (MIN_NODE <= lo <= hi <= MAX_NODE):
+        if lo > hi:
+            raise LocalProtocolError(f"bad node list {text!r}: range {part!r} runs backwards")
+        if not (lo >= MIN_NODE and hi <= MAX_NODE):
             raise LocalProtocolError(
-                f"bad node list {text!r}: {part!r} is not within {MIN_NODE}..{MAX_NODE}"
+                f"bad node list {text!r}: nodes are {MIN_NODE}..{MAX_NODE}, got {part!r}"
             )
         nodes.update(range(lo, hi + 1))
     if not nodes:

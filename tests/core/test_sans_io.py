@@ -33,6 +33,9 @@ CORE_MODULES = (
     "_request_parser",
     "_requests",
     "_terminals",
+    "_line",
+    "_timing",
+    "_url",
 )
 
 #: Top-level modules a sans-IO core must not import: event loops, I/O, clocks, threads.

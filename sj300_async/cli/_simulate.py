@@ -1,0 +1,232 @@
+"""``sj300 simulate``: serve simulated drives over TCP, a pty or a serial port until interrupted.
+
+stdout carries one line per listener, ``listening on tcp://127.0.0.1:4001``
+or ``listening on /dev/pts/5`` (``--pty``, or ``--device`` for a port that
+exists already), flushed at once so a script can read the
+real port (when given port 0) or the pty path; demo trips are reported
+there too. Everything else (the summary, warnings) goes to stderr.
+
+SIGINT and SIGTERM stop it cleanly: listeners and client connections are
+closed, pending replies cancelled, exit status 0.
+"""
+
+from __future__ import annotations
+
+import argparse
+import asyncio
+import contextlib
+import logging
+import random
+import signal
+import sys
+from typing import Any
+
+from .._errors import LocalProtocolError
+from ..simulator import (
+    Country,
+    LinePacing,
+    PacedLine,
+    PtyServer,
+    SerialDeviceServer,
+    SimulatedBus,
+    SimulatorServer,
+    open_pty_server,
+    serve_serial_device,
+    serve_tcp,
+)
+from ._args import DEFAULT_PORT, LOOPBACK, ListenAddress, format_nodes, parse_listen, parse_nodes
+from ._errors import CliError
+
+__all__ = ["add_parser"]
+
+_COUNTRIES = {"jp": Country.JAPAN, "eu": Country.EUROPE, "us": Country.USA}
+
+
+def _wait_ms(text: str) -> int:
+    try:
+        value = int(text)
+    except ValueError:
+        value = -1
+    if not 0 <= value <= 1000:
+        raise argparse.ArgumentTypeError(f"--wait-ms is 0..1000 (C078), got {text!r}")
+    return value
+
+
+def _positive_seconds(text: str) -> float:
+    try:
+        value = float(text)
+    except ValueError:
+        value = 0.0
+    if not value > 0:
+        raise argparse.ArgumentTypeError(f"expected a positive number of seconds, got {text!r}")
+    return value
+
+
+def add_parser(subparsers: Any) -> None:
+    """Add ``simulate`` to the ``sj300`` subcommands."""
+    p = subparsers.add_parser(
+        "simulate",
+        help="serve simulated SJ300 drives over TCP or a pseudo-terminal",
+        description="Serve simulated SJ300 drives on a virtual RS-485 line until interrupted.",
+    )
+    p.add_argument(
+        "--listen",
+        action="append",
+        type=parse_listen,
+        metavar="URL",
+        help=f"serve over TCP at tcp://HOST:PORT (repeatable; port 0 picks one); "
+        f"default tcp://{LOOPBACK}:{DEFAULT_PORT} unless --pty is given",
+    )
+    p.add_argument("--pty", action="store_true", help="serve on a pseudo-terminal, print its path")
+    p.add_argument(
+        "--device",
+        action="append",
+        metavar="PATH",
+        help="serve on this serial device (a real port, or one end of a socat pty pair); "
+        "--baud etc. set its UART",
+    )
+    p.add_argument(
+        "--nodes",
+        type=parse_nodes,
+        default=[1],
+        metavar="LIST",
+        help="drive addresses, e.g. 1-8,12,20-22 (default 1)",
+    )
+    p.add_argument("--wait-ms", type=_wait_ms, metavar="MS", help="set C078 on every drive")
+    p.add_argument(
+        "--factory-defaults",
+        action="store_true",
+        help="start with true factory values (A001=A002=01: serial run/frequency refused)",
+    )
+    p.add_argument(
+        "--country",
+        choices=sorted(_COUNTRIES),
+        default="eu",
+        help="B085 factory values: eu 50 Hz, us/jp 60 Hz (default eu)",
+    )
+    line = p.add_argument_group("serial line")
+    line.add_argument("--baud", type=int, metavar="BPS", help="line speed (default 19200)")
+    line.add_argument("--bytesize", type=int, choices=(7, 8), default=8)
+    line.add_argument("--parity", type=str.upper, choices=("N", "E", "O"), default="N")
+    line.add_argument("--stopbits", type=int, choices=(1, 2), default=1)
+    line.add_argument(
+        "--pace",
+        action="store_true",
+        help="hold every byte for its wire time at the line settings",
+    )
+    p.add_argument(
+        "--trip-every",
+        type=_positive_seconds,
+        metavar="SECONDS",
+        help="demo: trip a random running drive this often",
+    )
+    p.add_argument("--seed", type=int, help="seed for --trip-every's choices")
+    p.add_argument("-v", "--verbose", action="count", default=0, help="log more (-vv: debug)")
+    p.set_defaults(run=run)
+
+
+def run(args: argparse.Namespace) -> int:
+    """Serve until SIGINT / SIGTERM; return 0."""
+    if args.verbose:
+        logging.basicConfig(
+            level=logging.DEBUG if args.verbose > 1 else logging.INFO,
+            format="%(asctime)s %(name)s %(levelname)s %(message)s",
+        )
+    elsewhere = args.pty or args.device
+    listen: list[ListenAddress] = args.listen or ([] if elsewhere else [parse_listen("tcp://")])
+    line_given = args.baud is not None or args.pace
+    try:
+        pacing = LinePacing(args.baud or 19200, args.bytesize, args.parity, args.stopbits)
+        bus = SimulatedBus(
+            args.nodes,
+            factory_defaults=args.factory_defaults,
+            country=_COUNTRIES[args.country],
+            wait_ms=args.wait_ms,
+            line=pacing if line_given else None,
+        )
+    except LocalProtocolError as exc:
+        raise CliError(str(exc)) from None
+    for address in listen:
+        if not address.is_loopback:
+            print(f"warning: {address} is reachable from the network", file=sys.stderr)
+    shared_line = PacedLine(pacing) if args.pace else None
+    settings = pacing if line_given else None
+    return asyncio.run(_serve(args, bus, listen, shared_line, settings))
+
+
+async def _serve(
+    args: argparse.Namespace,
+    bus: SimulatedBus,
+    listen: list[ListenAddress],
+    line: PacedLine | None,
+    settings: LinePacing | None,
+) -> int:
+    loop = asyncio.get_running_loop()
+    stop = asyncio.Event()
+    for sig in (signal.SIGINT, signal.SIGTERM):
+        loop.add_signal_handler(sig, stop.set)
+    servers: list[SimulatorServer] = []
+    ttys: list[PtyServer | SerialDeviceServer] = []
+    tripper: asyncio.Task[None] | None = None
+    try:
+        for address in listen:
+            try:
+                server = await serve_tcp(bus, address.host, address.port, line=line)
+            except OSError as exc:
+                raise CliError(f"cannot listen on {address}: {exc.strerror or exc}") from None
+            servers.append(server)
+            print(f"listening on {ListenAddress(server.host, server.port)}", flush=True)
+        if args.pty:
+            try:
+                ttys.append(await open_pty_server(bus, line=line))
+            except OSError as exc:
+                raise CliError(f"cannot open a pseudo-terminal: {exc.strerror or exc}") from None
+            print(f"listening on {ttys[-1].path}", flush=True)
+        for path in args.device or ():
+            try:
+                ttys.append(await serve_serial_device(bus, path, settings=settings, line=line))
+            except (OSError, LocalProtocolError) as exc:
+                why = exc.strerror if isinstance(exc, OSError) else exc
+                raise CliError(f"cannot serve on {path}: {why or exc}") from None
+            print(f"listening on {path}", flush=True)
+        mode = "factory defaults" if args.factory_defaults else "serial control"
+        pace = f", paced at {line.pacing.baudrate} bps" if line else ""
+        print(
+            f"simulating node(s) {format_nodes(sorted(bus.drives))} ({mode}{pace}); Ctrl-C to stop",
+            file=sys.stderr,
+            flush=True,
+        )
+        if args.trip_every:
+            tripper = asyncio.create_task(
+                _trip_periodically(bus, args.trip_every, random.Random(args.seed))
+            )
+        await stop.wait()
+    finally:
+        if tripper is not None:
+            tripper.cancel()
+            with contextlib.suppress(asyncio.CancelledError):
+                await tripper
+        for server in servers:
+            server.close()
+        for server in servers:
+            await server.wait_closed()
+        for tty in ttys:
+            tty.close()
+        for sig in (signal.SIGINT, signal.SIGTERM):
+            loop.remove_signal_handler(sig)
+    return 0
+
+
+async def _trip_periodically(bus: SimulatedBus, every_s: float, rng: random.Random) -> None:
+    """Demo: every *every_s*, trip one running drive with the over-current code of its phase."""
+    loop = asyncio.get_running_loop()
+    while True:
+        await asyncio.sleep(every_s)
+        now = loop.time()
+        running = [d for d in bus.drives.values() if d.state(now).outputting]
+        if not running:
+            continue
+        drive = rng.choice(running)
+        if drive.trip(now=now):
+            record = drive.trip_history().records[0]
+            print(f"node {drive.node:02d} tripped: {record.error_code}", flush=True)

@@ -1,0 +1,142 @@
+"""The in-memory server: a simulated bus on the event loop's clock, talking through a callable.
+
+:class:`SimulatorEndpoint` is what every server wraps: bytes from the host
+go to :meth:`SimulatorEndpoint.data_received`, replies leave through the
+``send`` callable at the time the bus says. It needs no transport, so the
+library's loopback transport uses it directly; the TCP and pty servers hand
+it their write function.
+
+Without pacing, host bytes reach the bus at once and each reply is sent
+after its delay. With pacing (a :class:`PacedLine`), host bytes reach the
+bus when their last character has crossed the line, and replies are
+delivered a few characters at a time, never before those characters'
+wire time has passed.
+
+All deliveries go through one queue ordered by (time, sequence), so two
+deliveries due at the same instant keep their order: the event loop's
+timer heap alone does not promise that.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import functools
+import heapq
+import itertools
+import logging
+from collections.abc import Callable
+
+from ._bus import SimulatedBus, Transmission
+from ._pacing import LinePacing, PacedLine
+
+__all__ = ["SimulatorEndpoint"]
+
+_log = logging.getLogger("sj300_async.simulator")
+
+_Job = tuple[float, int, Callable[[], object]]
+
+
+class SimulatorEndpoint:
+    """A simulated bus served through a send callable (see the module docstring).
+
+    Args:
+        bus: the drives; several endpoints may share one bus.
+        send: called with each chunk of bytes for the host, from the event loop.
+        pacing: pace the line at these settings (a :class:`PacedLine` of its own).
+        line: pace on this shared line instead (overrides *pacing*).
+        loop: the event loop; by default the running loop at the first call.
+    """
+
+    def __init__(
+        self,
+        bus: SimulatedBus,
+        send: Callable[[bytes], object],
+        pacing: LinePacing | None = None,
+        *,
+        line: PacedLine | None = None,
+        loop: asyncio.AbstractEventLoop | None = None,
+    ) -> None:
+        self.bus = bus
+        self._send = send
+        self._line = line if line is not None else PacedLine(pacing) if pacing else None
+        self._loop = loop
+        self._queue: list[_Job] = []
+        self._sequence = itertools.count()
+        self._timers: set[asyncio.TimerHandle] = set()
+        self._closed = False
+
+    @property
+    def pacing(self) -> LinePacing | None:
+        """The line settings bytes are paced at, or None."""
+        return None if self._line is None else self._line.pacing
+
+    @property
+    def closed(self) -> bool:
+        """True after :meth:`close`."""
+        return self._closed
+
+    @property
+    def pending(self) -> int:
+        """Deliveries scheduled and not yet made."""
+        return len(self._queue)
+
+    def data_received(self, data: bytes | bytearray | memoryview) -> None:
+        """Take bytes the host wrote; after :meth:`close` they are discarded (and logged)."""
+        data = bytes(data)
+        if self._closed:
+            _log.debug("endpoint closed, %d host bytes discarded: %s", len(data), data.hex(" "))
+            return
+        now = self._get_loop().time()
+        if self._line is None:
+            self._schedule_replies(now, self.bus.receive(data, now))
+            return
+        for arrival, piece in self._line.receive(now, data):
+            self._at(arrival, functools.partial(self._arrived, arrival, piece))
+
+    def close(self) -> None:
+        """Cancel every pending delivery; nothing is sent afterwards. Idempotent."""
+        self._closed = True
+        for timer in self._timers:
+            timer.cancel()
+        self._timers.clear()
+        if self._queue:
+            _log.debug("endpoint closed with %d deliveries pending", len(self._queue))
+        self._queue.clear()
+
+    def _get_loop(self) -> asyncio.AbstractEventLoop:
+        if self._loop is None:
+            self._loop = asyncio.get_running_loop()
+        return self._loop
+
+    def _arrived(self, at: float, piece: bytes) -> None:
+        self._schedule_replies(at, self.bus.receive(piece, at))
+
+    def _schedule_replies(self, now: float, transmissions: list[Transmission]) -> None:
+        for t in transmissions:
+            start = now + t.delay_s
+            if self._line is None:
+                self._at(start, functools.partial(self._send, t.data))
+                continue
+            for when, group in self._line.transmit(start, t.data):
+                self._at(when, functools.partial(self._send, group))
+
+    def _at(self, when: float, job: Callable[[], object]) -> None:
+        heapq.heappush(self._queue, (when, next(self._sequence), job))
+        loop = self._get_loop()
+        timer: asyncio.TimerHandle | None = None
+
+        def fire() -> None:
+            assert timer is not None
+            self._timers.discard(timer)
+            self._run_due(when)
+
+        timer = loop.call_at(when, fire)
+        self._timers.add(timer)
+
+    def _run_due(self, until: float) -> None:
+        # Everything due by this timer's time, in (time, sequence) order; a job
+        # whose own timer has not fired yet but is due goes now, its timer finds
+        # nothing left to do.
+        while self._queue and self._queue[0][0] <= until and not self._closed:
+            _when, _seq, job = heapq.heappop(self._queue)
+            job()

@@ -1,0 +1,80 @@
+"""A drive's parameter memory: RAM that the line writes, EEPROM that survives a power cycle.
+
+Command 07 (and 01 for F001) writes RAM; 0A copies RAM to EEPROM; a power
+cycle reloads RAM from EEPROM, so what was not stored is lost. 08 writes
+both. An EEPROM write takes a while (``write_s``): until it has finished,
+command 09 says storing is not allowed. A 0A during a write restarts it.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Mapping
+from types import MappingProxyType
+
+from ._parameters_table import value_error
+
+__all__ = ["ParameterMemory"]
+
+
+class ParameterMemory:
+    """RAM and EEPROM of one drive, raw values keyed by upper-case code."""
+
+    __slots__ = ("_busy_until", "_eeprom", "_ram", "write_s")
+
+    def __init__(self, table: dict[str, int], *, write_s: float) -> None:
+        #: How long an EEPROM write takes.
+        self.write_s = write_s
+        self._eeprom = dict(table)
+        self._ram = dict(table)
+        self._busy_until = -math.inf
+
+    @property
+    def ram(self) -> Mapping[str, int]:
+        """What command 06 reads, read-only."""
+        return MappingProxyType(self._ram)
+
+    @property
+    def eeprom(self) -> Mapping[str, int]:
+        """What a power cycle restores, read-only."""
+        return MappingProxyType(self._eeprom)
+
+    def __getitem__(self, code: str) -> int:
+        return self._ram[code]
+
+    def __contains__(self, code: object) -> bool:
+        return code in self._ram
+
+    def refusal(self, code: str, raw: int) -> str | None:
+        """Why the drive refuses writing *raw* to *code*, or None if it accepts."""
+        if code not in self._ram:
+            return "unknown parameter"
+        return value_error(code, raw, self._ram)
+
+    def write(self, code: str, raw: int, *, store: bool = False) -> None:
+        """Write RAM (and EEPROM with *store*); the caller has checked :meth:`refusal`."""
+        memories = (self._ram, self._eeprom) if store else (self._ram,)
+        for memory in memories:
+            memory[code] = raw
+            if code == "A004":
+                # A lower maximum frequency pulls the setpoint down with it.
+                memory["F001"] = min(memory["F001"], raw * 10)
+
+    def store(self, now: float) -> None:
+        """Command 0A: copy RAM to EEPROM; the write takes ``write_s`` from *now*."""
+        self._eeprom = dict(self._ram)
+        self._busy_until = now + self.write_s
+
+    def can_store(self, now: float) -> bool:
+        """Command 09: True unless an EEPROM write is still in progress at *now*."""
+        return now >= self._busy_until
+
+    def initialize(self, table: dict[str, int]) -> None:
+        """Command 08: load *table* into RAM and EEPROM."""
+        self._ram = dict(table)
+        self._eeprom = dict(table)
+
+    def power_cycle(self) -> None:
+        """RAM forgets everything not stored; an unfinished EEPROM write is over."""
+        self._ram = dict(self._eeprom)
+        self._busy_until = -math.inf

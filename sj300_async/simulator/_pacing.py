@@ -1,0 +1,85 @@
+"""Wire time: how long characters take on a serial line, and a line that makes bytes wait for it.
+
+:class:`LinePacing` is the arithmetic: one character is a start bit, the
+data bits, the parity bit if any and the stop bits, at the baud rate.
+:class:`PacedLine` books the one half-duplex wire the host and the drives
+share, so a server can hand bytes over no earlier than a real line would
+have delivered them. Both are sans-IO: they compute times, the servers
+schedule.
+"""
+
+from __future__ import annotations
+
+import math
+from typing import Final
+
+from .._errors import LocalProtocolError
+from .._line import LineSettings
+
+__all__ = ["LinePacing", "PacedLine"]
+
+#: A paced reply is handed over in groups of characters about this long, so a
+#: 446-byte trip history does not need 446 timers; no byte is ever early.
+DEFAULT_GROUP_S: Final = 0.004
+
+
+#: The line settings that pace a simulated line: the library's own LineSettings
+#: (one definition of character time for the host's time-outs and the
+#: simulator's pacing). An instant line (baud rate 0) cannot be paced.
+LinePacing = LineSettings
+
+
+class PacedLine:
+    """The shared wire: one character at a time, in either direction.
+
+    Host bytes and replies queue behind whatever the line carries already
+    (half duplex), so two servers or two TCP clients on one bus share one
+    line's capacity when they share a :class:`PacedLine`.
+    """
+
+    def __init__(self, pacing: LinePacing, *, group_s: float = DEFAULT_GROUP_S) -> None:
+        if pacing.baudrate <= 0:
+            raise LocalProtocolError("an instant line (baud rate 0) cannot be paced")
+        self.pacing = pacing
+        #: How many characters a delivery group holds (at least one).
+        self.group_chars = max(1, int(group_s / pacing.char_time_s))
+        self._free_at = -math.inf
+
+    @property
+    def free_at(self) -> float:
+        """When the last booked character has crossed the line."""
+        return self._free_at
+
+    def receive(self, now: float, data: bytes) -> list[tuple[float, bytes]]:
+        """Book host bytes written at *now*; return ``(arrival time, bytes)`` pieces.
+
+        A piece ends after each CR, so a drive sees every frame complete at the
+        moment its CR has crossed the line, not when a later frame in the same
+        write has.
+        """
+        pieces: list[tuple[float, bytes]] = []
+        char_s = self.pacing.char_time_s
+        start = max(now, self._free_at)
+        sent = 0
+        while sent < len(data):
+            cr = data.find(b"\r", sent)
+            end = len(data) if cr < 0 else cr + 1
+            pieces.append((start + end * char_s, data[sent:end]))
+            sent = end
+        self._free_at = start + len(data) * char_s
+        return pieces
+
+    def transmit(self, start: float, data: bytes) -> list[tuple[float, bytes]]:
+        """Book reply bytes that may start at *start*; return ``(delivery time, bytes)`` groups.
+
+        Each group is delivered when its last character has crossed the line.
+        """
+        char_s = self.pacing.char_time_s
+        begin = max(start, self._free_at)
+        step = self.group_chars
+        groups = [
+            (begin + min(i + step, len(data)) * char_s, data[i : i + step])
+            for i in range(0, len(data), step)
+        ]
+        self._free_at = begin + len(data) * char_s
+        return groups

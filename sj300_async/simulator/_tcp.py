@@ -1,0 +1,140 @@
+"""The TCP server: a simulated bus behind a serial device server.
+
+Like a serial-to-Ethernet gateway in raw TCP mode, it moves bytes and
+nothing else: no framing of its own, one byte stream per connection. Every
+connection gets its own :class:`SimulatorEndpoint` on the same bus, and,
+when paced, the same :class:`PacedLine`: clients share one line, as they
+would share the gateway's one serial port.
+
+It listens on loopback unless given another host: a simulator reachable
+from the network is a choice, not a default.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import logging
+from types import TracebackType
+
+from ._bus import SimulatedBus
+from ._endpoint import SimulatorEndpoint
+from ._pacing import LinePacing, PacedLine
+
+__all__ = ["SimulatorServer", "serve_tcp"]
+
+_log = logging.getLogger("sj300_async.simulator")
+
+
+class _Connection(asyncio.Protocol):
+    """One client of the device server."""
+
+    def __init__(self, server: SimulatorServer) -> None:
+        self._server = server
+        self._transport: asyncio.Transport | None = None
+        self._endpoint: SimulatorEndpoint | None = None
+
+    def connection_made(self, transport: asyncio.BaseTransport) -> None:
+        assert isinstance(transport, asyncio.Transport)
+        self._transport = transport
+        self._endpoint = SimulatorEndpoint(
+            self._server.bus, send=transport.write, line=self._server.line
+        )
+        self._server._connections.add(self)
+        _log.debug("client connected: %s", transport.get_extra_info("peername"))
+
+    def data_received(self, data: bytes) -> None:
+        assert self._endpoint is not None
+        self._endpoint.data_received(data)
+
+    def connection_lost(self, exc: Exception | None) -> None:
+        if self._endpoint is not None:
+            self._endpoint.close()
+        self._server._connections.discard(self)
+        _log.debug("client disconnected (%s)", exc or "closed")
+
+    def close(self) -> None:
+        if self._endpoint is not None:
+            self._endpoint.close()
+        if self._transport is not None:
+            self._transport.close()
+
+
+class SimulatorServer:
+    """A listening TCP simulator: ``port``, :meth:`close`, :meth:`wait_closed`.
+
+    Use :func:`serve_tcp` to make one. Also an async context manager.
+    """
+
+    def __init__(self, bus: SimulatedBus, line: PacedLine | None) -> None:
+        self.bus = bus
+        self.line = line
+        #: The address the listener is bound to.
+        self.host = ""
+        #: The bound port (the real one when 0 was asked for).
+        self.port = 0
+        self._server: asyncio.Server | None = None
+        self._connections: set[_Connection] = set()
+
+    @property
+    def sockets(self) -> tuple[object, ...]:
+        """The listening sockets."""
+        return () if self._server is None else tuple(self._server.sockets)
+
+    @property
+    def connections(self) -> int:
+        """Clients connected now."""
+        return len(self._connections)
+
+    def close(self) -> None:
+        """Stop listening and close every client connection. Idempotent."""
+        if self._server is not None:
+            self._server.close()
+        for connection in list(self._connections):
+            connection.close()
+
+    async def wait_closed(self) -> None:
+        """Wait until the listener is closed."""
+        if self._server is not None:
+            await self._server.wait_closed()
+
+    async def __aenter__(self) -> SimulatorServer:
+        return self
+
+    async def __aexit__(
+        self,
+        exc_type: type[BaseException] | None,
+        exc: BaseException | None,
+        tb: TracebackType | None,
+    ) -> None:
+        self.close()
+        await self.wait_closed()
+
+
+async def serve_tcp(
+    bus: SimulatedBus,
+    host: str = "127.0.0.1",
+    port: int = 0,
+    pacing: LinePacing | None = None,
+    *,
+    line: PacedLine | None = None,
+) -> SimulatorServer:
+    """Listen for TCP clients and serve *bus* to each of them.
+
+    Args:
+        host: address to bind; loopback by default.
+        port: TCP port; 0 picks a free one (read :attr:`SimulatorServer.port`).
+        pacing: pace the line at these settings.
+        line: share this paced line (e.g. with a pty server); overrides *pacing*.
+
+    Raises:
+        OSError: the address cannot be bound (e.g. the port is in use).
+    """
+    if line is None and pacing is not None:
+        line = PacedLine(pacing)
+    server = SimulatorServer(bus, line)
+    loop = asyncio.get_running_loop()
+    listener = await loop.create_server(lambda: _Connection(server), host, port)
+    server._server = listener
+    bound = listener.sockets[0].getsockname()
+    server.host, server.port = str(bound[0]), int(bound[1])
+    return server
