@@ -67,6 +67,7 @@ from ._payloads import (
     decode_status,
     decode_trip_history,
 )
+from ._poller import BusPollStats, DriveHealth, Poller, Sample
 from ._reply_encoding import (
     encode_monitor,
     encode_reply,
@@ -100,6 +101,7 @@ __all__ = [
     "Bus",
     "BusAddress",
     "BusClosedError",
+    "BusPollStats",
     "BusStats",
     "BusTiming",
     "Command",
@@ -109,6 +111,7 @@ __all__ = [
     "DiscardReason",
     "Discarded",
     "Drive",
+    "DriveHealth",
     "InputMonitor",
     "InputTerminal",
     "InverterStatus",
@@ -123,6 +126,7 @@ __all__ = [
     "ParameterInfo",
     "ParserEvent",
     "ParserStats",
+    "Poller",
     "ProtocolError",
     "ReadOnlyError",
     "ReconnectPolicy",
@@ -135,6 +139,7 @@ __all__ = [
     "RequestData",
     "RequestParser",
     "SJ300Error",
+    "Sample",
     "StatsSnapshot",
     "StatusA",
     "StatusB",

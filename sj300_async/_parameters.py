@@ -116,6 +116,7 @@ PARAMETERS: Final[dict[str, ParameterInfo]] = {
         _p("B031", "software lock mode", 1, "", 0, 3),
         _p("B084", "initialization mode", 1, "", 0, 2),
         _p("B085", "country code for initialization", 1, "", 0, 2),
+        *(_p(f"C00{i}", f"intelligent input {i} function", 1, "", 0, 255) for i in range(1, 9)),
         _p("C070", "data command source", 1, "", 2, 5),
         _p("C071", "communication speed", 1, "", 2, 6),
         _p("C072", "node address", 1, "", 1, 32),

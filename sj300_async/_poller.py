@@ -1,0 +1,324 @@
+"""The poller: keep a picture of many drives on many buses up to date.
+
+Each bus gets one polling task (in an anyio task group) that walks its
+drives every ``interval_s``. Every read is its own transaction on the bus's
+arbiter, so a command from another task waits for at most the transaction
+on the line — never for a whole cycle — and a stop waits for nothing queued.
+
+Health: a drive goes offline after ``offline_after`` consecutive failed
+polls. While offline it is probed with a single status read every
+``offline_probe_interval_s`` instead of being polled every cycle, so a dead
+drive does not eat the line with time-outs; the first good reply brings it
+back online. While online, a poll stops at its first failed read for the
+same reason.
+
+Results go to callbacks (:meth:`Poller.on_sample`) and to any number of
+async iterators (:meth:`Poller.samples`). An iterator whose consumer falls
+behind holds at most ``buffer`` samples; older ones are dropped and counted
+in :attr:`Poller.dropped_samples` — never silently.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import contextlib
+import logging
+from collections.abc import AsyncIterator, Callable, Iterable, Mapping
+from dataclasses import dataclass, field
+from types import TracebackType
+from typing import Final, Literal
+
+import anyio
+import anyio.abc
+
+from ._bus import Bus
+from ._errors import LocalProtocolError, SJ300Error
+from ._parameters import normalize_code
+from ._payloads import InverterStatus, MonitorData
+
+__all__ = ["BusPollStats", "DriveHealth", "Poller", "Sample"]
+
+_log = logging.getLogger("sj300_async.poller")
+
+Read = Literal["status", "monitor"]
+_READS: Final = ("status", "monitor")
+
+
+@dataclass(frozen=True, slots=True)
+class Sample:
+    """The result of polling one drive once."""
+
+    bus: str  #: the bus's description, e.g. ``tcp://127.0.0.1:4001``
+    node: int
+    timestamp: float  #: event-loop time of the poll's end
+    online: bool  #: the drive's health after this poll
+    status: InverterStatus | None  #: None when not read or failed
+    monitor: MonitorData | None  #: None when not read or failed
+    parameters: Mapping[str, float]  #: the parameters read, engineering values
+    error: str | None  #: the poll's error, None when every read succeeded
+    latency_s: float | None  #: mean time per successful read of this poll
+
+
+@dataclass(slots=True)
+class DriveHealth:
+    """What the poller knows of one drive's health."""
+
+    online: bool = True
+    consecutive_failures: int = 0
+    last_error: str | None = None
+    polls: int = 0
+    failures: int = 0
+    #: Loop time of the last good poll (None before the first).
+    last_ok: float | None = None
+    #: Loop time before which an offline drive is not probed again.
+    next_probe: float = 0.0
+
+
+@dataclass(slots=True)
+class BusPollStats:
+    """Polling statistics of one bus."""
+
+    cycles: int = 0
+    last_cycle_s: float = 0.0
+    max_cycle_s: float = 0.0
+    total_cycle_s: float = 0.0
+    errors: int = 0
+
+    @property
+    def mean_cycle_s(self) -> float | None:
+        """Mean duration of a polling cycle, None before the first."""
+        return self.total_cycle_s / self.cycles if self.cycles else None
+
+
+@dataclass(slots=True)
+class _Target:
+    bus: Bus
+    nodes: list[int]
+    stats: BusPollStats = field(default_factory=BusPollStats)
+    health: dict[int, DriveHealth] = field(default_factory=dict)
+
+
+_END: Final = object()
+
+
+class Poller:
+    """Polls drives on one or more buses (see the module docstring).
+
+    Use as an async context manager; polling runs while inside it::
+
+        poller = Poller(interval_s=0.5)
+        poller.add(bus, [1, 2, 3])
+        async with poller:
+            async for sample in poller.samples():
+                print(sample.node, sample.monitor)
+    """
+
+    def __init__(
+        self,
+        *,
+        interval_s: float = 0.5,
+        reads: Iterable[Read] = _READS,
+        parameters: Iterable[str] = (),
+        offline_after: int = 3,
+        offline_probe_interval_s: float = 5.0,
+        buffer: int = 1000,
+    ) -> None:
+        reads = tuple(reads)
+        if unknown := set(reads) - set(_READS):
+            raise LocalProtocolError(f"unknown reads {sorted(unknown)}; choose from {_READS}")
+        if not interval_s >= 0:
+            raise LocalProtocolError(f"interval_s must be >= 0, got {interval_s!r}")
+        if isinstance(offline_after, bool) or not isinstance(offline_after, int):
+            raise LocalProtocolError(f"offline_after must be an int, got {offline_after!r}")
+        if offline_after < 1 or not offline_probe_interval_s >= 0 or buffer < 1:
+            raise LocalProtocolError("offline_after and buffer must be >= 1, probe interval >= 0")
+        self.interval_s = interval_s
+        self.reads: tuple[Read, ...] = reads
+        self.parameters = tuple(normalize_code(c) for c in parameters)
+        self.offline_after = offline_after
+        self.offline_probe_interval_s = offline_probe_interval_s
+        self.buffer = buffer
+        #: Samples dropped because an iterator's consumer fell behind.
+        self.dropped_samples = 0
+        self._targets: dict[str, _Target] = {}
+        self._callbacks: list[Callable[[Sample], None]] = []
+        self._queues: list[asyncio.Queue[object]] = []
+        self._stack: contextlib.AsyncExitStack | None = None
+        self._task_group: anyio.abc.TaskGroup | None = None
+
+    # -- configuration ---------------------------------------------------------
+
+    def add(self, bus: Bus, nodes: Iterable[int]) -> None:
+        """Poll *nodes* on *bus* (may be called while running: the bus starts at once)."""
+        nodes = sorted(set(nodes))
+        for node in nodes:
+            bus.drive(node)  # validates the node number
+        target = self._targets.get(bus.description)
+        if target is None:
+            target = _Target(bus, [])
+            self._targets[bus.description] = target
+            if self._task_group is not None:
+                self._task_group.start_soon(self._poll_bus, target)
+        for node in nodes:
+            if node not in target.nodes:
+                target.nodes.append(node)
+                target.health[node] = DriveHealth()
+        target.nodes.sort()
+
+    def on_sample(self, callback: Callable[[Sample], None]) -> Callable[[], None]:
+        """Call *callback* with every sample; returns a function that unregisters it."""
+        self._callbacks.append(callback)
+        return lambda: self._callbacks.remove(callback)
+
+    def health(self, bus: Bus | str, node: int) -> DriveHealth:
+        """The health record of *node* on *bus* (a Bus or its description).
+
+        Raises:
+            KeyError: the drive is not polled.
+        """
+        key = bus if isinstance(bus, str) else bus.description
+        return self._targets[key].health[node]
+
+    def bus_stats(self, bus: Bus | str) -> BusPollStats:
+        """Polling statistics of *bus* (a Bus or its description)."""
+        key = bus if isinstance(bus, str) else bus.description
+        return self._targets[key].stats
+
+    # -- running -------------------------------------------------------------------
+
+    async def __aenter__(self) -> Poller:
+        if self._stack is not None:
+            raise RuntimeError("the poller is already running")
+        stack = contextlib.AsyncExitStack()
+        # The task group lives in an exit stack rather than around the caller's
+        # body, so an exception from the body is not wrapped in an ExceptionGroup.
+        self._task_group = await stack.enter_async_context(anyio.create_task_group())
+        self._stack = stack
+        for target in self._targets.values():
+            self._task_group.start_soon(self._poll_bus, target)
+        return self
+
+    async def __aexit__(
+        self,
+        exc_type: type[BaseException] | None,
+        exc: BaseException | None,
+        tb: TracebackType | None,
+    ) -> None:
+        stack, self._stack = self._stack, None
+        task_group, self._task_group = self._task_group, None
+        if task_group is not None:
+            task_group.cancel_scope.cancel()
+        for queue in self._queues:
+            _put_dropping(queue, _END)
+        if stack is not None:
+            await stack.aclose()
+
+    async def samples(self) -> AsyncIterator[Sample]:
+        """Yield samples as they are polled, until the poller stops."""
+        queue: asyncio.Queue[object] = asyncio.Queue(self.buffer)
+        self._queues.append(queue)
+        try:
+            while True:
+                item = await queue.get()
+                if item is _END:
+                    return
+                assert isinstance(item, Sample)
+                yield item
+        finally:
+            self._queues.remove(queue)
+
+    # -- polling -------------------------------------------------------------------
+
+    async def _poll_bus(self, target: _Target) -> None:
+        while True:
+            start = anyio.current_time()
+            for node in list(target.nodes):
+                health = target.health[node]
+                if not health.online and anyio.current_time() < health.next_probe:
+                    continue
+                sample = await self._poll_drive(target, node, health)
+                self._publish(sample)
+            elapsed = anyio.current_time() - start
+            stats = target.stats
+            stats.cycles += 1
+            stats.last_cycle_s = elapsed
+            stats.total_cycle_s += elapsed
+            stats.max_cycle_s = max(stats.max_cycle_s, elapsed)
+            # Never spin: even an overrun cycle yields to other tasks.
+            await anyio.sleep(max(0.0, self.interval_s - elapsed))
+
+    async def _poll_drive(self, target: _Target, node: int, health: DriveHealth) -> Sample:
+        drive = target.bus.drive(node)
+        probing = not health.online
+        status: InverterStatus | None = None
+        monitor: MonitorData | None = None
+        parameters: dict[str, float] = {}
+        error: str | None = None
+        spent = 0.0
+        ok_reads = 0
+        reads: tuple[str, ...] = ("status",) if probing else self.reads + self.parameters
+        for read in reads:
+            begin = anyio.current_time()
+            try:
+                if read == "status":
+                    status = await drive.read_status()
+                elif read == "monitor":
+                    monitor = await drive.read_monitor()
+                else:
+                    parameters[read] = await drive.read_parameter(read)
+            except SJ300Error as exc:
+                error = f"{type(exc).__name__}: {exc}"
+                break  # a failing drive gets no more of the line this cycle
+            spent += anyio.current_time() - begin
+            ok_reads += 1
+        now = anyio.current_time()
+        self._update_health(target, node, health, error, now)
+        return Sample(
+            bus=target.bus.description,
+            node=node,
+            timestamp=now,
+            online=health.online,
+            status=status,
+            monitor=monitor,
+            parameters=parameters,
+            error=error,
+            latency_s=spent / ok_reads if ok_reads else None,
+        )
+
+    def _update_health(
+        self, target: _Target, node: int, health: DriveHealth, error: str | None, now: float
+    ) -> None:
+        health.polls += 1
+        if error is None:
+            if not health.online:
+                _log.info("%s node %02d back online", target.bus.description, node)
+            health.online = True
+            health.consecutive_failures = 0
+            health.last_ok = now
+            return
+        health.failures += 1
+        health.consecutive_failures += 1
+        health.last_error = error
+        target.stats.errors += 1
+        if health.online and health.consecutive_failures >= self.offline_after:
+            health.online = False
+            _log.warning("%s node %02d offline: %s", target.bus.description, node, error)
+        if not health.online:
+            health.next_probe = now + self.offline_probe_interval_s
+
+    def _publish(self, sample: Sample) -> None:
+        for callback in list(self._callbacks):
+            callback(sample)
+        for queue in self._queues:
+            if _put_dropping(queue, sample):
+                self.dropped_samples += 1
+
+
+def _put_dropping(queue: asyncio.Queue[object], item: object) -> bool:
+    """Put *item*, dropping the oldest entry when full; True if one was dropped."""
+    dropped = False
+    if queue.full():
+        queue.get_nowait()
+        dropped = True
+    queue.put_nowait(item)
+    return dropped
