@@ -113,9 +113,8 @@ async def test_cancellation_stops_polling_cleanly():
             await task
         assert asyncio.all_tasks() == {asyncio.current_task(), *_bus_tasks()}
         # The bus is still usable and in sync after the poller was cancelled mid-poll.
-        assert await bus.drive(1).read_parameter("F002") == await bus.drive(1).read_parameter(
-            "F002"
-        )
+        await bus.drive(1).write_parameter_raw("A020", 1234)
+        assert await bus.drive(1).read_parameter_raw("A020") == 1234
         assert bus._arbiter._outstanding is None
 
 
