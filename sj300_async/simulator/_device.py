@@ -20,11 +20,10 @@ import asyncio
 import os
 import termios
 import tty
-from types import TracebackType
 
 from .._errors import LocalProtocolError
 from ._bus import SimulatedBus
-from ._fd_link import FdLink
+from ._fd_link import FdLink, FdServer
 from ._pacing import LinePacing, PacedLine
 
 __all__ = ["SerialDeviceServer", "serve_serial_device"]
@@ -48,7 +47,7 @@ def _configure(fd: int, settings: LinePacing) -> None:
     termios.tcsetattr(fd, termios.TCSANOW, [iflag, oflag, cflag, lflag, speed, speed, cc])
 
 
-class SerialDeviceServer:
+class SerialDeviceServer(FdServer):
     """A simulated bus on an existing serial device. Use :func:`serve_serial_device`."""
 
     def __init__(
@@ -76,32 +75,8 @@ class SerialDeviceServer:
     def __repr__(self) -> str:
         return f"SerialDeviceServer(path={self.path!r}, closed={self._closed})"
 
-    @property
-    def dropped_bytes(self) -> int:
-        """Bytes for the host dropped because nobody read them."""
-        return self._link.dropped_bytes
-
-    def close(self) -> None:
-        """Stop serving and close the device. Idempotent."""
-        if self._closed:
-            return
-        self._closed = True
-        self._link.close()
+    def _close_fds(self) -> None:
         os.close(self._fd)
-
-    async def wait_closed(self) -> None:
-        """Nothing to wait for: :meth:`close` releases everything at once (kept for symmetry)."""
-
-    async def __aenter__(self) -> SerialDeviceServer:
-        return self
-
-    async def __aexit__(
-        self,
-        exc_type: type[BaseException] | None,
-        exc: BaseException | None,
-        tb: TracebackType | None,
-    ) -> None:
-        self.close()
 
 
 async def serve_serial_device(

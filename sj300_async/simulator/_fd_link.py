@@ -13,13 +13,14 @@ from __future__ import annotations
 import asyncio
 import logging
 import os
-from typing import Final
+from types import TracebackType
+from typing import Final, Self
 
 from ._bus import SimulatedBus
 from ._endpoint import SimulatorEndpoint
 from ._pacing import PacedLine
 
-__all__ = ["FdLink"]
+__all__ = ["FdLink", "FdServer"]
 
 _log = logging.getLogger("sj300_async.simulator")
 
@@ -104,3 +105,44 @@ class FdLink:
         elif not want_writer and self._writing:
             self._loop.remove_writer(self._fd)
         self._writing = want_writer
+
+
+class FdServer:
+    """Common life cycle of the servers that own descriptors (pty, serial device).
+
+    Subclasses set ``_link`` and ``_closed`` and release their descriptors in
+    :meth:`_close_fds`.
+    """
+
+    _link: FdLink
+    _closed: bool
+
+    @property
+    def dropped_bytes(self) -> int:
+        """Bytes for the client dropped because nobody read them."""
+        return self._link.dropped_bytes
+
+    def _close_fds(self) -> None:
+        raise NotImplementedError
+
+    def close(self) -> None:
+        """Stop serving and close the descriptors. Idempotent."""
+        if self._closed:
+            return
+        self._closed = True
+        self._link.close()
+        self._close_fds()
+
+    async def wait_closed(self) -> None:
+        """Nothing to wait for: :meth:`close` releases everything at once (kept for symmetry)."""
+
+    async def __aenter__(self) -> Self:
+        return self
+
+    async def __aexit__(
+        self,
+        exc_type: type[BaseException] | None,
+        exc: BaseException | None,
+        tb: TracebackType | None,
+    ) -> None:
+        self.close()

@@ -20,16 +20,15 @@ from __future__ import annotations
 import asyncio
 import os
 import tty
-from types import TracebackType
 
 from ._bus import SimulatedBus
-from ._fd_link import FdLink
+from ._fd_link import FdLink, FdServer
 from ._pacing import LinePacing, PacedLine
 
 __all__ = ["PtyServer", "open_pty_server"]
 
 
-class PtyServer:
+class PtyServer(FdServer):
     """A simulated bus on a pseudo-terminal (see the module docstring).
 
     Use :func:`open_pty_server` to make one. Also an async context manager.
@@ -57,33 +56,9 @@ class PtyServer:
     def __repr__(self) -> str:
         return f"PtyServer(path={self.path!r}, closed={self._closed})"
 
-    @property
-    def dropped_bytes(self) -> int:
-        """Bytes for the client dropped because nobody read them."""
-        return self._link.dropped_bytes
-
-    def close(self) -> None:
-        """Stop serving and close the pty. Idempotent."""
-        if self._closed:
-            return
-        self._closed = True
-        self._link.close()
+    def _close_fds(self) -> None:
         os.close(self._master)
         os.close(self._slave)
-
-    async def wait_closed(self) -> None:
-        """Nothing to wait for: :meth:`close` releases everything at once (kept for symmetry)."""
-
-    async def __aenter__(self) -> PtyServer:
-        return self
-
-    async def __aexit__(
-        self,
-        exc_type: type[BaseException] | None,
-        exc: BaseException | None,
-        tb: TracebackType | None,
-    ) -> None:
-        self.close()
 
 
 async def open_pty_server(
