@@ -8,24 +8,36 @@ __all__ = ["bcc", "xor_bytes"]
 _HEX_TABLE: tuple[bytes, ...] = tuple(b"%02X" % i for i in range(256))
 
 
+def _fold_shifts(n: int) -> tuple[int, ...]:
+    width = 1
+    while width < n:
+        width *= 2
+    shifts = []
+    while width > 1:
+        width //= 2
+        shifts.append(8 * width)
+    return tuple(shifts)
+
+
+# Shift sequence per body length: halve the next power of two down to one byte.
+_SHIFTS: tuple[tuple[int, ...], ...] = tuple(_fold_shifts(n) for n in range(1025))
+
+
 def xor_bytes(body: bytes | bytearray | memoryview) -> int:
     """Return the XOR of all bytes of *body*.
 
     Instead of a Python loop per byte, the bytes are read as one big integer
-    and folded onto themselves: XOR-ing the upper half onto the lower half
-    keeps the XOR of all byte lanes, so log2(n) big-int operations (done in C)
-    reduce the frame to one byte. A 446-byte trip-history reply takes 9 folds.
+    and folded onto themselves: with the width rounded up to a power of two,
+    ``v ^= v >> (8 * half)`` puts the XOR of the two halves into the lower
+    half, and log2(n) such steps (done in C) leave the answer in the lowest
+    byte. Rounding up to a power of two means the bytes above the current
+    half never need masking. A 446-byte trip-history reply takes 9 folds.
     """
-    n = len(body)
-    if n == 0:
-        return 0
     value = int.from_bytes(body, "little")
-    width = n  # in bytes
-    while width > 1:
-        half = (width + 1) // 2
-        value = (value & ((1 << (8 * half)) - 1)) ^ (value >> (8 * half))
-        width = half
-    return value
+    n = len(body)
+    for shift in _SHIFTS[n] if n < len(_SHIFTS) else _fold_shifts(n):
+        value ^= value >> shift
+    return value & 0xFF
 
 
 def bcc(body: bytes) -> bytes:

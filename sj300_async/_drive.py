@@ -20,11 +20,11 @@ from ._payloads import (
     InverterStatus,
     MonitorData,
     TripHistory,
+    _decode_monitor,
+    _decode_status,
+    _decode_trip_history,
     decode_can_store,
-    decode_monitor,
     decode_parameter_value,
-    decode_status,
-    decode_trip_history,
 )
 from ._requests import Request
 from ._stats import TransactionStats
@@ -153,15 +153,16 @@ class Drive(_Commands):
         Raises:
             NakError, ReplyTimeoutError, RemoteProtocolError, TransportError.
         """
-        return decode_status(await self._data(rq.read_status(self._node)))
+        # The reply parser has checked every character: decode without checking again.
+        return _decode_status(await self._data(rq.read_status(self._node)))
 
     async def read_monitor(self) -> MonitorData:
         """Command 03: the monitor block. Raises as :meth:`read_status`."""
-        return decode_monitor(await self._data(rq.read_monitor(self._node)))
+        return _decode_monitor(await self._data(rq.read_monitor(self._node)))
 
     async def read_trip_history(self) -> TripHistory:
         """Command 05: trip count and the six latest trips. Raises as :meth:`read_status`."""
-        return decode_trip_history(await self._data(rq.read_trip_history(self._node)))
+        return _decode_trip_history(await self._data(rq.read_trip_history(self._node)))
 
     async def read_parameter_raw(self, code: str) -> int:
         """Command 06: a parameter's unscaled integer value.

@@ -92,24 +92,21 @@ class FrameSplitter(Generic[FrameT]):
             _log.debug("discarded %d bytes (%s): %s", len(data), reason.value, data.hex(" "))
         events.append(Discarded(reason, data))
 
-    def _emit(self, events: list[FrameT | BadFrame | Discarded], body: bytes) -> None:
-        event = self._decode_body(body)
-        if isinstance(event, BadFrame):
-            self.stats.bad_frames += 1
-            if _log.isEnabledFor(logging.DEBUG):
-                _log.debug("bad frame (%s): %s", event.reason.value, body.hex(" "))
-        else:
-            self.stats.frames += 1
-        events.append(event)
+    def _bad(self, event: BadFrame) -> None:
+        self.stats.bad_frames += 1
+        if _log.isEnabledFor(logging.DEBUG):
+            _log.debug("bad frame (%s): %s", event.reason.value, event.body.hex(" "))
 
     def feed(self, data: bytes | bytearray | memoryview) -> list[FrameT | BadFrame | Discarded]:
         """Consume a chunk; return the events it completed (possibly none)."""
-        data = bytes(data)
+        if type(data) is not bytes:
+            data = bytes(data)
         events: list[FrameT | BadFrame | Discarded] = []
         pos = 0
         end = len(data)
         partial = self._partial
         max_body = self.max_body
+        decode = self._decode_body
         while pos < end:
             if not self._in_frame:
                 stx = data.find(STX_BYTE, pos)
@@ -156,5 +153,10 @@ class FrameSplitter(Generic[FrameT]):
                 body = data[pos:cr]
             self._in_frame = False
             pos = cr + 1
-            self._emit(events, body)
+            event = decode(body)
+            if type(event) is BadFrame:
+                self._bad(event)
+            else:
+                self.stats.frames += 1
+            events.append(event)
         return events

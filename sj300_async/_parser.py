@@ -76,12 +76,12 @@ def parse_bcc(chars: bytes) -> int | None:
     return _HEX_VALUES.get(chars)
 
 
+_NODES: Final = {b"%02d" % n: n for n in range(MIN_NODE, MAX_NODE + 1)}
+
+
 def parse_node(chars: bytes) -> int | None:
     """Return the node number of two decimal characters 01..32, or None."""
-    if not _TWO_DIGITS.fullmatch(chars):
-        return None
-    node = int(chars)
-    return node if MIN_NODE <= node <= MAX_NODE else None
+    return _NODES.get(chars)
 
 
 class ReplyParser(FrameSplitter[Reply]):

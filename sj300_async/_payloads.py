@@ -2,8 +2,11 @@
 
 from __future__ import annotations
 
+import enum
+import struct
+from collections.abc import Callable
 from dataclasses import dataclass
-from typing import Final
+from typing import Final, TypeVar
 
 from ._codes import Direction, StatusA, StatusB, StatusC, TripStatusB, TripStatusC
 from ._constants import MONITOR_DATA_LEN, STATUS_DATA_LEN, TRIP_HISTORY_DATA_LEN
@@ -23,7 +26,6 @@ __all__ = [
     "decode_trip_history",
 ]
 
-_FIELD: Final = 8
 _TRIP_RECORDS: Final = 6
 _TRIP_RECORD_FIELDS: Final = 9
 
@@ -33,10 +35,52 @@ def _check(data: bytes, length: int, what: str) -> None:
         raise RemoteProtocolError(f"malformed {what} data: {data!r}")
 
 
-def _fields(data: bytes) -> list[int]:
-    # The caller has checked every field against its pattern, so int() cannot
-    # see whitespace, '+' or '_' (which it would otherwise accept).
-    return [int(data[i : i + _FIELD]) for i in range(0, len(data), _FIELD)]
+# Splitting into 8-character fields with one struct call is about three times
+# faster than slicing in a loop. The callers have checked every field against
+# its pattern, so int() cannot see whitespace, '+' or '_' (which it accepts).
+_MONITOR_FIELDS: Final = struct.Struct("8s" * 4 + "16x" + "8s" * 7)
+_TRIP_FIELDS: Final = struct.Struct("8s" * 55)
+
+_E = TypeVar("_E", bound=enum.Enum)
+
+
+def _lookup(cls: type[_E]) -> Callable[[int], _E]:
+    """A fast int -> member function: a dict for known codes, the enum for the rest."""
+    members: dict[int, _E] = {m.value: m for m in cls}
+
+    def lookup(value: int) -> _E:
+        member = members.get(value)
+        return member if member is not None else cls(value)
+
+    return lookup
+
+
+_F = TypeVar("_F", bound=enum.IntFlag)
+
+
+def _flag_lookup(cls: type[_F], cached_below: int) -> Callable[[int], _F]:
+    """A memoizing int -> flag function (IntFlag's own constructor is slow)."""
+    cache: dict[int, _F] = {}
+
+    def lookup(value: int) -> _F:
+        flag = cache.get(value)
+        if flag is None:
+            flag = cls(value)
+            if 0 <= value < cached_below:  # bounded: at most cached_below entries
+                cache[value] = flag
+        return flag
+
+    return lookup
+
+
+_input_monitor = _flag_lookup(InputMonitor, 1 << 9)
+_output_terminal = _flag_lookup(OutputTerminal, 1 << 6)
+_trip_status_b = _flag_lookup(TripStatusB, 1 << 8)
+_status_a = _lookup(StatusA)
+_status_b = _lookup(StatusB)
+_status_c = _lookup(StatusC)
+_trip_status_c = _lookup(TripStatusC)
+_direction = _lookup(Direction)
 
 
 @dataclass(frozen=True, slots=True)
@@ -60,7 +104,13 @@ def decode_status(data: bytes) -> InverterStatus:
         RemoteProtocolError: the data is not 8 decimal digits.
     """
     _check(data, STATUS_DATA_LEN, "status")
-    return InverterStatus(StatusA(int(data[0:2])), StatusB(int(data[2:4])), StatusC(int(data[4:6])))
+    return _decode_status(data)
+
+
+def _decode_status(data: bytes) -> InverterStatus:
+    return InverterStatus(
+        _status_a(int(data[0:2])), _status_b(int(data[2:4])), _status_c(int(data[4:6]))
+    )
 
 
 @dataclass(frozen=True, slots=True)
@@ -88,15 +138,20 @@ def decode_monitor(data: bytes) -> MonitorData:
         RemoteProtocolError: the data is not 104 characters of the right kinds.
     """
     _check(data, MONITOR_DATA_LEN, "monitor")
-    freq, current, direction, pid = _fields(data[0:32])
-    conv, torque, voltage, power, _reserved, run_h, on_h = _fields(data[48:104])
+    return _decode_monitor(data)
+
+
+def _decode_monitor(data: bytes) -> MonitorData:
+    freq, current, direction, pid, conv, torque, voltage, power, _reserved, run_h, on_h = map(
+        int, _MONITOR_FIELDS.unpack(data)
+    )
     return MonitorData(
         output_frequency_hz=freq / 100,
         output_current_a=current / 10,
-        direction=Direction(direction),
+        direction=_direction(direction),
         pid_feedback_percent=pid / 100,
-        input_terminals=InputMonitor(int(data[32:40], 16)),
-        output_terminals=OutputTerminal(int(data[40:48], 16)),
+        input_terminals=_input_monitor(int(data[32:40], 16)),
+        output_terminals=_output_terminal(int(data[40:48], 16)),
         frequency_conversion=conv / 100,
         output_torque_percent=torque,
         output_voltage_v=voltage / 10,
@@ -151,7 +206,11 @@ def decode_trip_history(data: bytes) -> TripHistory:
         RemoteProtocolError: the data is not 440 characters of decimal fields.
     """
     _check(data, TRIP_HISTORY_DATA_LEN, "trip history")
-    values = _fields(data)
+    return _decode_trip_history(data)
+
+
+def _decode_trip_history(data: bytes) -> TripHistory:
+    values = list(map(int, _TRIP_FIELDS.unpack(data)))
     if any(values[3 + i * _TRIP_RECORD_FIELDS] < 0 for i in range(_TRIP_RECORDS)):
         raise RemoteProtocolError(f"negative status B bit field in trip history: {data!r}")
     records = []
@@ -160,9 +219,9 @@ def decode_trip_history(data: bytes) -> TripHistory:
         records.append(
             TripRecord(
                 trip_factor=f[0],
-                status_a=StatusA(f[1]),
-                status_b=TripStatusB(f[2]),
-                status_c=TripStatusC(f[3]),
+                status_a=_status_a(f[1]),
+                status_b=_trip_status_b(f[2]),
+                status_c=_trip_status_c(f[3]),
                 output_frequency_hz=f[4] / 10,
                 run_time_h=f[5],
                 output_current_a=f[6] / 10,
