@@ -29,15 +29,19 @@ from __future__ import annotations
 import asyncio
 import logging
 from dataclasses import dataclass
+from typing import Any
 
-from ._codes import NakCode
-from ._errors import NakError, RemoteProtocolError, ReplyTimeoutError, TransportError
-from ._events import BadFrame, Discarded, NakReply, ParserEvent, Reply
+from ._dialect import Dialect, LineRequest
+from ._errors import (
+    NakError,
+    RemoteProtocolError,
+    ReplyTimeoutError,
+    TransportError,
+)
+from ._events import BadFrame, Discarded
 from ._line import LineSettings
 from ._linequeue import LineQueue
 from ._link import Link
-from ._matching import answers
-from ._requests import Request
 from ._stats import BusStats, TransactionStats
 from ._timing import BusTiming
 
@@ -50,8 +54,8 @@ _log = logging.getLogger("sj300_async.arbiter")
 class _Outstanding:
     """The transaction currently on the line."""
 
-    request: Request
-    waiter: asyncio.Future[Reply | None]
+    request: LineRequest
+    waiter: asyncio.Future[Any]
     stats: TransactionStats
     bad_frame: BadFrame | None = None
 
@@ -59,8 +63,16 @@ class _Outstanding:
 class Arbiter:
     """Serializes transactions on one line and enforces the timing rules."""
 
-    def __init__(self, link: Link, line: LineSettings, timing: BusTiming, stats: BusStats) -> None:
+    def __init__(
+        self,
+        link: Link,
+        line: LineSettings,
+        timing: BusTiming,
+        stats: BusStats,
+        dialect: Dialect,
+    ) -> None:
         self.link = link
+        self.dialect = dialect
         self.line = line
         self.timing = timing
         self.stats = stats
@@ -79,7 +91,7 @@ class Arbiter:
     def bytes_received(self, now: float) -> None:
         self._last_rx = now
 
-    def event_received(self, event: ParserEvent, now: float) -> None:
+    def event_received(self, event: Any, now: float) -> None:
         out = self._outstanding
         if isinstance(event, Discarded):
             return  # counted by the protocol adapter
@@ -91,7 +103,7 @@ class Arbiter:
             self.stats.unsolicited_frames += 1
             _log.debug("unsolicited frame discarded: %s", event)
             return
-        if answers(out.request, event):
+        if self.dialect.answers(out.request, event):
             out.waiter.set_result(event)
             return
         self.stats.stray_frames += 1
@@ -109,15 +121,15 @@ class Arbiter:
 
     async def transact(
         self,
-        request: Request,
+        request: LineRequest,
         stats: TransactionStats,
         *,
         wait_s: float = 0.0,
         timeout_s: float | None = None,
         retries: int = 0,
         urgent: bool = False,
-    ) -> Reply | None:
-        """Run *request* on the line; return its positive answer (None for a broadcast).
+    ) -> Any:
+        """Run *request* on the line; return its positive answer (None when none is expected).
 
         Raises:
             NakError: the drive refused (after retries for transmission errors).
@@ -133,7 +145,7 @@ class Arbiter:
             try:
                 return await self._attempt(request, stats, wait_s, timeout_s)
             except (ReplyTimeoutError, RemoteProtocolError, NakError) as exc:
-                if attempt >= retries or not _retryable(exc):
+                if attempt >= retries or not self.dialect.retryable(exc):
                     raise
                 attempt += 1
                 stats.retries += 1
@@ -145,11 +157,11 @@ class Arbiter:
 
     async def _attempt(
         self,
-        request: Request,
+        request: LineRequest,
         stats: TransactionStats,
         wait_s: float,
         timeout_s: float | None,
-    ) -> Reply | None:
+    ) -> Any:
         protocol = self.link.require()
         if self._drain_quiet is not None:
             await self._drain()
@@ -160,19 +172,25 @@ class Arbiter:
             protocol = self.link.require()
         await protocol.wait_writable()
         totals = self.stats.transactions
-        if request.is_broadcast:
+        if not request.expects_reply:
             protocol.write(request.frame)
             self._count(stats, totals, "broadcasts")
             self._rest_until = self._loop.time() + self.timing.after_broadcast(request, self.line)
             return None
 
-        timeout = timeout_s or self.timing.response_timeout(request, self.line, wait_s)
-        waiter: asyncio.Future[Reply | None] = self._loop.create_future()
+        dialect = self.dialect
+        timeout = timeout_s or self.timing.response_timeout(
+            request,
+            self.line,
+            wait_s + dialect.processing_s(request),
+            dialect.reply_frame_length(request),
+        )
+        waiter: asyncio.Future[Any] = self._loop.create_future()
         out = _Outstanding(request, waiter, stats)
         self._outstanding = out  # registered before the write: no answer goes unseen
         sent = self._loop.time()
         timer = self._loop.call_at(sent + timeout, _expire, waiter)
-        answered = False
+        answered = acknowledged = False
         try:
             protocol.write(request.frame)
             self._count(stats, totals, "requests")
@@ -181,14 +199,14 @@ class Arbiter:
                 if out.bad_frame is not None:
                     self._count(stats, totals, "protocol_errors")
                     raise RemoteProtocolError(
-                        f"node {request.node:02d}: no valid answer to command "
-                        f"{request.command.wire.decode()}, only a corrupted frame "
+                        f"node {request.node:02d}: no valid answer to {request.label}, "
+                        f"only a corrupted frame "
                         f"({out.bad_frame.reason.value}: {out.bad_frame.body!r})"
                     )
                 self._count(stats, totals, "timeouts")
                 raise ReplyTimeoutError(
-                    f"node {request.node:02d} did not answer command "
-                    f"{request.command.wire.decode()} within {timeout * 1000:.0f} ms"
+                    f"node {request.node:02d} did not answer {request.label} "
+                    f"within {timeout * 1000:.0f} ms"
                 )
             answered = True
             latency = self._loop.time() - sent
@@ -196,11 +214,18 @@ class Arbiter:
             stats.record_latency(latency)
             if stats is not totals:
                 totals.record_latency(latency)
-            if isinstance(reply, NakReply):
-                stats.naks[reply.code] += 1
-                if stats is not totals:
-                    totals.naks[reply.code] += 1
-                raise NakError(reply.node, reply.code)
+            refusal = dialect.refusal(request, reply)
+            if refusal is not None:
+                code = getattr(refusal, "code", None)
+                if code is not None:
+                    stats.naks[code] += 1
+                    if stats is not totals:
+                        totals.naks[code] += 1
+                raise refusal
+            ack = dialect.acknowledgement(request, reply)
+            if ack is not None:
+                protocol.write(ack)
+                acknowledged = True
             return reply
         except TransportError:
             self._count(stats, totals, "transport_errors")
@@ -212,7 +237,10 @@ class Arbiter:
             timer.cancel()
             self._outstanding = None
             if answered:
-                self._rest_until = self._loop.time() + self.timing.guard(self.line)
+                rest = self.timing.guard(self.line)
+                if acknowledged:
+                    rest = max(rest, dialect.rest_after_acknowledgement_s())
+                self._rest_until = self._loop.time() + rest
             else:
                 quiet = self.timing.drain_quiet(timeout, self.line)
                 self._drain_quiet = max(self._drain_quiet or 0.0, quiet)
@@ -246,12 +274,6 @@ class Arbiter:
             setattr(totals, name, getattr(totals, name) + 1)
 
 
-def _expire(waiter: asyncio.Future[Reply | None]) -> None:
+def _expire(waiter: asyncio.Future[Any]) -> None:
     if not waiter.done():
         waiter.set_result(None)
-
-
-def _retryable(exc: BaseException) -> bool:
-    if isinstance(exc, NakError):
-        return NakCode(exc.code).is_transmission_error
-    return True

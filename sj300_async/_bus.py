@@ -6,18 +6,16 @@ import asyncio
 import logging
 from collections.abc import AsyncIterator
 from contextlib import asynccontextmanager
-from typing import TYPE_CHECKING, Final
+from typing import TYPE_CHECKING, Any, Final
 
 from ._arbiter import Arbiter
 from ._commands import Command
+from ._dialect import SJ300_DIALECT, Dialect, LineRequest
 from ._drive import Broadcast, Drive
 from ._errors import BusClosedError, LocalProtocolError, ReadOnlyError
-from ._events import Reply
 from ._line import INSTANT_LINE, LineSettings
 from ._link import Connector, Link, ReconnectPolicy
-from ._parser import ReplyParser
 from ._protocol import LineProtocol
-from ._requests import Request
 from ._stats import BusStats, TransactionStats
 from ._timing import BusTiming
 from ._trace import TraceHook
@@ -71,6 +69,7 @@ class Bus:
         read_only: bool = False,
         trace: TraceHook | None = None,
         reconnect: ReconnectPolicy | None = None,
+        dialect: Dialect = SJ300_DIALECT,
     ) -> None:
         if isinstance(retries, bool) or not isinstance(retries, int) or retries < 0:
             raise LocalProtocolError(f"retries must be an int >= 0, got {retries!r}")
@@ -82,11 +81,13 @@ class Bus:
         self.read_only = read_only
         self._trace = trace
         self._strip_echo = strip_echo
-        self._parser = ReplyParser()
+        #: The protocol spoken on this bus.
+        self.dialect = dialect
+        self._parser = dialect.new_parser()
         self.link = Link(
             connector, self._make_protocol, self.stats, description=description, policy=reconnect
         )
-        self._arbiter = Arbiter(self.link, line, timing, self.stats)
+        self._arbiter = Arbiter(self.link, line, timing, self.stats, dialect)
         self._drives: dict[int, Drive] = {}
         self._broadcast = Broadcast(self)
         self._closed = False
@@ -104,6 +105,7 @@ class Bus:
             self.stats,
             strip_echo=self._strip_echo,
             trace=self._trace,
+            trace_bytes=self.dialect.trace_bytes,
         )
 
     @property
@@ -159,20 +161,26 @@ class Bus:
 
     async def _execute(
         self,
-        request: Request,
+        request: LineRequest,
         stats: TransactionStats,
         *,
         wait_s: float = 0.0,
         timeout_s: float | None = None,
         urgent: bool = False,
-    ) -> Reply | None:
+        mutating: bool | None = None,
+    ) -> Any:
+        """Run a request of this bus's dialect (the Drive classes call this).
+
+        Args:
+            mutating: does the request change a drive? (None: decide from the
+                SJ300 command table.)
+        """
         if self._closed:
             raise BusClosedError(f"bus {self.description} is closed")
-        if self.read_only and request.command in MUTATING_COMMANDS:
-            raise ReadOnlyError(
-                f"bus {self.description} is read-only: command "
-                f"{request.command.wire.decode()} ({request.command.name}) refused"
-            )
+        if mutating is None:
+            mutating = getattr(request, "command", None) in MUTATING_COMMANDS
+        if self.read_only and mutating:
+            raise ReadOnlyError(f"bus {self.description} is read-only: {request.label} refused")
         return await self._arbiter.transact(
             request, stats, wait_s=wait_s, timeout_s=timeout_s, retries=self.retries, urgent=urgent
         )

@@ -137,9 +137,10 @@ class Drive(_Commands):
         return f"<Drive {self._node:02d} on {self._bus.description}>"
 
     async def _execute(self, request: Request, *, urgent: bool = False) -> Reply | None:
-        return await self._bus._execute(
+        reply: Reply | None = await self._bus._execute(
             request, self.stats, wait_s=self.wait_time_s, timeout_s=self.timeout_s, urgent=urgent
         )
+        return reply
 
     async def _data(self, request: Request) -> bytes:
         reply = await self._execute(request)
@@ -202,4 +203,5 @@ class Broadcast(_Commands):
         self.stats = TransactionStats()
 
     async def _execute(self, request: Request, *, urgent: bool = False) -> Reply | None:
-        return await self._bus._execute(request, self.stats, urgent=urgent)
+        reply: Reply | None = await self._bus._execute(request, self.stats, urgent=urgent)
+        return reply

@@ -10,13 +10,15 @@ from __future__ import annotations
 
 import asyncio
 import logging
-from typing import Protocol
+from collections.abc import Callable
+from typing import TYPE_CHECKING, Any, Protocol
 
-from ._events import BadFrame, Discarded, ParserEvent, Reply
-from ._parser import ReplyParser
-from ._reply_encoding import encode_reply
+from ._events import BadFrame, Discarded
 from ._stats import BusStats
 from ._trace import TraceHook, TraceRecord
+
+if TYPE_CHECKING:
+    from ._dialect import LineParser
 
 __all__ = ["LineListener", "LineProtocol"]
 
@@ -26,7 +28,7 @@ _log = logging.getLogger("sj300_async.line")
 class LineListener(Protocol):
     """What the adapter reports to (the arbiter)."""
 
-    def event_received(self, event: ParserEvent, now: float) -> None:
+    def event_received(self, event: Any, now: float) -> None:
         """A parser event; *now* is the loop time the chunk arrived."""
 
     def bytes_received(self, now: float) -> None:
@@ -41,14 +43,16 @@ class LineProtocol(asyncio.Protocol):
 
     def __init__(
         self,
-        parser: ReplyParser,
+        parser: LineParser,
         listener: LineListener,
         stats: BusStats,
         *,
         strip_echo: bool = False,
         trace: TraceHook | None = None,
+        trace_bytes: Callable[[Any], bytes] = bytes,
     ) -> None:
         self._parser = parser
+        self._trace_bytes = trace_bytes
         self._listener = listener
         self._stats = stats
         self._strip_echo = strip_echo
@@ -151,17 +155,13 @@ class LineProtocol(asyncio.Protocol):
         self._echo = b""
         return data
 
-    def _account(self, event: ParserEvent, now: float) -> None:
-        if isinstance(event, Discarded):
+    def _account(self, event: Any, now: float) -> None:
+        kind = type(event)
+        if kind is Discarded:
             self._stats.discarded_bytes += len(event.data)
-            data = event.data
-        elif isinstance(event, BadFrame):
+        elif kind is BadFrame:
             self._stats.bad_frames += 1
-            data = event.body
-        else:
-            data = b""
+        elif _log.isEnabledFor(logging.DEBUG):
+            _log.debug("rx %s", event)  # discards and bad frames are logged by the parser
         if self.trace is not None:
-            raw = encode_reply(event) if isinstance(event, Reply) else data
-            self.trace(TraceRecord(now, "rx", raw, event))
-        if _log.isEnabledFor(logging.DEBUG) and not data:
-            _log.debug("rx %s", event)
+            self.trace(TraceRecord(now, "rx", self._trace_bytes(event), event))

@@ -156,6 +156,16 @@ class Request:
         """True when the request goes to every drive (and gets no reply)."""
         return self.node == BROADCAST
 
+    @property
+    def expects_reply(self) -> bool:
+        """True unless broadcast: every SJ300 command to one node is answered."""
+        return self.node != BROADCAST
+
+    @property
+    def label(self) -> str:
+        """``"command 04"``: a short name for messages."""
+        return f"command {self.command.wire.decode()}"
+
 
 def encode_request(node: int, command: Command | int, data: bytes = b"") -> bytes:
     """Return the whole request frame, STX to CR.

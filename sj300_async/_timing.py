@@ -26,11 +26,14 @@ sequence numbers, cannot detect; ``drain_max_s`` bounds a babbling line.
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import TYPE_CHECKING
 
 from ._commands import Command, ReplyKind
 from ._errors import LocalProtocolError
 from ._line import LineSettings
-from ._requests import Request
+
+if TYPE_CHECKING:
+    from ._dialect import LineRequest
 
 __all__ = ["BusTiming", "reply_frame_length"]
 
@@ -74,18 +77,25 @@ class BusTiming:
         if self.fixed_timeout_s is not None and not self.fixed_timeout_s > 0:
             raise LocalProtocolError(f"timeout must be > 0, got {self.fixed_timeout_s!r}")
 
-    def response_timeout(self, request: Request, line: LineSettings, wait_s: float) -> float:
-        """Seconds from the write of *request* until its answer must have arrived."""
+    def response_timeout(
+        self, request: LineRequest, line: LineSettings, wait_s: float, reply_length: int
+    ) -> float:
+        """Seconds from the write of *request* until its answer must have arrived.
+
+        Args:
+            wait_s: the device's wait and processing time for this request.
+            reply_length: characters of the longest reply it can get.
+        """
         if self.fixed_timeout_s is not None:
             return self.fixed_timeout_s
-        wire = line.wire_time_s(len(request.frame) + reply_frame_length(request.command))
+        wire = line.wire_time_s(len(request.frame) + reply_length)
         return wire + wait_s + self.margin_s
 
     def guard(self, line: LineSettings) -> float:
         """Seconds the line rests after a reply."""
         return self.guard_chars * line.char_time_s
 
-    def after_broadcast(self, request: Request, line: LineSettings) -> float:
+    def after_broadcast(self, request: LineRequest, line: LineSettings) -> float:
         """Seconds the line rests after a broadcast was written."""
         return line.wire_time_s(len(request.frame)) + self.broadcast_processing_s
 

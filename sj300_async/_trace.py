@@ -4,9 +4,7 @@ from __future__ import annotations
 
 from collections.abc import Callable
 from dataclasses import dataclass
-from typing import Literal
-
-from ._events import ParserEvent
+from typing import Any, Literal
 
 __all__ = ["TraceHook", "TraceRecord"]
 
@@ -22,7 +20,7 @@ class TraceRecord:
     #: The frame written (tx), or the received frame / discarded bytes (rx).
     data: bytes
     #: What the parser yielded (rx only).
-    event: ParserEvent | None = None
+    event: Any = None
 
 
 #: A callable that receives every :class:`TraceRecord`. It must not block.

@@ -5,7 +5,7 @@ from __future__ import annotations
 import asyncio
 
 import pytest
-from conftest import ack, ack_value, answer_all, nak, reply, status
+from scripted import ack, ack_value, answer_all, nak, reply, status
 
 import sj300_async as sj
 

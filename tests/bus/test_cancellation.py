@@ -5,9 +5,9 @@ from __future__ import annotations
 import asyncio
 
 import pytest
-from conftest import ack_value, answer_all
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
+from scripted import ack_value, answer_all
 
 import sj300_async as sj
 

@@ -36,6 +36,7 @@ CORE_MODULES = (
     "_line",
     "_timing",
     "_url",
+    "_dialect",
 )
 
 #: Top-level modules a sans-IO core must not import: event loops, I/O, clocks, threads.

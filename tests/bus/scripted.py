@@ -1,0 +1,112 @@
+"""A scripted drive behind the real loopback transport, for the arbiter tests.
+
+The scripted peer parses requests with the library's RequestParser and
+answers with frames the test chooses, at the times the test chooses, so each
+arbiter rule can be exercised byte for byte. Expected reply bytes are built
+here from the protocol reference (XOR BCC written out), not by the library.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import functools
+import operator
+from collections.abc import Callable
+from dataclasses import dataclass, field
+
+import sj300_async as sj
+from sj300_async._bus import Bus
+
+
+def xor_bcc(body: bytes) -> bytes:
+    return b"%02X" % functools.reduce(operator.xor, body, 0)
+
+
+def reply(body: bytes) -> bytes:
+    """STX body BCC CR, with the BCC computed as the reference defines it."""
+    return b"\x02" + body + xor_bcc(body) + b"\r"
+
+
+def ack(node: int) -> bytes:
+    return reply(b"%02d\x06" % node)
+
+
+def ack_value(node: int, value: int) -> bytes:
+    return reply(b"%02d\x06%08d" % (node, value))
+
+
+def nak(node: int, code: int) -> bytes:
+    return reply(b"%02d\x15%02d" % (node, code))
+
+
+def status(node: int, a: int = 3, b: int = 1, c: int = 3) -> bytes:
+    return reply(b"%02d%02d%02d%02d00" % (node, a, b, c))
+
+
+Responder = Callable[[sj.Request], list[tuple[float, bytes]]]
+
+
+@dataclass
+class ScriptedPeer:
+    """A fake line: records every request and answers as ``respond`` says."""
+
+    respond: Responder
+    send: Callable[[bytes], None]
+    requests: list[sj.Request] = field(default_factory=list)
+    bad: list[object] = field(default_factory=list)
+    handles: list[asyncio.TimerHandle] = field(default_factory=list)
+    closed: bool = False
+
+    def __post_init__(self) -> None:
+        self._parser = sj.RequestParser()
+
+    def data_received(self, data: bytes) -> None:
+        loop = asyncio.get_running_loop()
+        for event in self._parser.feed(data):
+            if not isinstance(event, sj.Request):
+                self.bad.append(event)
+                continue
+            self.requests.append(event)
+            if event.is_broadcast:
+                continue
+            for delay, frame in self.respond(event):
+                self.handles.append(loop.call_later(delay, self._send, frame))
+
+    def _send(self, frame: bytes) -> None:
+        if not self.closed:
+            self.send(frame)
+
+    def close(self) -> None:
+        self.closed = True
+        for handle in self.handles:
+            handle.cancel()
+
+
+def answer_all(request: sj.Request) -> list[tuple[float, bytes]]:
+    """A healthy drive: answers every command immediately with a plausible reply."""
+    node = request.node
+    cmd = request.command
+    if cmd is sj.Command.READ_STATUS:
+        return [(0.0, status(node))]
+    if cmd is sj.Command.READ_PARAMETER:
+        return [(0.0, ack_value(node, 1000 + node))]
+    if cmd is sj.Command.CAN_STORE:
+        return [(0.0, reply(b"%02d\x0601" % node))]
+    if cmd in (sj.Command.READ_MONITOR, sj.Command.READ_TRIP_HISTORY):
+        length = 104 if cmd is sj.Command.READ_MONITOR else 440
+        return [(0.0, reply(b"%02d" % node + b"0" * length))]
+    return [(0.0, ack(node))]
+
+
+@dataclass
+class Rig:
+    bus: Bus
+    peers: list[ScriptedPeer]
+    trace: list[sj.TraceRecord]
+
+    @property
+    def peer(self) -> ScriptedPeer:
+        return self.peers[-1]
+
+    def written(self) -> list[bytes]:
+        return [r.data for r in self.trace if r.direction == "tx"]
