@@ -15,7 +15,7 @@ from urllib.parse import urlsplit
 from .._errors import LocalProtocolError
 from .._url import format_node_list, parse_node_list
 
-__all__ = ["ListenAddress", "format_nodes", "parse_listen", "parse_nodes"]
+__all__ = ["ListenAddress", "format_nodes", "parse_any_nodes", "parse_listen", "parse_nodes"]
 
 #: Where ``simulate`` listens when given nothing: loopback, the device-server port 4001.
 DEFAULT_PORT: Final = 4001
@@ -26,6 +26,14 @@ def parse_nodes(text: str) -> list[int]:
     """``"1-8,12,20-22"`` -> sorted node numbers; each 1..32, repeats allowed and merged."""
     try:
         return list(parse_node_list(text))
+    except LocalProtocolError as exc:
+        raise argparse.ArgumentTypeError(str(exc)) from None
+
+
+def parse_any_nodes(text: str) -> list[int]:
+    """Like :func:`parse_nodes`, but 0..32: SJ300 nodes or FR-700 stations (the bus checks)."""
+    try:
+        return list(parse_node_list(text, low=0, high=32))
     except LocalProtocolError as exc:
         raise argparse.ArgumentTypeError(str(exc)) from None
 

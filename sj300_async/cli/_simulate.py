@@ -8,6 +8,11 @@ there too. Everything else (the summary, warnings) goes to stderr.
 
 SIGINT and SIGTERM stop it cleanly: listeners and client connections are
 closed, pending replies cancelled, exit status 0.
+
+``--protocol fr700`` serves Mitsubishi FR-700 drives instead (stations
+0..31): by default with the drives' factory line settings, the
+waiting-time field expected and every frame ending with CR
+(``--no-wait-field``, ``--terminator none|cr|crlf`` change them).
 """
 
 from __future__ import annotations
@@ -22,6 +27,7 @@ import sys
 from typing import Any
 
 from .._errors import LocalProtocolError
+from .._url import NODE_RANGES, parse_node_list
 from ..simulator import (
     Country,
     LinePacing,
@@ -34,12 +40,15 @@ from ..simulator import (
     serve_serial_device,
     serve_tcp,
 )
-from ._args import DEFAULT_PORT, LOOPBACK, ListenAddress, format_nodes, parse_listen, parse_nodes
+from ..simulator.fr700 import Fr700SimulatedBus, Fr700SimulatedDrive
+from ._args import DEFAULT_PORT, LOOPBACK, ListenAddress, format_nodes, parse_listen
 from ._errors import CliError
 
 __all__ = ["add_parser"]
 
 _COUNTRIES = {"jp": Country.JAPAN, "eu": Country.EUROPE, "us": Country.USA}
+_TERMINATORS = {"none": "", "cr": "\r", "crlf": "\r\n"}
+_DEFAULT_NODES = {"sj300": "1", "fr700": "0"}
 
 
 def _wait_ms(text: str) -> int:
@@ -66,8 +75,9 @@ def add_parser(subparsers: Any) -> None:
     """Add ``simulate`` to the ``sj300`` subcommands."""
     p = subparsers.add_parser(
         "simulate",
-        help="serve simulated SJ300 drives over TCP or a pseudo-terminal",
-        description="Serve simulated SJ300 drives on a virtual RS-485 line until interrupted.",
+        help="serve simulated SJ300 (or FR-700) drives over TCP or a pseudo-terminal",
+        description="Serve simulated SJ300 drives (or Mitsubishi FR-700 drives, with "
+        "--protocol fr700) on a virtual RS-485 line until interrupted.",
     )
     p.add_argument(
         "--listen",
@@ -86,13 +96,34 @@ def add_parser(subparsers: Any) -> None:
         "--baud etc. set its UART",
     )
     p.add_argument(
-        "--nodes",
-        type=parse_nodes,
-        default=[1],
-        metavar="LIST",
-        help="drive addresses, e.g. 1-8,12,20-22 (default 1)",
+        "--protocol",
+        choices=("sj300", "fr700"),
+        default="sj300",
+        help="the drives' protocol: Hitachi SJ300 or Mitsubishi FR-700 (default sj300)",
     )
-    p.add_argument("--wait-ms", type=_wait_ms, metavar="MS", help="set C078 on every drive")
+    p.add_argument(
+        "--nodes",
+        metavar="LIST",
+        help="drive addresses, e.g. 1-8,12,20-22 (default 1; FR-700 stations 0..31, default 0)",
+    )
+    p.add_argument(
+        "--wait-ms",
+        type=_wait_ms,
+        metavar="MS",
+        help="set C078 on every drive (FR-700: Pr.123 0..150, with --no-wait-field)",
+    )
+    fr700 = p.add_argument_group("FR-700 line (with --protocol fr700)")
+    fr700.add_argument(
+        "--no-wait-field",
+        action="store_true",
+        help="requests carry no waiting-time character (Pr.123 != 9999)",
+    )
+    fr700.add_argument(
+        "--terminator",
+        choices=sorted(_TERMINATORS),
+        default="cr",
+        help="what ends every frame (Pr.124; default cr)",
+    )
     p.add_argument(
         "--factory-defaults",
         action="store_true",
@@ -137,13 +168,9 @@ def run(args: argparse.Namespace) -> int:
     line_given = args.baud is not None or args.pace
     try:
         pacing = LinePacing(args.baud or 19200, args.bytesize, args.parity, args.stopbits)
-        bus = SimulatedBus(
-            args.nodes,
-            factory_defaults=args.factory_defaults,
-            country=_COUNTRIES[args.country],
-            wait_ms=args.wait_ms,
-            line=pacing if line_given else None,
-        )
+        low, high = NODE_RANGES[args.protocol]
+        nodes = parse_node_list(args.nodes or _DEFAULT_NODES[args.protocol], low=low, high=high)
+        bus = _simulated_bus(args, nodes, pacing if line_given else None)
     except LocalProtocolError as exc:
         raise CliError(str(exc)) from None
     for address in listen:
@@ -154,9 +181,37 @@ def run(args: argparse.Namespace) -> int:
     return asyncio.run(_serve(args, bus, listen, shared_line, settings))
 
 
+def _simulated_bus(
+    args: argparse.Namespace, nodes: tuple[int, ...], line: LinePacing | None
+) -> SimulatedBus | Fr700SimulatedBus:
+    """The simulated line the options describe.
+
+    Raises:
+        LocalProtocolError: an option the drives refuse.
+    """
+    if args.protocol == "sj300":
+        return SimulatedBus(
+            nodes,
+            factory_defaults=args.factory_defaults,
+            country=_COUNTRIES[args.country],
+            wait_ms=args.wait_ms,
+            line=line,
+        )
+    bus = Fr700SimulatedBus(
+        nodes,
+        wait_field=not args.no_wait_field,
+        terminator=_TERMINATORS[args.terminator],
+        factory_defaults=args.factory_defaults,
+    )
+    if args.wait_ms is not None:
+        for drive in bus.drives.values():
+            drive.set_wait_ms(args.wait_ms)
+    return bus
+
+
 async def _serve(
     args: argparse.Namespace,
-    bus: SimulatedBus,
+    bus: SimulatedBus | Fr700SimulatedBus,
     listen: list[ListenAddress],
     line: PacedLine | None,
     settings: LinePacing | None,
@@ -189,7 +244,12 @@ async def _serve(
                 why = exc.strerror if isinstance(exc, OSError) else exc
                 raise CliError(f"cannot serve on {path}: {why or exc}") from None
             print(f"listening on {path}", flush=True)
-        mode = "factory defaults" if args.factory_defaults else "serial control"
+        if isinstance(bus, Fr700SimulatedBus):
+            mode = "FR-700, " + ("external mode" if args.factory_defaults else "network mode")
+            mode += f", terminator {args.terminator}"
+            mode += "" if bus.wait_field else ", no waiting-time field"
+        else:
+            mode = "factory defaults" if args.factory_defaults else "serial control"
         pace = f", paced at {line.pacing.baudrate} bps" if line else ""
         print(
             f"simulating node(s) {format_nodes(sorted(bus.drives))} ({mode}{pace}); Ctrl-C to stop",
@@ -217,7 +277,9 @@ async def _serve(
     return 0
 
 
-async def _trip_periodically(bus: SimulatedBus, every_s: float, rng: random.Random) -> None:
+async def _trip_periodically(
+    bus: SimulatedBus | Fr700SimulatedBus, every_s: float, rng: random.Random
+) -> None:
     """Demo: every *every_s*, trip one running drive with the over-current code of its phase."""
     loop = asyncio.get_running_loop()
     while True:
@@ -228,5 +290,8 @@ async def _trip_periodically(bus: SimulatedBus, every_s: float, rng: random.Rand
             continue
         drive = rng.choice(running)
         if drive.trip(now=now):
-            record = drive.trip_history().records[0]
-            print(f"node {drive.node:02d} tripped: {record.error_code}", flush=True)
+            if isinstance(drive, Fr700SimulatedDrive):
+                name = f"fault H{drive.fault_history[0]:02X}"
+            else:
+                name = drive.trip_history().records[0].error_code
+            print(f"node {drive.node:02d} tripped: {name}", flush=True)

@@ -1,0 +1,158 @@
+"""The embedded demo of ``sj300 monitor``: eight simulated drives doing something worth watching.
+
+:func:`run_demo` drives a ``sim://`` bus through the public Drive API, as a
+program on the line would: it starts the drives at different speeds and
+ramp times, then now and then changes a setpoint, reverses or stops a drive
+and starts it again. Every ``trip_every_s`` (give or take) one running drive
+trips (the simulator's fault hook, as a fault inside the drive would), sits
+in its trip for a few seconds, and is reset with the RS terminal (command
+02) and started again.
+
+It shares the bus with the poller: its commands queue on the same arbiter.
+A command that fails is skipped; the demo goes on.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import logging
+import random
+from collections.abc import Awaitable
+from typing import Final
+
+from .._bus import Bus
+from .._codes import Direction
+from .._errors import LocalProtocolError, SJ300Error
+from .._terminals import InputTerminal
+from ..fr700 import Fr700Drive
+
+__all__ = ["run_demo"]
+
+_log = logging.getLogger("sj300_async.cli.demo")
+
+#: Setpoints the demo picks from (Hz; the simulated drives' maximum is 50 Hz).
+_SETPOINTS: Final = (10.0, 15.0, 20.0, 25.0, 30.0, 35.0, 40.0, 45.0, 50.0)
+#: Trips the demo causes: None is the over-current code that fits the drive's phase.
+_TRIP_CODES: Final = (None, None, 5, 7, 21)
+
+
+async def run_demo(
+    bus: Bus,
+    *,
+    trip_every_s: float = 12.0,
+    tripped_s: float = 4.0,
+    tick_s: float = 0.5,
+    seed: int | None = None,
+) -> None:
+    """Animate the simulated drives of *bus* until cancelled.
+
+    Args:
+        trip_every_s: mean time between trips (the first comes after half of it).
+        tripped_s: how long a tripped drive waits for its reset.
+        tick_s: time between the demo's decisions.
+        seed: for a repeatable show.
+
+    Raises:
+        LocalProtocolError: *bus* is not a ``sim://`` bus.
+    """
+    if bus.simulator is None:
+        raise LocalProtocolError("the demo needs a sim:// bus")
+    await _Demo(bus, random.Random(seed), trip_every_s, tripped_s, tick_s).run()
+
+
+class _Demo:
+    def __init__(
+        self, bus: Bus, rng: random.Random, trip_every_s: float, tripped_s: float, tick_s: float
+    ) -> None:
+        assert bus.simulator is not None
+        self._bus = bus
+        self._sim = bus.simulator
+        self._rng = rng
+        self._trip_every_s = trip_every_s
+        self._tripped_s = tripped_s
+        self._tick_s = tick_s
+        self._nodes = sorted(self._sim.drives)
+        #: What the demo last commanded each drive (STOP when stopped or tripped).
+        self._running: dict[int, Direction] = dict.fromkeys(self._nodes, Direction.STOP)
+        #: Tripped drives and the loop time of their reset.
+        self._resets: dict[int, float] = {}
+
+    async def run(self) -> None:
+        loop = asyncio.get_running_loop()
+        for node in self._nodes:
+            ramp = self._rng.choice((2.0, 3.0, 5.0, 8.0))
+            drive = self._bus.drive(node)
+            if isinstance(drive, Fr700Drive):  # Pr.7 / Pr.8 in 0.1 s
+                await self._do(drive.write_parameter(7, round(ramp * 10)))
+                await self._do(drive.write_parameter(8, round(ramp * 10)))
+            else:
+                await self._do(drive.write_parameter("F002", ramp))
+                await self._do(drive.write_parameter("F003", ramp))
+            if node != self._nodes[-1]:  # one drive starts stopped: something to start later
+                await self._start(node)
+        next_trip = loop.time() + self._trip_every_s / 2
+        while True:
+            await asyncio.sleep(self._tick_s)
+            now = loop.time()
+            for node, at in list(self._resets.items()):
+                if now >= at:
+                    del self._resets[node]
+                    await self._reset(node)
+            if now >= next_trip:
+                self._trip(now)
+                next_trip = now + self._trip_every_s * self._rng.uniform(0.7, 1.3)
+            if self._rng.random() < 0.6:
+                await self._change()
+
+    async def _do(self, step: Awaitable[None]) -> bool:
+        try:
+            await step
+        except SJ300Error as exc:
+            _log.debug("demo step failed: %s", exc)
+            return False
+        return True
+
+    async def _start(self, node: int, direction: Direction | None = None) -> None:
+        drive = self._bus.drive(node)
+        if direction is None:
+            direction = self._rng.choice((Direction.FORWARD, Direction.FORWARD, Direction.REVERSE))
+        await self._do(drive.set_frequency(self._rng.choice(_SETPOINTS)))
+        run = drive.run_forward() if direction is Direction.FORWARD else drive.run_reverse()
+        if await self._do(run):
+            self._running[node] = direction
+
+    async def _change(self) -> None:
+        candidates = [n for n in self._nodes if n not in self._resets]
+        if not candidates:
+            return
+        node = self._rng.choice(candidates)
+        drive = self._bus.drive(node)
+        direction = self._running[node]
+        if direction is Direction.STOP:
+            await self._start(node)
+            return
+        action = self._rng.random()
+        if action < 0.5:
+            await self._do(drive.set_frequency(self._rng.choice(_SETPOINTS)))
+        elif action < 0.75:
+            other = Direction.REVERSE if direction is Direction.FORWARD else Direction.FORWARD
+            await self._start(node, other)
+        elif await self._do(drive.stop()):
+            self._running[node] = Direction.STOP
+
+    def _trip(self, now: float) -> None:
+        running = [n for n, d in self._running.items() if d is not Direction.STOP]
+        if not running:
+            return
+        node = self._rng.choice(running)
+        if self._sim.drives[node].trip(self._rng.choice(_TRIP_CODES), now=now):
+            self._running[node] = Direction.STOP  # a trip clears the run command
+            self._resets[node] = now + self._tripped_s
+
+    async def _reset(self, node: int) -> None:
+        drive = self._bus.drive(node)
+        if isinstance(drive, Fr700Drive):  # HFD H9696: the FR-700's reset
+            await self._do(drive.reset())
+        elif await self._do(drive.set_terminals(InputTerminal.RS)):
+            await self._do(drive.set_terminals(0))
+        await self._start(node)

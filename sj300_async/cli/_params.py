@@ -1,0 +1,289 @@
+"""``sj300 params backup|restore|diff FILE``: a drive's parameters to and from a JSON snapshot.
+
+- ``backup FILE`` reads every catalogue parameter (or ``--codes``) and saves
+  the raw values (format: :mod:`._snapshot`). A code the drive answers NAK
+  16 for is recorded as absent, not an error: drives differ by firmware.
+- ``restore FILE`` writes every value with command 07, then reads each
+  back and compares. Any mismatch is listed and the exit status is 1. A
+  write refused with a NAK is tried again after the others, since drives
+  check some values against others (a base frequency above the maximum
+  frequency is refused until the maximum is written). ``--store`` stores
+  to EEPROM at the end if everything matched.
+- ``diff FILE`` compares the file with the drive: exit 0 when equal, 1
+  when different, 2 on trouble (diff(1)'s convention).
+
+Communication settings are not restored: C072 (node address) never, the
+line settings C071 (speed), C073 (data bits), C074 (parity) and C075 (stop
+bits) only with ``--include-comm``. Writing them changes how the drive
+talks: a different value cuts the drive off the line the tool is talking
+on, and C072 from another drive's backup would re-address this one. Use
+``sj300 write C072 N`` to re-address a drive on purpose.
+
+``--node`` defaults to 1 for a backup and to the file's node for restore
+and diff.
+"""
+
+from __future__ import annotations
+
+import argparse
+import asyncio
+from collections.abc import Callable, Coroutine
+from pathlib import Path
+from typing import Any, Final
+
+from .._codes import NakCode
+from .._drive import Drive
+from .._errors import NakError
+from .._parameters import PARAMETERS, parameter_info
+from ._common import (
+    DEFAULT_URL,
+    add_bus_options,
+    add_json_option,
+    add_node_option,
+    bus_url,
+    open_cli_bus,
+)
+from ._errors import FAILURE, USAGE, CliError
+from ._output import Column, format_raw, print_json, print_table
+from ._progress import progress
+from ._read import parameter_code
+from ._snapshot import Snapshot
+
+__all__ = ["COMM_CODES", "NODE_ADDRESS", "add_parser"]
+
+#: The node address: never restored.
+NODE_ADDRESS: Final = "C072"
+#: Line settings: restored only with --include-comm.
+COMM_CODES: Final = ("C071", "C073", "C074", "C075")
+
+
+def _code_list(text: str) -> list[str]:
+    return [parameter_code(code) for code in text.replace(" ", "").split(",") if code]
+
+
+def add_parser(subparsers: Any) -> None:
+    """Add ``params`` and its actions to the ``sj300`` subcommands."""
+    p = subparsers.add_parser(
+        "params",
+        help="back up, restore or compare a drive's parameters",
+        description="Back up, restore or compare a drive's parameters as a JSON file.",
+    )
+    actions = p.add_subparsers(dest="action", metavar="ACTION", required=True)
+
+    backup = actions.add_parser(
+        "backup",
+        help="save the drive's parameters to FILE",
+        description="Read every catalogue parameter (or --codes) and save the raw values as "
+        "JSON. Codes the drive does not have (NAK 16) are recorded as absent.",
+    )
+    backup.add_argument(
+        "--codes",
+        type=_code_list,
+        metavar="LIST",
+        help="only these codes, e.g. F002,F003,A004 (default: the whole catalogue)",
+    )
+    restore = actions.add_parser(
+        "restore",
+        help="write FILE's parameters and verify them",
+        description="Write FILE's values (raw, command 07), read each back and compare; exit 1 "
+        "on any mismatch. C072 (node address) is never written, the line settings C071 and "
+        "C073-C075 only with --include-comm: a new value there cuts the drive off this line.",
+    )
+    restore.add_argument(
+        "--include-comm",
+        action="store_true",
+        help="also restore the line settings C071, C073-C075 (may cut the link)",
+    )
+    restore.add_argument("--store", action="store_true", help="store to EEPROM if all match")
+    diff = actions.add_parser(
+        "diff",
+        help="compare FILE with the drive (exit 1 when different)",
+        description="Compare FILE with the drive. Exit 0 when equal, 1 when different, "
+        "2 on trouble, as diff(1).",
+    )
+    steps = (("backup", backup, _backup), ("restore", restore, _restore), ("diff", diff, _diff))
+    for name, action, step in steps:
+        action.add_argument("file", type=Path, metavar="FILE", help="the JSON snapshot")
+        add_node_option(action, default=1 if name == "backup" else None)
+        add_json_option(action)
+        add_bus_options(action)
+        action.set_defaults(run=_runner(step), command_name=f"params {name}")
+    diff.set_defaults(failure_status=USAGE)
+
+
+def _runner(
+    step: Callable[[argparse.Namespace], Coroutine[Any, Any, int]],
+) -> Callable[[argparse.Namespace], int]:
+    def run(args: argparse.Namespace) -> int:
+        return asyncio.run(step(args))
+
+    return run
+
+
+async def _read_or_absent(drive: Drive, code: str) -> int | None:
+    """The raw value of *code*, None when the drive does not have it (NAK 16)."""
+    try:
+        return await drive.read_parameter_raw(code)
+    except NakError as exc:
+        if exc.code == NakCode.ABNORMAL_PARAMETER:
+            return None
+        raise CliError(f"{code}: {exc}", status=FAILURE) from None
+
+
+async def _read_all(drive: Drive, codes: list[str], what: str) -> dict[str, int | None]:
+    values: dict[str, int | None] = {}
+    with progress(what, len(codes)) as advance:
+        for code in codes:
+            values[code] = await _read_or_absent(drive, code)
+            advance(code)
+    return values
+
+
+# -- backup ---------------------------------------------------------------------
+
+
+async def _backup(args: argparse.Namespace) -> int:
+    codes: list[str] = list(dict.fromkeys(args.codes or PARAMETERS))
+    async with open_cli_bus(args) as bus:
+        values = await _read_all(bus.drive(args.node), codes, "reading")
+    snapshot = Snapshot(
+        node=args.node,
+        url=bus_url(args) or DEFAULT_URL,
+        parameters={code: raw for code, raw in values.items() if raw is not None},
+        absent=tuple(code for code, raw in values.items() if raw is None),
+    )
+    snapshot.save(args.file)
+    if args.json:
+        print_json(
+            {
+                "node": args.node,
+                "file": str(args.file),
+                "parameters": len(snapshot.parameters),
+                "absent": list(snapshot.absent),
+            }
+        )
+    else:
+        absent = f"; absent: {', '.join(snapshot.absent)}" if snapshot.absent else ""
+        print(
+            f"node {args.node:02d}: {len(snapshot.parameters)} parameters "
+            f"saved to {args.file}{absent}"
+        )
+    return 0
+
+
+# -- restore --------------------------------------------------------------------
+
+
+async def _write_all(drive: Drive, values: dict[str, int]) -> dict[str, str]:
+    """Write *values*; retry NAK'd ones while a pass makes progress. Returns code -> last error."""
+    pending = list(values)
+    errors: dict[str, str] = {}
+    with progress("writing", len(pending)) as advance:
+        while pending:
+            errors = {}
+            for code in pending:
+                try:
+                    await drive.write_parameter_raw(code, values[code])
+                except NakError as exc:
+                    errors[code] = str(exc)
+                    continue
+                advance(code)
+            if len(errors) == len(pending):  # no progress: the rest stays refused
+                break
+            pending = list(errors)
+    return errors
+
+
+async def _restore(args: argparse.Namespace) -> int:
+    snapshot = Snapshot.load(args.file)
+    node: int = args.node or snapshot.node
+    skipped = sorted([NODE_ADDRESS, *(() if args.include_comm else COMM_CODES)])
+    values = {c: raw for c, raw in snapshot.parameters.items() if c not in skipped}
+    async with open_cli_bus(args) as bus:
+        drive = bus.drive(node)
+        errors = await _write_all(drive, values)
+        back = await _read_all(drive, list(values), "verifying")
+        mismatches = [code for code, raw in values.items() if back[code] != raw]
+        stored = bool(args.store and not mismatches)
+        if stored:
+            await drive.store()
+    skipped = [c for c in skipped if c in snapshot.parameters]
+    if args.json:
+        print_json(
+            {
+                "node": node,
+                "file": str(args.file),
+                "written": [c for c in values if c not in errors],
+                "skipped": skipped,
+                "mismatches": [
+                    {"code": c, "expected": values[c], "actual": back[c], "error": errors.get(c)}
+                    for c in mismatches
+                ],
+                "stored": stored,
+            }
+        )
+    else:
+        if mismatches:
+            rows = [
+                (c, _show(c, values[c]), _show(c, back[c]), errors.get(c, "")) for c in mismatches
+            ]
+            columns = (Column("code"), Column("file"), Column("drive"), Column("write error"))
+            print_table(columns, rows, title="not restored")
+        note = f"; skipped {', '.join(skipped)}" if skipped else ""
+        done = len(values) - len(mismatches)
+        print(
+            f"node {node:02d}: {done} of {len(values)} parameters restored and verified"
+            f"{' and stored' if stored else ''}{note}"
+        )
+    if mismatches:
+        raise CliError(f"{len(mismatches)} parameter(s) do not match {args.file}", status=FAILURE)
+    return 0
+
+
+def _show(code: str, raw: int | None) -> str:
+    return "(absent)" if raw is None else format_raw(parameter_info(code), raw)
+
+
+# -- diff -----------------------------------------------------------------------
+
+
+async def _diff(args: argparse.Namespace) -> int:
+    snapshot = Snapshot.load(args.file)
+    node: int = args.node or snapshot.node
+    expected: dict[str, int | None] = dict(snapshot.parameters)
+    expected.update(dict.fromkeys(snapshot.absent))
+    async with open_cli_bus(args) as bus:
+        actual = await _read_all(bus.drive(node), list(expected), "reading")
+    different = [code for code in expected if expected[code] != actual[code]]
+    if args.json:
+        print_json(
+            {
+                "node": node,
+                "file": str(args.file),
+                "equal": not different,
+                "differences": [_difference(c, expected[c], actual[c]) for c in different],
+            }
+        )
+    elif different:
+        rows = [
+            (c, parameter_info(c).name, _show(c, expected[c]), _show(c, actual[c]))
+            for c in different
+        ]
+        columns = (Column("code"), Column("name"), Column("file"), Column("drive"))
+        print_table(columns, rows, title=f"node {node:02d} differs from {args.file}")
+    else:
+        print(f"node {node:02d} matches {args.file} ({len(expected)} parameters)")
+    return 1 if different else 0
+
+
+def _difference(code: str, file_raw: int | None, drive_raw: int | None) -> dict[str, Any]:
+    info = parameter_info(code)
+    return {
+        "code": code,
+        "name": info.name,
+        "unit": info.unit,
+        "file_raw": file_raw,
+        "drive_raw": drive_raw,
+        "file_value": None if file_raw is None else info.from_raw(file_raw),
+        "drive_value": None if drive_raw is None else info.from_raw(drive_raw),
+    }

@@ -1,0 +1,60 @@
+"""``sj300 run forward|reverse``: start a drive (command 00; the drive needs A002 = 03).
+
+JSON: ``{"node": 1, "direction": "FORWARD"}``.
+"""
+
+from __future__ import annotations
+
+import argparse
+import asyncio
+from typing import Any
+
+from .._codes import Direction, NakCode
+from .._errors import NakError
+from ._common import add_bus_options, add_json_option, add_node_option, open_cli_bus
+from ._errors import FAILURE, CliError
+from ._output import human, print_json
+
+__all__ = ["add_parser"]
+
+_DIRECTIONS = {"forward": Direction.FORWARD, "reverse": Direction.REVERSE}
+
+
+def add_parser(subparsers: Any) -> None:
+    """Add ``run`` to the ``sj300`` subcommands."""
+    p = subparsers.add_parser(
+        "run",
+        help="run a drive forward or reverse",
+        description="Run a drive (command 00). Set the frequency with `sj300 freq`.",
+    )
+    p.add_argument("direction", choices=sorted(_DIRECTIONS), help="direction of rotation")
+    add_node_option(p)
+    add_json_option(p)
+    add_bus_options(p)
+    p.set_defaults(run=run)
+
+
+def run(args: argparse.Namespace) -> int:
+    """Send the run command; return 0."""
+    return asyncio.run(_run(args))
+
+
+async def _run(args: argparse.Namespace) -> int:
+    direction = _DIRECTIONS[args.direction]
+    async with open_cli_bus(args) as bus:
+        drive = bus.drive(args.node)
+        try:
+            if direction is Direction.FORWARD:
+                await drive.run_forward()
+            else:
+                await drive.run_reverse()
+        except NakError as exc:
+            if exc.code != NakCode.EXECUTION_DISABLED:
+                raise
+            hint = "the run command source A002 must be 03 (serial)"
+            raise CliError(f"{exc}: {hint}", status=FAILURE) from None
+    if args.json:
+        print_json({"node": args.node, "direction": direction})
+    else:
+        print(f"node {args.node:02d}: run {human(direction)}")
+    return 0

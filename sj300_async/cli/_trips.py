@@ -1,0 +1,85 @@
+"""``sj300 trips``: a drive's trip count and its latest trips, newest first (command 05).
+
+JSON: ``{"node": 1, "total_count": 3, "records": [{"error_code": "E07",
+"trip_factor": 7, "status_a": "RUNNING", "status_b": 8, "status_c":
+"CONSTANT_SPEED", "output_frequency_hz": 50.0, ...}]}``: the fields of
+:class:`~sj300_async.TripHistory` and :class:`~sj300_async.TripRecord`, with
+``error_code`` added and the empty slots of the six-deep history left out.
+``status_b`` is a bit field (:class:`~sj300_async.TripStatusB`).
+"""
+
+from __future__ import annotations
+
+import argparse
+import asyncio
+from typing import Any
+
+from .._payloads import TripRecord
+from ._common import add_bus_options, add_json_option, add_node_option, open_cli_bus
+from ._output import Column, human, jsonable, print_json, print_table
+
+__all__ = ["add_parser"]
+
+
+def add_parser(subparsers: Any) -> None:
+    """Add ``trips`` to the ``sj300`` subcommands."""
+    p = subparsers.add_parser(
+        "trips",
+        help="trip history",
+        description="Read the trip count and the six latest trips (command 05).",
+    )
+    add_node_option(p)
+    add_json_option(p)
+    add_bus_options(p)
+    p.set_defaults(run=run)
+
+
+def run(args: argparse.Namespace) -> int:
+    """Print the trip history; return 0."""
+    return asyncio.run(_trips(args))
+
+
+def _record_json(record: TripRecord) -> dict[str, Any]:
+    return {"error_code": record.error_code, **jsonable(record)}
+
+
+async def _trips(args: argparse.Namespace) -> int:
+    async with open_cli_bus(args) as bus:
+        history = await bus.drive(args.node).read_trip_history()
+    if args.json:
+        records = [_record_json(r) for r in history.trips]
+        print_json({"node": args.node, "total_count": history.total_count, "records": records})
+        return 0
+    title = f"node {args.node:02d}: {history.total_count} trip(s) in total"
+    if not history.trips:
+        print(f"{title}, none recorded")
+        return 0
+    columns = (
+        Column("#", "right"),
+        Column("trip"),
+        Column("state"),
+        Column("output"),
+        Column("causes"),
+        Column("Hz", "right"),
+        Column("A", "right"),
+        Column("V", "right"),
+        Column("run h", "right"),
+        Column("on h", "right"),
+    )
+    rows = [
+        (
+            str(i),
+            r.error_code,
+            human(r.status_a),
+            human(r.status_c),
+            human(r.status_b),
+            f"{r.output_frequency_hz:.1f}",
+            f"{r.output_current_a:.1f}",
+            f"{r.output_voltage_v:.1f}",
+            str(r.run_time_h),
+            str(r.power_on_time_h),
+        )
+        for i, r in enumerate(history.trips, 1)
+    ]
+    print_table(columns, rows, title=f"{title}, newest first")
+    return 0
