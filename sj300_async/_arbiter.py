@@ -22,6 +22,11 @@ each of which has its own test:
 6. Retries (time-outs, corrupted answers, NAK 01..08; never NAK 11/13/16, and
    never a transport error, which must fail promptly) release the line and
    queue again at the back, so one failing drive cannot starve the others.
+7. A protocol that lets the host answer a reply (FR-700) gets its answer
+   sent after the dialect's answer delay: an acknowledgement after a good
+   reply (the line then rests as the dialect says), and, once per attempt,
+   a re-output request after a corrupted one, which pushes the deadline
+   back by a whole response time-out so the repeated reply can arrive.
 """
 
 from __future__ import annotations
@@ -42,6 +47,7 @@ from ._events import BadFrame, Discarded
 from ._line import LineSettings
 from ._linequeue import LineQueue
 from ._link import Link
+from ._protocol import LineProtocol
 from ._stats import BusStats, TransactionStats
 from ._timing import BusTiming
 
@@ -57,7 +63,13 @@ class _Outstanding:
     request: LineRequest
     waiter: asyncio.Future[Any]
     stats: TransactionStats
+    #: The response time-out of this attempt, and the timer that ends it.
+    timeout: float
+    deadline: float
+    timer: asyncio.TimerHandle
     bad_frame: BadFrame | None = None
+    #: The scheduled re-output request (rule 7), at most one per attempt.
+    reoutput: asyncio.TimerHandle | None = None
 
 
 class Arbiter:
@@ -98,6 +110,8 @@ class Arbiter:
         if isinstance(event, BadFrame):
             if out is not None and out.bad_frame is None:
                 out.bad_frame = event
+            if out is not None and out.reoutput is None and not out.waiter.done():
+                self._request_reoutput(out, event, now)
             return
         if out is None or out.waiter.done():
             self.stats.unsolicited_frames += 1
@@ -109,6 +123,29 @@ class Arbiter:
         self.stats.stray_frames += 1
         out.stats.discarded_frames += 1
         _log.debug("stray frame while waiting for node %02d: %s", out.request.node, event)
+
+    def _request_reoutput(self, out: _Outstanding, bad_frame: BadFrame, now: float) -> None:
+        frame = self.dialect.reoutput_request(out.request, bad_frame)
+        if frame is None:
+            return
+        delay = self.dialect.answer_delay_s()
+        out.reoutput = self._loop.call_at(now + delay, self._send_reoutput, out, frame)
+        # The repeated reply needs a whole exchange's time again.
+        deadline = now + delay + out.timeout
+        if deadline > out.deadline:
+            out.timer.cancel()
+            out.deadline = deadline
+            out.timer = self._loop.call_at(deadline, _expire, out.waiter)
+
+    def _send_reoutput(self, out: _Outstanding, frame: bytes) -> None:
+        if self._outstanding is not out or out.waiter.done():
+            return  # the attempt is over: nothing to ask for any more
+        protocol = self.link.protocol
+        if protocol is None:
+            return  # the link is down: the waiter fails on its own
+        protocol.write(frame)
+        self.stats.reoutput_requests += 1
+        _log.debug("asked node %02d to send its reply again", out.request.node)
 
     def connection_lost(self, exc: BaseException | None) -> None:
         out = self._outstanding
@@ -186,10 +223,10 @@ class Arbiter:
             dialect.reply_frame_length(request),
         )
         waiter: asyncio.Future[Any] = self._loop.create_future()
-        out = _Outstanding(request, waiter, stats)
-        self._outstanding = out  # registered before the write: no answer goes unseen
         sent = self._loop.time()
         timer = self._loop.call_at(sent + timeout, _expire, waiter)
+        out = _Outstanding(request, waiter, stats, timeout, sent + timeout, timer)
+        self._outstanding = out  # registered before the write: no answer goes unseen
         answered = acknowledged = False
         try:
             protocol.write(request.frame)
@@ -224,8 +261,7 @@ class Arbiter:
                 raise refusal
             ack = dialect.acknowledgement(request, reply)
             if ack is not None:
-                protocol.write(ack)
-                acknowledged = True
+                acknowledged = await self._acknowledge(protocol, ack)
             return reply
         except TransportError:
             self._count(stats, totals, "transport_errors")
@@ -234,7 +270,9 @@ class Arbiter:
             self._count(stats, totals, "cancelled")
             raise
         finally:
-            timer.cancel()
+            out.timer.cancel()
+            if out.reoutput is not None:
+                out.reoutput.cancel()
             self._outstanding = None
             if answered:
                 rest = self.timing.guard(self.line)
@@ -245,6 +283,19 @@ class Arbiter:
                 quiet = self.timing.drain_quiet(timeout, self.line)
                 self._drain_quiet = max(self._drain_quiet or 0.0, quiet)
                 self._failed_at = self._loop.time()
+
+    async def _acknowledge(self, protocol: LineProtocol, ack: bytes) -> bool:
+        """Send the host's acknowledgement after the answer delay; True when it went out.
+
+        The protocol makes it optional, so a link lost meanwhile only skips it.
+        """
+        delay = self.dialect.answer_delay_s()
+        if delay > 0:
+            await asyncio.sleep(delay)
+        if not protocol.connected:
+            return False
+        protocol.write(ack)
+        return True
 
     async def _drain(self) -> None:
         """Wait until the line has been quiet long enough; discard what arrives meanwhile."""

@@ -81,8 +81,18 @@ class Dialect(Protocol):
     def acknowledgement(self, request: Any, reply: Any) -> bytes | None:
         """Bytes the host sends after a good reply (FR-700 computer ACK), or None."""
 
+    def answer_delay_s(self) -> float:
+        """How long the host waits after a reply before answering it (ACK or re-output request)."""
+
     def rest_after_acknowledgement_s(self) -> float:
         """How long the line must rest after the host's acknowledgement."""
+
+    def reoutput_request(self, request: Any, bad_frame: BadFrame) -> bytes | None:
+        """Bytes asking the device to send a damaged reply again (FR-700 format F), or None.
+
+        The arbiter sends them at most once per attempt, :meth:`answer_delay_s`
+        after the damaged frame, and waits a full response time-out more.
+        """
 
     def trace_bytes(self, event: Any) -> bytes:
         """The wire bytes of a parser event, for the trace hook."""
@@ -119,8 +129,14 @@ class SJ300Dialect:
     def acknowledgement(self, request: Request, reply: Reply) -> bytes | None:
         return None
 
+    def answer_delay_s(self) -> float:
+        return 0.0
+
     def rest_after_acknowledgement_s(self) -> float:
         return 0.0
+
+    def reoutput_request(self, request: Request, bad_frame: BadFrame) -> bytes | None:
+        return None  # an SJ300 cannot be asked to repeat a reply: the host retries
 
     def trace_bytes(self, event: Reply | BadFrame | Discarded) -> bytes:
         if isinstance(event, Discarded):

@@ -8,7 +8,7 @@ defined once.
 
 from __future__ import annotations
 
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Any
 
 from . import _requests as rq
 from ._codes import Direction
@@ -119,7 +119,7 @@ class Drive(_Commands):
         timeout_s: a fixed response time-out for this drive (None: computed).
     """
 
-    def __init__(self, bus: Bus, node: int, *, wait_time_s: float = 0.0) -> None:
+    def __init__(self, bus: Bus[Any], node: int, *, wait_time_s: float = 0.0) -> None:
         if isinstance(node, bool) or not isinstance(node, int) or not 1 <= node <= 32:
             raise LocalProtocolError(f"node must be 1..32, got {node!r}")
         self._bus = bus
@@ -197,7 +197,7 @@ class Broadcast(_Commands):
     Only the commands the protocol allows to broadcast are offered.
     """
 
-    def __init__(self, bus: Bus) -> None:
+    def __init__(self, bus: Bus[Any]) -> None:
         self._bus = bus
         self._node = BROADCAST
         self.stats = TransactionStats()

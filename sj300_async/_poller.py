@@ -12,6 +12,10 @@ drive does not eat the line with time-outs; the first good reply brings it
 back online. While online, a poll stops at its first failed read for the
 same reason.
 
+FR-700 drives are polled the same way (status H7A, monitors H6F / H70 /
+H71); ``parameters`` may mix SJ300 codes (``"F002"``) and FR-700 parameter
+numbers (``"Pr.7"``), and each bus reads only the ones of its own protocol.
+
 Results go to callbacks (:meth:`Poller.on_sample`) and to any number of
 async iterators (:meth:`Poller.samples`). An iterator whose consumer falls
 behind holds at most ``buffer`` samples; older ones are dropped and counted
@@ -26,7 +30,7 @@ import logging
 from collections.abc import AsyncIterator, Callable, Iterable, Mapping
 from dataclasses import dataclass, field
 from types import TracebackType
-from typing import Final, Literal
+from typing import Any, Final, Literal
 
 import anyio
 import anyio.abc
@@ -35,6 +39,8 @@ from ._bus import Bus
 from ._errors import LocalProtocolError, SJ300Error
 from ._parameters import normalize_code
 from ._payloads import InverterStatus, MonitorData
+from .fr700 import Fr700Monitor, Fr700Status
+from .fr700._requests import parameter_bank
 
 __all__ = ["BusPollStats", "DriveHealth", "Poller", "Sample"]
 
@@ -52,8 +58,8 @@ class Sample:
     node: int
     timestamp: float  #: event-loop time of the poll's end
     online: bool  #: the drive's health after this poll
-    status: InverterStatus | None  #: None when not read or failed
-    monitor: MonitorData | None  #: None when not read or failed
+    status: InverterStatus | Fr700Status | None  #: None when not read or failed
+    monitor: MonitorData | Fr700Monitor | None  #: None when not read or failed
     parameters: Mapping[str, float]  #: the parameters read, engineering values
     error: str | None  #: the poll's error, None when every read succeeded
     latency_s: float | None  #: mean time per successful read of this poll
@@ -92,8 +98,10 @@ class BusPollStats:
 
 @dataclass(slots=True)
 class _Target:
-    bus: Bus
+    bus: Bus[Any]
     nodes: list[int]
+    #: The poller's parameters this bus's protocol has.
+    parameters: tuple[str, ...] = ()
     stats: BusPollStats = field(default_factory=BusPollStats)
     health: dict[int, DriveHealth] = field(default_factory=dict)
 
@@ -134,7 +142,7 @@ class Poller:
             raise LocalProtocolError("offline_after and buffer must be >= 1, probe interval >= 0")
         self.interval_s = interval_s
         self.reads: tuple[Read, ...] = reads
-        self.parameters = tuple(normalize_code(c) for c in parameters)
+        self.parameters = tuple(_parameter_name(c) for c in parameters)
         self.offline_after = offline_after
         self.offline_probe_interval_s = offline_probe_interval_s
         self.buffer = buffer
@@ -148,14 +156,16 @@ class Poller:
 
     # -- configuration ---------------------------------------------------------
 
-    def add(self, bus: Bus, nodes: Iterable[int]) -> None:
+    def add(self, bus: Bus[Any], nodes: Iterable[int]) -> None:
         """Poll *nodes* on *bus* (may be called while running: the bus starts at once)."""
         nodes = sorted(set(nodes))
         for node in nodes:
             bus.drive(node)  # validates the node number
         target = self._targets.get(bus.description)
         if target is None:
-            target = _Target(bus, [])
+            fr700 = bus.dialect.name == "fr700"
+            own = tuple(p for p in self.parameters if p.startswith("Pr.") == fr700)
+            target = _Target(bus, [], parameters=own)
             self._targets[bus.description] = target
             if self._task_group is not None:
                 self._task_group.start_soon(self._poll_bus, target)
@@ -170,7 +180,7 @@ class Poller:
         self._callbacks.append(callback)
         return lambda: self._callbacks.remove(callback)
 
-    def health(self, bus: Bus | str, node: int) -> DriveHealth:
+    def health(self, bus: Bus[Any] | str, node: int) -> DriveHealth:
         """The health record of *node* on *bus* (a Bus or its description).
 
         Raises:
@@ -179,7 +189,7 @@ class Poller:
         key = bus if isinstance(bus, str) else bus.description
         return self._targets[key].health[node]
 
-    def bus_stats(self, bus: Bus | str) -> BusPollStats:
+    def bus_stats(self, bus: Bus[Any] | str) -> BusPollStats:
         """Polling statistics of *bus* (a Bus or its description)."""
         key = bus if isinstance(bus, str) else bus.description
         return self._targets[key].stats
@@ -250,13 +260,13 @@ class Poller:
     async def _poll_drive(self, target: _Target, node: int, health: DriveHealth) -> Sample:
         drive = target.bus.drive(node)
         probing = not health.online
-        status: InverterStatus | None = None
-        monitor: MonitorData | None = None
+        status: InverterStatus | Fr700Status | None = None
+        monitor: MonitorData | Fr700Monitor | None = None
         parameters: dict[str, float] = {}
         error: str | None = None
         spent = 0.0
         ok_reads = 0
-        reads: tuple[str, ...] = ("status",) if probing else self.reads + self.parameters
+        reads: tuple[str, ...] = ("status",) if probing else self.reads + target.parameters
         for read in reads:
             begin = anyio.current_time()
             try:
@@ -312,6 +322,18 @@ class Poller:
         for queue in self._queues:
             if _put_dropping(queue, sample):
                 self.dropped_samples += 1
+
+
+def _parameter_name(code: str) -> str:
+    """An SJ300 code (``"f002"`` -> ``"F002"``) or an FR-700 number (``"pr7"`` -> ``"Pr.7"``).
+
+    Raises:
+        LocalProtocolError: neither.
+    """
+    if isinstance(code, str) and code.strip().upper().startswith("PR"):
+        bank, offset = parameter_bank(code)
+        return f"Pr.{bank * 100 + offset}"
+    return normalize_code(code)
 
 
 def _put_dropping(queue: asyncio.Queue[object], item: object) -> bool:

@@ -126,6 +126,8 @@ class BusStats:
     unsolicited_frames: int = 0
     #: Drains performed after failed transactions.
     drains: int = 0
+    #: Corrupted replies the host asked the device to send again (FR-700 format F).
+    reoutput_requests: int = 0
     #: Local-echo bytes removed (when echo stripping is on).
     echo_bytes: int = 0
     #: Echoes that did not match what was sent (the rest went to the parser).

@@ -10,8 +10,14 @@ Forms::
     sim://?nodes=1-8[&wait_ms=0&factory_defaults=1&pace=1&baudrate=19200...]
         the in-memory simulator (an instant line unless pace=1)
 
-Common query options: ``echo=1`` strips the RS-485 adapter's local echo.
-Any other query key is refused, so a typo cannot be silently ignored.
+Common query options: ``echo=1`` strips the RS-485 adapter's local echo;
+``protocol=sj300`` (the default) or ``protocol=fr700`` picks the protocol.
+FR-700 line options: ``wait_field=1`` (requests carry the waiting-time
+character; default on, the drive's factory setting), ``terminator=cr``
+(``none``, ``cr`` or ``crlf``; default ``cr``), ``ack=0`` (send ACK after
+read data). On an FR-700 ``sim://`` bus the nodes are stations 0..31
+(default ``0-7``). Any other query key is refused, so a typo cannot be
+silently ignored, and FR-700 options on an SJ300 bus are refused too.
 """
 
 from __future__ import annotations
@@ -24,16 +30,25 @@ from ._constants import MAX_NODE, MIN_NODE
 from ._errors import LocalProtocolError
 from ._line import LineSettings
 
-__all__ = ["BusAddress", "parse_bus_url", "parse_node_list"]
+__all__ = ["NODE_RANGES", "PROTOCOLS", "BusAddress", "parse_bus_url", "parse_node_list"]
 
 Scheme = Literal["tcp", "serial", "sim"]
+ProtocolName = Literal["sj300", "fr700"]
 
+#: The protocols a bus can speak.
+PROTOCOLS: Final[tuple[ProtocolName, ...]] = ("sj300", "fr700")
 _LINE_KEYS: Final = ("baudrate", "bytesize", "parity", "stopbits")
+#: Query keys that configure the FR-700 dialect.
+FR700_KEYS: Final = ("wait_field", "terminator", "ack")
+_COMMON_KEYS: Final = (*_LINE_KEYS, "echo", "protocol", *FR700_KEYS)
 _ALLOWED_KEYS: Final[dict[str, frozenset[str]]] = {
-    "tcp": frozenset((*_LINE_KEYS, "echo")),
-    "serial": frozenset((*_LINE_KEYS, "echo")),
-    "sim": frozenset((*_LINE_KEYS, "echo", "nodes", "wait_ms", "factory_defaults", "pace")),
+    "tcp": frozenset(_COMMON_KEYS),
+    "serial": frozenset(_COMMON_KEYS),
+    "sim": frozenset((*_COMMON_KEYS, "nodes", "wait_ms", "factory_defaults", "pace")),
 }
+#: The node numbers of each protocol: SJ300 nodes 1..32, FR-700 stations 0..31.
+NODE_RANGES: Final[dict[str, tuple[int, int]]] = {"sj300": (MIN_NODE, MAX_NODE), "fr700": (0, 31)}
+_DEFAULT_SIM_NODES: Final = {"sj300": "1-8", "fr700": "0-7"}
 _TRUE: Final = frozenset(("1", "true", "yes", "on"))
 _FALSE: Final = frozenset(("0", "false", "no", "off", ""))
 
@@ -55,6 +70,10 @@ class BusAddress:
     #: sim: the simulated nodes and options.
     nodes: tuple[int, ...] = ()
     sim_options: dict[str, str] = field(default_factory=dict)
+    #: The protocol named in the URL (None: not given, SJ300 unless told otherwise).
+    protocol: ProtocolName | None = None
+    #: FR-700 line options as given (``wait_field``, ``terminator``, ``ack``).
+    protocol_options: dict[str, str] = field(default_factory=dict)
 
     @property
     def description(self) -> str:
@@ -63,14 +82,15 @@ class BusAddress:
             return f"tcp://{self.host}:{self.port}"
         if self.scheme == "serial":
             return f"serial://{self.device}"
-        return f"sim://(nodes {format_node_list(self.nodes)})"
+        what = "stations" if self.protocol == "fr700" else "nodes"
+        return f"sim://({what} {format_node_list(self.nodes)})"
 
 
-def parse_node_list(text: str) -> tuple[int, ...]:
-    """Parse ``"1-8,12,20-22"`` into sorted unique node numbers 1..32.
+def parse_node_list(text: str, *, low: int = MIN_NODE, high: int = MAX_NODE) -> tuple[int, ...]:
+    """Parse ``"1-8,12,20-22"`` into sorted unique node numbers *low*..*high* (1..32).
 
     Raises:
-        LocalProtocolError: malformed, empty, or a node outside 1..32.
+        LocalProtocolError: malformed, empty, or a node outside *low*..*high*.
     """
     nodes: set[int] = set()
     for part in text.replace(" ", "").split(","):
@@ -84,9 +104,9 @@ def parse_node_list(text: str) -> tuple[int, ...]:
             raise LocalProtocolError(f"bad node list {text!r}: {part!r} is not N or N-M") from None
         if lo > hi:
             raise LocalProtocolError(f"bad node list {text!r}: range {part!r} runs backwards")
-        if not (lo >= MIN_NODE and hi <= MAX_NODE):
+        if not (lo >= low and hi <= high):
             raise LocalProtocolError(
-                f"bad node list {text!r}: nodes are {MIN_NODE}..{MAX_NODE}, got {part!r}"
+                f"bad node list {text!r}: nodes are {low}..{high}, got {part!r}"
             )
         nodes.update(range(lo, hi + 1))
     if not nodes:
@@ -119,12 +139,18 @@ def parse_flag(key: str, value: str) -> bool:
     raise LocalProtocolError(f"{key} must be true or false, got {value!r}")
 
 
-def parse_bus_url(url: str) -> BusAddress:
+def parse_bus_url(url: str, *, protocol: ProtocolName | None = None) -> BusAddress:
     """Parse a bus URL (see the module docstring).
+
+    Args:
+        protocol: the protocol when the URL does not name one (``open_bus``'s
+            argument); it sets the range of ``sim://`` nodes and allows the
+            FR-700 options.
 
     Raises:
         LocalProtocolError: unknown scheme, missing host/port/device, unknown
-            query key, or a line setting the protocol does not allow.
+            query key, a line setting the protocol does not allow, or a
+            *protocol* other than the URL's.
     """
     if not isinstance(url, str) or not url.strip():
         raise LocalProtocolError(f"bus URL must be a non-empty string, got {url!r}")
@@ -153,6 +179,18 @@ def parse_bus_url(url: str) -> BusAddress:
             query.get("stopbits", "1"),
         )
     echo = parse_flag("echo", query["echo"]) if "echo" in query else None
+    named = _protocol(query.pop("protocol", None), url)
+    if protocol is not None and protocol not in PROTOCOLS:
+        raise LocalProtocolError(f"unknown protocol {protocol!r} (use {' or '.join(PROTOCOLS)})")
+    if named is not None and protocol is not None and named != protocol:
+        raise LocalProtocolError(f"protocol={protocol!r} but the URL says protocol={named}")
+    protocol = named or protocol
+    protocol_options: dict[str, str] = {k: query.pop(k) for k in FR700_KEYS if k in query}
+    if protocol_options and protocol != "fr700":
+        raise LocalProtocolError(
+            f"{', '.join(sorted(protocol_options))} in {url!r} are FR-700 options: "
+            f"add protocol=fr700"
+        )
     if scheme == "tcp":
         try:
             host, port = parts.hostname, parts.port
@@ -160,12 +198,49 @@ def parse_bus_url(url: str) -> BusAddress:
             raise LocalProtocolError(f"bad port in {url!r}: {exc}") from None
         if not host or port is None:
             raise LocalProtocolError(f"tcp URL needs a host and a port: {url!r}")
-        return BusAddress("tcp", host=host, port=port, line=line, echo=echo)
+        return BusAddress(
+            "tcp",
+            host=host,
+            port=port,
+            line=line,
+            echo=echo,
+            protocol=protocol,
+            protocol_options=protocol_options,
+        )
     if scheme == "serial":
         device = parts.netloc + parts.path
         if not device:
             raise LocalProtocolError(f"serial URL needs a device path: {url!r}")
-        return BusAddress("serial", device=device, line=line or LineSettings(), echo=echo)
-    nodes = parse_node_list(query.pop("nodes", "1-8"))
+        return BusAddress(
+            "serial",
+            device=device,
+            line=line or LineSettings(),
+            echo=echo,
+            protocol=protocol,
+            protocol_options=protocol_options,
+        )
+    kind = protocol or "sj300"
+    low, high = NODE_RANGES[kind]
+    nodes = parse_node_list(query.pop("nodes", _DEFAULT_SIM_NODES[kind]), low=low, high=high)
     options = {k: v for k, v in query.items() if k in ("wait_ms", "factory_defaults", "pace")}
-    return BusAddress("sim", line=line, echo=echo, nodes=nodes, sim_options=options)
+    return BusAddress(
+        "sim",
+        line=line,
+        echo=echo,
+        nodes=nodes,
+        sim_options=options,
+        protocol=protocol,
+        protocol_options=protocol_options,
+    )
+
+
+def _protocol(value: str | None, url: str) -> ProtocolName | None:
+    if value is None:
+        return None
+    lowered = value.lower()
+    for protocol in PROTOCOLS:
+        if lowered == protocol:
+            return protocol
+    raise LocalProtocolError(
+        f"unknown protocol {value!r} in {url!r} (use {' or '.join(PROTOCOLS)})"
+    )

@@ -21,7 +21,7 @@ them paced at a baud rate with :class:`LinePacing`.
 
 from __future__ import annotations
 
-from ._bus import SimulatedBus, SimulatorStats, Transmission
+from ._bus import BusModel, SimulatedBus, SimulatorStats, Transmission
 from ._device import SerialDeviceServer, serve_serial_device
 from ._drive import DEFAULT_EEPROM_WRITE_S, DEFAULT_PROCESSING_S, SimulatedDrive
 from ._endpoint import SimulatorEndpoint
@@ -36,6 +36,7 @@ from ._trips import TripCode
 __all__ = [
     "DEFAULT_EEPROM_WRITE_S",
     "DEFAULT_PROCESSING_S",
+    "BusModel",
     "Country",
     "Faults",
     "LinePacing",

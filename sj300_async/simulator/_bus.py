@@ -28,6 +28,7 @@ from __future__ import annotations
 import logging
 from collections.abc import Iterable
 from dataclasses import dataclass
+from typing import Protocol
 
 from .._codes import NakCode
 from .._constants import BROADCAST, MAX_NODE, MIN_NODE
@@ -42,7 +43,7 @@ from ._faults import Faults
 from ._pacing import LinePacing
 from ._parameters_table import Country, line_parameters
 
-__all__ = ["SimulatedBus", "SimulatorStats", "Transmission"]
+__all__ = ["BusModel", "SimulatedBus", "SimulatorStats", "Transmission"]
 
 _log = logging.getLogger("sj300_async.simulator")
 
@@ -53,6 +54,13 @@ class Transmission:
 
     delay_s: float
     data: bytes
+
+
+class BusModel(Protocol):
+    """What the servers need of a simulated bus, whatever protocol its drives speak."""
+
+    def receive(self, data: bytes, now: float) -> list[Transmission]:
+        """Feed the host's bytes that arrived at *now*; return the replies, in order."""
 
 
 class SimulatorStats:

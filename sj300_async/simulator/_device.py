@@ -22,7 +22,7 @@ import termios
 import tty
 
 from .._errors import LocalProtocolError
-from ._bus import SimulatedBus
+from ._bus import BusModel
 from ._fd_link import FdLink, FdServer
 from ._pacing import LinePacing, PacedLine
 
@@ -52,7 +52,7 @@ class SerialDeviceServer(FdServer):
 
     def __init__(
         self,
-        bus: SimulatedBus,
+        bus: BusModel,
         path: str,
         settings: LinePacing | None,
         line: PacedLine | None,
@@ -80,7 +80,7 @@ class SerialDeviceServer(FdServer):
 
 
 async def serve_serial_device(
-    bus: SimulatedBus,
+    bus: BusModel,
     path: str,
     pacing: LinePacing | None = None,
     *,

@@ -26,7 +26,7 @@ import itertools
 import logging
 from collections.abc import Callable
 
-from ._bus import SimulatedBus, Transmission
+from ._bus import BusModel, Transmission
 from ._pacing import LinePacing, PacedLine
 
 __all__ = ["SimulatorEndpoint"]
@@ -49,7 +49,7 @@ class SimulatorEndpoint:
 
     def __init__(
         self,
-        bus: SimulatedBus,
+        bus: BusModel,
         send: Callable[[bytes], object],
         pacing: LinePacing | None = None,
         *,

@@ -13,6 +13,7 @@ dropped and that also uses up the delay.
 from __future__ import annotations
 
 from collections import deque
+from collections.abc import Callable
 from dataclasses import dataclass
 
 from .._constants import MAX_NODE, MIN_NODE
@@ -21,9 +22,9 @@ from .._errors import LocalProtocolError
 __all__ = ["FaultedReply", "Faults"]
 
 
-def _check_node(node: int) -> None:
-    if isinstance(node, bool) or not isinstance(node, int) or not MIN_NODE <= node <= MAX_NODE:
-        raise LocalProtocolError(f"node must be 1..32, got {node!r}")
+def _check_node(node: int, nodes: range) -> None:
+    if isinstance(node, bool) or not isinstance(node, int) or node not in nodes:
+        raise LocalProtocolError(f"node must be {nodes.start}..{nodes.stop - 1}, got {node!r}")
 
 
 def _check_count(count: int) -> None:
@@ -58,9 +59,22 @@ class FaultedReply:
 
 
 class Faults:
-    """Hooks to drop, delay or corrupt replies, make a node late, or take it off the line."""
+    """Hooks to drop, delay or corrupt replies, make a node late, or take it off the line.
 
-    def __init__(self) -> None:
+    Args:
+        nodes: the addresses a fault may name (SJ300 1..32; FR-700 stations 0..31).
+        corrupt: how :meth:`corrupt_next` damages a reply frame so its check fails
+            (the protocol's frames differ: see :func:`corrupt` for SJ300's).
+    """
+
+    def __init__(
+        self,
+        *,
+        nodes: range = range(MIN_NODE, MAX_NODE + 1),
+        corrupt: Callable[[bytes], bytes] = corrupt,
+    ) -> None:
+        self._nodes = nodes
+        self._corrupt_frame = corrupt
         self._drop: dict[int, int] = {}
         self._corrupt: dict[int, int] = {}
         self._delay: dict[int, deque[float]] = {}
@@ -69,26 +83,26 @@ class Faults:
 
     def drop_next(self, node: int, count: int = 1) -> None:
         """Lose the next *count* replies of *node* (the drive still executes the requests)."""
-        _check_node(node)
+        _check_node(node, self._nodes)
         _check_count(count)
         self._drop[node] = self._drop.get(node, 0) + count
 
     def delay_next(self, node: int, seconds: float, count: int = 1) -> None:
         """Hold the next *count* replies of *node* for *seconds* more."""
-        _check_node(node)
+        _check_node(node, self._nodes)
         _check_count(count)
         _check_seconds(seconds)
         self._delay.setdefault(node, deque()).extend([seconds] * count)
 
     def corrupt_next(self, node: int, count: int = 1) -> None:
         """Damage the next *count* replies of *node* so their BCC fails (see :func:`corrupt`)."""
-        _check_node(node)
+        _check_node(node, self._nodes)
         _check_count(count)
         self._corrupt[node] = self._corrupt.get(node, 0) + count
 
     def late(self, node: int, seconds: float) -> None:
         """Delay every reply of *node* by *seconds* from now on (0 clears)."""
-        _check_node(node)
+        _check_node(node, self._nodes)
         _check_seconds(seconds)
         if seconds:
             self._late[node] = seconds
@@ -97,7 +111,7 @@ class Faults:
 
     def silence(self, node: int, silent: bool = True) -> None:
         """Take *node* off the line (it hears and answers nothing), or put it back."""
-        _check_node(node)
+        _check_node(node, self._nodes)
         if silent:
             self._silent.add(node)
         else:
@@ -124,7 +138,8 @@ class Faults:
         corrupted = _take(self._corrupt, node)
         if _take(self._drop, node):
             return None
-        return FaultedReply(extra, corrupt(frame) if corrupted else frame, corrupted, delayed)
+        damaged = self._corrupt_frame(frame) if corrupted else frame
+        return FaultedReply(extra, damaged, corrupted, delayed)
 
 
 def _take(counts: dict[int, int], node: int) -> bool:

@@ -16,7 +16,7 @@ import os
 from types import TracebackType
 from typing import Final, Self
 
-from ._bus import SimulatedBus
+from ._bus import BusModel
 from ._endpoint import SimulatorEndpoint
 from ._pacing import PacedLine
 
@@ -35,7 +35,7 @@ class FdLink:
         self,
         fd: int,
         name: str,
-        bus: SimulatedBus,
+        bus: BusModel,
         line: PacedLine | None,
         loop: asyncio.AbstractEventLoop,
     ) -> None:

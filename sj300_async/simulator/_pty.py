@@ -21,7 +21,7 @@ import asyncio
 import os
 import tty
 
-from ._bus import SimulatedBus
+from ._bus import BusModel
 from ._fd_link import FdLink, FdServer
 from ._pacing import LinePacing, PacedLine
 
@@ -36,7 +36,7 @@ class PtyServer(FdServer):
 
     def __init__(
         self,
-        bus: SimulatedBus,
+        bus: BusModel,
         line: PacedLine | None,
         loop: asyncio.AbstractEventLoop,
     ) -> None:
@@ -62,7 +62,7 @@ class PtyServer(FdServer):
 
 
 async def open_pty_server(
-    bus: SimulatedBus,
+    bus: BusModel,
     pacing: LinePacing | None = None,
     *,
     line: PacedLine | None = None,

@@ -16,7 +16,7 @@ import asyncio
 import logging
 from types import TracebackType
 
-from ._bus import SimulatedBus
+from ._bus import BusModel
 from ._endpoint import SimulatorEndpoint
 from ._pacing import LinePacing, PacedLine
 
@@ -65,7 +65,7 @@ class SimulatorServer:
     Use :func:`serve_tcp` to make one. Also an async context manager.
     """
 
-    def __init__(self, bus: SimulatedBus, line: PacedLine | None) -> None:
+    def __init__(self, bus: BusModel, line: PacedLine | None) -> None:
         self.bus = bus
         self.line = line
         #: The address the listener is bound to.
@@ -111,7 +111,7 @@ class SimulatorServer:
 
 
 async def serve_tcp(
-    bus: SimulatedBus,
+    bus: BusModel,
     host: str = "127.0.0.1",
     port: int = 0,
     pacing: LinePacing | None = None,

@@ -1,0 +1,343 @@
+"""The typed FR-700 Drive API: one method per thing a user does with a drive.
+
+Get one from an FR-700 bus: ``open_bus(url, protocol="fr700")`` then
+``bus.drive(station)`` (stations 0..31). Every method validates its
+arguments before anything reaches the wire and raises the library's typed
+errors: :class:`~sj300_async.LocalProtocolError` (nothing sent),
+:class:`~sj300_async.NakError` (``.code`` an :class:`Fr700NakCode`),
+:class:`~sj300_async.ReplyTimeoutError`,
+:class:`~sj300_async.RemoteProtocolError`,
+:class:`~sj300_async.TransportError`, :class:`~sj300_async.ReadOnlyError`.
+
+Parameters go through the link-parameter extension: the bank is written
+with HFF, then the parameter is read or written at its offset. The two
+transactions hold a per-drive lock, so another task cannot switch the bank
+in between; the bank last written is remembered and not written again
+while it holds. It is forgotten (written again next time) after any error
+in such a pair and after an inverter reset, which returns the drive's bank
+to 0. Selecting a bank only prepares a read, so a read-only bus allows it.
+"""
+
+from __future__ import annotations
+
+import asyncio
+from typing import TYPE_CHECKING, Any
+
+from .._codes import Direction
+from .._errors import LocalProtocolError, ReadOnlyError, RemoteProtocolError
+from .._stats import TransactionStats
+from . import _requests as rq
+from ._codes import Fr700Instruction, Fr700OperationMode, Fr700StatusBits
+from ._dialect import Fr700Dialect
+from ._events import Fr700Data
+from ._payloads import (
+    Fr700Monitor,
+    Fr700MultiReply,
+    Fr700Status,
+    decode_hex,
+    decode_multi_reply,
+)
+from ._requests import Fr700MultiReceive, Fr700Request
+
+if TYPE_CHECKING:
+    from .._bus import Bus
+
+__all__ = ["Fr700Drive"]
+
+I = Fr700Instruction  # noqa: E741
+
+
+class Fr700Drive:
+    """One FR-700 drive on a bus. Get it from :meth:`Bus.drive` on an FR-700 bus.
+
+    Attributes:
+        station: the drive's station number (0..31, its Pr.117).
+        stats: counters of this drive's transactions.
+        wait_time_s: the drive's fixed waiting time (Pr.123) when requests
+            carry no waiting-time field; the response time-out grows by it.
+        timeout_s: a fixed response time-out for this drive (None: computed).
+    """
+
+    def __init__(self, bus: Bus[Any], station: int, *, wait_time_s: float = 0.0) -> None:
+        if isinstance(station, bool) or not isinstance(station, int) or not 0 <= station <= 31:
+            raise LocalProtocolError(f"an FR-700 station is 0..31, got {station!r}")
+        dialect = bus.dialect
+        if not isinstance(dialect, Fr700Dialect):
+            raise LocalProtocolError(f"bus {bus.description} does not speak FR-700")
+        self._bus = bus
+        self._station = station
+        self._options = dialect.options
+        self.stats = TransactionStats()
+        self.wait_time_s = wait_time_s
+        self.timeout_s: float | None = None
+        self._bank: int | None = None
+        self._bank_lock = asyncio.Lock()
+
+    @property
+    def station(self) -> int:
+        """The station number."""
+        return self._station
+
+    @property
+    def node(self) -> int:
+        """The station number (the name every drive on a bus shares)."""
+        return self._station
+
+    def __repr__(self) -> str:
+        return f"<Fr700Drive {self._station:02d} on {self._bus.description}>"
+
+    # -- transactions ----------------------------------------------------------------
+
+    async def _execute(self, request: Fr700Request, *, urgent: bool = False) -> Any:
+        return await self._bus._execute(
+            request,
+            self.stats,
+            wait_s=self.wait_time_s,
+            timeout_s=self.timeout_s,
+            urgent=urgent,
+            mutating=request.mutating,
+        )
+
+    async def _data(self, request: Fr700Request) -> bytes:
+        reply = await self._execute(request)
+        if not isinstance(reply, Fr700Data):  # the dialect's matching guarantees it
+            raise RemoteProtocolError(f"unexpected reply {reply!r} to {request.label}")
+        return reply.data
+
+    async def _value(self, instruction: int) -> int:
+        return decode_hex(
+            await self._data(rq.read(self._station, instruction, options=self._options))
+        )
+
+    async def _write(self, instruction: int, value: int, *, urgent: bool = False) -> None:
+        request = rq.write(self._station, instruction, value, options=self._options)
+        await self._execute(request, urgent=urgent)
+
+    # -- raw access --------------------------------------------------------------------
+
+    async def read_data(self, code: int | str, *, width: int | None = None) -> bytes:
+        """Read any instruction H00..H7F; return the reply's data characters as sent.
+
+        Args:
+            width: data characters the reply must have (default: the
+                instruction's known width, else any).
+
+        Raises:
+            LocalProtocolError: not a read code (nothing sent).
+            NakError: e.g. B when the drive has no such instruction.
+            ReplyTimeoutError, RemoteProtocolError, TransportError.
+        """
+        request = rq.read(self._station, code, options=self._options, reply_width=width)
+        return await self._data(request)
+
+    async def read(self, code: int | str, *, width: int | None = None) -> int:
+        """Read any instruction H00..H7F; return its hex data as an int.
+
+        Raises as :meth:`read_data`, and RemoteProtocolError when the data is not hex.
+        """
+        return decode_hex(await self.read_data(code, width=width))
+
+    async def write(self, code: int | str, value: int, *, digits: int | None = None) -> None:
+        """Write *value* to any instruction H80..HFF (HF0: :meth:`multi_command`).
+
+        Args:
+            digits: 2 or 4 hex digits (default: the instruction's known width, else 4).
+
+        Raises:
+            LocalProtocolError: not a write code, or a value that does not fit (nothing sent).
+            NakError: A (mode), B (no such instruction), C (data range) and
+                transmission errors.
+            ReplyTimeoutError, RemoteProtocolError, TransportError, ReadOnlyError.
+        """
+        request = rq.write(self._station, code, value, options=self._options, digits=digits)
+        await self._execute(request)
+        if request.instruction == I.INVERTER_RESET:
+            self._bank = None
+
+    # -- status and monitors -------------------------------------------------------------
+
+    async def read_status(self) -> Fr700Status:
+        """H7A: the status monitor (RUN, forward, reverse, SU, OL, IPF, FU, ABC1).
+
+        Raises:
+            NakError, ReplyTimeoutError, RemoteProtocolError, TransportError.
+        """
+        return Fr700Status(Fr700StatusBits(await self._value(I.STATUS)))
+
+    async def read_extended_status(self) -> Fr700Status:
+        """H79: the extended status monitor (16 bits). Raises as :meth:`read_status`."""
+        return Fr700Status(Fr700StatusBits(await self._value(I.EXTENDED_STATUS)), extended=True)
+
+    async def read_output_frequency(self) -> float:
+        """H6F: the output frequency in Hz. Raises as :meth:`read_status`."""
+        return await self._value(I.OUTPUT_FREQUENCY) / 100
+
+    async def read_output_current(self) -> float:
+        """H70: the output current in A. Raises as :meth:`read_status`."""
+        return await self._value(I.OUTPUT_CURRENT) / 100
+
+    async def read_output_voltage(self) -> float:
+        """H71: the output voltage in V. Raises as :meth:`read_status`."""
+        return await self._value(I.OUTPUT_VOLTAGE) / 10
+
+    async def read_monitor(self) -> Fr700Monitor:
+        """H6F, H70 and H71 (three transactions). Raises as :meth:`read_status`."""
+        return Fr700Monitor(
+            output_frequency_hz=await self.read_output_frequency(),
+            output_current_a=await self.read_output_current(),
+            output_voltage_v=await self.read_output_voltage(),
+        )
+
+    # -- run and frequency -----------------------------------------------------------------
+
+    async def run_forward(self) -> None:
+        """HFA H02: run forward.
+
+        Raises:
+            NakError: A when the drive is not in network operation mode.
+            ReplyTimeoutError, RemoteProtocolError, TransportError, ReadOnlyError.
+        """
+        await self._execute(rq.run(self._station, Direction.FORWARD, options=self._options))
+
+    async def run_reverse(self) -> None:
+        """HFA H04: run reverse. Raises as :meth:`run_forward`."""
+        await self._execute(rq.run(self._station, Direction.REVERSE, options=self._options))
+
+    async def stop(self) -> None:
+        """HFA H00: stop. Jumps the queue: it goes out before every waiting poll.
+
+        Raises as :meth:`run_forward`.
+        """
+        request = rq.run(self._station, Direction.STOP, options=self._options)
+        await self._execute(request, urgent=True)
+
+    async def set_frequency(self, hz: float, *, eeprom: bool = False) -> None:
+        """HED (RAM) or, with *eeprom*, HEE (RAM and EEPROM): the set frequency in Hz.
+
+        Raises:
+            LocalProtocolError: not a number in 0..655.35 or finer than 0.01 Hz (nothing sent).
+            NakError: C above the drive's maximum frequency, A outside network mode.
+            ReplyTimeoutError, RemoteProtocolError, TransportError, ReadOnlyError.
+        """
+        await self._execute(
+            rq.set_frequency(self._station, hz, eeprom=eeprom, options=self._options)
+        )
+
+    async def read_set_frequency(self, *, eeprom: bool = False) -> float:
+        """H6D (RAM) or, with *eeprom*, H6E (EEPROM): the set frequency in Hz.
+
+        Raises as :meth:`read_status`.
+        """
+        code = I.READ_SET_FREQUENCY_EEPROM if eeprom else I.READ_SET_FREQUENCY_RAM
+        return await self._value(code) / 100
+
+    async def multi_command(
+        self,
+        direction: Direction | int,
+        hz: float,
+        *,
+        eeprom: bool = False,
+        receive: Fr700MultiReceive | int = Fr700MultiReceive.OUTPUT_FREQUENCY,
+    ) -> Fr700MultiReply:
+        """HF0: run command and set frequency in one request; status and a monitor back.
+
+        The reply says how each half fared (:attr:`Fr700MultiReply.run_error`,
+        :attr:`~Fr700MultiReply.frequency_error`): a mode or range error of one
+        half is reported there, not raised, so the monitor value is not lost.
+
+        Raises:
+            LocalProtocolError: a bad direction, frequency or receive type (nothing sent).
+            NakError: errors other than mode and range (e.g. transmission errors).
+            ReplyTimeoutError, RemoteProtocolError, TransportError, ReadOnlyError.
+        """
+        request = rq.multi_command(
+            self._station,
+            rq.run_bits(direction),
+            hz,
+            eeprom=eeprom,
+            receive=receive,
+            options=self._options,
+        )
+        return decode_multi_reply(await self._data(request))
+
+    # -- operation mode and reset --------------------------------------------------------------
+
+    async def read_operation_mode(self) -> Fr700OperationMode:
+        """H7B: network, external or PU operation. Raises as :meth:`read_status`."""
+        return Fr700OperationMode(await self._value(I.READ_OPERATION_MODE))
+
+    async def set_operation_mode(self, mode: Fr700OperationMode | int) -> None:
+        """HFB: switch the operation mode.
+
+        Raises:
+            LocalProtocolError: not NETWORK, EXTERNAL or PU (nothing sent).
+            NakError: A while running, C for a mode the drive refuses.
+            ReplyTimeoutError, RemoteProtocolError, TransportError, ReadOnlyError.
+        """
+        await self._execute(rq.write_operation_mode(self._station, mode, options=self._options))
+
+    async def reset(self) -> None:
+        """HFD H9696: reset the inverter (clears a fault). The drive sends no reply.
+
+        A real drive takes about a second to restart and answers nothing
+        meanwhile: the next request may time out and be retried.
+
+        Raises:
+            TransportError, ReadOnlyError.
+        """
+        self._bank = None
+        await self._execute(rq.reset(self._station, options=self._options))
+
+    # -- parameters ----------------------------------------------------------------------------
+
+    async def read_parameter(self, number: int | str) -> int:
+        """Read parameter *number* (0..999, or ``"Pr.7"``): its raw value 0..65535.
+
+        The value is in the parameter's own unit (Pr.7 in 0.1 s...): this
+        library has no FR-700 parameter catalogue.
+
+        Raises:
+            LocalProtocolError: not a parameter number (nothing sent).
+            NakError: e.g. B for a parameter the drive does not have.
+            ReplyTimeoutError, RemoteProtocolError, TransportError.
+        """
+        bank, _offset = rq.parameter_bank(number)
+        async with self._bank_lock:
+            await self._select_bank(bank)
+            try:
+                request = rq.read_parameter(self._station, number, options=self._options)
+                return decode_hex(await self._data(request))
+            except BaseException:
+                self._bank = None
+                raise
+
+    async def write_parameter(self, number: int | str, value: int) -> None:
+        """Write the raw *value* (0..65535) to parameter *number* (0..999, or ``"Pr.7"``).
+
+        Raises:
+            LocalProtocolError: bad number or value (nothing sent).
+            NakError: A (not writable in this mode or while running), B (no such
+                parameter), C (out of range).
+            ReplyTimeoutError, RemoteProtocolError, TransportError, ReadOnlyError.
+        """
+        request = rq.write_parameter(self._station, number, value, options=self._options)
+        if self._bus.read_only:  # refuse before switching the bank, not after it
+            raise ReadOnlyError(
+                f"bus {self._bus.description} is read-only: {request.label} refused"
+            )
+        bank, _offset = rq.parameter_bank(number)
+        async with self._bank_lock:
+            await self._select_bank(bank)
+            try:
+                await self._execute(request)
+            except BaseException:
+                self._bank = None
+                raise
+
+    async def _select_bank(self, bank: int) -> None:
+        if self._bank == bank:
+            return
+        self._bank = None  # unknown until the drive has acknowledged
+        request = rq.link_extension(self._station, bank, options=self._options, changes_drive=False)
+        await self._execute(request)
+        self._bank = bank

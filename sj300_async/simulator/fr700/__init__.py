@@ -1,0 +1,35 @@
+"""Virtual Mitsubishi FR-700 drives on a virtual RS-485 line (the computer link).
+
+The same machinery as the SJ300 simulator: :class:`Fr700SimulatedBus` is
+sans-IO (``receive(data, now) -> [Transmission]``), and every server of
+:mod:`sj300_async.simulator` (:class:`~sj300_async.simulator.SimulatorEndpoint`,
+:func:`~sj300_async.simulator.serve_tcp`, the pty and serial-device
+servers, baud pacing) serves it as it is::
+
+    bus = Fr700SimulatedBus(stations=range(4))          # CR, waiting-time field
+    out = bus.receive(host_bytes, now)
+    bus.drives[2].trip(now=now)
+    bus.faults.corrupt_next(2)                           # its next reply's sum fails
+"""
+
+from __future__ import annotations
+
+from ._bus import Fr700SimulatedBus, Fr700SimulatorStats, corrupt
+from ._drive import DEFAULT_PROCESSING_S, FaultCode, Fr700SimulatedDrive
+from ._parameters import PARAMETERS, ParameterSpec
+from ._request_parser import BadRequest, HostAnswer, HostRequest, RequestParser
+
+__all__ = [
+    "DEFAULT_PROCESSING_S",
+    "PARAMETERS",
+    "BadRequest",
+    "FaultCode",
+    "Fr700SimulatedBus",
+    "Fr700SimulatedDrive",
+    "Fr700SimulatorStats",
+    "HostAnswer",
+    "HostRequest",
+    "ParameterSpec",
+    "RequestParser",
+    "corrupt",
+]
