@@ -1,11 +1,18 @@
-"""``python -m benchmarks``: run the benchmarks and print the notes and one markdown table."""
+"""``python -m benchmarks``: run the benchmarks and print the notes and one markdown table.
+
+With ``--uvloop``, the benchmarks that run an event loop run once more on
+uvloop and get a table of their own: the targets hold on asyncio's default
+loop, uvloop is an optional speed-up.
+"""
 
 from __future__ import annotations
 
 import argparse
+import importlib.util
 import os
 import platform
 import sys
+import time
 from collections.abc import Sequence
 from importlib.metadata import version
 
@@ -24,52 +31,89 @@ def _parse_args(argv: Sequence[str] | None) -> argparse.Namespace:
     )
     parser.add_argument(
         "--only",
-        choices=sorted(BENCHMARKS),
+        action="append",
+        choices=list(BENCHMARKS),
         metavar="NAME",
-        help=f"one of: {', '.join(BENCHMARKS)}",
+        help=f"run only this one (repeatable): {', '.join(BENCHMARKS)}",
+    )
+    parser.add_argument(
+        "--uvloop",
+        action="store_true",
+        help="also run the event-loop benchmarks on uvloop, in a table of their own",
     )
     parser.add_argument("--repeats", type=int, help="timed runs per side (default 5, quick 2)")
     parser.add_argument("--seed", type=int, default=DEFAULT_SEED, help="seed of every random input")
-    return parser.parse_args(argv)
+    args = parser.parse_args(argv)
+    if args.uvloop and importlib.util.find_spec("uvloop") is None:
+        parser.error("--uvloop needs uvloop: pip install uvloop")
+    return args
 
 
-def _environment() -> str:
-    return "\n".join(
-        (
-            f"- Python {platform.python_version()} ({platform.python_implementation()}), "
-            f"{platform.platform()}, {platform.machine()}, {os.cpu_count()} CPUs",
-            f"- sj300_async {version('sj300-async')}, pymodbus {version('pymodbus')}",
-        )
-    )
+def _environment(uvloop: bool) -> str:
+    lines = [
+        f"- Python {platform.python_version()} ({platform.python_implementation()}), "
+        f"{platform.platform()}, {platform.machine()}, {os.cpu_count()} CPUs",
+        f"- sj300_async {version('sj300-async')}, pymodbus {version('pymodbus')}",
+        "- event loop: asyncio's default"
+        + (f"; then uvloop {version('uvloop')} in a table of its own" if uvloop else ""),
+    ]
+    return "\n".join(lines)
+
+
+def _run_all(names: Sequence[str], config: Config, suffix: str = "") -> tuple[list[Result], bool]:
+    """Run and print each benchmark; return the rows and whether every one ran."""
+    results: list[Result] = []
+    ok = True
+    for name in names:
+        module = load(name)
+        print()
+        print(f"## {module.TITLE}{suffix}")
+        print()
+        start = time.perf_counter()
+        try:
+            section = module.run(config)
+        except Exception as exc:  # one broken benchmark must not hide the others' results
+            ok = False
+            print(f"**failed**: {type(exc).__name__}: {exc}")
+            continue
+        print("\n".join(section.notes))
+        print()
+        print(f"_{time.perf_counter() - start:.1f} s_")
+        results += section.results
+    return results, ok
 
 
 def main(argv: Sequence[str] | None = None) -> int:
-    """Run the chosen benchmarks; return the exit status."""
+    """Run the chosen benchmarks; return the exit status (1 if one of them failed)."""
     args = _parse_args(argv)
     repeats = args.repeats if args.repeats is not None else (2 if args.quick else 5)
     config = Config(quick=args.quick, repeats=repeats, seed=args.seed)
-    names = [args.only] if args.only else list(BENCHMARKS)
+    names = list(dict.fromkeys(args.only)) if args.only else list(BENCHMARKS)
+    peer = f"pymodbus {version('pymodbus')}"
 
     print(
         "# sj300_async benchmarks"
         + (" (quick: sizes too small to mean anything)" if config.quick else "")
     )
     print()
-    print(_environment())
+    print(_environment(args.uvloop))
     print(f"- best of {config.repeats} interleaved runs per side, after one warm-up run")
-    results: list[Result] = []
-    for name in names:
-        section = load(name).run(config)
-        print()
-        print(f"## {section.title}")
-        print()
-        print("\n".join(section.notes))
-        results += section.results
+    results, ok = _run_all(names, config)
     print()
     print("## results")
     print()
-    print(markdown_table(results, f"pymodbus {version('pymodbus')}"))
-    return 0
+    print(markdown_table(results, peer))
+
+    if args.uvloop:
+        on_loop = [name for name in names if load(name).USES_EVENT_LOOP]
+        uv_config = Config(quick=config.quick, repeats=repeats, seed=args.seed, loop="uvloop")
+        uv_results, uv_ok = _run_all(on_loop, uv_config, " (uvloop)")
+        ok = ok and uv_ok
+        print()
+        print(f"## results on uvloop {version('uvloop')} (the targets are for the default loop)")
+        print()
+        print(markdown_table(uv_results, peer))
+    return 0 if ok else 1
 
 
 if __name__ == "__main__":

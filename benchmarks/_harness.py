@@ -4,28 +4,42 @@ A benchmark module exposes ``TITLE`` and ``run(config) -> Section``. It times
 our code and the peer in the same process and the same run, interleaved, so
 that drift of the machine (turbo, other load) hits both alike; the ratio is
 what the project tracks, the absolute numbers only describe this machine.
+
+Not every row has a peer: a row may instead measure against a limit (the
+wire time of a line), a target given as an absolute number (transactions/s)
+or nothing at all (a latency percentile). :attr:`Result.against` names the
+reference, and the ratio is always "how many times better than the
+reference" so that one column reads the same way for every row.
 """
 
 from __future__ import annotations
 
+import asyncio
 import gc
 import time
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
+from typing import Literal
 
 __all__ = [
     "DEFAULT_SEED",
     "Config",
+    "EventLoop",
     "Result",
     "Section",
+    "best_time",
     "compare",
     "format_number",
     "markdown_table",
+    "new_runner",
 ]
 
 
 #: Seed of every random input unless ``--seed`` says otherwise.
 DEFAULT_SEED = 300
+
+#: The event loops a benchmark can run on: asyncio's default, or uvloop (``--uvloop``).
+EventLoop = Literal["asyncio", "uvloop"]
 
 
 @dataclass(frozen=True, slots=True)
@@ -38,32 +52,50 @@ class Config:
     repeats: int = 5
     #: Seed of every random choice, so that two runs measure the same input.
     seed: int = DEFAULT_SEED
+    #: The event loop of the benchmarks that use one (the targets hold for "asyncio").
+    loop: EventLoop = "asyncio"
 
 
 @dataclass(frozen=True, slots=True)
 class Result:
-    """One row of the table: a measurement of ours against the same one of the peer."""
+    """One row of the table: a measurement of ours against a reference in the same unit.
+
+    The reference is the peer's same measurement, unless :attr:`against` names
+    something else (``"target"``, ``"wire limit"``); None when there is none.
+    """
 
     name: str
     ours: float
-    peer: float
+    #: The reference value: the peer's measurement, a limit or a target (None: none).
+    peer: float | None
     unit: str
     #: The ratio (see :attr:`ratio`) the project aims for, or None for information only.
     target: float | None = None
     #: False for times and sizes, where less is better; the ratio is then peer / ours.
     higher_is_better: bool = True
+    #: What the reference is, when it is not the peer: "target", "wire limit"...
+    against: str | None = None
+    #: Show the ratio and its target as percentages (an efficiency against a limit).
+    percent: bool = False
 
     @property
-    def ratio(self) -> float:
-        """How many times better ours is: > 1 means ours wins, whatever the unit."""
+    def ratio(self) -> float | None:
+        """How many times better ours is: > 1 means ours wins, whatever the unit.
+
+        None without a reference; infinite when ours is a cost of zero or less
+        (no growth at all against a growth budget).
+        """
+        if self.peer is None:
+            return None
         if self.higher_is_better:
-            return self.ours / self.peer
-        return self.peer / self.ours
+            return self.ours / self.peer if self.peer else float("inf")
+        return self.peer / self.ours if self.ours > 0 else float("inf")
 
     @property
     def met(self) -> bool | None:
-        """Whether the target is met, or None when there is no target."""
-        return None if self.target is None else self.ratio >= self.target
+        """Whether the target is met, or None when there is no target (or no reference)."""
+        ratio = self.ratio
+        return None if self.target is None or ratio is None else ratio >= self.target
 
 
 @dataclass(frozen=True, slots=True)
@@ -105,6 +137,33 @@ def compare(
     return best_ours, best_peer
 
 
+def best_time(fn: Callable[[], object], repeats: int) -> float:
+    """Time *fn* once untimed, then *repeats* times; return the best wall time in seconds.
+
+    For measurements without a peer to interleave with (see :func:`compare`).
+    """
+    if repeats < 1:
+        raise ValueError(f"repeats must be at least 1, got {repeats}")
+    fn()
+    return min(_time_once(fn) for _ in range(repeats))
+
+
+def new_runner(loop: EventLoop) -> asyncio.Runner:
+    """An asyncio runner on the chosen event loop; benchmarks time ``runner.run(...)`` calls.
+
+    One runner keeps connections open across timed runs, so that only the
+    transactions are timed, not the set-up.
+
+    Raises:
+        ModuleNotFoundError: *loop* is "uvloop" and uvloop is not installed.
+    """
+    if loop == "uvloop":
+        import uvloop  # optional: only with --uvloop
+
+        return asyncio.Runner(loop_factory=uvloop.new_event_loop)
+    return asyncio.Runner()
+
+
 def format_number(value: float) -> str:
     """Thousands separators for large values, three significant digits for small ones."""
     if abs(value) >= 1000:
@@ -112,17 +171,33 @@ def format_number(value: float) -> str:
     return f"{value:.3g}"
 
 
+def _format_ratio(r: Result) -> tuple[str, str]:
+    ratio = r.ratio
+    if r.percent:
+        shown = "—" if ratio is None else f"{ratio * 100:.1f} %"
+        return shown, "—" if r.target is None else f">= {r.target * 100:g} %"
+    if ratio is None:
+        shown = "—"
+    elif ratio == float("inf"):
+        shown = "∞"
+    else:
+        shown = f"{ratio:.2f}x"
+    return shown, "—" if r.target is None else f">= {r.target:g}x"
+
+
 def markdown_table(results: Sequence[Result], peer_name: str) -> str:
-    """Render the results as one markdown table."""
+    """Render the results as one markdown table; *peer_name* names the peer's references."""
     lines = [
-        f"| benchmark | ours | {peer_name} | unit | ours vs peer | target | met |",
-        "|---|---:|---:|---|---:|---:|:---:|",
+        "| benchmark | ours | reference | unit | reference is | ours vs reference | target | met |",
+        "|---|---:|---:|---|---|---:|---:|:---:|",
     ]
     for r in results:
-        target = "—" if r.target is None else f">= {r.target:g}x"
+        ratio, target = _format_ratio(r)
         met = {None: "—", True: "yes", False: "**no**"}[r.met]
+        reference = "—" if r.peer is None else format_number(r.peer)
+        against = "—" if r.peer is None else (r.against or peer_name)
         lines.append(
-            f"| {r.name} | {format_number(r.ours)} | {format_number(r.peer)} | {r.unit} "
-            f"| {r.ratio:.2f}x | {target} | {met} |"
+            f"| {r.name} | {format_number(r.ours)} | {reference} | {r.unit} | {against} "
+            f"| {ratio} | {target} | {met} |"
         )
     return "\n".join(lines)

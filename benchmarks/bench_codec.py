@@ -48,6 +48,7 @@ __all__ = [
     "FRAMES",
     "QUICK_FRAMES",
     "TITLE",
+    "USES_EVENT_LOOP",
     "Workload",
     "build_workload",
     "decode_ours",
@@ -58,6 +59,7 @@ __all__ = [
 ]
 
 TITLE = "codec"
+USES_EVENT_LOOP = False
 #: Frames in the stream of a full run, and of a ``--quick`` run.
 FRAMES = 20_000
 QUICK_FRAMES = 300

@@ -1,0 +1,180 @@
+"""The TCP benchmark's servers, each run in a process of its own.
+
+``python -m benchmarks._servers sj300|pymodbus [--uvloop]`` listens on a free
+loopback port, prints ``port N`` on stdout, and serves until its standard
+input closes: the parent holds the pipe, so the server ends with it even if
+the parent is killed. A line ``cpu`` on its standard input is answered with
+``cpu SECONDS``, the process's CPU time so far, so the parent can tell the
+server's share of a round trip from its own. :class:`ServerProcess` is the
+parent's side.
+
+- ``sj300``: :func:`sj300_async.simulator.serve_tcp` over a
+  :class:`~sj300_async.simulator.SimulatedBus` with one drive whose
+  ``processing_s`` is 0. The simulator otherwise waits 1 ms before each reply
+  to emulate a real drive's processing, which would measure the emulated
+  drive rather than the stack. The CLI (``sj300 simulate``) does not expose
+  ``processing_s``, hence this script.
+- ``pymodbus``: pymodbus's ``ModbusTcpServer`` with one device (id 1) whose
+  registers are one plain ``SimData`` block (pymodbus 3.16's datastore; the
+  older ``ModbusServerContext`` is deprecated).
+"""
+
+from __future__ import annotations
+
+import argparse
+import asyncio
+import os
+import subprocess
+import sys
+import time
+from collections.abc import Sequence
+from pathlib import Path
+from types import TracebackType
+from typing import Any, Literal
+
+__all__ = ["ServerKind", "ServerProcess", "main"]
+
+ServerKind = Literal["sj300", "pymodbus"]
+
+#: Holding registers the pymodbus server offers (the benchmark reads at most 50).
+_REGISTERS = 256
+# The folder that holds the benchmarks package, as this process found it.
+_ROOT = Path(__file__).parent.parent
+
+
+def _answer_parent() -> None:
+    for line in sys.stdin:
+        if line.strip() == "cpu":
+            print(f"cpu {time.process_time()!r}", flush=True)
+
+
+async def _stdin_closed() -> None:
+    """Answer the parent's questions; return when it closes standard input (or dies)."""
+    loop = asyncio.get_running_loop()
+    await loop.run_in_executor(None, _answer_parent)
+
+
+async def _serve_sj300() -> None:
+    from sj300_async.simulator import SimulatedBus, serve_tcp
+
+    server = await serve_tcp(SimulatedBus(nodes=[1], processing_s=0.0))
+    print(f"port {server.port}", flush=True)
+    try:
+        await _stdin_closed()
+    finally:
+        server.close()
+        await server.wait_closed()
+
+
+async def _serve_pymodbus() -> None:
+    from pymodbus.server import ModbusTcpServer
+    from pymodbus.simulator import DataType, SimData, SimDevice
+
+    registers = SimData(
+        0, count=_REGISTERS, values=list(range(_REGISTERS)), datatype=DataType.REGISTERS
+    )
+    server = ModbusTcpServer(SimDevice(1, [registers]), address=("127.0.0.1", 0))
+    await server.serve_forever(background=True)
+    listener: Any = server.transport  # asyncio.Server, or uvloop's own Server
+    print(f"port {listener.sockets[0].getsockname()[1]}", flush=True)
+    try:
+        await _stdin_closed()
+    finally:
+        await server.shutdown()  # type: ignore[no-untyped-call]
+
+
+class ServerProcess:
+    """A benchmark server in a child process; a context manager that yields its port.
+
+    Raises (on enter):
+        RuntimeError: the server did not report a port (its stderr is quoted).
+    """
+
+    def __init__(self, kind: ServerKind, *, uvloop: bool = False) -> None:
+        self.kind = kind
+        self.port = 0
+        self._args = [sys.executable, "-m", "benchmarks._servers", kind]
+        if uvloop:
+            self._args.append("--uvloop")
+        self._process: subprocess.Popen[str] | None = None
+
+    def __enter__(self) -> ServerProcess:
+        env = dict(os.environ)
+        env["PYTHONPATH"] = os.pathsep.join(p for p in (str(_ROOT), env.get("PYTHONPATH", "")) if p)
+        process = subprocess.Popen(
+            self._args,
+            cwd=_ROOT,
+            env=env,
+            stdin=subprocess.PIPE,
+            stdout=subprocess.PIPE,
+            stderr=subprocess.PIPE,
+            text=True,
+        )
+        self._process = process
+        assert process.stdout is not None
+        line = process.stdout.readline()
+        if not line.startswith("port "):
+            assert process.stdin is not None
+            assert process.stderr is not None
+            process.stdin.close()
+            error = process.stderr.read()
+            self.__exit__(None, None, None)
+            raise RuntimeError(f"{self.kind} server did not start: {line}{error}")
+        self.port = int(line.split()[1])
+        return self
+
+    def cpu_seconds(self) -> float:
+        """The server process's CPU time so far (user + system), in seconds.
+
+        Raises:
+            RuntimeError: the server is not running, or did not answer.
+        """
+        process = self._process
+        if process is None or process.stdin is None or process.stdout is None:
+            raise RuntimeError(f"{self.kind} server is not running")
+        process.stdin.write("cpu\n")
+        process.stdin.flush()
+        answer = process.stdout.readline()
+        if not answer.startswith("cpu "):
+            raise RuntimeError(f"{self.kind} server answered {answer!r} to cpu")
+        return float(answer.split()[1])
+
+    def __exit__(
+        self,
+        exc_type: type[BaseException] | None,
+        exc: BaseException | None,
+        tb: TracebackType | None,
+    ) -> None:
+        process, self._process = self._process, None
+        if process is None:
+            return
+        assert process.stdin is not None
+        process.stdin.close()
+        try:
+            process.wait(timeout=5)
+        except subprocess.TimeoutExpired:
+            process.kill()
+            process.wait()
+        for stream in (process.stdout, process.stderr):
+            if stream is not None:
+                stream.close()
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    """Serve until standard input closes; return the exit status."""
+    parser = argparse.ArgumentParser(prog="python -m benchmarks._servers")
+    parser.add_argument("kind", choices=("sj300", "pymodbus"))
+    parser.add_argument("--uvloop", action="store_true", help="serve on uvloop")
+    args = parser.parse_args(argv)
+    serve = _serve_sj300 if args.kind == "sj300" else _serve_pymodbus
+    if args.uvloop:
+        import uvloop
+
+        uvloop.run(serve())
+    else:
+        asyncio.run(serve())
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,222 @@
+"""Wire efficiency: how close a polling cycle comes to what the line itself allows.
+
+32 simulated drives behind a baud-paced in-memory line
+(``sim://?pace=1&baudrate=B``): every character takes its wire time, in both
+directions, on one half-duplex line, and each drive waits its processing
+time (the simulator's default 1 ms, a real drive's order of magnitude)
+after a request before it answers; C078 is 0. A :class:`~sj300_async.Poller`
+with ``interval_s=0`` reads status (04) and monitor (03) of every drive; one
+cycle is 64 transactions.
+
+The limit of a cycle is what no host can beat::
+
+    wire limit = sum over transactions of (request + reply characters)
+                 x bits per character / baud  +  the drives' processing time
+
+The library also rests a guard interval of 3.5 character times after each
+reply before it writes again (``BusTiming.guard_chars``: the drive's RS-485
+driver must release the line). That rest is policy, not wire time, so it is
+not in the limit: the first row of each line compares the cycle with the
+wire limit alone (the issue's target), the second with the wire limit plus
+the guard, which shows how much of the gap the guard is. The notes break the
+rest down, from the trace of every frame: the host's turnaround beyond the
+guard (the library and the event loop's timer granularity) and how late the
+simulated line delivered the reply's last character (the emulation's timers,
+not the library: a real UART hands bytes over as they arrive).
+"""
+
+from __future__ import annotations
+
+import asyncio
+from dataclasses import dataclass
+
+from sj300_async import BusTiming, LineSettings, Poller, TraceRecord, open_bus
+from sj300_async.simulator import DEFAULT_PROCESSING_S, SimulatedBus
+
+from ._harness import Config, Result, Section, new_runner
+
+__all__ = ["LINES", "TITLE", "USES_EVENT_LOOP", "Cycle", "measure", "run"]
+
+TITLE = "wire"
+USES_EVENT_LOOP = True
+#: The line settings measured: (baud rate, bytesize, parity, stop bits).
+LINES: tuple[LineSettings, ...] = (LineSettings(9600), LineSettings(19200))
+#: Drives on the line, full and ``--quick``.
+DRIVES = 32
+QUICK_DRIVES = 2
+#: The project's aim: cycle time within 1 % of the wire limit.
+TARGET_EFFICIENCY = 0.99
+
+
+@dataclass(frozen=True, slots=True)
+class Cycle:
+    """One measured polling cycle and its limits, in seconds."""
+
+    line: LineSettings
+    drives: int
+    transactions: int
+    #: The cycle as the poller measured it (``BusPollStats.last_cycle_s``).
+    cycle_s: float
+    #: Wire time of every request and reply character.
+    wire_s: float
+    #: The drives' processing time (and C078 wait, here 0), summed.
+    processing_s: float
+    #: The guard intervals the timing policy requires within the cycle.
+    guard_s: float
+    #: Summed time from each reply's arrival to the next request, beyond the guard.
+    turnaround_s: float
+    #: Summed lateness of each reply's arrival past its ideal wire time.
+    line_late_s: float
+
+    @property
+    def limit_s(self) -> float:
+        """Wire time plus processing: no host can poll faster."""
+        return self.wire_s + self.processing_s
+
+    @property
+    def guarded_limit_s(self) -> float:
+        """The limit plus the guard intervals the library's policy adds."""
+        return self.limit_s + self.guard_s
+
+
+def _line_label(line: LineSettings) -> str:
+    return f"{line.baudrate} {line.bytesize}{line.parity}{line.stopbits}"
+
+
+async def _poll_one_cycle(line: LineSettings, drives: int) -> Cycle:
+    nodes = range(1, drives + 1)
+    sim = SimulatedBus(nodes=nodes, wait_ms=0)
+    trace: list[TraceRecord] = []
+    timing = BusTiming()
+    url = (
+        f"sim://?pace=1&baudrate={line.baudrate}&bytesize={line.bytesize}"
+        f"&parity={line.parity}&stopbits={line.stopbits}"
+    )
+    async with open_bus(url, simulator=sim, timing=timing, trace=trace.append) as bus:
+        poller = Poller(interval_s=0, reads=("status", "monitor"))
+        poller.add(bus, nodes)
+        done: asyncio.Future[None] = asyncio.get_running_loop().create_future()
+        polled = 0
+
+        def count(_sample: object) -> None:
+            nonlocal polled
+            polled += 1
+            if polled == drives and not done.done():
+                done.set_result(None)
+
+        poller.on_sample(count)
+        async with poller:
+            await done
+            # The poller updated its statistics right after publishing the last
+            # sample, before this task could resume; the next cycle has just begun.
+            stats = poller.bus_stats(bus)
+            if stats.cycles != 1 or stats.errors:
+                raise RuntimeError(f"expected one clean polling cycle: {stats}")
+            cycle_s = stats.last_cycle_s
+    return _analyse(trace, line, drives, cycle_s, timing.guard(line))
+
+
+def _analyse(
+    trace: list[TraceRecord], line: LineSettings, drives: int, cycle_s: float, guard_s: float
+) -> Cycle:
+    # Trace of one cycle: tx, rx, tx, rx... (the poller may have written the first
+    # request of the next cycle before it was stopped: pairs only).
+    tx = [r for r in trace if r.direction == "tx"]
+    rx = [r for r in trace if r.direction == "rx"]
+    pairs = list(zip(tx, rx, strict=False))[: 2 * drives]
+    if len(pairs) != 2 * drives or any(r.event is None for _, r in pairs):
+        raise RuntimeError(f"expected {2 * drives} clean transactions, traced {len(pairs)}")
+    char_s = line.char_time_s
+    processing = DEFAULT_PROCESSING_S
+    wire = sum((len(t.data) + len(r.data)) * char_s for t, r in pairs)
+    late = sum(
+        (r.timestamp - t.timestamp) - (len(t.data) + len(r.data)) * char_s - processing
+        for t, r in pairs
+    )
+    gaps = [pairs[i + 1][0].timestamp - pairs[i][1].timestamp for i in range(len(pairs) - 1)]
+    return Cycle(
+        line=line,
+        drives=drives,
+        transactions=len(pairs),
+        cycle_s=cycle_s,
+        wire_s=wire,
+        processing_s=processing * len(pairs),
+        guard_s=guard_s * len(gaps),
+        turnaround_s=sum(gaps) - guard_s * len(gaps),
+        line_late_s=late,
+    )
+
+
+def measure(config: Config) -> list[Cycle]:
+    """Poll one cycle on each line of :data:`LINES`; return the cycles."""
+    drives = QUICK_DRIVES if config.quick else DRIVES
+    with new_runner(config.loop) as runner:
+        return [runner.run(_poll_one_cycle(line, drives)) for line in LINES]
+
+
+def _notes(cycles: list[Cycle], config: Config) -> tuple[str, ...]:
+    first = cycles[0]
+    ms = 1e3
+    lines = [
+        f"{first.drives} drives at nodes 1..{first.drives} on `sim://?pace=1&baudrate=…`, "
+        f"C078 = 0, processing {DEFAULT_PROCESSING_S * ms:g} ms per request (the simulator's "
+        f"default); a `Poller(interval_s=0, reads=('status', 'monitor'))`, one cycle of "
+        f"{first.transactions} transactions (8-byte requests, 14- and 110-byte replies). "
+        "The cycle is the poller's own `BusPollStats.last_cycle_s`; the breakdown comes from "
+        "the bus's trace of every frame.",
+        "",
+        "| line | cycle ms | wire ms | processing ms | guard ms (3.5 chars) "
+        "| host turnaround beyond guard ms | simulated line late ms | unaccounted ms |",
+        "|---|---:|---:|---:|---:|---:|---:|---:|",
+    ]
+    for c in cycles:
+        rest = c.cycle_s - c.guarded_limit_s - c.turnaround_s - c.line_late_s
+        lines.append(
+            f"| {_line_label(c.line)} | {c.cycle_s * ms:.1f} | {c.wire_s * ms:.1f} "
+            f"| {c.processing_s * ms:.1f} | {c.guard_s * ms:.1f} | {c.turnaround_s * ms:.1f} "
+            f"| {c.line_late_s * ms:.1f} | {rest * ms:.1f} |"
+        )
+    lines += [
+        "",
+        "Host turnaround: from the reply's arrival to the next request's write, beyond the "
+        "guard (the library's own work, and the event loop waking late from the guard's "
+        "sleep). Simulated line late: the emulated line's timers fired after the reply's last "
+        "character was due (the event loop's timer granularity; a real UART has no such "
+        "delay). Unaccounted: the poller's work between cycles and before the first request.",
+    ]
+    if config.loop == "uvloop":
+        lines.append(
+            "On uvloop, `loop.time()` (which stamps the trace and paces the simulated line) "
+            "has a resolution of 1 ms: the breakdown is rough and a column may go negative."
+        )
+    return tuple(lines)
+
+
+def run(config: Config) -> Section:
+    """Measure polling cycles against the wire limit at each line setting."""
+    cycles = measure(config)
+    results: list[Result] = []
+    for c in cycles:
+        label = _line_label(c.line)
+        results += [
+            Result(
+                f"wire {label}: {c.drives} drives, status + monitor cycle vs wire limit",
+                c.cycle_s * 1e3,
+                c.limit_s * 1e3,
+                "ms",
+                TARGET_EFFICIENCY,
+                higher_is_better=False,
+                against="wire limit",
+                percent=True,
+            ),
+            Result(
+                f"wire {label}: same cycle vs wire limit + 3.5-char guards",
+                c.cycle_s * 1e3,
+                c.guarded_limit_s * 1e3,
+                "ms",
+                higher_is_better=False,
+                against="limit + guard",
+                percent=True,
+            ),
+        ]
+    return Section(TITLE, _notes(cycles, config), tuple(results))
