@@ -181,7 +181,7 @@ def run(config: Config) -> Section:
         "against `sj300_async.simulator.serve_tcp` with the drive's `processing_s=0` "
         "(its default 1 ms emulates a drive's processing and would time the emulated drive), "
         "the bus opened with `line=LineSettings(baudrate=0)` (no RS-485 line behind the "
-        "socket, so no 3.5-character guard interval after each reply). "
+        "socket, so no guard interval after each reply). "
         f"pymodbus {version('pymodbus')}: `AsyncModbusTcpClient.read_holding_registers` "
         "against `ModbusTcpServer` with one `SimDevice` of holding registers; "
         "1 register (12-byte request, 11-byte reply) matches our status read (8 / 14 bytes), "

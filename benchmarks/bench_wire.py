@@ -13,7 +13,7 @@ The limit of a cycle is what no host can beat::
     wire limit = sum over transactions of (request + reply characters)
                  x bits per character / baud  +  the drives' processing time
 
-The library also rests a guard interval of 3.5 character times after each
+The library also rests a guard interval (one character time by default) after each
 reply before it writes again (``BusTiming.guard_chars``: the drive's RS-485
 driver must release the line). That rest is policy, not wire time, so it is
 not in the limit: the first row of each line compares the cycle with the
@@ -34,6 +34,8 @@ from sj300_async import BusTiming, LineSettings, Poller, TraceRecord, open_bus
 from sj300_async.simulator import DEFAULT_PROCESSING_S, SimulatedBus
 
 from ._harness import Config, Result, Section, new_runner
+
+_GUARD_CHARS = BusTiming().guard_chars
 
 __all__ = ["LINES", "TITLE", "USES_EVENT_LOOP", "Cycle", "measure", "run"]
 
@@ -165,7 +167,7 @@ def _notes(cycles: list[Cycle], config: Config) -> tuple[str, ...]:
         "The cycle is the poller's own `BusPollStats.last_cycle_s`; the breakdown comes from "
         "the bus's trace of every frame.",
         "",
-        "| line | cycle ms | wire ms | processing ms | guard ms (3.5 chars) "
+        f"| line | cycle ms | wire ms | processing ms | guard ms ({_GUARD_CHARS:g} chars) "
         "| host turnaround beyond guard ms | simulated line late ms | unaccounted ms |",
         "|---|---:|---:|---:|---:|---:|---:|---:|",
     ]
@@ -210,7 +212,7 @@ def run(config: Config) -> Section:
                 percent=True,
             ),
             Result(
-                f"wire {label}: same cycle vs wire limit + 3.5-char guards",
+                f"wire {label}: same cycle vs wire limit + {_GUARD_CHARS:g}-char guards",
                 c.cycle_s * 1e3,
                 c.guarded_limit_s * 1e3,
                 "ms",

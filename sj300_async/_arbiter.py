@@ -230,7 +230,9 @@ class Arbiter:
         answered = acknowledged = False
         try:
             protocol.write(request.frame)
-            self._count(stats, totals, "requests")
+            stats.requests += 1
+            if stats is not totals:
+                totals.requests += 1
             reply = await waiter
             if reply is None:  # the deadline passed
                 if out.bad_frame is not None:
@@ -246,10 +248,11 @@ class Arbiter:
                     f"within {timeout * 1000:.0f} ms"
                 )
             answered = True
-            latency = self._loop.time() - sent
-            self._count(stats, totals, "replies")
+            latency = self._last_rx - sent  # when the answer arrived, not when we resumed
+            stats.replies += 1
             stats.record_latency(latency)
             if stats is not totals:
+                totals.replies += 1
                 totals.record_latency(latency)
             refusal = dialect.refusal(request, reply)
             if refusal is not None:
@@ -275,10 +278,14 @@ class Arbiter:
                 out.reoutput.cancel()
             self._outstanding = None
             if answered:
-                rest = self.timing.guard(self.line)
+                # The guard runs from the answer's arrival: the time this task took
+                # to resume already counts towards it.
+                self._rest_until = self._last_rx + self.timing.guard(self.line)
                 if acknowledged:
-                    rest = max(rest, dialect.rest_after_acknowledgement_s())
-                self._rest_until = self._loop.time() + rest
+                    self._rest_until = max(
+                        self._rest_until,
+                        self._loop.time() + dialect.rest_after_acknowledgement_s(),
+                    )
             else:
                 quiet = self.timing.drain_quiet(timeout, self.line)
                 self._drain_quiet = max(self._drain_quiet or 0.0, quiet)

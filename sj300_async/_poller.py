@@ -148,7 +148,7 @@ class Poller:
         self.buffer = buffer
         #: Samples dropped because an iterator's consumer fell behind.
         self.dropped_samples = 0
-        self._targets: dict[str, _Target] = {}
+        self._targets: dict[int, _Target] = {}
         self._callbacks: list[Callable[[Sample], None]] = []
         self._queues: list[asyncio.Queue[object]] = []
         self._stack: contextlib.AsyncExitStack | None = None
@@ -161,12 +161,12 @@ class Poller:
         nodes = sorted(set(nodes))
         for node in nodes:
             bus.drive(node)  # validates the node number
-        target = self._targets.get(bus.description)
+        target = self._targets.get(id(bus))
         if target is None:
             fr700 = bus.dialect.name == "fr700"
             own = tuple(p for p in self.parameters if p.startswith("Pr.") == fr700)
             target = _Target(bus, [], parameters=own)
-            self._targets[bus.description] = target
+            self._targets[id(bus)] = target
             if self._task_group is not None:
                 self._task_group.start_soon(self._poll_bus, target)
         for node in nodes:
@@ -186,13 +186,21 @@ class Poller:
         Raises:
             KeyError: the drive is not polled.
         """
-        key = bus if isinstance(bus, str) else bus.description
-        return self._targets[key].health[node]
+        return self._target(bus).health[node]
 
     def bus_stats(self, bus: Bus[Any] | str) -> BusPollStats:
         """Polling statistics of *bus* (a Bus or its description)."""
-        key = bus if isinstance(bus, str) else bus.description
-        return self._targets[key].stats
+        return self._target(bus).stats
+
+    def _target(self, bus: Bus[Any] | str) -> _Target:
+        # Targets are keyed by the Bus object: two buses may share a description
+        # (two sim:// buses with the same nodes). By description, the first matches.
+        if not isinstance(bus, str):
+            return self._targets[id(bus)]
+        for target in self._targets.values():
+            if target.bus.description == bus:
+                return target
+        raise KeyError(bus)
 
     # -- running -------------------------------------------------------------------
 

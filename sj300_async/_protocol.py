@@ -11,7 +11,7 @@ from __future__ import annotations
 import asyncio
 import logging
 from collections.abc import Callable
-from typing import TYPE_CHECKING, Any, Protocol
+from typing import TYPE_CHECKING, Any, Protocol, cast
 
 from ._events import BadFrame, Discarded
 from ._stats import BusStats
@@ -71,7 +71,9 @@ class LineProtocol(asyncio.Protocol):
     # -- asyncio.Protocol -----------------------------------------------------
 
     def connection_made(self, transport: asyncio.BaseTransport) -> None:
-        assert isinstance(transport, asyncio.Transport)
+        # Not isinstance(): uvloop's transports implement the interface without
+        # deriving from asyncio's classes.
+        transport = cast(asyncio.Transport, transport)
         self._transport = transport
         if not self.made.done():
             self.made.set_result(None)

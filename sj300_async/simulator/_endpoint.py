@@ -115,10 +115,20 @@ class SimulatorEndpoint:
         for t in transmissions:
             start = now + t.delay_s
             if self._line is None:
-                self._at(start, functools.partial(self._send, t.data))
+                if t.delay_s <= 0 and not self._queue:
+                    # Nothing to wait for and nothing queued ahead: the next loop
+                    # turn, without a timer and the heap (never from inside
+                    # data_received: the caller may be a transport's write).
+                    self._get_loop().call_soon(self._send_unless_closed, t.data)
+                else:
+                    self._at(start, functools.partial(self._send, t.data))
                 continue
             for when, group in self._line.transmit(start, t.data):
                 self._at(when, functools.partial(self._send, group))
+
+    def _send_unless_closed(self, data: bytes) -> None:
+        if not self._closed:
+            self._send(data)
 
     def _at(self, when: float, job: Callable[[], object]) -> None:
         heapq.heappush(self._queue, (when, next(self._sequence), job))

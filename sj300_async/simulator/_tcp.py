@@ -15,6 +15,7 @@ from __future__ import annotations
 import asyncio
 import logging
 from types import TracebackType
+from typing import cast
 
 from ._bus import BusModel
 from ._endpoint import SimulatorEndpoint
@@ -34,7 +35,9 @@ class _Connection(asyncio.Protocol):
         self._endpoint: SimulatorEndpoint | None = None
 
     def connection_made(self, transport: asyncio.BaseTransport) -> None:
-        assert isinstance(transport, asyncio.Transport)
+        # Not isinstance(): uvloop's transports implement the interface without
+        # deriving from asyncio's classes.
+        transport = cast(asyncio.Transport, transport)
         self._transport = transport
         self._endpoint = SimulatorEndpoint(
             self._server.bus, send=transport.write, line=self._server.line
