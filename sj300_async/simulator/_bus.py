@@ -28,9 +28,8 @@ from __future__ import annotations
 import logging
 from collections.abc import Iterable
 from dataclasses import dataclass
-from typing import Protocol
+from typing import Any, Protocol
 
-from .._codes import NakCode
 from .._constants import BROADCAST, MAX_NODE, MIN_NODE
 from .._errors import LocalProtocolError
 from .._events import BadFrame, BadFrameReason, Discarded, NakReply, Reply
@@ -63,16 +62,14 @@ class BusModel(Protocol):
         """Feed the host's bytes that arrived at *now*; return the replies, in order."""
 
 
-class SimulatorStats:
-    """Counters of everything the simulated line saw and did."""
+class LineCounters:
+    """What every simulated line counts, whatever protocol its drives speak."""
 
     __slots__ = (
         "absent",
-        "broadcasts",
         "corrupted_replies",
         "delayed_replies",
         "dropped_replies",
-        "ignored_broadcasts",
         "naks",
         "parser",
         "replies",
@@ -82,16 +79,12 @@ class SimulatorStats:
     def __init__(self, parser: ParserStats) -> None:
         #: Valid request frames, whoever they were for (broadcasts included).
         self.requests = 0
-        #: Valid broadcast frames executed by every drive.
-        self.broadcasts = 0
-        #: Broadcasts of commands that may not be broadcast (nobody executes them).
-        self.ignored_broadcasts = 0
         #: Frames for a node without a drive, or a silenced one.
         self.absent = 0
         #: Replies put on the line (NAKs and corrupted ones included, dropped ones not).
         self.replies = 0
         #: Negative replies put on the line, by code.
-        self.naks: dict[NakCode, int] = {}
+        self.naks: dict[Any, int] = {}
         #: Replies lost to :meth:`Faults.drop_next`.
         self.dropped_replies = 0
         #: Replies damaged by :meth:`Faults.corrupt_next`.
@@ -103,7 +96,7 @@ class SimulatorStats:
 
     @property
     def bad_frames(self) -> int:
-        """Complete frames the parser rejected (bad BCC, length, characters...)."""
+        """Complete frames the parser rejected (bad check code, length, characters...)."""
         return self.parser.bad_frames
 
     @property
@@ -112,11 +105,23 @@ class SimulatorStats:
         return self.parser.discarded_bytes
 
     def __repr__(self) -> str:
-        fields = ", ".join(
-            f"{name}={getattr(self, name)!r}" for name in self.__slots__ if name != "parser"
-        )
+        names = [n for cls in type(self).__mro__ for n in getattr(cls, "__slots__", ())]
+        fields = ", ".join(f"{n}={getattr(self, n)!r}" for n in names if n != "parser")
         extra = f"bad_frames={self.bad_frames}, discarded={self.discarded_bytes}"
-        return f"SimulatorStats({fields}, {extra})"
+        return f"{type(self).__name__}({fields}, {extra})"
+
+
+class SimulatorStats(LineCounters):
+    """Counters of everything the simulated SJ300 line saw and did."""
+
+    __slots__ = ("broadcasts", "ignored_broadcasts")
+
+    def __init__(self, parser: ParserStats) -> None:
+        super().__init__(parser)
+        #: Valid broadcast frames executed by every drive.
+        self.broadcasts = 0
+        #: Broadcasts of commands that may not be broadcast (nobody executes them).
+        self.ignored_broadcasts = 0
 
 
 class SimulatedBus:

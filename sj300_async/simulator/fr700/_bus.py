@@ -38,9 +38,9 @@ from ...fr700._codec import (
     encode_nak,
     terminator_bytes,
 )
-from ...fr700._codes import ETX, STX, Fr700Instruction, Fr700NakCode
+from ...fr700._codes import ETX, STX, Fr700Instruction
 from ...fr700._events import Fr700Ack, Fr700Data, Fr700Nak, Fr700Reply
-from .._bus import Transmission
+from .._bus import LineCounters, Transmission
 from .._faults import Faults
 from ._drive import DEFAULT_PROCESSING_S, Fr700SimulatedDrive
 from ._request_parser import BadRequest, HostAnswer, HostRequest, RequestParser
@@ -64,62 +64,19 @@ def corrupt(frame: bytes) -> bytes:
     return frame[:1] + bytes((frame[1] ^ 0x40,)) + frame[2:]
 
 
-class Fr700SimulatorStats:
+class Fr700SimulatorStats(LineCounters):
     """Counters of everything the simulated FR-700 line saw and did."""
 
-    __slots__ = (
-        "absent",
-        "corrupted_replies",
-        "delayed_replies",
-        "dropped_replies",
-        "host_acks",
-        "naks",
-        "parser",
-        "reoutputs",
-        "replies",
-        "requests",
-        "resets",
-    )
+    __slots__ = ("host_acks", "reoutputs", "resets")
 
     def __init__(self, parser: ParserStats) -> None:
-        #: Valid request frames, whoever they were for.
-        self.requests = 0
-        #: Frames for a station without a drive, a silenced or a restarting one.
-        self.absent = 0
-        #: Replies put on the line (NAKs, re-outputs and corrupted ones included).
-        self.replies = 0
-        #: Negative replies put on the line, by code.
-        self.naks: dict[Fr700NakCode, int] = {}
+        super().__init__(parser)
         #: The host's ACKs after read data.
         self.host_acks = 0
         #: Replies sent again at the host's request (format F).
         self.reoutputs = 0
         #: Inverter resets executed.
         self.resets = 0
-        #: Replies lost to :meth:`Faults.drop_next`.
-        self.dropped_replies = 0
-        #: Replies damaged by :meth:`Faults.corrupt_next`.
-        self.corrupted_replies = 0
-        #: Replies held back by :meth:`Faults.delay_next`.
-        self.delayed_replies = 0
-        #: The request parser's own counters.
-        self.parser = parser
-
-    @property
-    def bad_frames(self) -> int:
-        """Frames the drives rejected (sum, grammar, characters)."""
-        return self.parser.bad_frames
-
-    @property
-    def discarded_bytes(self) -> int:
-        """Bytes thrown away outside frames."""
-        return self.parser.discarded_bytes
-
-    def __repr__(self) -> str:
-        fields = ", ".join(
-            f"{name}={getattr(self, name)!r}" for name in self.__slots__ if name != "parser"
-        )
-        return f"Fr700SimulatorStats({fields}, bad_frames={self.bad_frames})"
 
 
 class Fr700SimulatedBus:
