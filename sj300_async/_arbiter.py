@@ -207,7 +207,9 @@ class Arbiter:
         if delay > 0:
             await asyncio.sleep(delay)
             protocol = self.link.require()
-        await protocol.wait_writable()
+        if not protocol.writable:
+            await protocol.wait_writable()
+            protocol = self.link.require()  # the link may have dropped while we waited
         totals = self.stats.transactions
         if not request.expects_reply:
             protocol.write(request.frame)

@@ -186,6 +186,11 @@ class Bus(Generic[DriveT]):
         Raises:
             LocalProtocolError: *node* is out of the protocol's range.
         """
+        # Validate before the cache: True == 1 and 1.0 == 1 would find drive 1.
+        if isinstance(node, bool) or not isinstance(node, int):
+            raise LocalProtocolError(
+                f"node must be an int (1..32; FR-700 stations 0..31), got {node!r}"
+            )
         drive = self._drives.get(node)
         if drive is None:
             drive = self._drive_class(self, node)
@@ -492,6 +497,8 @@ async def _open_bus(
     if address.scheme == "tcp":
         connector = tcp_connector(address.host, address.port)
     elif address.scheme == "serial":
+        if line.baudrate == 0:
+            raise LocalProtocolError(f"a serial line needs a baud rate: {url!r}")
         connector = serial_connector(address.device, line)
     else:
         connector, simulator = _sim_connector(address, line, dialect, faults, simulator)

@@ -118,8 +118,12 @@ class FrameSplitter(Generic[FrameT]):
                 self._in_frame = True
                 pos = stx + 1
                 continue
-            cr = data.find(CR_BYTE, pos)
-            stop = cr if cr >= 0 else end
+            # Search no further than the longest legal frame could reach: beyond
+            # it the frame is overlong anyway, and an unbounded search would
+            # make a chunk with many STX and no CR cost quadratic time.
+            reach = min(end, pos + max_body + 1 - len(partial))
+            cr = data.find(CR_BYTE, pos, reach)
+            stop = cr if cr >= 0 else reach
             stx = data.find(STX_BYTE, pos, stop)
             limit = stx if stx >= 0 else stop
             if len(partial) + (limit - pos) > max_body:

@@ -59,16 +59,26 @@ _F = TypeVar("_F", bound=enum.IntFlag)
 
 
 def _flag_lookup(cls: type[_F], cached_below: int) -> Callable[[int], _F]:
-    """A memoizing int -> flag function (IntFlag's own constructor is slow)."""
+    """A memoizing int -> flag function (IntFlag's own constructor is slow).
+
+    Values with bits the manual does not assign are kept (never dropped) but
+    built without the enum's constructor: enum.Flag caches every pseudo-member
+    it makes, so a line delivering ever new stray bits would grow memory
+    without bound. Known-bit combinations are at most ``cached_below``.
+    """
     cache: dict[int, _F] = {}
 
     def lookup(value: int) -> _F:
         flag = cache.get(value)
-        if flag is None:
-            flag = cls(value)
-            if 0 <= value < cached_below:  # bounded: at most cached_below entries
-                cache[value] = flag
-        return flag
+        if flag is not None:
+            return flag
+        if 0 <= value < cached_below:
+            flag = cache[value] = cls(value)
+            return flag
+        stray = int.__new__(cls, value)
+        stray._value_ = value
+        stray._name_ = None
+        return stray
 
     return lookup
 

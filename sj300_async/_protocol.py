@@ -121,6 +121,11 @@ class LineProtocol(asyncio.Protocol):
             _log.debug("tx %s", frame.hex(" "))
         self._transport.write(frame)
 
+    @property
+    def writable(self) -> bool:
+        """False while the transport has asked us to pause writing."""
+        return self._writable.is_set()
+
     async def wait_writable(self) -> None:
         """Return when the transport's write buffer is below its high-water mark."""
         if not self._writable.is_set():

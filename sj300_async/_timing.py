@@ -25,6 +25,7 @@ sequence numbers, cannot detect; ``drain_max_s`` bounds a babbling line.
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 from typing import TYPE_CHECKING
 
@@ -54,6 +55,10 @@ def reply_frame_length(command: Command) -> int:
     return max(positive, _NAK_FRAME)
 
 
+def _finite_number(value: object) -> bool:
+    return isinstance(value, int | float) and not isinstance(value, bool) and math.isfinite(value)
+
+
 @dataclass(frozen=True, slots=True)
 class BusTiming:
     """Timing policy of one bus. Every field is in seconds unless named otherwise."""
@@ -75,10 +80,12 @@ class BusTiming:
     def __post_init__(self) -> None:
         for name in ("margin_s", "guard_chars", "broadcast_processing_s", "drain_max_s"):
             value = getattr(self, name)
-            if not value >= 0:
-                raise LocalProtocolError(f"{name} must be >= 0, got {value!r}")
-        if self.fixed_timeout_s is not None and not self.fixed_timeout_s > 0:
-            raise LocalProtocolError(f"timeout must be > 0, got {self.fixed_timeout_s!r}")
+            if not _finite_number(value) or value < 0:
+                raise LocalProtocolError(f"{name} must be a finite number >= 0, got {value!r}")
+        timeout = self.fixed_timeout_s
+        if timeout is not None and (not _finite_number(timeout) or timeout <= 0):
+            # An infinite time-out is the hang a time-out exists to prevent.
+            raise LocalProtocolError(f"timeout must be a finite number > 0, got {timeout!r}")
 
     def response_timeout(
         self, request: LineRequest, line: LineSettings, wait_s: float, reply_length: int

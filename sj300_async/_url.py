@@ -157,7 +157,10 @@ def parse_bus_url(url: str, *, protocol: ProtocolName | None = None) -> BusAddre
     url = url.strip()
     if "://" not in url:
         return BusAddress("serial", device=url, line=LineSettings())
-    parts = urlsplit(url)
+    try:
+        parts = urlsplit(url)
+    except ValueError as exc:  # e.g. "Invalid IPv6 URL"
+        raise LocalProtocolError(f"bad bus URL {url!r}: {exc}") from None
     scheme = parts.scheme.lower()
     if scheme not in _ALLOWED_KEYS:
         raise LocalProtocolError(
@@ -196,6 +199,8 @@ def parse_bus_url(url: str, *, protocol: ProtocolName | None = None) -> BusAddre
             host, port = parts.hostname, parts.port
         except ValueError as exc:
             raise LocalProtocolError(f"bad port in {url!r}: {exc}") from None
+        if port == 0:
+            raise LocalProtocolError(f"tcp URL needs a port 1..65535, got 0: {url!r}")
         if not host or port is None:
             raise LocalProtocolError(f"tcp URL needs a host and a port: {url!r}")
         return BusAddress(

@@ -1,0 +1,42 @@
+"""How big each reliability run is, in the default suite and with ``--soak``."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+
+@dataclass(frozen=True)
+class Sizes:
+    #: Drive API calls in the fault soak.
+    transactions: int
+    #: Cancelled calls in the cancellation storm.
+    cancellations: int
+    #: Kill / restart cycles of the TCP server.
+    reconnect_cycles: int
+    #: Inputs of the mutation fuzz loop (each goes through both parsers and the simulator).
+    fuzz_inputs: int
+    #: Examples per hypothesis property.
+    hypothesis_examples: int
+    #: Runs of the atheris harness (0: not run in this form).
+    atheris_runs: int
+
+
+#: The default suite (and CI): every run, small enough for the whole suite to stay fast.
+SHORT = Sizes(
+    transactions=2_000,
+    cancellations=300,
+    reconnect_cycles=5,
+    fuzz_inputs=20_000,
+    hypothesis_examples=200,
+    atheris_runs=0,
+)
+
+#: ``make soak``: the sizes docs/RELIABILITY.md publishes.
+LONG = Sizes(
+    transactions=100_000,
+    cancellations=10_000,
+    reconnect_cycles=100,
+    fuzz_inputs=1_000_000,
+    hypothesis_examples=5_000,
+    atheris_runs=1_000_000,
+)
