@@ -33,8 +33,11 @@ pytest: $(STAMP)
 bench: $(STAMP)
 	$(BIN)/python -m benchmarks
 
+# The long form of tests/reliability (docs/RELIABILITY.md); its figures are printed
+# at the end and written as JSON.
+SOAK_REPORT ?= $${TMPDIR:-/tmp}/sj300-soak-report.json
 soak: $(STAMP)
-	$(BIN)/pytest --soak -m soak $(PYTEST_ARGS)
+	$(BIN)/pytest --soak -m soak --soak-report $(SOAK_REPORT) $(PYTEST_ARGS)
 
 clean:
 	rm -rf $(VENV) .mypy_cache .ruff_cache .pytest_cache .hypothesis

@@ -13,6 +13,7 @@ import json
 import os
 import platform
 import resource
+import subprocess
 import sys
 import time
 from pathlib import Path
@@ -77,6 +78,7 @@ def pytest_terminal_summary(terminalreporter: Any, exitstatus: int, config: pyte
     report = {
         "form": "long (--soak)" if config.getoption("--soak") else "short (default suite)",
         "date": time.strftime("%Y-%m-%d %H:%M:%S %z"),
+        "commit": _commit(config.rootpath),
         "python": sys.version.split()[0],
         "platform": platform.platform(),
         "cpus": os.cpu_count(),
@@ -92,13 +94,35 @@ def pytest_terminal_summary(terminalreporter: Any, exitstatus: int, config: pyte
         terminalreporter.write_line(text)
     else:  # the default suite: the headlines only
         for name, run in figures.items():
+            whole = json.dumps(run, default=str)
             shown = {k: v for k, v in run.items() if k in _HEADLINES}
-            terminalreporter.write_line(f"{name}: {json.dumps(shown)}")
+            terminalreporter.write_line(
+                f"{name}: {whole if len(whole) <= 240 else json.dumps(shown)}"
+            )
         if not path:
             terminalreporter.write_line("(-v or --soak-report PATH for every figure)")
     if path:
         Path(path).write_text(text + "\n")
         terminalreporter.write_line(f"written to {path}")
+
+
+def _commit(root: Path) -> str | None:
+    """The git commit under test (with ``+`` when the tree has changes), if known."""
+    try:
+        head = subprocess.run(
+            ["git", "rev-parse", "--short", "HEAD"], cwd=root, capture_output=True, text=True
+        )
+        dirty = subprocess.run(
+            ["git", "status", "--porcelain", "--untracked-files=no"],
+            cwd=root,
+            capture_output=True,
+            text=True,
+        )
+    except OSError:
+        return None
+    if head.returncode != 0:
+        return os.environ.get("SJ300_COMMIT")
+    return head.stdout.strip() + ("+" if dirty.stdout.strip() else "")
 
 
 _HEADLINES = frozenset(

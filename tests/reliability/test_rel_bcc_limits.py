@@ -13,7 +13,7 @@ from __future__ import annotations
 
 import random
 from collections import Counter
-from collections.abc import Callable
+from collections.abc import Callable, Iterator
 from typing import Any
 
 import pytest
@@ -58,18 +58,15 @@ def _valid(make: Callable[[], Any], data: bytes) -> list[object]:
     ]
 
 
-def _single_faults(frame: bytes, insert_values: bytes) -> list[tuple[str, bytes]]:
-    variants = []
+def _single_faults(frame: bytes, insert_values: bytes) -> Iterator[tuple[str, bytes]]:
     for at in range(len(frame)):
         byte = frame[at : at + 1]
-        variants += [
-            ("corrupted", frame[:at] + bytes((frame[at] ^ 1 << bit,)) + frame[at + 1 :])
-            for bit in range(8)
-        ]
-        variants.append(("dropped", frame[:at] + frame[at + 1 :]))
-        variants.append(("duplicated", frame[:at] + byte + frame[at:]))
-        variants += [("inserted", frame[:at] + bytes((v,)) + frame[at:]) for v in insert_values]
-    return variants
+        for bit in range(8):
+            yield "corrupted", frame[:at] + bytes((frame[at] ^ 1 << bit,)) + frame[at + 1 :]
+        yield "dropped", frame[:at] + frame[at + 1 :]
+        yield "duplicated", frame[:at] + byte + frame[at:]
+        for value in insert_values:
+            yield "inserted", frame[:at] + bytes((value,)) + frame[at:]
 
 
 def _judge(make: Callable[[], Any], original: bytes, damaged: bytes) -> str:
