@@ -82,7 +82,14 @@ def _port_free(port: int) -> bool:
 @pytest.mark.parametrize("listen", [None, "tcp://:0"], ids=["no --listen", "--listen tcp://:0"])
 def test_cli_simulate_listens_on_loopback_by_default(listen: str | None) -> None:
     if listen is None and not _port_free(4001):
-        pytest.skip("port 4001 (the default) is in use on this machine")
+        # Something else holds the default port: the simulator must say so in one
+        # line and exit 2 (the behaviour under test then is the refusal, not a skip).
+        busy = _simulate()
+        _, err = busy.communicate(timeout=10)
+        assert busy.returncode == 2, err
+        assert "Traceback" not in err
+        assert len(err.strip().splitlines()) == 1
+        return
     proc = _simulate(*(["--listen", listen] if listen else []))
     try:
         host, port = _listening_line(proc)
