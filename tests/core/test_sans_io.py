@@ -7,100 +7,22 @@ package's ``__init__`` (which may later pull in the async layers, legitimately).
 
 from __future__ import annotations
 
-import ast
-import importlib.util
 import json
 import subprocess
 import sys
 import textwrap
-from pathlib import Path
 
 import pytest
-
-CORE_MODULES = (
-    "_bcc",
-    "_codes",
-    "_commands",
-    "_constants",
-    "_errors",
-    "_events",
-    "_framing",
-    "_matching",
-    "_parameters",
-    "_parser",
-    "_payloads",
-    "_reply_encoding",
-    "_request_parser",
-    "_requests",
-    "_terminals",
-    "_line",
-    "_timing",
-    "_url",
-    "_dialect",
-)
-
-#: Top-level modules a sans-IO core must not import: event loops, I/O, clocks, threads.
-FORBIDDEN = frozenset(
-    {
-        "asyncio",
-        "anyio",
-        "trio",
-        "socket",
-        "ssl",
-        "select",
-        "selectors",
-        "signal",
-        "subprocess",
-        "multiprocessing",
-        "concurrent",
-        "threading",
-        "time",
-        "serial",
-        "serial_asyncio",
-        "serial_asyncio_fast",
-        "importlib",  # a dynamic import would slip past this scan
-    }
-)
+from sans_io_scan import CORE_MODULES, package_dir, violations
 
 #: Modules that must still be absent after importing the whole core at run time.
 #: (threading and time are not listed: the standard library's logging imports them.)
 FORBIDDEN_AT_RUNTIME = ("asyncio", "anyio", "trio", "socket", "ssl", "selectors", "serial")
 
 
-def package_dir() -> Path:
-    # find_spec locates the package without executing its __init__.
-    spec = importlib.util.find_spec("sj300_async")
-    assert spec is not None
-    assert spec.submodule_search_locations
-    return Path(next(iter(spec.submodule_search_locations)))
-
-
 def import_violations(source: str) -> list[str]:
-    """Return a description of every import in *source* a core module may not make."""
-    problems = []
-    for node in ast.walk(ast.parse(source)):
-        if isinstance(node, ast.Import):
-            for alias in node.names:
-                if alias.name.split(".")[0] in FORBIDDEN:
-                    problems.append(f"import {alias.name}")
-        elif isinstance(node, ast.ImportFrom):
-            if node.level == 0:
-                if (node.module or "").split(".")[0] in FORBIDDEN:
-                    problems.append(f"from {node.module} import ...")
-            elif node.level > 1:
-                problems.append(f"relative import beyond the package: level {node.level}")
-            elif node.module is not None:
-                if node.module.split(".")[0] not in CORE_MODULES:
-                    problems.append(f"from .{node.module} import ... (not a core module)")
-            else:
-                problems += [
-                    f"from . import {alias.name} (not a core module)"
-                    for alias in node.names
-                    if alias.name not in CORE_MODULES
-                ]
-        elif isinstance(node, ast.Name) and node.id == "__import__":
-            problems.append("__import__")
-    return problems
+    """Every import in *source* (a top-level module of the package) a core module may not make."""
+    return violations(source, (), CORE_MODULES)
 
 
 @pytest.mark.parametrize("module", CORE_MODULES)

@@ -8,86 +8,48 @@ any package ``__init__`` and finds no I/O module loaded.
 
 from __future__ import annotations
 
-import ast
-import importlib.util
 import json
 import subprocess
 import sys
 from pathlib import Path
 
 import pytest
+from sans_io_scan import CORE_MODULES, package_dir
+from sans_io_scan import violations as scan
 
 #: package-relative module -> the modules it may import from (by dotted path in sj300_async).
 CORE = ("_codec", "_codes", "_dialect", "_events", "_parser", "_payloads", "_requests")
 SIM = ("_bus", "_drive", "_parameters", "_request_parser")
 #: sj300_async modules proven sans-IO by the core's own test, or by this one.
 ALLOWED = {
-    *(f"_{m}" for m in ("bcc", "codes", "commands", "constants", "errors", "events", "framing")),
-    *(f"_{m}" for m in ("line", "matching", "parameters", "parser", "payloads")),
-    *(f"_{m}" for m in ("reply_encoding", "request_parser", "requests", "terminals", "timing")),
-    "_url",
-    "_dialect",
+    *CORE_MODULES,
     *(f"fr700.{m}" for m in CORE),
     *(f"simulator.{m}" for m in ("_bus", "_electrical", "_faults", "_motion", "_pacing")),
     *(f"simulator.{m}" for m in ("_memory", "_parameters_table", "_status", "_trips", "_drive")),
     *(f"simulator.fr700.{m}" for m in SIM),
 }
-FORBIDDEN = frozenset(
-    {"asyncio", "anyio", "trio", "socket", "ssl", "select", "selectors", "signal", "subprocess"}
-    | {"multiprocessing", "concurrent", "threading", "time", "serial", "importlib"}
-    | {"serial_asyncio", "serial_asyncio_fast"}
-)
 
 
-def package_dir() -> Path:
-    spec = importlib.util.find_spec("sj300_async")
-    assert spec is not None
-    assert spec.submodule_search_locations
-    return Path(next(iter(spec.submodule_search_locations)))
-
-
-def violations(path: Path, package: tuple[str, ...]) -> list[str]:
+def fr700_violations(path: Path, package: tuple[str, ...]) -> list[str]:
     """Forbidden imports of the module at *path*, which lives in sj300_async.<package>."""
-    problems = []
-    for node in ast.walk(ast.parse(path.read_text(encoding="utf-8"))):
-        if isinstance(node, ast.Import):
-            problems += [
-                f"import {a.name}" for a in node.names if a.name.split(".")[0] in FORBIDDEN
-            ]
-        elif isinstance(node, ast.ImportFrom):
-            if node.level == 0:
-                if (node.module or "").split(".")[0] in FORBIDDEN:
-                    problems.append(f"from {node.module}")
-                continue
-            base = package[: len(package) - (node.level - 1)]
-            if len(base) != len(package) - (node.level - 1):
-                problems.append(f"relative import beyond the package: level {node.level}")
-                continue
-            names = [node.module] if node.module else [a.name for a in node.names]
-            for name in names:
-                target = ".".join((*base, *name.split(".")))
-                if target not in ALLOWED:
-                    problems.append(f"imports sj300_async.{target} (not sans-IO)")
-        elif isinstance(node, ast.Name) and node.id == "__import__":
-            problems.append("__import__")
-    return problems
+    return scan(path.read_text(encoding="utf-8"), package, ALLOWED)
 
 
 @pytest.mark.parametrize("module", CORE)
 def test_fr700_core_module_imports_nothing_io(module):
-    assert violations(package_dir() / "fr700" / f"{module}.py", ("fr700",)) == []
+    assert fr700_violations(package_dir() / "fr700" / f"{module}.py", ("fr700",)) == []
 
 
 @pytest.mark.parametrize("module", SIM)
 def test_fr700_simulator_module_imports_nothing_io(module):
     path = package_dir() / "simulator" / "fr700" / f"{module}.py"
-    assert violations(path, ("simulator", "fr700")) == []
+    assert fr700_violations(path, ("simulator", "fr700")) == []
 
 
 def test_the_scan_can_fail(tmp_path):
     bad = tmp_path / "bad.py"
     bad.write_text("import asyncio\nfrom .._bus import Bus\nfrom ._drive import Fr700Drive\n")
-    assert len(violations(bad, ("fr700",))) == 3
+    assert len(fr700_violations(bad, ("fr700",))) == 3
 
 
 _PROBE = """

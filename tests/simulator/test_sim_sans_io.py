@@ -8,8 +8,6 @@ servers, legitimately).
 
 from __future__ import annotations
 
-import ast
-import importlib.util
 import json
 import subprocess
 import sys
@@ -17,6 +15,7 @@ import textwrap
 from pathlib import Path
 
 import pytest
+from sans_io_scan import CORE_MODULES, FORBIDDEN, package_dir, violations
 
 SANS_IO = (
     "_bus",
@@ -32,79 +31,18 @@ SANS_IO = (
 )
 IO_MODULES = ("_device", "_endpoint", "_fd_link", "_pty", "_tcp")
 
-# The core modules a sans-IO simulator module may import (the core proves them sans-IO).
-CORE = (
-    "_bcc",
-    "_codes",
-    "_commands",
-    "_constants",
-    "_errors",
-    "_events",
-    "_framing",
-    "_line",
-    "_parameters",
-    "_parser",
-    "_payloads",
-    "_reply_encoding",
-    "_request_parser",
-    "_requests",
-    "_terminals",
-)
-
-FORBIDDEN = frozenset(
-    {
-        "asyncio",
-        "anyio",
-        "trio",
-        "socket",
-        "ssl",
-        "select",
-        "selectors",
-        "signal",
-        "subprocess",
-        "threading",
-        "time",
-        "os",
-        "pty",
-        "tty",
-        "termios",
-        "fcntl",
-        "random",  # the model is deterministic
-        "serial",
-        "serial_asyncio_fast",
-        "importlib",
-    }
-)
+#: Beyond the core's list: the model is deterministic and touches no descriptor.
+EXTRA_FORBIDDEN = FORBIDDEN | {"os", "pty", "tty", "termios", "fcntl", "random"}
+ALLOWED = {*CORE_MODULES, *(f"simulator.{m}" for m in SANS_IO)}
 
 
 def simulator_dir() -> Path:
-    spec = importlib.util.find_spec("sj300_async")
-    assert spec is not None
-    assert spec.submodule_search_locations
-    return Path(next(iter(spec.submodule_search_locations))) / "simulator"
+    return package_dir() / "simulator"
 
 
 def import_violations(source: str) -> list[str]:
     """Every import in *source* a sans-IO simulator module may not make."""
-    problems = []
-    for node in ast.walk(ast.parse(source)):
-        if isinstance(node, ast.Import):
-            problems += [
-                f"import {a.name}" for a in node.names if a.name.split(".")[0] in FORBIDDEN
-            ]
-        elif isinstance(node, ast.ImportFrom):
-            module = node.module or ""
-            if node.level == 0 and module.split(".")[0] in FORBIDDEN:
-                problems.append(f"from {module} import ...")
-            elif node.level == 1 and module.split(".")[0] not in SANS_IO:
-                problems.append(f"from .{module} import ... (not a sans-IO module)")
-            elif node.level == 2 and module.split(".")[0] not in CORE:
-                problems.append(f"from ..{module} import ... (not a core module)")
-            elif node.level > 2:
-                problems.append(f"relative import of level {node.level}")
-        elif isinstance(node, ast.Name) and node.id == "__import__":
-            problems.append("__import__")
-    return problems
+    return violations(source, ("simulator",), ALLOWED, EXTRA_FORBIDDEN)
 
 
 def test_the_module_lists_cover_the_package() -> None:
