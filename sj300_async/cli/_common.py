@@ -23,6 +23,7 @@ and terminals refuse it, ``monitor`` shows either.
 from __future__ import annotations
 
 import argparse
+import math
 import os
 from collections.abc import AsyncIterator
 from contextlib import asynccontextmanager
@@ -53,13 +54,13 @@ DEFAULT_URL: Final = "sim://?nodes=1-8"
 
 
 def positive_float(text: str) -> float:
-    """argparse type: a number of seconds > 0."""
+    """argparse type: a finite number of seconds > 0 (an infinite time-out is a hang)."""
     try:
         value = float(text)
     except ValueError:
         value = 0.0
-    if not value > 0:
-        raise argparse.ArgumentTypeError(f"expected a positive number, got {text!r}")
+    if not 0 < value < math.inf:
+        raise argparse.ArgumentTypeError(f"expected a positive number of seconds, got {text!r}")
     return value
 
 

@@ -42,6 +42,7 @@ from ..simulator import (
 )
 from ..simulator.fr700 import Fr700SimulatedBus, Fr700SimulatedDrive
 from ._args import DEFAULT_PORT, LOOPBACK, ListenAddress, format_nodes, parse_listen
+from ._common import positive_float
 from ._errors import CliError
 
 __all__ = ["add_parser"]
@@ -58,16 +59,6 @@ def _wait_ms(text: str) -> int:
         value = -1
     if not 0 <= value <= 1000:
         raise argparse.ArgumentTypeError(f"--wait-ms is 0..1000 (C078), got {text!r}")
-    return value
-
-
-def _positive_seconds(text: str) -> float:
-    try:
-        value = float(text)
-    except ValueError:
-        value = 0.0
-    if not value > 0:
-        raise argparse.ArgumentTypeError(f"expected a positive number of seconds, got {text!r}")
     return value
 
 
@@ -147,7 +138,7 @@ def add_parser(subparsers: Any) -> None:
     )
     p.add_argument(
         "--trip-every",
-        type=_positive_seconds,
+        type=positive_float,
         metavar="SECONDS",
         help="demo: trip a random running drive this often",
     )
