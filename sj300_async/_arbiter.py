@@ -55,6 +55,9 @@ __all__ = ["Arbiter"]
 
 _log = logging.getLogger("sj300_async.arbiter")
 
+#: Distinct requests whose response time-out is remembered (see _response_timeout).
+_TIMEOUT_CACHE_SIZE = 256
+
 
 @dataclass(slots=True)
 class _Outstanding:
@@ -63,10 +66,9 @@ class _Outstanding:
     request: LineRequest
     waiter: asyncio.Future[Any]
     stats: TransactionStats
-    #: The response time-out of this attempt, and the timer that ends it.
+    #: The response time-out of this attempt, and the loop time it ends at.
     timeout: float
     deadline: float
-    timer: asyncio.TimerHandle
     bad_frame: BadFrame | None = None
     #: The scheduled re-output request (rule 7), at most one per attempt.
     reoutput: asyncio.TimerHandle | None = None
@@ -85,8 +87,12 @@ class Arbiter:
     ) -> None:
         self.link = link
         self.dialect = dialect
-        self.line = line
-        self.timing = timing
+        self._line = line
+        self._timing = timing
+        self._guard_s = timing.guard(line)
+        # Response time-outs by (frame, wait): computed once per distinct request
+        # (see _response_timeout). A poll repeats a handful of frames.
+        self._timeouts: dict[tuple[bytes, float], float] = {}
         self.stats = stats
         self.queue = LineQueue()
         self._loop = asyncio.get_running_loop()
@@ -97,6 +103,20 @@ class Arbiter:
         self._drain_quiet: float | None = None
         self._failed_at = 0.0
         self._last_rx = 0.0
+        # One deadline timer for every attempt (see _arm_deadline), and the
+        # loop time it is due at.
+        self._deadline_timer: asyncio.TimerHandle | None = None
+        self._deadline_due = 0.0
+
+    @property
+    def line(self) -> LineSettings:
+        """The line's settings (fixed for the arbiter's life: its timing derives from them)."""
+        return self._line
+
+    @property
+    def timing(self) -> BusTiming:
+        """The timing policy (fixed for the arbiter's life)."""
+        return self._timing
 
     # -- LineListener ------------------------------------------------------------
 
@@ -130,12 +150,9 @@ class Arbiter:
             return
         delay = self.dialect.answer_delay_s()
         out.reoutput = self._loop.call_at(now + delay, self._send_reoutput, out, frame)
-        # The repeated reply needs a whole exchange's time again.
-        deadline = now + delay + out.timeout
-        if deadline > out.deadline:
-            out.timer.cancel()
-            out.deadline = deadline
-            out.timer = self._loop.call_at(deadline, _expire, out.waiter)
+        # The repeated reply needs a whole exchange's time again. Deadlines only
+        # move later: the armed timer fires first and re-arms for this one.
+        out.deadline = max(out.deadline, now + delay + out.timeout)
 
     def _send_reoutput(self, out: _Outstanding, frame: bytes) -> None:
         if self._outstanding is not out or out.waiter.done():
@@ -153,6 +170,35 @@ class Arbiter:
             out.waiter.set_exception(
                 TransportError(f"connection lost while waiting for node {out.request.node:02d}")
             )
+
+    # -- the deadline timer -------------------------------------------------------
+
+    def _arm_deadline(self, deadline: float) -> None:
+        """Make sure the deadline timer fires no later than *deadline*.
+
+        A timer per attempt would cost a handle, a heap push and a cancelled
+        entry in the loop's heap for every transaction, and nearly every one
+        is cancelled. Instead one timer stays armed: attempts start in order
+        and their deadlines grow, so the timer armed for an earlier attempt
+        fires first, and re-arms for the attempt then outstanding.
+        """
+        timer = self._deadline_timer
+        if timer is not None:
+            if self._deadline_due <= deadline:
+                return
+            timer.cancel()  # a shorter time-out than the one armed
+        self._deadline_due = deadline
+        self._deadline_timer = self._loop.call_at(deadline, self._deadline_passed)
+
+    def _deadline_passed(self) -> None:
+        self._deadline_timer = None
+        out = self._outstanding
+        if out is None or out.waiter.done():
+            return  # nothing to time out: the next attempt arms a new timer
+        if out.deadline > self._deadline_due:
+            self._arm_deadline(out.deadline)  # armed for an earlier attempt
+        else:
+            out.waiter.set_result(None)  # the attempt's time is up
 
     # -- transactions ----------------------------------------------------------------
 
@@ -200,35 +246,33 @@ class Arbiter:
         timeout_s: float | None,
     ) -> Any:
         protocol = self.link.require()
+        loop = self._loop
         if self._drain_quiet is not None:
             await self._drain()
             protocol = self.link.require()
-        delay = self._rest_until - self._loop.time()
-        if delay > 0:
-            await asyncio.sleep(delay)
+        now = loop.time()
+        if self._rest_until > now:
+            await asyncio.sleep(self._rest_until - now)
             protocol = self.link.require()
+            now = loop.time()
         if not protocol.writable:
             await protocol.wait_writable()
             protocol = self.link.require()  # the link may have dropped while we waited
+            now = loop.time()
         totals = self.stats.transactions
         if not request.expects_reply:
             protocol.write(request.frame)
             self._count(stats, totals, "broadcasts")
-            self._rest_until = self._loop.time() + self.timing.after_broadcast(request, self.line)
+            self._rest_until = loop.time() + self._timing.after_broadcast(request, self._line)
             return None
 
         dialect = self.dialect
-        timeout = timeout_s or self.timing.response_timeout(
-            request,
-            self.line,
-            wait_s + dialect.processing_s(request),
-            dialect.reply_frame_length(request),
-        )
-        waiter: asyncio.Future[Any] = self._loop.create_future()
-        sent = self._loop.time()
-        timer = self._loop.call_at(sent + timeout, _expire, waiter)
-        out = _Outstanding(request, waiter, stats, timeout, sent + timeout, timer)
+        timeout = timeout_s or self._response_timeout(request, wait_s)
+        waiter: asyncio.Future[Any] = loop.create_future()
+        sent = now
+        out = _Outstanding(request, waiter, stats, timeout, sent + timeout)
         self._outstanding = out  # registered before the write: no answer goes unseen
+        self._arm_deadline(out.deadline)
         answered = acknowledged = False
         try:
             protocol.write(request.frame)
@@ -275,23 +319,44 @@ class Arbiter:
             self._count(stats, totals, "cancelled")
             raise
         finally:
-            out.timer.cancel()
             if out.reoutput is not None:
                 out.reoutput.cancel()
             self._outstanding = None
             if answered:
                 # The guard runs from the answer's arrival: the time this task took
                 # to resume already counts towards it.
-                self._rest_until = self._last_rx + self.timing.guard(self.line)
+                self._rest_until = self._last_rx + self._guard_s
                 if acknowledged:
                     self._rest_until = max(
                         self._rest_until,
                         self._loop.time() + dialect.rest_after_acknowledgement_s(),
                     )
             else:
-                quiet = self.timing.drain_quiet(timeout, self.line)
+                quiet = self._timing.drain_quiet(timeout, self._line)
                 self._drain_quiet = max(self._drain_quiet or 0.0, quiet)
                 self._failed_at = self._loop.time()
+
+    def _response_timeout(self, request: LineRequest, wait_s: float) -> float:
+        """The computed response time-out of *request* with the device waiting *wait_s*.
+
+        It depends only on the request (its frame says everything about it),
+        the wait, and the arbiter's fixed line and timing, so it is cached.
+        The cache starts over when it grows large (a stream of distinct
+        parameter writes), so it stays bounded.
+        """
+        key = (request.frame, wait_s)
+        timeout = self._timeouts.get(key)
+        if timeout is None:
+            if len(self._timeouts) >= _TIMEOUT_CACHE_SIZE:
+                self._timeouts.clear()
+            dialect = self.dialect
+            timeout = self._timeouts[key] = self._timing.response_timeout(
+                request,
+                self._line,
+                wait_s + dialect.processing_s(request),
+                dialect.reply_frame_length(request),
+            )
+        return timeout
 
     async def _acknowledge(self, protocol: LineProtocol, ack: bytes) -> bool:
         """Send the host's acknowledgement after the answer delay; True when it went out.
@@ -311,7 +376,7 @@ class Arbiter:
         assert self._drain_quiet is not None
         quiet = self._drain_quiet
         start = self._loop.time()
-        give_up = start + self.timing.drain_max_s
+        give_up = start + self._timing.drain_max_s
         self.stats.drains += 1
         while True:
             now = self._loop.time()
@@ -332,8 +397,3 @@ class Arbiter:
         setattr(stats, name, getattr(stats, name) + 1)
         if stats is not totals:
             setattr(totals, name, getattr(totals, name) + 1)
-
-
-def _expire(waiter: asyncio.Future[Any]) -> None:
-    if not waiter.done():
-        waiter.set_result(None)

@@ -9,9 +9,10 @@ State machine (the whole of it lives in :meth:`FrameSplitter.feed`)::
 
 Rather than stepping byte by byte, each state searches the chunk with
 ``bytes.find`` for the next byte that can change it (STX when hunting; CR or
-STX inside a frame), so a whole frame arriving in one chunk costs two
-searches and a slice. The buffer of an incomplete frame never exceeds
-``max_body`` bytes: memory is bounded whatever the line sends.
+STX inside a frame). A chunk that is exactly one whole frame (the usual
+case) is recognised by two searches and decoded without entering the loop.
+The buffer of an incomplete frame never exceeds ``max_body`` bytes: memory
+is bounded whatever the line sends.
 """
 
 from __future__ import annotations
@@ -25,6 +26,8 @@ from ._events import BadFrame, Discarded, DiscardReason
 __all__ = ["FrameSplitter", "ParserStats"]
 
 _log = logging.getLogger("sj300_async.parser")
+
+_STX = STX_BYTE[0]
 
 #: What a subclass decodes a valid frame body into.
 FrameT = TypeVar("FrameT")
@@ -101,12 +104,23 @@ class FrameSplitter(Generic[FrameT]):
         """Consume a chunk; return the events it completed (possibly none)."""
         if type(data) is not bytes:
             data = bytes(data)
+        end = len(data)
+        if (
+            not self._in_frame
+            and end >= 2
+            and data[0] == _STX
+            and data.find(CR_BYTE) == end - 1
+            and data.find(STX_BYTE, 1) < 0
+            and end - 2 <= self.max_body
+        ):
+            # The usual chunk: exactly one whole frame, STX first, CR last and
+            # neither in between. The loop below would reach the same single
+            # event; this only skips its bookkeeping.
+            return [self._complete(data[1:-1])]
         events: list[FrameT | BadFrame | Discarded] = []
         pos = 0
-        end = len(data)
         partial = self._partial
         max_body = self.max_body
-        decode = self._decode_body
         while pos < end:
             if not self._in_frame:
                 stx = data.find(STX_BYTE, pos)
@@ -157,10 +171,14 @@ class FrameSplitter(Generic[FrameT]):
                 body = data[pos:cr]
             self._in_frame = False
             pos = cr + 1
-            event = decode(body)
-            if type(event) is BadFrame:
-                self._bad(event)
-            else:
-                self.stats.frames += 1
-            events.append(event)
+            events.append(self._complete(body))
         return events
+
+    def _complete(self, body: bytes) -> FrameT | BadFrame:
+        """Decode a whole frame's body and count the outcome."""
+        event = self._decode_body(body)
+        if type(event) is BadFrame:
+            self._bad(event)
+        else:
+            self.stats.frames += 1
+        return event

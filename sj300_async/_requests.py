@@ -186,6 +186,27 @@ def encode_request(node: int, command: Command | int, data: bytes = b"") -> byte
 
 # -- typed builders ---------------------------------------------------------
 
+#: Requests without a data field, by (node, command): at most 33 x 12 of them.
+_WITHOUT_DATA: dict[tuple[int, Command], Request] = {}
+
+
+def _without_data(node: int, command: Command) -> Request:
+    """The request for a command without data: built and validated once, then shared.
+
+    A poll asks the same few questions of the same drives over and over;
+    building and checking the same frame each time is wasted work. Sharing
+    is safe: a Request is frozen. Only a plain int is looked up (``True``
+    hashes like 1 and must still be refused by :meth:`Request.build`), and
+    only a request that was built is stored.
+    """
+    if type(node) is not int:
+        return Request.build(node, command)  # refused, or an int subclass: not shared
+    key = (node, command)
+    request = _WITHOUT_DATA.get(key)
+    if request is None:
+        request = _WITHOUT_DATA[key] = Request.build(node, command)
+    return request
+
 
 def run(node: int, direction: Direction | int) -> Request:
     """Command 00: run forward, run reverse or stop."""
@@ -232,17 +253,17 @@ def set_terminals(node: int, terminals: InputTerminal | int) -> Request:
 
 def read_monitor(node: int) -> Request:
     """Command 03: read the monitor block."""
-    return Request.build(node, Command.READ_MONITOR)
+    return _without_data(node, Command.READ_MONITOR)
 
 
 def read_status(node: int) -> Request:
     """Command 04: read status A/B/C."""
-    return Request.build(node, Command.READ_STATUS)
+    return _without_data(node, Command.READ_STATUS)
 
 
 def read_trip_history(node: int) -> Request:
     """Command 05: read the trip history."""
-    return Request.build(node, Command.READ_TRIP_HISTORY)
+    return _without_data(node, Command.READ_TRIP_HISTORY)
 
 
 def read_parameter(node: int, code: str) -> Request:
@@ -277,19 +298,19 @@ def write_parameter(node: int, code: str, value: float) -> Request:
 
 def initialize(node: int) -> Request:
     """Command 08: initialize to factory defaults (needs B084 / B085 written first)."""
-    return Request.build(node, Command.INITIALIZE)
+    return _without_data(node, Command.INITIALIZE)
 
 
 def can_store(node: int) -> Request:
     """Command 09: ask whether settings may be stored to EEPROM."""
-    return Request.build(node, Command.CAN_STORE)
+    return _without_data(node, Command.CAN_STORE)
 
 
 def store(node: int) -> Request:
     """Command 0A: store settings to EEPROM."""
-    return Request.build(node, Command.STORE)
+    return _without_data(node, Command.STORE)
 
 
 def recalculate(node: int) -> Request:
     """Command 0B: recalculate the internal motor constants."""
-    return Request.build(node, Command.RECALCULATE)
+    return _without_data(node, Command.RECALCULATE)

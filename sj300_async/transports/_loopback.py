@@ -3,9 +3,11 @@
 The peer (normally the simulator's ``SimulatorEndpoint``) is built from a
 ``send`` callable and must offer ``data_received(bytes)`` and ``close()``.
 Bytes in each direction pass through optional :class:`LineFaults` and a FIFO
-pipe that delivers them in order, never re-entrantly from inside the call
-that produced them (a reply is delivered from the event loop, as a socket's
-would be).
+pipe that delivers them in order and never re-entrantly: nothing reaches
+the host inside its own ``write`` or inside the peer's ``data_received``. A
+chunk the peer sends from its own loop callback (the simulator's replies)
+is delivered at once when nothing is queued ahead, as a socket's reader
+callback would deliver it.
 """
 
 from __future__ import annotations
@@ -98,6 +100,9 @@ class LoopbackTransport(asyncio.Transport):
         self._to_host_faults = to_host
         self._closing = False
         self._reading = True
+        # True while the peer is inside data_received: what it sends meanwhile
+        # must wait for a later loop turn (no re-entrant delivery to the host).
+        self._in_peer = False
         self._peer = peer_factory(self._from_peer)
         self._to_peer = _Pipe(loop, self._deliver_to_peer)
         self._to_host = _Pipe(loop, self._deliver_to_host)
@@ -124,14 +129,24 @@ class LoopbackTransport(asyncio.Transport):
         if self._closing:
             return
         if self._to_host_faults is None:
-            self._to_host.push(0.0, data)
+            if self._in_peer or not self._to_host.idle:
+                self._to_host.push(0.0, data)
+            else:
+                # Sent from its own loop callback, nothing queued ahead: deliver
+                # now, as a socket's reader callback would (one loop turn less).
+                self._deliver_to_host(data)
             return
         for delay, piece in self._to_host_faults.apply(data):
             self._to_host.push(delay, piece)
 
     def _deliver_to_peer(self, data: bytes) -> None:
-        if not self._closing:
+        if self._closing:
+            return
+        self._in_peer = True
+        try:
             self._peer.data_received(data)
+        finally:
+            self._in_peer = False
 
     def _deliver_to_host(self, data: bytes) -> None:
         if not self._closing:
