@@ -7,11 +7,20 @@ Response time-out = request wire time + the drive's wait time (C078)
 time and, for a TCP bridge, the network; it is the one number a user
 normally tunes. A fixed time-out can replace the whole sum.
 
-Guard interval: after every reply the line rests ``guard_chars`` character
-times, counted from the reply's arrival (the RS-485 driver of the drive must
-release the line before the host talks; one character by default). After a
-broadcast nobody answers, but every drive is busy for its processing time:
-the host waits the broadcast's own wire time plus ``broadcast_processing_s``.
+Guard interval: after every reply the line may rest ``guard_chars``
+character times, counted from the reply's arrival. By default it does not
+(0 characters), a decision: the SJ300 protocol sets no silence between a
+reply and the next request (frames are delimited by STX and CR, as Modbus
+ASCII's are, which needs no gap either), and a drive's RS-485 driver
+releases the line within microseconds of its last stop bit, sooner than any
+host turns around (a USB adapter alone takes longer). Every character of
+rest is about 1.4 % of a status/monitor poll's line time, which the default
+should not give away. A line with slow repeaters, isolators or
+direction-switching converters sets ``guard_chars`` (1 to 3.5 is usual);
+note that asyncio's default event loop waits in whole milliseconds, so a
+shorter rest costs about a millisecond. After a broadcast nobody answers,
+but every drive is busy for its processing time: the host waits the
+broadcast's own wire time plus ``broadcast_processing_s``.
 
 Drain after a failure: when a transaction ends without its answer (time-out,
 transport error, cancellation), a reply may still be on its way. Nothing is
@@ -68,10 +77,10 @@ class BusTiming:
     #: If set, the response time-out of every request, replacing the computed sum.
     fixed_timeout_s: float | None = None
     #: Rest after every reply, in character times of the line, counted from the
-    #: reply's arrival. One character covers the drive's RS-485 driver turnaround;
-    #: the 3.5-character silence of Modbus RTU is a framing rule that this
-    #: STX..CR-delimited protocol does not need (it cost 5 % of the line at 9600).
-    guard_chars: float = 1.0
+    #: reply's arrival (see the module docstring for why the default is none).
+    #: The 3.5-character silence of Modbus RTU is a framing rule that this
+    #: STX..CR-delimited protocol does not need.
+    guard_chars: float = 0.0
     #: Rest after a broadcast, on top of its wire time.
     broadcast_processing_s: float = 0.01
     #: Upper bound of a drain, so a line that never goes quiet cannot stall the bus.

@@ -169,6 +169,34 @@ async def test_broadcast_gets_no_reply_and_the_line_rests(scripted):
         assert rig.bus.broadcast.stats.broadcasts == 1
 
 
+async def test_a_guard_rests_the_line_after_each_reply(scripted):
+    # 1200 baud 8N1: a character is 8.33 ms; a 3-character guard is 25 ms,
+    # counted from the reply's arrival (the trace's rx stamp).
+    line = sj.LineSettings(1200)
+    timing = sj.BusTiming(margin_s=0.05, guard_chars=3)
+    async with scripted(line=line, timing=timing) as rig:
+        for _ in range(3):
+            await rig.bus.drive(1).read_status()
+        tx = [r.timestamp for r in rig.trace if r.direction == "tx"]
+        rx = [r.timestamp for r in rig.trace if r.direction == "rx"]
+        for reply_at, next_write in zip(rx, tx[1:], strict=False):
+            assert next_write - reply_at >= 3 * line.char_time_s
+
+
+async def test_no_rest_after_a_reply_by_default(scripted):
+    # The default guard is 0 characters (see _timing.py): at 1200 baud a
+    # 1-character rest alone would be 8 ms between reply and next request.
+    assert sj.BusTiming().guard_chars == 0
+    async with scripted(line=sj.LineSettings(1200)) as rig:
+        for _ in range(5):
+            await rig.bus.drive(1).read_status()
+        tx = [r.timestamp for r in rig.trace if r.direction == "tx"]
+        rx = [r.timestamp for r in rig.trace if r.direction == "rx"]
+        gaps = [nxt - at for at, nxt in zip(rx, tx[1:], strict=False)]
+        assert len(gaps) == 4
+        assert min(gaps) < sj.LineSettings(1200).char_time_s
+
+
 async def test_broadcast_refuses_unicast_only_commands(scripted):
     async with scripted() as rig:
         assert not hasattr(rig.bus.broadcast, "read_status")
