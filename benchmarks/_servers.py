@@ -1,4 +1,4 @@
-"""The TCP benchmark's servers, each run in a process of its own.
+"""The benchmarks' servers, each run in a process of its own.
 
 ``python -m benchmarks._servers sj300|pymodbus [--uvloop]`` listens on a free
 loopback port, prints ``port N`` on stdout, and serves until its standard
@@ -7,6 +7,12 @@ the parent is killed. A line ``cpu`` on its standard input is answered with
 ``cpu SECONDS``, the process's CPU time so far, so the parent can tell the
 server's share of a round trip from its own. :class:`ServerProcess` is the
 parent's side.
+
+``python -m benchmarks._servers sj300-pty --baudrate B --drives N`` serves
+drives 1..N (C078 = 0, the default 1 ms processing) on a pseudo-terminal
+paced at B baud 8N1, on :func:`~sj300_async.simulator.precise_event_loop`
+(see there why a paced line needs it), and prints ``path /dev/pts/M``: the
+wire benchmark's line.
 
 - ``sj300``: :func:`sj300_async.simulator.serve_tcp` over a
   :class:`~sj300_async.simulator.SimulatedBus` with one drive whose
@@ -34,7 +40,7 @@ from typing import Any, Literal
 
 __all__ = ["ServerKind", "ServerProcess", "main"]
 
-ServerKind = Literal["sj300", "pymodbus"]
+ServerKind = Literal["sj300", "pymodbus", "sj300-pty"]
 
 #: Holding registers the pymodbus server offers (the benchmark reads at most 50).
 _REGISTERS = 256
@@ -66,6 +72,19 @@ async def _serve_sj300() -> None:
         await server.wait_closed()
 
 
+async def _serve_sj300_pty(baudrate: int, drives: int) -> None:
+    from sj300_async import LineSettings
+    from sj300_async.simulator import PacedLine, SimulatedBus, open_pty_server
+
+    bus = SimulatedBus(nodes=range(1, drives + 1), wait_ms=0)
+    server = await open_pty_server(bus, line=PacedLine(LineSettings(baudrate)))
+    print(f"path {server.path}", flush=True)
+    try:
+        await _stdin_closed()
+    finally:
+        server.close()
+
+
 async def _serve_pymodbus() -> None:
     from pymodbus.server import ModbusTcpServer
     from pymodbus.simulator import DataType, SimData, SimDevice
@@ -90,12 +109,18 @@ class ServerProcess:
         RuntimeError: the server did not report a port (its stderr is quoted).
     """
 
-    def __init__(self, kind: ServerKind, *, uvloop: bool = False) -> None:
+    def __init__(
+        self, kind: ServerKind, *, uvloop: bool = False, baudrate: int = 0, drives: int = 1
+    ) -> None:
         self.kind = kind
+        #: What the server reported: a TCP port, or a pty's path (``sj300-pty``).
         self.port = 0
+        self.path = ""
         self._args = [sys.executable, "-m", "benchmarks._servers", kind]
         if uvloop:
             self._args.append("--uvloop")
+        if kind == "sj300-pty":
+            self._args += ["--baudrate", str(baudrate), "--drives", str(drives)]
         self._process: subprocess.Popen[str] | None = None
 
     def __enter__(self) -> ServerProcess:
@@ -113,14 +138,17 @@ class ServerProcess:
         self._process = process
         assert process.stdout is not None
         line = process.stdout.readline()
-        if not line.startswith("port "):
+        if line.startswith("port "):
+            self.port = int(line.split()[1])
+        elif line.startswith("path "):
+            self.path = line.split()[1]
+        else:
             assert process.stdin is not None
             assert process.stderr is not None
             process.stdin.close()
             error = process.stderr.read()
             self.__exit__(None, None, None)
             raise RuntimeError(f"{self.kind} server did not start: {line}{error}")
-        self.port = int(line.split()[1])
         return self
 
     def cpu_seconds(self) -> float:
@@ -163,9 +191,17 @@ class ServerProcess:
 def main(argv: Sequence[str] | None = None) -> int:
     """Serve until standard input closes; return the exit status."""
     parser = argparse.ArgumentParser(prog="python -m benchmarks._servers")
-    parser.add_argument("kind", choices=("sj300", "pymodbus"))
+    parser.add_argument("kind", choices=("sj300", "pymodbus", "sj300-pty"))
     parser.add_argument("--uvloop", action="store_true", help="serve on uvloop")
+    parser.add_argument("--baudrate", type=int, default=19200, help="sj300-pty: line speed")
+    parser.add_argument("--drives", type=int, default=32, help="sj300-pty: drives 1..N")
     args = parser.parse_args(argv)
+    if args.kind == "sj300-pty":
+        from sj300_async.simulator import precise_event_loop
+
+        with asyncio.Runner(loop_factory=precise_event_loop) as runner:
+            runner.run(_serve_sj300_pty(args.baudrate, args.drives))
+        return 0
     serve = _serve_sj300 if args.kind == "sj300" else _serve_pymodbus
     if args.uvloop:
         import uvloop

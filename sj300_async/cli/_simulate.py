@@ -37,6 +37,7 @@ from ..simulator import (
     SimulatedBus,
     SimulatorServer,
     open_pty_server,
+    precise_event_loop,
     serve_serial_device,
     serve_tcp,
 )
@@ -169,7 +170,10 @@ def run(args: argparse.Namespace) -> int:
             print(f"warning: {address} is reachable from the network", file=sys.stderr)
     shared_line = PacedLine(pacing) if args.pace else None
     settings = pacing if line_given else None
-    return asyncio.run(_serve(args, bus, listen, shared_line, settings))
+    # A paced line's timers are the wire: they need sub-millisecond precision.
+    factory = precise_event_loop if shared_line is not None else None
+    with asyncio.Runner(loop_factory=factory) as runner:
+        return runner.run(_serve(args, bus, listen, shared_line, settings))
 
 
 def _simulated_bus(

@@ -16,7 +16,8 @@ Sans-IO part (no asyncio, no clock: time is passed in as ``now``)::
 I/O part (asyncio, on the loop's clock): :class:`SimulatorEndpoint` (in
 memory, through a send callable), :func:`serve_tcp`, :func:`open_pty_server`,
 :func:`serve_serial_device` (an existing pty or a real serial port); any of
-them paced at a baud rate with :class:`LinePacing`.
+them paced at a baud rate with :class:`LinePacing` (serve a paced line on
+:func:`precise_event_loop`, whose timers keep sub-millisecond time).
 """
 
 from __future__ import annotations
@@ -29,6 +30,7 @@ from ._faults import Faults
 from ._motion import RunState
 from ._pacing import LinePacing, PacedLine
 from ._parameters_table import Country
+from ._precise_loop import precise_event_loop
 from ._pty import PtyServer, open_pty_server
 from ._tcp import SimulatorServer, serve_tcp
 from ._trips import TripCode
@@ -52,6 +54,7 @@ __all__ = [
     "Transmission",
     "TripCode",
     "open_pty_server",
+    "precise_event_loop",
     "serve_serial_device",
     "serve_tcp",
 ]
