@@ -7,7 +7,7 @@ decoder of the same name in :mod:`._payloads`.
 
 from __future__ import annotations
 
-from collections.abc import Iterable
+from collections.abc import Sequence
 
 from ._bcc import bcc
 from ._constants import ACK_BYTE, CR_BYTE, MAX_NODE, MIN_NODE, NAK_BYTE, STX_BYTE
@@ -23,6 +23,10 @@ __all__ = [
     "encode_trip_history",
     "frame_body",
 ]
+
+# What an 8-character decimal field can carry.
+_FIELD_MIN = -9_999_999
+_FIELD_MAX = 99_999_999
 
 
 def frame_body(body: bytes) -> bytes:
@@ -56,13 +60,18 @@ def encode_decimal_field(value: int) -> bytes:
     Raises:
         LocalProtocolError: the value does not fit in 8 characters.
     """
-    if not -9_999_999 <= value <= 99_999_999:
+    if not _FIELD_MIN <= value <= _FIELD_MAX:
         raise LocalProtocolError(f"{value} does not fit in an 8-character field")
     return b"-%07d" % -value if value < 0 else b"%08d" % value
 
 
-def _fields(values: Iterable[int]) -> bytes:
-    return b"".join(encode_decimal_field(v) for v in values)
+def _fields(values: Sequence[int]) -> bytes:
+    """:func:`encode_decimal_field` of every value, joined."""
+    if min(values) < _FIELD_MIN or max(values) > _FIELD_MAX:
+        return b"".join(encode_decimal_field(v) for v in values)  # raises for the first misfit
+    # One format for all of them: "%08d" pads a negative number as "-" and 7 digits,
+    # the same characters encode_decimal_field makes.
+    return (b"%08d" * len(values)) % tuple(values)
 
 
 def encode_status(status: InverterStatus) -> bytes:

@@ -11,6 +11,7 @@ the drive's own judgement.
 from __future__ import annotations
 
 import re
+from functools import lru_cache
 from typing import Final
 
 from ._bcc import xor_bytes
@@ -49,6 +50,36 @@ NAK_FOR_BAD_REQUEST: Final[dict[BadFrameReason, NakCode | None]] = {
 
 _MIN_REQUEST_BODY: Final = 6  # node(2) + command(2) + BCC(2)
 
+# A line carries the same few requests over and over (a poll asks every drive the
+# same questions), and decoding is a pure function of the body whose results are
+# frozen: each of the bodies seen most recently is decoded once. Bounded, so a line full of
+# distinct frames costs memory for this many at most.
+_DECODED_BODIES: Final = 1024
+
+
+@lru_cache(maxsize=_DECODED_BODIES)
+def _decode(body: bytes) -> Request | BadFrame:
+    """The request (or the defect) in the body of one frame, STX and CR stripped."""
+    node: int | None
+    node = BROADCAST if body[:2] == b"FF" else parse_node(body[:2])
+    if node is None:
+        return BadFrame(BadFrameReason.BAD_NODE, body)
+    if len(body) < _MIN_REQUEST_BODY:
+        return BadFrame(BadFrameReason.TOO_SHORT, body, node)
+    check = parse_bcc(body[-2:])
+    if check is None or check != xor_bytes(body[:-2]):
+        return BadFrame(BadFrameReason.BAD_BCC, body, node)
+    command = _COMMANDS.get(body[2:4])
+    if command is None:
+        return BadFrame(BadFrameReason.BAD_COMMAND, body, node)
+    data = body[4:-2]
+    length, pattern = _DATA_SHAPES[command.spec.request]
+    if len(data) != length:
+        return BadFrame(BadFrameReason.BAD_LENGTH, body, node)
+    if not pattern.fullmatch(data):
+        return BadFrame(BadFrameReason.BAD_CHARACTERS, body, node)
+    return Request(node, command, data, STX_BYTE + body + CR_BYTE)
+
 
 class RequestParser(FrameSplitter[Request]):
     """Parses requests out of the host's byte stream.
@@ -61,22 +92,4 @@ class RequestParser(FrameSplitter[Request]):
         super().__init__(MAX_REQUEST_BODY)
 
     def _decode_body(self, body: bytes) -> Request | BadFrame:
-        node: int | None
-        node = BROADCAST if body[:2] == b"FF" else parse_node(body[:2])
-        if node is None:
-            return BadFrame(BadFrameReason.BAD_NODE, body)
-        if len(body) < _MIN_REQUEST_BODY:
-            return BadFrame(BadFrameReason.TOO_SHORT, body, node)
-        check = parse_bcc(body[-2:])
-        if check is None or check != xor_bytes(body[:-2]):
-            return BadFrame(BadFrameReason.BAD_BCC, body, node)
-        command = _COMMANDS.get(body[2:4])
-        if command is None:
-            return BadFrame(BadFrameReason.BAD_COMMAND, body, node)
-        data = body[4:-2]
-        length, pattern = _DATA_SHAPES[command.spec.request]
-        if len(data) != length:
-            return BadFrame(BadFrameReason.BAD_LENGTH, body, node)
-        if not pattern.fullmatch(data):
-            return BadFrame(BadFrameReason.BAD_CHARACTERS, body, node)
-        return Request(node, command, data, STX_BYTE + body + CR_BYTE)
+        return _decode(body)

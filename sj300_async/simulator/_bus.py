@@ -177,6 +177,10 @@ class SimulatedBus:
         self.faults = Faults()
         self._parser = RequestParser()
         self.stats = SimulatorStats(self._parser.stats)
+        # Each node's last reply and its frame: a drive hands back the very same reply
+        # object while nothing changes (its reads are cached), and a reply is frozen,
+        # so its frame is reused. Keeping the reply keeps the identity check sound.
+        self._frames: dict[int, tuple[Reply, bytes]] = {}
 
     def __repr__(self) -> str:
         return f"SimulatedBus(nodes={sorted(self.drives)})"
@@ -237,15 +241,27 @@ class SimulatedBus:
 
     def _transmit(self, answer: tuple[SimulatedDrive, Reply]) -> Transmission | None:
         drive, reply = answer
-        frame = encode_reply(reply)
-        faulted = self.faults.apply(drive.node, frame)
-        if faulted is None:
-            self.stats.dropped_replies += 1
-            _log.debug("node %02d: reply dropped: %s", drive.node, frame.hex(" "))
-            return None
+        frame = self._frame(drive.node, reply)
+        extra_delay_s = 0.0
+        if self.faults.pending(drive.node):
+            faulted = self.faults.apply(drive.node, frame)
+            if faulted is None:
+                self.stats.dropped_replies += 1
+                _log.debug("node %02d: reply dropped: %s", drive.node, frame.hex(" "))
+                return None
+            self.stats.corrupted_replies += faulted.corrupted
+            self.stats.delayed_replies += faulted.delayed
+            frame, extra_delay_s = faulted.data, faulted.extra_delay_s
         self.stats.replies += 1
         if isinstance(reply, NakReply):
             self.stats.naks[reply.code] = self.stats.naks.get(reply.code, 0) + 1
-        self.stats.corrupted_replies += faulted.corrupted
-        self.stats.delayed_replies += faulted.delayed
-        return Transmission(drive.reply_delay_s + faulted.extra_delay_s, faulted.data)
+        return Transmission(drive.reply_delay_s + extra_delay_s, frame)
+
+    def _frame(self, node: int, reply: Reply) -> bytes:
+        """The frame of *reply* from *node*: encoded, or reused when it is the last reply again."""
+        last = self._frames.get(node)
+        if last is not None and last[0] is reply:
+            return last[1]
+        frame = encode_reply(reply)
+        self._frames[node] = (reply, frame)
+        return frame

@@ -54,7 +54,7 @@ from .._requests import Request
 from .._terminals import ASSIGNED_INPUT_BITS, InputMonitor, InputTerminal, OutputTerminal
 from ._electrical import MotorRating, electrical
 from ._memory import ParameterMemory
-from ._motion import Output, Ramp, RunState, advance, classify
+from ._motion import Output, Ramp, RunState, advance, classify, settled
 from ._parameters_table import (
     KEPT_BY_INITIALIZATION,
     SERIAL_CONTROL,
@@ -89,8 +89,93 @@ _EXT: Final = InputTerminal.EXT.value
 # Bits 1..8 of monitor item 5 are the intelligent input terminals 1..8.
 _INPUT_TERMINAL_CODES: Final = tuple(f"C00{i}" for i in range(1, 9))
 
+# Making an IntFlag from an int costs about a microsecond; the monitor makes two per
+# request. Both flags have few values (9 and 3 bits), so each is made once.
+_INPUT_MONITORS: Final[dict[int, InputMonitor]] = {}
+_AL: Final = OutputTerminal.AL.value
+_OUT11: Final = OutputTerminal.OUT11.value
+_OUT12: Final = OutputTerminal.OUT12.value
+_OUTPUT_TERMINALS: Final = tuple(
+    OutputTerminal(bits) for bits in range((_AL | _OUT11 | _OUT12) + 1)
+)
+
 Result = Reply | NakCode
 Handler = Callable[["SimulatedDrive", bytes, float], Result]
+
+
+class _Settings:
+    """What the model reads from the parameters, worked out once per change of RAM.
+
+    Every request needs these several times, and they change only when a
+    parameter is written: a drive keeps one, and reads it again when the
+    memory's ``version`` has moved past the one it was read at.
+    """
+
+    __slots__ = ("input_functions", "ramp", "rating", "setpoint_hz", "source", "version", "wait_s")
+
+    def __init__(self, memory: ParameterMemory) -> None:
+        self.version = memory.version
+        #: A002, the run command source.
+        self.source = memory["A002"]
+        self.setpoint_hz = memory["F001"] / 100
+        self.ramp = Ramp.from_times(memory["A004"] / 10, memory["F002"] / 100, memory["F003"] / 100)
+        kw = motor_capacity_kw(memory["H003"], memory["B085"])
+        self.rating = MotorRating(
+            voltage_v=float(memory["A082"]),
+            current_a=memory["B012"] / 10,
+            # B085 may change after H003 was set; a code without a capacity reads as 0 kW.
+            power_kw=kw or 0.0,
+            base_hz=memory["A003"] / 10,
+        )
+        #: C001..C008: the command 02 bit each intelligent input terminal 1..8 shows.
+        self.input_functions = tuple(memory[code] for code in _INPUT_TERMINAL_CODES)
+        #: C078 in seconds.
+        self.wait_s = memory["C078"] / 1000
+
+
+class _Snapshot:
+    """The model between two changes: the run state and what the replies make of it.
+
+    It describes the drive's present output under its present inputs (the
+    latches and the parameters), so it stays true until one of them
+    changes: the drive drops it when a latch changes or the output moves,
+    and when the memory's version has moved past the one it was taken at.
+    The replies built from it are kept in it, so a drive that keeps being
+    asked while nothing changes answers from here.
+    """
+
+    __slots__ = (
+        "command",
+        "cut",
+        "monitor",
+        "monitor_reply",
+        "outputting",
+        "state",
+        "status",
+        "status_reply",
+        "steady",
+        "still",
+        "version",
+    )
+
+    def __init__(
+        self, version: int, command: Direction, state: RunState, *, cut: bool, steady: bool
+    ) -> None:
+        self.version = version
+        #: The run command the drive obeys.
+        self.command = command
+        self.state = state
+        self.outputting = state.outputting
+        #: A trip or FRS holds the output at 0 Hz, whatever the run command.
+        self.cut = cut
+        #: The output stays as it is however much time passes (nothing to advance).
+        self.steady = steady
+        #: An advance by no time has left the output as it is (so would the next one).
+        self.still = False
+        self.status: InverterStatus | None = None
+        self.status_reply: DataReply | None = None
+        self.monitor: MonitorData | None = None
+        self.monitor_reply: DataReply | None = None
 
 
 class SimulatedDrive:
@@ -128,12 +213,17 @@ class SimulatedDrive:
         if not factory_defaults:
             table |= SERIAL_CONTROL
         self._memory = ParameterMemory(table, write_s=eeprom_write_s)
+        self._settings_cache = _Settings(self._memory)
         self._trips = TripLog()
         self._clock: float | None = None
         self._output = Output()
+        # The latches: with the parameters, the model's inputs. Whatever changes one
+        # (or the output, outside _advance) calls _changed().
         self._serial_run = Direction.STOP
         self._terminals = 0
         self._tripped = False
+        self._snapshot_cache: _Snapshot | None = None
+        self._history_reply: tuple[TripHistory, DataReply] | None = None
         self._run_s = 0.0
         self._power_on_s = 0.0
 
@@ -165,7 +255,7 @@ class SimulatedDrive:
     @property
     def reply_delay_s(self) -> float:
         """Time from a request's CR to the reply's first byte: C078 plus processing."""
-        return self._memory["C078"] / 1000 + self.processing_s
+        return self._settings().wait_s + self.processing_s
 
     def state(self, now: float) -> RunState:
         """The run state at *now*."""
@@ -180,27 +270,12 @@ class SimulatedDrive:
     def status(self, now: float) -> InverterStatus:
         """What command 04 reports at *now*."""
         self._advance(now)
-        return inverter_status(self._state(), self._output, self._run_command())
+        return self._status(self._snapshot())
 
     def monitor(self, now: float) -> MonitorData:
         """What command 03 reports at *now*."""
         self._advance(now)
-        state = self._state()
-        values = electrical(state, self._output.hz, self._rating())
-        return MonitorData(
-            output_frequency_hz=self._output.hz,
-            output_current_a=values.current_a,
-            direction=self._output.direction,
-            pid_feedback_percent=0.0,
-            input_terminals=self._input_monitor(),
-            output_terminals=self._output_terminals(state),
-            frequency_conversion=self._output.hz,
-            output_torque_percent=values.torque_percent,
-            output_voltage_v=values.voltage_v,
-            power_kw=values.power_kw,
-            run_time_h=int(self._run_s // _HOUR_S),
-            power_on_time_h=int(self._power_on_s // _HOUR_S),
-        )
+        return self._monitor(self._snapshot())
 
     def trip_history(self) -> TripHistory:
         """What command 05 reports."""
@@ -233,6 +308,7 @@ class SimulatedDrive:
         self._advance(now)
         was_tripped = self._tripped
         self._tripped = False
+        self._changed()
         self._advance(now)
         return was_tripped
 
@@ -244,6 +320,7 @@ class SimulatedDrive:
         self._serial_run = Direction.STOP
         self._terminals = 0
         self._tripped = False
+        self._changed()
 
     def set_parameter(self, code: str, raw: int, *, store: bool = True) -> None:
         """Set a parameter from outside the line (e.g. a server's --wait-ms option).
@@ -296,6 +373,7 @@ class SimulatedDrive:
             return self._nak(NakCode.EXECUTION_DISABLED, data, "A002 is not 03")
         if not self._tripped:
             self._serial_run = direction
+            self._changed()
         return AckReply(self.node)
 
     def _cmd_set_frequency(self, data: bytes, now: float) -> Result:
@@ -316,18 +394,39 @@ class SimulatedDrive:
         self._terminals = mask
         if rising & _RS:
             self._tripped = False
+        self._changed()  # before _trip, which records the state the new terminals make
         if rising & _EXT:
             self._trip(TripCode.EXTERNAL)
         return AckReply(self.node)
 
+    # The three reads answer the same reply object while nothing changes (kept in the
+    # snapshot, or with the history it encodes): a reply is immutable, and the bus
+    # reuses the frame it encoded for the previous one.
+
     def _cmd_read_monitor(self, data: bytes, now: float) -> Result:
-        return DataReply(self.node, encode_monitor(self.monitor(now)))
+        self._advance(now)
+        snapshot = self._snapshot()
+        monitor = self._monitor(snapshot)
+        if snapshot.monitor_reply is None:
+            snapshot.monitor_reply = DataReply(self.node, encode_monitor(monitor))
+        return snapshot.monitor_reply
 
     def _cmd_read_status(self, data: bytes, now: float) -> Result:
-        return DataReply(self.node, encode_status(self.status(now)))
+        self._advance(now)
+        snapshot = self._snapshot()
+        if snapshot.status_reply is None:
+            snapshot.status_reply = DataReply(self.node, encode_status(self._status(snapshot)))
+        return snapshot.status_reply
 
     def _cmd_read_trip_history(self, data: bytes, now: float) -> Result:
-        return DataReply(self.node, encode_trip_history(self._trips.history()))
+        history = self._trips.history()
+        cached = self._history_reply
+        if cached is None or cached[0] is not history:
+            cached = self._history_reply = (
+                history,
+                DataReply(self.node, encode_trip_history(history)),
+            )
+        return cached[1]
 
     def _cmd_read_parameter(self, data: bytes, now: float) -> Result:
         code = data.decode("ascii").upper()
@@ -354,6 +453,7 @@ class SimulatedDrive:
             kept = {code: self._memory[code] for code in KEPT_BY_INITIALIZATION}
             self._memory.initialize(factory_table(Country(kept["B085"]), self.node) | kept)
             self._serial_run = Direction.STOP
+            self._changed()
         return AckReply(self.node)
 
     def _cmd_can_store(self, data: bytes, now: float) -> Result:
@@ -368,6 +468,43 @@ class SimulatedDrive:
         return AckReply(self.node)
 
     # -- the model -------------------------------------------------------------
+    #
+    # The inputs (latches and parameters) change only at requests and events, while
+    # every request reads the run state several times: what the inputs make of the
+    # output is kept in a _Snapshot until something changes (see _changed), and what
+    # the parameters give in _Settings until RAM is written.
+
+    def _changed(self) -> None:
+        """Drop the snapshot: call after changing a latch, or the output outside _advance."""
+        self._snapshot_cache = None
+
+    def _settings(self) -> _Settings:
+        settings = self._settings_cache
+        if settings.version != self._memory.version:
+            settings = self._settings_cache = _Settings(self._memory)
+        return settings
+
+    def _snapshot(self) -> _Snapshot:
+        """The run state of the present output under the present inputs."""
+        snapshot = self._snapshot_cache
+        if snapshot is None or snapshot.version != self._memory.version:
+            snapshot = self._snapshot_cache = self._take_snapshot()
+        return snapshot
+
+    def _take_snapshot(self) -> _Snapshot:
+        settings = self._settings()
+        command = self._run_command(settings.source)
+        free_run = bool(self._terminals & _FRS)
+        output = self._output
+        state = classify(
+            output, command, settings.setpoint_hz, tripped=self._tripped, free_run=free_run
+        )
+        cut = self._tripped or free_run
+        if cut:  # _advance holds the output at Output()
+            steady = output.hz == 0 and output.direction is Direction.STOP
+        else:
+            steady = settled(output, command, settings.setpoint_hz)
+        return _Snapshot(settings.version, command, state, cut=cut, steady=steady)
 
     def _advance(self, now: float) -> None:
         """Bring the drive to *now*: counters, then the output along its ramps.
@@ -375,35 +512,43 @@ class SimulatedDrive:
         Time never runs backwards: an earlier *now* (another server's clock)
         counts as no time at all.
         """
-        if self._clock is None:
-            self._clock = now
-        dt = max(0.0, now - self._clock)
-        self._clock += dt
+        clock = now if self._clock is None else self._clock
+        dt = now - clock
+        if not dt > 0:
+            dt = 0.0
+        self._clock = clock + dt
         self._power_on_s += dt
+        snapshot = self._snapshot()
         # Hours only: the state at the start of the span is accurate enough.
-        if self._state().outputting:
+        if snapshot.outputting:
             self._run_s += dt
-        if self._tripped or self._terminals & _FRS:
-            self._output = Output()
+        if snapshot.steady or (snapshot.still and not dt):
+            # advance() would hand the output back as it is: at its goal whatever the
+            # span (steady), or already advanced at this instant (still).
+            return
+        if snapshot.cut:
+            output = Output()
         else:
-            self._output = advance(
-                self._output, self._run_command(), self._setpoint_hz(), self._ramp(), dt
+            settings = self._settings()
+            output = advance(
+                self._output, snapshot.command, settings.setpoint_hz, settings.ramp, dt
             )
+        if output is self._output:  # advance() returns an unchanged output as it is
+            # advance() depends only on the output and the inputs: at this instant the
+            # next one would leave it as it is again.
+            if not dt:
+                snapshot.still = True
+        else:
+            self._output = output
+            self._changed()
 
     def _state(self) -> RunState:
-        return classify(
-            self._output,
-            self._run_command(),
-            self._setpoint_hz(),
-            tripped=self._tripped,
-            free_run=bool(self._terminals & _FRS),
-        )
+        return self._snapshot().state
 
-    def _run_command(self) -> Direction:
-        """The run command the drive obeys (see the module docstring)."""
+    def _run_command(self, source: int) -> Direction:
+        """The run command the drive obeys, with A002 = *source* (see the module docstring)."""
         if self._tripped:
             return Direction.STOP
-        source = self._memory["A002"]
         if source in (SOURCE_TERMINAL, SOURCE_SERIAL):
             forward = bool(self._terminals & _FW)
             reverse = bool(self._terminals & _RV)
@@ -415,29 +560,52 @@ class SimulatedDrive:
                 return Direction.REVERSE
         return self._serial_run if source == SOURCE_SERIAL else Direction.STOP
 
-    def _setpoint_hz(self) -> float:
-        return self._memory["F001"] / 100
+    def _status(self, snapshot: _Snapshot) -> InverterStatus:
+        """Command 04's status, from *snapshot* (the present one)."""
+        if snapshot.status is None:
+            snapshot.status = inverter_status(snapshot.state, self._output, snapshot.command)
+        return snapshot.status
 
-    def _ramp(self) -> Ramp:
-        return Ramp.from_times(
-            self._memory["A004"] / 10, self._memory["F002"] / 100, self._memory["F003"] / 100
-        )
+    def _monitor(self, snapshot: _Snapshot) -> MonitorData:
+        """Command 03's monitor block, from *snapshot* (the present one).
 
-    def _rating(self) -> MotorRating:
-        kw = motor_capacity_kw(self._memory["H003"], self._memory["B085"])
-        return MotorRating(
-            voltage_v=float(self._memory["A082"]),
-            current_a=self._memory["B012"] / 10,
-            # B085 may change after H003 was set; a code without a capacity reads as 0 kW.
-            power_kw=kw or 0.0,
-            base_hz=self._memory["A003"] / 10,
+        Only the hour counters move while the snapshot holds: the block is
+        kept in it and made again when one of them has ticked over.
+        """
+        run_time_h = int(self._run_s // _HOUR_S)
+        power_on_time_h = int(self._power_on_s // _HOUR_S)
+        monitor = snapshot.monitor
+        if (
+            monitor is not None
+            and monitor.run_time_h == run_time_h
+            and monitor.power_on_time_h == power_on_time_h
+        ):
+            return monitor
+        state = snapshot.state
+        output = self._output
+        values = electrical(state, output.hz, self._settings().rating)
+        snapshot.monitor_reply = None  # it encodes the block this one replaces
+        monitor = snapshot.monitor = MonitorData(
+            output_frequency_hz=output.hz,
+            output_current_a=values.current_a,
+            direction=output.direction,
+            pid_feedback_percent=0.0,
+            input_terminals=self._input_monitor(),
+            output_terminals=self._output_terminals(state),
+            frequency_conversion=output.hz,
+            output_torque_percent=values.torque_percent,
+            output_voltage_v=values.voltage_v,
+            power_kw=values.power_kw,
+            run_time_h=run_time_h,
+            power_on_time_h=power_on_time_h,
         )
+        return monitor
 
     def _trip(self, code: int) -> bool:
         if self._tripped:
             return False
         state = self._state()
-        values = electrical(state, self._output.hz, self._rating())
+        values = electrical(state, self._output.hz, self._settings().rating)
         self._trips.record(
             TripRecord(
                 trip_factor=code,
@@ -455,24 +623,29 @@ class SimulatedDrive:
         self._tripped = True
         self._serial_run = Direction.STOP
         self._output = Output()
+        self._changed()
         return True
 
     def _input_monitor(self) -> InputMonitor:
-        bits = self._terminals & _FW
-        for terminal, code in enumerate(_INPUT_TERMINAL_CODES, start=1):
-            if self._terminals >> self._memory[code] & 1:
+        terminals = self._terminals
+        bits = terminals & _FW
+        for terminal, function in enumerate(self._settings().input_functions, start=1):
+            if terminals >> function & 1:
                 bits |= 1 << terminal
-        return InputMonitor(bits)
+        monitor = _INPUT_MONITORS.get(bits)
+        if monitor is None:
+            monitor = _INPUT_MONITORS[bits] = InputMonitor(bits)
+        return monitor
 
     def _output_terminals(self, state: RunState) -> OutputTerminal:
-        bits = OutputTerminal(0)
+        bits = 0
         if state is RunState.TRIPPED:
-            bits |= OutputTerminal.AL
+            bits |= _AL
         if state.outputting:
-            bits |= OutputTerminal.OUT11
+            bits |= _OUT11
         if state is RunState.CONSTANT_SPEED and self._output.hz > 0:
-            bits |= OutputTerminal.OUT12
-        return bits
+            bits |= _OUT12
+        return _OUTPUT_TERMINALS[bits]
 
 
 _HANDLERS: Final[dict[Command, Handler]] = {

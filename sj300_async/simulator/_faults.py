@@ -129,6 +129,16 @@ class Faults:
         self._late.clear()
         self._silent.clear()
 
+    def pending(self, node: int) -> bool:
+        """True when a fault may act on *node*'s next reply.
+
+        When False, :meth:`apply` would pass the reply on untouched, so a
+        caller may skip it.
+        """
+        return (
+            node in self._drop or node in self._corrupt or node in self._delay or node in self._late
+        )
+
     def apply(self, node: int, frame: bytes) -> FaultedReply | None:
         """Consume *node*'s pending one-shot faults for one reply; None when it is dropped."""
         delays = self._delay.get(node)

@@ -20,7 +20,7 @@ __all__ = ["ParameterMemory"]
 class ParameterMemory:
     """RAM and EEPROM of one drive, raw values keyed by upper-case code."""
 
-    __slots__ = ("_busy_until", "_eeprom", "_ram", "write_s")
+    __slots__ = ("_busy_until", "_eeprom", "_ram", "version", "write_s")
 
     def __init__(self, table: dict[str, int], *, write_s: float) -> None:
         #: How long an EEPROM write takes.
@@ -28,6 +28,8 @@ class ParameterMemory:
         self._eeprom = dict(table)
         self._ram = dict(table)
         self._busy_until = -math.inf
+        #: Moves on every change of RAM, so a reader may cache what it derives from it.
+        self.version = 0
 
     @property
     def ram(self) -> Mapping[str, int]:
@@ -53,6 +55,7 @@ class ParameterMemory:
 
     def write(self, code: str, raw: int, *, store: bool = False) -> None:
         """Write RAM (and EEPROM with *store*); the caller has checked :meth:`refusal`."""
+        self.version += 1
         memories = (self._ram, self._eeprom) if store else (self._ram,)
         for memory in memories:
             memory[code] = raw
@@ -71,10 +74,12 @@ class ParameterMemory:
 
     def initialize(self, table: dict[str, int]) -> None:
         """Command 08: load *table* into RAM and EEPROM."""
+        self.version += 1
         self._ram = dict(table)
         self._eeprom = dict(table)
 
     def power_cycle(self) -> None:
         """RAM forgets everything not stored; an unfinished EEPROM write is over."""
+        self.version += 1
         self._ram = dict(self._eeprom)
         self._busy_until = -math.inf

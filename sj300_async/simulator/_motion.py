@@ -33,7 +33,7 @@ from dataclasses import dataclass
 
 from .._codes import Direction
 
-__all__ = ["Output", "Ramp", "RunState", "advance", "classify", "goal_hz"]
+__all__ = ["Output", "Ramp", "RunState", "advance", "classify", "goal_hz", "settled"]
 
 
 class RunState(enum.Enum):
@@ -80,11 +80,25 @@ class Output:
 
 def goal_hz(output: Output, command: Direction, setpoint_hz: float) -> float:
     """Where the output is heading now: the setpoint, or 0 Hz (stop, or reversing)."""
+    return _goal(output.hz, output.direction, command, setpoint_hz)
+
+
+def _goal(hz: float, direction: Direction, command: Direction, setpoint_hz: float) -> float:
+    # goal_hz() on the parts of an Output, so advance() need not build one per segment.
     if command is Direction.STOP:
         return 0.0
-    if output.hz > 0 and output.direction is not command:
+    if hz > 0 and direction is not command:
         return 0.0
     return setpoint_hz
+
+
+def settled(output: Output, command: Direction, setpoint_hz: float) -> bool:
+    """True when :func:`advance` leaves *output* as it is, however long the span.
+
+    That is when it is at its goal and already turns the way :func:`advance`
+    would set it: the commanded direction, or STOP when stopped.
+    """
+    return output.direction is command and output.hz == goal_hz(output, command, setpoint_hz)
 
 
 def advance(
@@ -93,12 +107,13 @@ def advance(
     """The output *dt_s* seconds later, following the ramps toward the goal.
 
     With ``dt_s == 0`` it only applies what is instantaneous: taking the
-    commanded direction at 0 Hz, or dropping it when stopped.
+    commanded direction at 0 Hz, or dropping it when stopped. An output
+    that does not change is returned as it is (the same object).
     """
     hz, direction = output.hz, output.direction
     # At most three segments: down to 0 Hz, turn, up to the setpoint.
     while True:
-        goal = goal_hz(Output(hz, direction), command, setpoint_hz)
+        goal = _goal(hz, direction, command, setpoint_hz)
         if hz == 0 and command is not Direction.STOP:
             direction = command
         if hz == goal:
@@ -112,6 +127,8 @@ def advance(
         dt_s -= needed_s
     if hz == 0 and command is Direction.STOP:
         direction = Direction.STOP
+    if hz == output.hz and direction is output.direction:
+        return output
     return Output(hz, direction)
 
 

@@ -87,25 +87,35 @@ def overcurrent_code(state: RunState) -> TripCode:
 class TripLog:
     """The total trip count and the six most recent records, newest first."""
 
-    __slots__ = ("_records", "total")
+    __slots__ = ("_history", "_records", "total")
 
     def __init__(self) -> None:
         #: Trips since the history was last cleared (the count keeps going past six).
         self.total = 0
         self._records: list[TripRecord] = []
+        # What history() returned, until the next record or clear: a TripHistory is
+        # immutable, and a drive that answers it again can reuse its encoding.
+        self._history: TripHistory | None = None
 
     def record(self, record: TripRecord) -> None:
         """Add a trip as the most recent; the seventh oldest falls out."""
         self._records.insert(0, record)
         del self._records[_DEPTH:]
         self.total = min(self.total + 1, _MAX_COUNT)
+        self._history = None
 
     def clear(self) -> None:
         """Forget every trip (command 08 with B084 = 00 or 02)."""
         self._records.clear()
         self.total = 0
+        self._history = None
 
     def history(self) -> TripHistory:
-        """The command 05 payload: count and six slots, empty ones zero."""
-        padding = [EMPTY_RECORD] * (_DEPTH - len(self._records))
-        return TripHistory(self.total, (*self._records, *padding))
+        """The command 05 payload: count and six slots, empty ones zero.
+
+        The same object until the log changes.
+        """
+        if self._history is None:
+            padding = [EMPTY_RECORD] * (_DEPTH - len(self._records))
+            self._history = TripHistory(self.total, (*self._records, *padding))
+        return self._history

@@ -29,7 +29,7 @@ SANS_IO = (
     "_status",
     "_trips",
 )
-IO_MODULES = ("_device", "_endpoint", "_fd_link", "_pty", "_tcp")
+IO_MODULES = ("_device", "_endpoint", "_fd_link", "_precise_loop", "_pty", "_tcp")
 
 #: Beyond the core's list: the model is deterministic and touches no descriptor.
 EXTRA_FORBIDDEN = FORBIDDEN | {"os", "pty", "tty", "termios", "fcntl", "random"}
