@@ -11,8 +11,8 @@ parent's side.
 ``python -m benchmarks._servers sj300-pty --baudrate B --drives N`` serves
 drives 1..N (C078 = 0, the default 1 ms processing) on a pseudo-terminal
 paced at B baud 8N1, on :func:`~sj300_async.simulator.precise_event_loop`
-(see there why a paced line needs it), and prints ``path /dev/pts/M``: the
-wire benchmark's line.
+(see there why a paced line needs it) with ``spin=True``, and prints
+``path /dev/pts/M``: the wire benchmark's line. It keeps one CPU busy.
 
 - ``sj300``: :func:`sj300_async.simulator.serve_tcp` over a
   :class:`~sj300_async.simulator.SimulatedBus` with one drive whose
@@ -29,6 +29,7 @@ from __future__ import annotations
 
 import argparse
 import asyncio
+import functools
 import os
 import subprocess
 import sys
@@ -199,7 +200,11 @@ def main(argv: Sequence[str] | None = None) -> int:
     if args.kind == "sj300-pty":
         from sj300_async.simulator import precise_event_loop
 
-        with asyncio.Runner(loop_factory=precise_event_loop) as runner:
+        # Spinning: the process stands in for hardware that never sleeps (a
+        # UART, a drive's controller), so its own wake-up latency must not
+        # count against the host measured on the other end of the pty.
+        spinning = functools.partial(precise_event_loop, spin=True)
+        with asyncio.Runner(loop_factory=spinning) as runner:
             runner.run(_serve_sj300_pty(args.baudrate, args.drives))
         return 0
     serve = _serve_sj300 if args.kind == "sj300" else _serve_pymodbus

@@ -12,20 +12,47 @@ The simulator's servers watch a handful of descriptors (a listener, a few
 clients, a pty), far below ``select()``'s limit of 1024, so the select-based
 selector costs nothing there. The library itself never needs this: a host
 waits for bytes (which wake any loop at once), not for sub-millisecond timers.
+
+Even a precise time-out is a sleep, and waking a sleeping process costs time
+(on a virtual machine, a few hundred microseconds at worst). With
+``spin=True`` the loop never sleeps: it polls its descriptors until
+something is ready or the next timer is due. That keeps a CPU busy, so it
+is for a simulator standing in for hardware that never sleeps either (a
+UART, a drive's controller) while a benchmark measures the host on the
+other end, not for everyday serving.
 """
 
 from __future__ import annotations
 
 import asyncio
 import selectors
+import time
 
 __all__ = ["precise_event_loop"]
 
 
-def precise_event_loop() -> asyncio.AbstractEventLoop:
+class _SpinningSelector(selectors.SelectSelector):
+    """A select() selector that polls instead of sleeping (see the module docstring)."""
+
+    def select(self, timeout: float | None = None) -> list[tuple[selectors.SelectorKey, int]]:
+        if timeout is not None and timeout <= 0:
+            return super().select(0)
+        end = None if timeout is None else time.monotonic() + timeout
+        while True:
+            ready = super().select(0)
+            if ready or (end is not None and time.monotonic() >= end):
+                return ready
+
+
+def precise_event_loop(*, spin: bool = False) -> asyncio.AbstractEventLoop:
     """A new asyncio event loop whose timers fire within microseconds of their time.
 
     Use it as ``asyncio.Runner(loop_factory=precise_event_loop)`` for a process
     that serves a paced line (``sj300 simulate --pace`` does).
+
+    Args:
+        spin: never sleep; poll until a descriptor is ready or a timer is due
+            (keeps one CPU busy; see the module docstring).
     """
-    return asyncio.SelectorEventLoop(selectors.SelectSelector())
+    selector = _SpinningSelector() if spin else selectors.SelectSelector()
+    return asyncio.SelectorEventLoop(selector)

@@ -9,6 +9,8 @@ inside that, else a paced line blames the host for the emulation's rounding.
 from __future__ import annotations
 
 import asyncio
+import functools
+import os
 import selectors
 import statistics
 
@@ -46,3 +48,29 @@ def test_sub_millisecond_timers_fire_on_time() -> None:
     # epoll would make every one of them >= 0.7 ms late; the median here is
     # normally tens of microseconds (bound loose for a loaded machine).
     assert statistics.median(late) < 0.0004
+
+
+def test_a_spinning_loop_times_timers_and_sees_descriptors() -> None:
+    spinning = functools.partial(precise_event_loop, spin=True)
+    with asyncio.Runner(loop_factory=spinning) as runner:
+        late = runner.run(_lateness())
+        assert min(late) > -1e-6
+        assert statistics.median(late) < 0.0004
+        # A descriptor that becomes readable ends the poll as a sleep would.
+        read_fd, write_fd = os.pipe()
+        try:
+
+            async def readable() -> bytes:
+                loop = asyncio.get_running_loop()
+                ready: asyncio.Future[bytes] = loop.create_future()
+                loop.add_reader(read_fd, lambda: ready.set_result(os.read(read_fd, 10)))
+                loop.call_later(0.001, os.write, write_fd, b"x")
+                try:
+                    return await asyncio.wait_for(ready, 1.0)
+                finally:
+                    loop.remove_reader(read_fd)
+
+            assert runner.run(readable()) == b"x"
+        finally:
+            os.close(read_fd)
+            os.close(write_fd)
