@@ -55,6 +55,8 @@ LINES: tuple[LineSettings, ...] = (LineSettings(9600), LineSettings(19200))
 #: Drives on the line, full and ``--quick``.
 DRIVES = 32
 QUICK_DRIVES = 2
+#: Untraced cycles measured per line (the best counts), full runs.
+CYCLES = 3
 #: The project's aim: cycle time within 1 % of the wire limit.
 TARGET_EFFICIENCY = 0.99
 
@@ -66,8 +68,10 @@ class Cycle:
     line: LineSettings
     drives: int
     transactions: int
-    #: The cycle as the poller measured it (``BusPollStats.last_cycle_s``).
+    #: The cycle as the poller measured it (``BusPollStats.last_cycle_s``), untraced.
     cycle_s: float
+    #: A second cycle, with every frame traced for the breakdown below.
+    traced_cycle_s: float
     #: Wire time of every request and reply character.
     wire_s: float
     #: The drives' processing time (and C078 wait, here 0), summed.
@@ -94,15 +98,33 @@ def _line_label(line: LineSettings) -> str:
     return f"{line.baudrate} {line.bytesize}{line.parity}{line.stopbits}"
 
 
-async def _poll_one_cycle(line: LineSettings, drives: int, path: str) -> Cycle:
-    nodes = range(1, drives + 1)
-    trace: list[TraceRecord] = []
+async def _measure_line(line: LineSettings, drives: int, path: str, repeats: int) -> Cycle:
+    """The best of *repeats* cycles as a user's poll runs them, then one traced for the breakdown.
+
+    Best of several, as every other benchmark here: a cycle is one sample of
+    a noisy machine, and the best one is the closest to what the code costs.
+    """
     timing = BusTiming()
+    cycle_s = min([await _poll_one_cycle(line, drives, path, timing, None) for _ in range(repeats)])
+    trace: list[TraceRecord] = []
+    traced_s = await _poll_one_cycle(line, drives, path, timing, trace)
+    return _analyse(trace, line, drives, cycle_s, traced_s, timing.guard(line))
+
+
+async def _poll_one_cycle(
+    line: LineSettings,
+    drives: int,
+    path: str,
+    timing: BusTiming,
+    trace: list[TraceRecord] | None,
+) -> float:
+    nodes = range(1, drives + 1)
     url = (
         f"serial://{path}?baudrate={line.baudrate}&bytesize={line.bytesize}"
         f"&parity={line.parity}&stopbits={line.stopbits}"
     )
-    async with open_bus(url, timing=timing, trace=trace.append) as bus:
+    hook = None if trace is None else trace.append
+    async with open_bus(url, timing=timing, trace=hook) as bus:
         poller = Poller(interval_s=0, reads=("status", "monitor"))
         poller.add(bus, nodes)
         done: asyncio.Future[None] = asyncio.get_running_loop().create_future()
@@ -122,12 +144,16 @@ async def _poll_one_cycle(line: LineSettings, drives: int, path: str) -> Cycle:
             stats = poller.bus_stats(bus)
             if stats.cycles != 1 or stats.errors:
                 raise RuntimeError(f"expected one clean polling cycle: {stats}")
-            cycle_s = stats.last_cycle_s
-    return _analyse(trace, line, drives, cycle_s, timing.guard(line))
+            return stats.last_cycle_s
 
 
 def _analyse(
-    trace: list[TraceRecord], line: LineSettings, drives: int, cycle_s: float, guard_s: float
+    trace: list[TraceRecord],
+    line: LineSettings,
+    drives: int,
+    cycle_s: float,
+    traced_s: float,
+    guard_s: float,
 ) -> Cycle:
     # Trace of one cycle: tx, rx, tx, rx... (the poller may have written the first
     # request of the next cycle before it was stopped: pairs only).
@@ -149,6 +175,7 @@ def _analyse(
         drives=drives,
         transactions=len(pairs),
         cycle_s=cycle_s,
+        traced_cycle_s=traced_s,
         wire_s=wire,
         processing_s=processing * len(pairs),
         guard_s=guard_s * len(gaps),
@@ -160,13 +187,15 @@ def _analyse(
 def measure(config: Config) -> list[Cycle]:
     """Poll one cycle on each line of :data:`LINES`; return the cycles."""
     drives = QUICK_DRIVES if config.quick else DRIVES
+    repeats = 1 if config.quick else CYCLES
     cycles: list[Cycle] = []
     with new_runner(config.loop) as runner:
         for line in LINES:
             if (line.bytesize, line.parity, line.stopbits) != (8, "N", 1):
                 raise ValueError(f"the pty simulator paces 8N1 only, not {line}")
             with ServerProcess("sj300-pty", baudrate=line.baudrate, drives=drives) as server:
-                cycles.append(runner.run(_poll_one_cycle(line, drives, server.path)))
+                measured = _measure_line(line, drives, server.path, repeats)
+                cycles.append(runner.run(measured))
     return cycles
 
 
@@ -180,24 +209,28 @@ def _notes(cycles: list[Cycle], config: Config) -> tuple[str, ...]:
         "request (the simulator's default); a `Poller(interval_s=0, reads=('status', "
         "'monitor'))`, one cycle of "
         f"{first.transactions} transactions (8-byte requests, 14- and 110-byte replies). "
-        "The cycle is the poller's own `BusPollStats.last_cycle_s`; the breakdown comes from "
-        "the bus's trace of every frame.",
+        f"The cycle is the best of {CYCLES} of the poller's own `BusPollStats.last_cycle_s`, "
+        "each on a fresh bus without a trace, as a user polls; the breakdown comes from one "
+        "more cycle on a bus that traces every frame (the trace re-encodes each reply for its "
+        "record, which costs time of its own: the traced cycle is longer).",
         "",
-        f"| line | cycle ms | wire ms | processing ms | guard ms ({_GUARD_CHARS:g} chars) "
-        "| host turnaround beyond guard ms | simulated line late ms | unaccounted ms |",
-        "|---|---:|---:|---:|---:|---:|---:|---:|",
+        "| line | cycle ms | traced cycle ms | wire ms | processing ms "
+        f"| guard ms ({_GUARD_CHARS:g} chars) | host turnaround beyond guard ms "
+        "| simulated line late ms | unaccounted ms |",
+        "|---|---:|---:|---:|---:|---:|---:|---:|---:|",
     ]
     for c in cycles:
-        rest = c.cycle_s - c.guarded_limit_s - c.turnaround_s - c.line_late_s
+        rest = c.traced_cycle_s - c.guarded_limit_s - c.turnaround_s - c.line_late_s
         lines.append(
-            f"| {_line_label(c.line)} | {c.cycle_s * ms:.1f} | {c.wire_s * ms:.1f} "
-            f"| {c.processing_s * ms:.1f} | {c.guard_s * ms:.1f} | {c.turnaround_s * ms:.1f} "
-            f"| {c.line_late_s * ms:.1f} | {rest * ms:.1f} |"
+            f"| {_line_label(c.line)} | {c.cycle_s * ms:.1f} | {c.traced_cycle_s * ms:.1f} "
+            f"| {c.wire_s * ms:.1f} | {c.processing_s * ms:.1f} | {c.guard_s * ms:.1f} "
+            f"| {c.turnaround_s * ms:.1f} | {c.line_late_s * ms:.1f} | {rest * ms:.1f} |"
         )
     lines += [
         "",
-        "Host turnaround: from the reply's arrival to the next request's write, beyond the "
-        "guard (the library's own work and the event loop's wake-up). Simulated line late: "
+        "Breakdown of the traced cycle. Host turnaround: from the reply's arrival to the next "
+        "request's write, beyond the guard (the library's own work, the trace's, and the "
+        "event loop's wake-up). Simulated line late: "
         "the reply's last character reached the host after its ideal time (the simulator "
         "process's wake-ups, its timers' slack, and the pty's hand-over in both directions; "
         "a real UART has no such delay). Unaccounted: the poller's work between cycles and "

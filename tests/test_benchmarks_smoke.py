@@ -328,6 +328,7 @@ def test_wire_limit_is_computed_from_frames_bits_and_processing(harness: ModuleT
         )
         # no host can beat the wire: the paced line never delivers early
         assert c.cycle_s > c.wire_s
+        assert c.traced_cycle_s > c.wire_s
     section = bench.run(_quick(harness))
     assert [(r.unit, r.against, r.target, r.percent) for r in section.results] == [
         ("ms", "wire limit", 0.99, True),
