@@ -8,6 +8,10 @@ the parent is killed. A line ``cpu`` on its standard input is answered with
 server's share of a round trip from its own. :class:`ServerProcess` is the
 parent's side.
 
+``python -m benchmarks._servers echo`` is the floor of any asyncio stack: a
+bare protocol that answers each request with a fixed reply of a status's or
+a monitor's size (:data:`ECHO_REPLIES`), no parsing, no checks.
+
 ``python -m benchmarks._servers sj300-pty --baudrate B --drives N`` serves
 drives 1..N (C078 = 0, the default 1 ms processing) on a pseudo-terminal
 paced at B baud 8N1, on :func:`~sj300_async.simulator.precise_event_loop`
@@ -37,11 +41,14 @@ import time
 from collections.abc import Sequence
 from pathlib import Path
 from types import TracebackType
-from typing import Any, Literal
+from typing import Any, Literal, cast
 
 __all__ = ["ServerKind", "ServerProcess", "main"]
 
-ServerKind = Literal["sj300", "pymodbus", "sj300-pty"]
+ServerKind = Literal["sj300", "pymodbus", "sj300-pty", "echo"]
+
+#: The bare round trip's replies (``echo``): sized as a status and a monitor reply.
+ECHO_REPLIES: dict[bytes, bytes] = {b"S": b"S" * 14, b"M": b"M" * 110}
 
 #: Holding registers the pymodbus server offers (the benchmark reads at most 50).
 _REGISTERS = 256
@@ -66,6 +73,28 @@ async def _serve_sj300() -> None:
 
     server = await serve_tcp(SimulatedBus(nodes=[1], processing_s=0.0))
     print(f"port {server.port}", flush=True)
+    try:
+        await _stdin_closed()
+    finally:
+        server.close()
+        await server.wait_closed()
+
+
+class _Echo(asyncio.Protocol):
+    """Answers each request with the reply its first byte names; nothing else."""
+
+    def connection_made(self, transport: asyncio.BaseTransport) -> None:
+        # A cast, not isinstance(): uvloop's transports do not derive from asyncio's.
+        self._transport = cast(asyncio.Transport, transport)
+
+    def data_received(self, data: bytes) -> None:
+        self._transport.write(ECHO_REPLIES[data[:1]])
+
+
+async def _serve_echo() -> None:
+    loop = asyncio.get_running_loop()
+    server = await loop.create_server(_Echo, "127.0.0.1", 0)
+    print(f"port {server.sockets[0].getsockname()[1]}", flush=True)
     try:
         await _stdin_closed()
     finally:
@@ -192,7 +221,7 @@ class ServerProcess:
 def main(argv: Sequence[str] | None = None) -> int:
     """Serve until standard input closes; return the exit status."""
     parser = argparse.ArgumentParser(prog="python -m benchmarks._servers")
-    parser.add_argument("kind", choices=("sj300", "pymodbus", "sj300-pty"))
+    parser.add_argument("kind", choices=("sj300", "pymodbus", "sj300-pty", "echo"))
     parser.add_argument("--uvloop", action="store_true", help="serve on uvloop")
     parser.add_argument("--baudrate", type=int, default=19200, help="sj300-pty: line speed")
     parser.add_argument("--drives", type=int, default=32, help="sj300-pty: drives 1..N")
@@ -207,7 +236,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         with asyncio.Runner(loop_factory=spinning) as runner:
             runner.run(_serve_sj300_pty(args.baudrate, args.drives))
         return 0
-    serve = _serve_sj300 if args.kind == "sj300" else _serve_pymodbus
+    serve = {"sj300": _serve_sj300, "pymodbus": _serve_pymodbus, "echo": _serve_echo}[args.kind]
     if args.uvloop:
         import uvloop
 

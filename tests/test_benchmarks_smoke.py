@@ -251,15 +251,18 @@ def test_tcp_times_both_stacks_on_their_own_servers(harness: ModuleType) -> None
     section = bench_tcp.run(_quick(harness))  # raises unless every request was answered
     assert [(r.name, r.unit, r.target) for r in section.results] == [
         ("tcp: read_status vs 1 register", "requests/s", 2.5),
+        ("tcp floor: bare asyncio round trip, read_status sizes", "requests/s", None),
         ("tcp: read_monitor vs 50 registers", "requests/s", 2.5),
+        ("tcp floor: bare asyncio round trip, read_monitor sizes", "requests/s", None),
     ]
     assert all(r.ours > 0 and r.peer > 0 for r in section.results)
     assert any("processing_s=0" in note for note in section.notes)
+    assert any("most any stack on the same loop" in note for note in section.notes)
 
 
 def test_server_processes_end_with_their_context(harness: ModuleType) -> None:
     servers = importlib.import_module("benchmarks._servers")
-    for kind in ("sj300", "pymodbus"):
+    for kind in ("sj300", "pymodbus", "echo"):
         server = servers.ServerProcess(kind)
         with server:
             assert server.port > 0
@@ -374,7 +377,7 @@ def test_cli_quick_runs_every_benchmark_into_one_table() -> None:
         assert f"\n## {title}\n" in out
     table = out.split("\n## results\n", 1)[1]
     rows = [line for line in table.splitlines() if line.startswith("| ") and "---" not in line]
-    assert len(rows) == 1 + 3 + 2 + 3 + 2 + 2 + 3  # header + rows of each benchmark
+    assert len(rows) == 1 + 3 + 4 + 3 + 2 + 2 + 3  # header + rows of each benchmark
     assert "**failed**" not in out
 
 
@@ -415,7 +418,7 @@ def test_cli_uvloop_prints_a_table_of_its_own() -> None:
 def test_tcp_runs_on_uvloop(harness: ModuleType) -> None:
     bench_tcp = importlib.import_module("benchmarks.bench_tcp")
     section = bench_tcp.run(_quick(harness, "uvloop"))
-    assert len(section.results) == 2
+    assert len(section.results) == 4
 
 
 def test_hotspots_profile_sees_the_library_per_transaction(harness: ModuleType) -> None:

@@ -45,6 +45,11 @@ class SimulatorEndpoint:
         pacing: pace the line at these settings (a :class:`PacedLine` of its own).
         line: pace on this shared line instead (overrides *pacing*).
         loop: the event loop; by default the running loop at the first call.
+        defer: send a reply that is due at once from a later loop turn, never
+            from inside :meth:`data_received` (the default: safe for a host that
+            calls it from inside its own write). A server whose
+            ``data_received`` the event loop calls passes False and answers
+            at once, a loop turn sooner.
     """
 
     def __init__(
@@ -55,9 +60,11 @@ class SimulatorEndpoint:
         *,
         line: PacedLine | None = None,
         loop: asyncio.AbstractEventLoop | None = None,
+        defer: bool = True,
     ) -> None:
         self.bus = bus
         self._send = send
+        self._defer = defer
         self._line = line if line is not None else PacedLine(pacing) if pacing else None
         self._loop = loop
         self._queue: list[_Job] = []
@@ -116,10 +123,12 @@ class SimulatorEndpoint:
             start = now + t.delay_s
             if self._line is None:
                 if t.delay_s <= 0 and not self._queue:
-                    # Nothing to wait for and nothing queued ahead: the next loop
-                    # turn, without a timer and the heap (never from inside
-                    # data_received: the caller may be a transport's write).
-                    self._get_loop().call_soon(self._send_unless_closed, t.data)
+                    # Nothing to wait for and nothing queued ahead: no timer and no
+                    # heap; at once, or on the next loop turn (see *defer*).
+                    if self._defer:
+                        self._get_loop().call_soon(self._send_unless_closed, t.data)
+                    else:
+                        self._send(t.data)
                 else:
                     self._at(start, functools.partial(self._send, t.data))
                 continue

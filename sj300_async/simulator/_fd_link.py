@@ -48,7 +48,7 @@ class FdLink:
         self._writing = False
         self._closed = False
         os.set_blocking(fd, False)
-        self._endpoint = SimulatorEndpoint(bus, send=self._write, line=line, loop=loop)
+        self._endpoint = SimulatorEndpoint(bus, send=self._write, line=line, loop=loop, defer=False)
         loop.add_reader(fd, self._on_readable)
 
     def close(self) -> None:

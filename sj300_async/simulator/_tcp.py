@@ -39,8 +39,9 @@ class _Connection(asyncio.Protocol):
         # deriving from asyncio's classes.
         transport = cast(asyncio.Transport, transport)
         self._transport = transport
+        # The loop calls data_received from the socket's reader: answer at once.
         self._endpoint = SimulatorEndpoint(
-            self._server.bus, send=transport.write, line=self._server.line
+            self._server.bus, send=transport.write, line=self._server.line, defer=False
         )
         self._server._connections.add(self)
         _log.debug("client connected: %s", transport.get_extra_info("peername"))

@@ -51,6 +51,20 @@ async def test_never_sends_from_inside_data_received() -> None:
     ep.close()
 
 
+async def test_a_server_may_answer_from_inside_data_received() -> None:
+    host = Host()
+    bus = SimulatedBus(nodes=[1], processing_s=0.0)
+    ep = SimulatorEndpoint(bus, send=host.send, defer=False)
+    ep.data_received(request(b"01", b"0B"))
+    assert [chunk for _, chunk in host.chunks] == [ack(b"01")]  # sent at once
+    # A reply with a delay still waits for it.
+    bus.drives[1].processing_s = 0.01
+    ep.data_received(request(b"01", b"0B"))
+    assert len(host.chunks) == 1
+    assert await host.wait_for(2 * 7) == ack(b"01") * 2
+    ep.close()
+
+
 async def test_reply_waits_for_c078() -> None:
     host = Host()
     ep = SimulatorEndpoint(SimulatedBus(nodes=[1], wait_ms=50), send=host.send)
