@@ -21,6 +21,7 @@ def _fold_shifts(n: int) -> tuple[int, ...]:
 
 # Shift sequence per body length: halve the next power of two down to one byte.
 _SHIFTS: tuple[tuple[int, ...], ...] = tuple(_fold_shifts(n) for n in range(1025))
+_from_bytes = int.from_bytes  # bound once: looking it up on int costs as much as a fold
 
 
 def xor_bytes(body: bytes | bytearray | memoryview) -> int:
@@ -33,7 +34,7 @@ def xor_bytes(body: bytes | bytearray | memoryview) -> int:
     byte. Rounding up to a power of two means the bytes above the current
     half never need masking. A 446-byte trip-history reply takes 9 folds.
     """
-    value = int.from_bytes(body, "little")
+    value = _from_bytes(body)  # big-endian: the byte order does not matter to a XOR
     n = len(body)
     for shift in _SHIFTS[n] if n < len(_SHIFTS) else _fold_shifts(n):
         value ^= value >> shift

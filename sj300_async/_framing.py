@@ -1,6 +1,6 @@
 """The STX..CR frame splitter shared by the reply parser and the request parser.
 
-State machine (the whole of it lives in :meth:`FrameSplitter.feed`)::
+State machine (the whole of it lives in :meth:`FrameSplitter._run`)::
 
     HUNTING --STX--> IN_FRAME --CR--> (frame complete) --> HUNTING
        ^  \\--other bytes: Discarded(GARBAGE)
@@ -9,10 +9,17 @@ State machine (the whole of it lives in :meth:`FrameSplitter.feed`)::
 
 Rather than stepping byte by byte, each state searches the chunk with
 ``bytes.find`` for the next byte that can change it (STX when hunting; CR or
-STX inside a frame). A chunk that is exactly one whole frame (the usual
-case) is recognised by two searches and decoded without entering the loop.
-The buffer of an incomplete frame never exceeds ``max_body`` bytes: memory
-is bounded whatever the line sends.
+STX inside a frame). The buffer of an incomplete frame never exceeds
+``max_body`` bytes: memory is bounded whatever the line sends.
+
+:meth:`FrameSplitter.feed` takes a shortcut for a clean line. Every CR leaves
+the machine HUNTING (it ends a frame, or is garbage while hunting), so a
+chunk split at its CRs is a run of pieces whose starting state is known:
+the first starts where the last chunk left off, the others HUNTING. A piece
+that is a whole frame on its own (STX, no other STX, at most ``max_body``
+bytes) is decoded at once, and one that continues the partial frame without
+an STX is appended to it; either is exactly what the machine would do. Any
+other piece runs through the machine.
 """
 
 from __future__ import annotations
@@ -28,6 +35,7 @@ __all__ = ["FrameSplitter", "ParserStats"]
 _log = logging.getLogger("sj300_async.parser")
 
 _STX = STX_BYTE[0]
+_CR = CR_BYTE[0]
 
 #: What a subclass decodes a valid frame body into.
 FrameT = TypeVar("FrameT")
@@ -66,25 +74,29 @@ class FrameSplitter(Generic[FrameT]):
         #: The longest body (bytes between STX and CR) a frame may have.
         self.max_body = max_body
         self.stats = ParserStats()
-        self._in_frame = False
-        self._partial = bytearray()
+        # The state: None while HUNTING; IN_FRAME, the bytes received since the
+        # frame's STX (never an STX or CR among them, never more than max_body).
+        self._partial: bytes | None = None
 
     @property
     def buffered(self) -> int:
         """Bytes held for an incomplete frame (never more than ``max_body``)."""
-        return len(self._partial)
+        return 0 if self._partial is None else len(self._partial)
 
     def reset(self) -> list[FrameT | BadFrame | Discarded]:
         """Forget any partial frame (e.g. after draining the line); return it as discarded."""
         events: list[FrameT | BadFrame | Discarded] = []
-        if self._in_frame:
-            self._discard(events, DiscardReason.RESTARTED, STX_BYTE + bytes(self._partial))
+        if self._partial is not None:
+            self._discard(events, DiscardReason.RESTARTED, STX_BYTE + self._partial)
             self.stats.restarted_frames += 1
-        self._partial.clear()
-        self._in_frame = False
+        self._partial = None
         return events
 
     def _decode_body(self, body: bytes) -> FrameT | BadFrame:
+        """Decode the body of a complete frame (STX and CR stripped).
+
+        Return the frame, or a BadFrame that has been passed to :meth:`_bad`.
+        """
         raise NotImplementedError
 
     def _discard(
@@ -96,7 +108,15 @@ class FrameSplitter(Generic[FrameT]):
         events.append(Discarded(reason, data))
 
     def _bad(self, event: BadFrame) -> None:
-        self.stats.bad_frames += 1
+        """Count and log a bad frame (called by :meth:`_decode_body`).
+
+        The splitter counts every body it decodes as a frame (cheaper than
+        asking each event its type); this moves a bad one to ``bad_frames``.
+        Both counters are right again by the time :meth:`feed` returns.
+        """
+        stats = self.stats
+        stats.frames -= 1
+        stats.bad_frames += 1
         if _log.isEnabledFor(logging.DEBUG):
             _log.debug("bad frame (%s): %s", event.reason.value, event.body.hex(" "))
 
@@ -104,81 +124,101 @@ class FrameSplitter(Generic[FrameT]):
         """Consume a chunk; return the events it completed (possibly none)."""
         if type(data) is not bytes:
             data = bytes(data)
-        end = len(data)
-        if (
-            not self._in_frame
-            and end >= 2
-            and data[0] == _STX
-            and data.find(CR_BYTE) == end - 1
-            and data.find(STX_BYTE, 1) < 0
-            and end - 2 <= self.max_body
-        ):
-            # The usual chunk: exactly one whole frame, STX first, CR last and
-            # neither in between. The loop below would reach the same single
-            # event; this only skips its bookkeeping.
-            return [self._complete(data[1:-1])]
         events: list[FrameT | BadFrame | Discarded] = []
-        pos = 0
         partial = self._partial
         max_body = self.max_body
-        while pos < end:
-            if not self._in_frame:
+        # The shortcut of the module docstring, up to the first piece that needs
+        # the machine: the machine takes the rest of the chunk from there (so
+        # that, e.g., garbage with CRs in it stays one Discarded event). Note
+        # `_STX in body`: testing for an int is much cheaper than for a bytes.
+        tail = data  # what follows the last CR: the whole chunk if it has none
+        if _CR in data:
+            pieces = data.split(CR_BYTE)
+            tail = pieces.pop()
+            for piece in pieces:  # each ended by a CR
+                if partial is not None:  # IN_FRAME: the CR ends the frame
+                    body = partial + piece
+                elif piece and piece[0] == _STX:  # HUNTING: a whole frame, perhaps
+                    body = piece[1:]
+                else:
+                    body = None
+                if body is None or _STX in body or len(body) > max_body:
+                    partial = self._run_rest(pieces, tail, partial, events)
+                    tail = b""
+                    break
+                partial = None
+                events.append(self._decode_body(body))
+            else:
+                self.stats.frames += len(events)  # one per piece
+        if tail:  # no CR in it: a frame's beginning, or more of it
+            if partial is None and tail[0] != _STX:
+                partial = self._run(tail, partial, events)
+            else:
+                body = tail[1:] if partial is None else partial + tail
+                if _STX in body or len(body) > max_body:
+                    partial = self._run(tail, partial, events)
+                else:
+                    partial = body
+        self._partial = partial
+        return events
+
+    def _run_rest(
+        self,
+        pieces: list[bytes],
+        tail: bytes,
+        partial: bytes | None,
+        events: list[FrameT | BadFrame | Discarded],
+    ) -> bytes | None:
+        """Hand the chunk to the machine from the piece the shortcut stopped at."""
+        decoded = len(events)  # one per piece so far
+        self.stats.frames += decoded
+        return self._run(CR_BYTE.join([*pieces[decoded:], tail]), partial, events)
+
+    def _run(
+        self, data: bytes, partial: bytes | None, events: list[FrameT | BadFrame | Discarded]
+    ) -> bytes | None:
+        """Run the state machine over *data* from state *partial*; return the new state."""
+        max_body = self.max_body
+        end = len(data)
+        pos = 0
+        while True:
+            if partial is None:  # HUNTING
+                if pos >= end:
+                    break
                 stx = data.find(STX_BYTE, pos)
                 if stx < 0:
                     self._discard(events, DiscardReason.GARBAGE, data[pos:])
                     break
                 if stx > pos:
                     self._discard(events, DiscardReason.GARBAGE, data[pos:stx])
-                self._in_frame = True
+                partial = b""
                 pos = stx + 1
-                continue
-            # Search no further than the longest legal frame could reach: beyond
-            # it the frame is overlong anyway, and an unbounded search would
-            # make a chunk with many STX and no CR cost quadratic time.
-            reach = min(end, pos + max_body + 1 - len(partial))
+            # IN_FRAME. Search no further than the longest legal frame could
+            # reach: beyond it the frame is overlong anyway, and an unbounded
+            # search would make a chunk with many STX and no CR cost quadratic
+            # time. (find() treats an end past the chunk as the chunk's end.)
+            reach = pos + max_body + 1 - len(partial)
             cr = data.find(CR_BYTE, pos, reach)
-            stop = cr if cr >= 0 else reach
-            stx = data.find(STX_BYTE, pos, stop)
-            limit = stx if stx >= 0 else stop
-            if len(partial) + (limit - pos) > max_body:
-                # Longer than any legal frame: abandon it at byte max_body + 1, as a
-                # byte-by-byte feed would, and hunt for the next STX.
-                cut = pos + max_body + 1 - len(partial)
-                self._discard(
-                    events, DiscardReason.OVERLONG, STX_BYTE + bytes(partial) + data[pos:cut]
-                )
-                self.stats.overlong_frames += 1
-                partial.clear()
-                self._in_frame = False
-                pos = cut
-                continue
+            stx = data.find(STX_BYTE, pos, reach if cr < 0 else cr)
             if stx >= 0:
                 # A new frame starts before this one ended: the partial frame is lost.
-                self._discard(
-                    events, DiscardReason.RESTARTED, STX_BYTE + bytes(partial) + data[pos:stx]
-                )
+                self._discard(events, DiscardReason.RESTARTED, STX_BYTE + partial + data[pos:stx])
                 self.stats.restarted_frames += 1
-                partial.clear()
+                partial = b""
                 pos = stx + 1
-                continue
-            if cr < 0:
+            elif cr >= 0:  # the frame is complete (and, within reach, not too long)
+                self.stats.frames += 1
+                events.append(self._decode_body(partial + data[pos:cr]))
+                partial = None
+                pos = cr + 1
+            elif reach <= end:
+                # max_body + 1 bytes and no CR: longer than any legal frame. Abandon
+                # it at that byte, as a byte-by-byte feed would, and hunt for an STX.
+                self._discard(events, DiscardReason.OVERLONG, STX_BYTE + partial + data[pos:reach])
+                self.stats.overlong_frames += 1
+                partial = None
+                pos = reach
+            else:  # the chunk ends inside the frame
                 partial += data[pos:]
                 break
-            if partial:
-                body = bytes(partial) + data[pos:cr]
-                partial.clear()
-            else:
-                body = data[pos:cr]
-            self._in_frame = False
-            pos = cr + 1
-            events.append(self._complete(body))
-        return events
-
-    def _complete(self, body: bytes) -> FrameT | BadFrame:
-        """Decode a whole frame's body and count the outcome."""
-        event = self._decode_body(body)
-        if type(event) is BadFrame:
-            self._bad(event)
-        else:
-            self.stats.frames += 1
-        return event
+        return partial

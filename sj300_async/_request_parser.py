@@ -92,4 +92,7 @@ class RequestParser(FrameSplitter[Request]):
         super().__init__(MAX_REQUEST_BODY)
 
     def _decode_body(self, body: bytes) -> Request | BadFrame:
-        return _decode(body)
+        event = _decode(body)
+        if type(event) is BadFrame:
+            self._bad(event)
+        return event
