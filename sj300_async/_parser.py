@@ -119,7 +119,6 @@ _new = object.__new__
 _set_ack_data_node, _set_ack_data_data = slot_setters(AckDataReply)
 _set_data_node, _set_data_data = slot_setters(DataReply)
 _set_nak_node, _set_nak_code = slot_setters(NakReply)
-_from_bytes = int.from_bytes
 
 
 class ReplyParser(FrameSplitter[Reply]):
@@ -142,22 +141,7 @@ class ReplyParser(FrameSplitter[Reply]):
         node = _NODES.get(body[:2])
         if n not in _REPLY_BODY_LENGTHS or node is None:  # (expected: see below)
             return self._decode_general(body)
-        # The XOR of the body, as xor_bytes() computes it, with the folds for
-        # n <= 512 written out: a loop over them costs about a third more.
-        xor = _from_bytes(body)
-        if n > 8:
-            if n > 16:
-                if n > 128:
-                    xor ^= xor >> 2048
-                    xor ^= xor >> 1024
-                xor ^= xor >> 512
-                xor ^= xor >> 256
-                xor ^= xor >> 128
-            xor ^= xor >> 64
-        xor ^= xor >> 32
-        xor ^= xor >> 16
-        xor ^= xor >> 8
-        if xor & 0xFF != expected:  # (also when the BCC is not hex: expected is None)
+        if xor_bytes(body) != expected:  # (also when the BCC is not hex: expected is None)
             return self._decode_general(body)
         if n == _MONITOR_BODY_LEN:
             # Items 1-4 and 7-13 all digits (no minus sign), items 5-6 hex.

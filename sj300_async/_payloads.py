@@ -150,12 +150,7 @@ def decode_status(data: bytes) -> InverterStatus:
         data = bytes(data)
     if len(data) != STATUS_DATA_LEN or not data.isdigit():  # bytes.isdigit() is ASCII-only
         raise _malformed("status", data)
-    # _decode_status() written out: a call more would cost a tenth of the decode.
-    status = _new(InverterStatus)
-    _set_status_a(status, _STATUS_A_CHARS[data[0:2]])
-    _set_status_b(status, _STATUS_B_CHARS[data[2:4]])
-    _set_status_c(status, _STATUS_C_CHARS[data[4:6]])
-    return status
+    return _decode_status(data)
 
 
 def _decode_status(data: bytes) -> InverterStatus:
