@@ -69,7 +69,8 @@ async def _stdin_closed() -> None:
 
 
 async def _serve_sj300() -> None:
-    from sj300_async.simulator import SimulatedBus, serve_tcp
+    from sj300_async.simulator import serve_tcp
+    from sj300_async.simulator.sj300 import SimulatedBus
 
     server = await serve_tcp(SimulatedBus(nodes=[1], processing_s=0.0))
     print(f"port {server.port}", flush=True)
@@ -104,7 +105,8 @@ async def _serve_echo() -> None:
 
 async def _serve_sj300_pty(baudrate: int, drives: int) -> None:
     from sj300_async import LineSettings
-    from sj300_async.simulator import PacedLine, SimulatedBus, open_pty_server
+    from sj300_async.simulator import PacedLine, open_pty_server
+    from sj300_async.simulator.sj300 import SimulatedBus
 
     bus = SimulatedBus(nodes=range(1, drives + 1), wait_ms=0)
     server = await open_pty_server(bus, line=PacedLine(LineSettings(baudrate)))

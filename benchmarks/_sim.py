@@ -16,8 +16,8 @@ from __future__ import annotations
 import time
 from collections.abc import Iterable, Sequence
 
-from sj300_async import Request
-from sj300_async.simulator import SimulatedBus
+from sj300_async.simulator.sj300 import SimulatedBus
+from sj300_async.sj300 import Request
 
 __all__ = ["instant_simulator", "simulator_cost"]
 

@@ -28,17 +28,12 @@ from pymodbus.pdu.other_message import ReadExceptionStatusResponse
 from pymodbus.pdu.register_message import ReadHoldingRegistersResponse
 
 from sj300_async import (
-    AckDataReply,
-    AckReply,
-    DataReply,
     Direction,
     InputMonitor,
     InverterStatus,
     MonitorData,
     NakCode,
-    NakReply,
     OutputTerminal,
-    Reply,
     StatusA,
     StatusB,
     StatusC,
@@ -46,6 +41,13 @@ from sj300_async import (
     TripRecord,
     TripStatusB,
     TripStatusC,
+)
+from sj300_async.sj300 import (
+    AckDataReply,
+    AckReply,
+    DataReply,
+    NakReply,
+    Reply,
     encode_monitor,
     encode_reply,
     encode_status,

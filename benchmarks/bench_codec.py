@@ -28,7 +28,7 @@ from importlib.metadata import version
 from pymodbus.framer import FramerAscii
 from pymodbus.pdu import DecodePDU, ModbusPDU
 
-from sj300_async import (
+from sj300_async.sj300 import (
     AckDataReply,
     AckReply,
     DataReply,

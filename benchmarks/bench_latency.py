@@ -18,7 +18,8 @@ import math
 import time
 from dataclasses import dataclass
 
-from sj300_async import Drive, open_bus, requests
+from sj300_async import Drive, open_bus
+from sj300_async.sj300 import requests
 
 from ._harness import Config, Result, Section, new_runner
 from ._sim import instant_simulator, simulator_cost

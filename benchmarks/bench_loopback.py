@@ -18,7 +18,8 @@ import asyncio
 import contextlib
 from dataclasses import dataclass
 
-from sj300_async import Bus, Drive, open_bus, requests
+from sj300_async import Bus, Drive, open_bus
+from sj300_async.sj300 import requests
 
 from ._harness import Config, Result, Section, best_time, new_runner
 from ._sim import instant_simulator, simulator_cost

@@ -30,7 +30,8 @@ import os
 import resource
 import time
 
-from sj300_async import Bus, Poller, open_bus, requests
+from sj300_async import Bus, Poller, open_bus
+from sj300_async.sj300 import requests
 
 from ._harness import Config, Result, Section, new_runner
 from ._sim import instant_simulator, simulator_cost

@@ -38,8 +38,9 @@ from __future__ import annotations
 import asyncio
 from dataclasses import dataclass
 
-from sj300_async import BusTiming, LineSettings, Poller, TraceRecord, open_bus
-from sj300_async.simulator import DEFAULT_PROCESSING_S
+from sj300_async import BusTiming, LineSettings, Poller, open_bus
+from sj300_async.bus import TraceRecord
+from sj300_async.simulator.sj300 import DEFAULT_PROCESSING_S
 
 from ._harness import Config, Result, Section, new_runner
 from ._servers import ServerProcess

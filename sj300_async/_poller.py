@@ -12,9 +12,10 @@ drive does not eat the line with time-outs; the first good reply brings it
 back online. While online, a poll stops at its first failed read for the
 same reason.
 
-FR-700 drives are polled the same way (status H7A, monitors H6F / H70 /
-H71); ``parameters`` may mix SJ300 codes (``"F002"``) and FR-700 parameter
-numbers (``"Pr.7"``), and each bus reads only the ones of its own protocol.
+Every protocol's drives are polled the same way: the poller calls the
+drive's ``read_status``, ``read_monitor`` and ``read_parameter``.
+``parameters`` may mix protocols' codes (SJ300's ``"F002"``, FR-700's
+``"Pr.7"``); each bus reads the ones its dialect recognises.
 
 Results go to callbacks (:meth:`Poller.on_sample`) and to any number of
 async iterators (:meth:`Poller.samples`). An iterator whose consumer falls
@@ -35,12 +36,10 @@ from typing import Any, Final, Literal
 import anyio
 import anyio.abc
 
-from ._bus import Bus
-from ._errors import LocalProtocolError, SJ300Error
-from ._parameters import normalize_code
-from ._payloads import InverterStatus, MonitorData
+from .bus import Bus, get_dialect, protocol_names
 from .fr700 import Fr700Monitor, Fr700Status
-from .fr700._requests import parameter_bank
+from .sj300 import InverterStatus, MonitorData
+from .wire import LocalProtocolError, SJ300Error
 
 __all__ = ["BusPollStats", "DriveHealth", "Poller", "Sample"]
 
@@ -163,8 +162,7 @@ class Poller:
             bus.drive(node)  # validates the node number
         target = self._targets.get(id(bus))
         if target is None:
-            fr700 = bus.dialect.name == "fr700"
-            own = tuple(p for p in self.parameters if p.startswith("Pr.") == fr700)
+            own = tuple(p for p in self.parameters if bus.dialect.parameter_code(p) == p)
             target = _Target(bus, [], parameters=own)
             self._targets[id(bus)] = target
             if self._task_group is not None:
@@ -339,15 +337,16 @@ class Poller:
 
 
 def _parameter_name(code: str) -> str:
-    """An SJ300 code (``"f002"`` -> ``"F002"``) or an FR-700 number (``"pr7"`` -> ``"Pr.7"``).
+    """The code as its protocol names it (``"f002"`` -> ``"F002"``, ``"pr7"`` -> ``"Pr.7"``).
 
     Raises:
-        LocalProtocolError: neither.
+        LocalProtocolError: no registered protocol has such a parameter.
     """
-    if isinstance(code, str) and code.strip().upper().startswith("PR"):
-        bank, offset = parameter_bank(code)
-        return f"Pr.{bank * 100 + offset}"
-    return normalize_code(code)
+    for name in protocol_names():
+        own = get_dialect(name).parameter_code(code)
+        if own is not None:
+            return own
+    raise LocalProtocolError(f"{code!r} is not a parameter code of any protocol")
 
 
 def _put_dropping(queue: asyncio.Queue[object], item: object) -> bool:

@@ -17,16 +17,8 @@ from typing import TYPE_CHECKING
 
 import pytest
 
-from sj300_async import (
-    AckReply,
-    BusTiming,
-    DataReply,
-    InverterStatus,
-    MonitorData,
-    NakReply,
-    ReplyParser,
-    TripHistory,
-)
+from sj300_async import BusTiming, InverterStatus, MonitorData, TripHistory
+from sj300_async.sj300 import AckReply, DataReply, NakReply, ReplyParser
 
 if TYPE_CHECKING:
     from benchmarks.bench_codec import Workload

@@ -30,7 +30,7 @@ import sys
 from typing import NoReturn
 
 from .. import __version__
-from .._errors import LocalProtocolError, SJ300Error
+from ..wire._errors import LocalProtocolError, SJ300Error
 from ._errors import FAILURE, USAGE, CliError
 
 __all__ = ["CliError", "main"]

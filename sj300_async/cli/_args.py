@@ -12,8 +12,8 @@ from dataclasses import dataclass
 from typing import Final
 from urllib.parse import urlsplit
 
-from .._errors import LocalProtocolError
-from .._url import format_node_list, parse_node_list
+from ..bus._url import format_node_list, parse_node_list
+from ..wire._errors import LocalProtocolError
 
 __all__ = ["ListenAddress", "format_nodes", "parse_any_nodes", "parse_listen", "parse_nodes"]
 

@@ -29,11 +29,11 @@ from collections.abc import AsyncIterator
 from contextlib import asynccontextmanager
 from typing import Final
 
-from .._bus import Bus, open_bus
-from .._constants import MAX_NODE, MIN_NODE
-from .._errors import LocalProtocolError
-from .._line import LineSettings
-from .._url import parse_bus_url
+from ..bus import Bus, open_bus
+from ..bus._url import parse_bus_url
+from ..sj300._constants import MAX_NODE, MIN_NODE
+from ..wire._errors import LocalProtocolError
+from ..wire._line import LineSettings
 
 __all__ = [
     "DEFAULT_URL",

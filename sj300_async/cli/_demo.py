@@ -20,11 +20,11 @@ import random
 from collections.abc import Awaitable
 from typing import Final
 
-from .._bus import Bus
-from .._codes import Direction
-from .._errors import LocalProtocolError, SJ300Error
-from .._terminals import InputTerminal
+from ..bus._bus import Bus
 from ..fr700 import Fr700Drive
+from ..sj300._terminals import InputTerminal
+from ..wire._enums import Direction
+from ..wire._errors import LocalProtocolError, SJ300Error
 
 __all__ = ["run_demo"]
 

@@ -12,8 +12,8 @@ import argparse
 import asyncio
 from typing import Any
 
-from .._codes import NakCode
-from .._errors import NakError
+from ..sj300._codes import NakCode
+from ..wire._errors import NakError
 from ._common import add_bus_options, add_json_option, add_node_option, open_cli_bus
 from ._errors import FAILURE, CliError
 from ._output import print_json

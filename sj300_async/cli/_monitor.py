@@ -33,10 +33,10 @@ from collections.abc import AsyncIterator, Coroutine
 from dataclasses import dataclass
 from typing import Any, Final
 
-from .._bus import Bus
-from .._codes import StatusA
-from .._payloads import InverterStatus, MonitorData
 from .._poller import Poller, Sample
+from ..bus._bus import Bus
+from ..sj300._codes import StatusA
+from ..sj300._payloads import InverterStatus, MonitorData
 from ._args import parse_any_nodes
 from ._common import add_bus_options, add_json_option, bus_url, open_cli_bus, positive_float
 from ._demo import run_demo

@@ -21,7 +21,7 @@ import sys
 from collections.abc import Mapping, Sequence
 from typing import Any, Literal, TextIO
 
-from .._parameters import ParameterInfo
+from ..sj300._parameters import ParameterInfo
 
 __all__ = [
     "Column",

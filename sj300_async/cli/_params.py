@@ -31,10 +31,10 @@ from collections.abc import Callable, Coroutine
 from pathlib import Path
 from typing import Any, Final
 
-from .._codes import NakCode
-from .._drive import Drive
-from .._errors import NakError
-from .._parameters import PARAMETERS, parameter_info
+from ..sj300._codes import NakCode
+from ..sj300._drive import Drive
+from ..sj300._parameters import PARAMETERS, parameter_info
+from ..wire._errors import NakError
 from ._common import (
     DEFAULT_URL,
     add_bus_options,

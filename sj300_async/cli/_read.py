@@ -15,9 +15,9 @@ import argparse
 import asyncio
 from typing import Any
 
-from .._drive import Drive
-from .._errors import NakError
-from .._parameters import normalize_code, parameter_info
+from ..sj300._drive import Drive
+from ..sj300._parameters import normalize_code, parameter_info
+from ..wire._errors import NakError
 from ._common import add_bus_options, add_json_option, add_node_option, open_cli_bus
 from ._errors import FAILURE, CliError
 from ._output import Column, format_raw, print_json, print_table

@@ -9,8 +9,9 @@ import argparse
 import asyncio
 from typing import Any
 
-from .._codes import Direction, NakCode
-from .._errors import NakError
+from ..sj300._codes import NakCode
+from ..wire._enums import Direction
+from ..wire._errors import NakError
 from ._common import add_bus_options, add_json_option, add_node_option, open_cli_bus
 from ._errors import FAILURE, CliError
 from ._output import human, print_json

@@ -21,8 +21,8 @@ import sys
 from collections.abc import Callable
 from typing import Any
 
-from .._bus import Bus
-from .._errors import NakError, RemoteProtocolError, ReplyTimeoutError
+from ..bus._bus import Bus
+from ..wire._errors import NakError, RemoteProtocolError, ReplyTimeoutError
 from ._args import format_nodes, parse_nodes
 from ._common import add_bus_options, add_json_option, open_cli_bus
 from ._errors import FAILURE

@@ -26,15 +26,12 @@ import signal
 import sys
 from typing import Any
 
-from .._errors import LocalProtocolError
-from .._url import NODE_RANGES, parse_node_list
+from ..bus import get_dialect, parse_node_list
 from ..simulator import (
-    Country,
     LinePacing,
     PacedLine,
     PtyServer,
     SerialDeviceServer,
-    SimulatedBus,
     SimulatorServer,
     open_pty_server,
     precise_event_loop,
@@ -42,6 +39,8 @@ from ..simulator import (
     serve_tcp,
 )
 from ..simulator.fr700 import Fr700SimulatedBus, Fr700SimulatedDrive
+from ..simulator.sj300 import Country, SimulatedBus
+from ..wire._errors import LocalProtocolError
 from ._args import DEFAULT_PORT, LOOPBACK, ListenAddress, format_nodes, parse_listen
 from ._common import positive_float
 from ._errors import CliError
@@ -160,7 +159,7 @@ def run(args: argparse.Namespace) -> int:
     line_given = args.baud is not None or args.pace
     try:
         pacing = LinePacing(args.baud or 19200, args.bytesize, args.parity, args.stopbits)
-        low, high = NODE_RANGES[args.protocol]
+        low, high = get_dialect(args.protocol).node_range
         nodes = parse_node_list(args.nodes or _DEFAULT_NODES[args.protocol], low=low, high=high)
         bus = _simulated_bus(args, nodes, pacing if line_given else None)
     except LocalProtocolError as exc:

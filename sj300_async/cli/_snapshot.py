@@ -29,9 +29,9 @@ from datetime import UTC, datetime
 from pathlib import Path
 from typing import Any, Final
 
-from .._constants import MAX_NODE, MIN_NODE
-from .._errors import LocalProtocolError
-from .._parameters import RAW_VALUE_MAX, RAW_VALUE_MIN, normalize_code
+from ..sj300._constants import MAX_NODE, MIN_NODE
+from ..sj300._parameters import RAW_VALUE_MAX, RAW_VALUE_MIN, normalize_code
+from ..wire._errors import LocalProtocolError
 from ._errors import CliError
 
 __all__ = ["FORMAT", "VERSION", "Snapshot"]

@@ -12,7 +12,7 @@ import argparse
 import asyncio
 from typing import Any
 
-from .._payloads import InverterStatus, MonitorData
+from ..sj300._payloads import InverterStatus, MonitorData
 from ._common import add_bus_options, add_json_option, add_node_option, open_cli_bus
 from ._output import Column, human, print_json, print_table
 

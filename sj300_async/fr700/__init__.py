@@ -42,13 +42,7 @@ from ._dialect import Fr700Dialect
 from ._drive import Fr700Drive
 from ._events import Fr700Ack, Fr700Data, Fr700Nak, Fr700ParserEvent, Fr700Reply
 from ._parser import MAX_FRAME, Fr700ReplyParser, decode_frame
-from ._payloads import (
-    Fr700Monitor,
-    Fr700MultiReply,
-    Fr700Status,
-    decode_hex,
-    decode_multi_reply,
-)
+from ._payloads import Fr700Monitor, Fr700MultiReply, Fr700Status, decode_hex, decode_multi_reply
 from ._requests import Fr700MultiReceive, Fr700Request, Fr700RequestKind
 
 __all__ = [

@@ -23,7 +23,7 @@ from __future__ import annotations
 import enum
 from typing import Final
 
-from .._codes import _TolerantIntEnum
+from ..wire._enums import TolerantIntEnum as TolerantIntEnum
 
 __all__ = [
     "A1_INSTRUCTIONS",
@@ -136,7 +136,7 @@ _NAK_DESCRIPTIONS: Final = {
 }
 
 
-class Fr700NakCode(_TolerantIntEnum):
+class Fr700NakCode(TolerantIntEnum):
     """The one hex character after NAK (format D), or an error field of a C1 reply."""
 
     COMPUTER_NAK = 0x0  #: too many consecutive errors: the drive trips E.PUE / E.SER
@@ -167,7 +167,7 @@ class Fr700NakCode(_TolerantIntEnum):
         return b"%X" % self.value
 
 
-class Fr700OperationMode(_TolerantIntEnum):
+class Fr700OperationMode(TolerantIntEnum):
     """Operation mode, the data of H7B / HFB."""
 
     NETWORK = 0x0000  #: network (computer link) operation

@@ -32,26 +32,27 @@ What the arbiter learns from it:
 
 from __future__ import annotations
 
-from typing import Final
+from collections.abc import Mapping
+from typing import TYPE_CHECKING, Final
 
-from .._errors import NakError, SJ300Error
-from .._events import BadFrame, Discarded
+from ..wire import BadFrame, LocalProtocolError, NakError, SJ300Error
 from ._codec import (
     MAX_REPLY_DATA,
     Fr700LineOptions,
-    encode_ack,
-    encode_data_reply,
     encode_host_ack,
-    encode_nak,
     encode_reoutput_request,
     terminator_bytes,
 )
 from ._codes import Fr700Instruction, Fr700NakCode
 from ._events import Fr700Ack, Fr700Data, Fr700Nak, Fr700Reply
 from ._parser import Fr700ReplyParser
-from ._requests import Fr700Request, Fr700RequestKind
+from ._requests import Fr700Request, Fr700RequestKind, parameter_bank
 
-__all__ = ["ANSWER_DELAY_S", "CHECK_TIME_S", "EEPROM_CHECK_TIME_S", "Fr700Dialect"]
+if TYPE_CHECKING:
+    from ..bus import Channel
+    from ._drive import Fr700Drive
+
+__all__ = ["ANSWER_DELAY_S", "CHECK_TIME_S", "EEPROM_CHECK_TIME_S", "FR700_DIALECT", "Fr700Dialect"]
 
 #: Data check time of monitors, the run command and the RAM frequency.
 CHECK_TIME_S: Final = 0.012
@@ -72,6 +73,8 @@ _SLOW: Final = frozenset(
     }
 )
 _CLEAR_S: Final = 5.0
+#: The URL's ``terminator=`` values.
+_TERMINATORS: Final = {"none": "", "": "", "cr": "\r", "crlf": "\r\n"}
 
 
 def _nak_error(station: int, code: Fr700NakCode) -> NakError:
@@ -98,6 +101,11 @@ class Fr700Dialect:
     """
 
     name = "fr700"
+    node_range = (0, 31)
+    node_noun = "station"
+    default_sim_nodes = "0-7"
+    url_options = frozenset(("wait_field", "terminator", "ack"))
+    simulator = "sj300_async.simulator.fr700:simulate"
 
     def __init__(
         self,
@@ -124,6 +132,28 @@ class Fr700Dialect:
             f"request_reoutput={self.request_reoutput})"
         )
 
+    def configure(self, options: Mapping[str, str]) -> Fr700Dialect:
+        """A dialect with the URL's ``wait_field``, ``terminator`` and ``ack`` applied.
+
+        Raises:
+            LocalProtocolError: an unknown option or a bad value.
+        """
+        from ..bus import parse_flag
+
+        unknown = set(options) - self.url_options
+        if unknown:
+            raise LocalProtocolError(f"unknown FR-700 option(s): {', '.join(sorted(unknown))}")
+        terminator = options.get("terminator", "cr").lower()
+        if terminator not in _TERMINATORS:
+            raise LocalProtocolError(f"terminator must be none, cr or crlf, got {terminator!r}")
+        return Fr700Dialect(
+            wait_field=parse_flag("wait_field", options.get("wait_field", "1")),
+            terminator=_TERMINATORS[terminator],
+            send_ack=parse_flag("ack", options.get("ack", "0")),
+            wait_time_digit=self.options.wait_time_digit,
+            request_reoutput=self.request_reoutput,
+        )
+
     def new_parser(self) -> Fr700ReplyParser:
         return Fr700ReplyParser(self.options.terminator)
 
@@ -143,15 +173,20 @@ class Fr700Dialect:
             return len(event.data) == 12 and event.data[:2] == request.data[:2]
         return request.reply_width is None or len(event.data) == request.reply_width
 
-    def refusal(self, request: Fr700Request, reply: Fr700Reply) -> SJ300Error | None:
-        if isinstance(reply, Fr700Nak):
-            return _nak_error(reply.station, reply.code)
-        return None
+    def accept(self, request: Fr700Request, reply: Fr700Reply) -> bytes:
+        if isinstance(reply, Fr700Data):
+            return reply.data
+        if isinstance(reply, Fr700Ack):
+            return b""
+        raise _nak_error(reply.station, reply.code)
 
     def retryable(self, exc: SJ300Error) -> bool:
         if isinstance(exc, NakError):
             return Fr700NakCode(exc.code).is_transmission_error
         return True
+
+    def writes(self, request: Fr700Request) -> bool:
+        return request.mutating
 
     def reply_frame_length(self, request: Fr700Request) -> int:
         term = len(self.options.terminator)
@@ -195,14 +230,33 @@ class Fr700Dialect:
             return None
         return encode_reoutput_request(request.station, self.options.terminator)
 
-    def trace_bytes(self, event: Fr700Reply | BadFrame | Discarded) -> bytes:
-        term = self.options.terminator
-        if isinstance(event, Discarded):
-            return event.data
-        if isinstance(event, BadFrame):
-            return event.body
-        if isinstance(event, Fr700Data):
-            return encode_data_reply(event.station, event.data, term)
-        if isinstance(event, Fr700Ack):
-            return encode_ack(event.station, term)
-        return encode_nak(event.station, event.code, term)
+    def describe(self, reply: Fr700Reply) -> str:
+        if isinstance(reply, Fr700Nak):
+            return (
+                f"station {reply.station:02d} NAK {reply.code.wire.decode()} "
+                f"({reply.code.description})"
+            )
+        if isinstance(reply, Fr700Ack):
+            return f"station {reply.station:02d} ACK"
+        return f"station {reply.station:02d} data {reply.data.decode('ascii', 'replace')}"
+
+    def parameter_code(self, text: str) -> str | None:
+        if not isinstance(text, str) or not text.strip().upper().startswith("PR"):
+            return None
+        try:
+            bank, offset = parameter_bank(text)
+        except LocalProtocolError:
+            return None
+        return f"Pr.{bank * 100 + offset}"
+
+    def make_drive(self, channel: Channel[Fr700Request], node: int) -> Fr700Drive:
+        from ._drive import Fr700Drive
+
+        return Fr700Drive(channel, node, options=self.options)
+
+    def make_broadcast(self, channel: Channel[Fr700Request]) -> None:
+        return None  # the computer link has no broadcast
+
+
+#: The FR-700 dialect at the drive's factory settings (what ``protocol="fr700"`` starts from).
+FR700_DIALECT: Final = Fr700Dialect()

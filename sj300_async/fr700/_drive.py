@@ -21,26 +21,19 @@ to 0. Selecting a bank only prepares a read, so a read-only bus allows it.
 from __future__ import annotations
 
 import asyncio
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING
 
-from .._codes import Direction
-from .._errors import LocalProtocolError, ReadOnlyError, RemoteProtocolError
-from .._stats import TransactionStats
+from ..bus._stats import TransactionStats
+from ..wire import LocalProtocolError
+from ..wire._enums import Direction
 from . import _requests as rq
+from ._codec import DEFAULT_LINE_OPTIONS, Fr700LineOptions
 from ._codes import Fr700Instruction, Fr700OperationMode, Fr700StatusBits
-from ._dialect import Fr700Dialect
-from ._events import Fr700Data
-from ._payloads import (
-    Fr700Monitor,
-    Fr700MultiReply,
-    Fr700Status,
-    decode_hex,
-    decode_multi_reply,
-)
+from ._payloads import Fr700Monitor, Fr700MultiReply, Fr700Status, decode_hex, decode_multi_reply
 from ._requests import Fr700MultiReceive, Fr700Request
 
 if TYPE_CHECKING:
-    from .._bus import Bus
+    from ..bus import Channel
 
 __all__ = ["Fr700Drive"]
 
@@ -58,15 +51,19 @@ class Fr700Drive:
         timeout_s: a fixed response time-out for this drive (None: computed).
     """
 
-    def __init__(self, bus: Bus[Any], station: int, *, wait_time_s: float = 0.0) -> None:
+    def __init__(
+        self,
+        channel: Channel[Fr700Request],
+        station: int,
+        *,
+        options: Fr700LineOptions = DEFAULT_LINE_OPTIONS,
+        wait_time_s: float = 0.0,
+    ) -> None:
         if isinstance(station, bool) or not isinstance(station, int) or not 0 <= station <= 31:
             raise LocalProtocolError(f"an FR-700 station is 0..31, got {station!r}")
-        dialect = bus.dialect
-        if not isinstance(dialect, Fr700Dialect):
-            raise LocalProtocolError(f"bus {bus.description} does not speak FR-700")
-        self._bus = bus
+        self._channel = channel
         self._station = station
-        self._options = dialect.options
+        self._options = options
         self.stats = TransactionStats()
         self.wait_time_s = wait_time_s
         self.timeout_s: float | None = None
@@ -84,25 +81,20 @@ class Fr700Drive:
         return self._station
 
     def __repr__(self) -> str:
-        return f"<Fr700Drive {self._station:02d} on {self._bus.description}>"
+        return f"<Fr700Drive {self._station:02d} on {self._channel.description}>"
 
     # -- transactions ----------------------------------------------------------------
 
-    async def _execute(self, request: Fr700Request, *, urgent: bool = False) -> Any:
-        return await self._bus._execute(
-            request,
-            self.stats,
-            wait_s=self.wait_time_s,
-            timeout_s=self.timeout_s,
-            urgent=urgent,
-            mutating=request.mutating,
-        )
+    async def _execute(self, request: Fr700Request, *, urgent: bool = False) -> None:
+        if request.expects_reply:
+            await self._data(request, urgent=urgent)
+        else:  # the inverter reset: nothing answers
+            await self._channel.send(request, self.stats, urgent=urgent)
 
-    async def _data(self, request: Fr700Request) -> bytes:
-        reply = await self._execute(request)
-        if not isinstance(reply, Fr700Data):  # the dialect's matching guarantees it
-            raise RemoteProtocolError(f"unexpected reply {reply!r} to {request.label}")
-        return reply.data
+    async def _data(self, request: Fr700Request, *, urgent: bool = False) -> bytes:
+        return await self._channel.transact(
+            request, self.stats, wait_s=self.wait_time_s, timeout_s=self.timeout_s, urgent=urgent
+        )
 
     async def _value(self, instruction: int) -> int:
         return decode_hex(
@@ -321,10 +313,7 @@ class Fr700Drive:
             ReplyTimeoutError, RemoteProtocolError, TransportError, ReadOnlyError.
         """
         request = rq.write_parameter(self._station, number, value, options=self._options)
-        if self._bus.read_only:  # refuse before switching the bank, not after it
-            raise ReadOnlyError(
-                f"bus {self._bus.description} is read-only: {request.label} refused"
-            )
+        self._channel.check(request)  # refuse before switching the bank, not after it
         bank, _offset = rq.parameter_bank(number)
         async with self._bank_lock:
             await self._select_bank(bank)

@@ -52,9 +52,9 @@ import logging
 import re
 from typing import Final
 
-from .._errors import LocalProtocolError
-from .._events import BadFrame, BadFrameReason, Discarded, DiscardReason
-from .._framing import ParserStats
+from ..wire._errors import LocalProtocolError
+from ..wire._events import BadFrame, BadFrameReason, Discarded, DiscardReason
+from ..wire._parser_stats import ParserStats
 from ._codec import MAX_REPLY_DATA, parse_station
 from ._codes import ACK, CR, ETX, LF, NAK, Fr700NakCode
 from ._events import Fr700Ack, Fr700Data, Fr700Nak, Fr700Reply

@@ -21,9 +21,9 @@ import os
 import termios
 import tty
 
-from .._errors import LocalProtocolError
-from ._bus import BusModel
+from ..wire._errors import LocalProtocolError
 from ._fd_link import FdLink, FdServer
+from ._model import BusModel
 from ._pacing import LinePacing, PacedLine
 
 __all__ = ["SerialDeviceServer", "serve_serial_device"]

@@ -26,7 +26,7 @@ import itertools
 import logging
 from collections.abc import Callable
 
-from ._bus import BusModel, Transmission
+from ._model import BusModel, Transmission
 from ._pacing import LinePacing, PacedLine
 
 __all__ = ["SimulatorEndpoint"]

@@ -16,8 +16,8 @@ from collections import deque
 from collections.abc import Callable
 from dataclasses import dataclass
 
-from .._constants import MAX_NODE, MIN_NODE
-from .._errors import LocalProtocolError
+from ..sj300._constants import MAX_NODE, MIN_NODE
+from ..wire._errors import LocalProtocolError
 
 __all__ = ["FaultedReply", "Faults"]
 

@@ -16,8 +16,8 @@ import os
 from types import TracebackType
 from typing import Final, Self
 
-from ._bus import BusModel
 from ._endpoint import SimulatorEndpoint
+from ._model import BusModel
 from ._pacing import PacedLine
 
 __all__ = ["FdLink", "FdServer"]

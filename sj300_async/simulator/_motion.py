@@ -31,7 +31,7 @@ import enum
 import math
 from dataclasses import dataclass
 
-from .._codes import Direction
+from ..wire._enums import Direction
 
 __all__ = ["Output", "Ramp", "RunState", "advance", "classify", "goal_hz", "settled"]
 

@@ -13,8 +13,8 @@ from __future__ import annotations
 import math
 from typing import Final
 
-from .._errors import LocalProtocolError
-from .._line import LineSettings
+from ..wire._errors import LocalProtocolError
+from ..wire._line import LineSettings
 
 __all__ = ["LinePacing", "PacedLine"]
 

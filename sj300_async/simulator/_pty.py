@@ -21,8 +21,8 @@ import asyncio
 import os
 import tty
 
-from ._bus import BusModel
 from ._fd_link import FdLink, FdServer
+from ._model import BusModel
 from ._pacing import LinePacing, PacedLine
 
 __all__ = ["PtyServer", "open_pty_server"]

@@ -17,8 +17,8 @@ import logging
 from types import TracebackType
 from typing import cast
 
-from ._bus import BusModel
 from ._endpoint import SimulatorEndpoint
+from ._model import BusModel
 from ._pacing import LinePacing, PacedLine
 
 __all__ = ["SimulatorServer", "serve_tcp"]

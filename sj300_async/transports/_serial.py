@@ -12,8 +12,8 @@ import asyncio
 from collections.abc import Callable
 from typing import Any
 
-from .._errors import TransportError
-from .._line import LineSettings
+from ..wire._errors import TransportError
+from ..wire._line import LineSettings
 
 __all__ = ["serial_connector"]
 

@@ -9,7 +9,10 @@ import pytest
 from scripted import Responder, Rig, ScriptedPeer, answer_all
 
 import sj300_async as sj
-from sj300_async._bus import Bus
+from sj300_async.wire._line import INSTANT_LINE
+from sj300_async import bus as sjbus
+from sj300_async import sj300 as sj3
+from sj300_async.bus._bus import Bus
 from sj300_async.transports import LineFaults, loopback_connector
 
 
@@ -32,8 +35,8 @@ def scripted() -> Callable[..., object]:
             peers.append(ScriptedPeer(respond, send))
             return peers[-1]
 
-        trace: list[sj.TraceRecord] = []
-        bus_kwargs.setdefault("line", sj._line.INSTANT_LINE)
+        trace: list[sjbus.TraceRecord] = []
+        bus_kwargs.setdefault("line", INSTANT_LINE)
         bus_kwargs.setdefault("timing", sj.BusTiming(margin_s=0.05))
         bus = Bus(
             loopback_connector(factory, to_peer=to_peer, to_host=to_host),

@@ -14,8 +14,9 @@ import operator
 from collections.abc import Callable
 from dataclasses import dataclass, field
 
-import sj300_async as sj
-from sj300_async._bus import Bus
+from sj300_async import bus as sjbus
+from sj300_async import sj300 as sj3
+from sj300_async.bus._bus import Bus
 
 
 def xor_bcc(body: bytes) -> bytes:
@@ -43,7 +44,7 @@ def status(node: int, a: int = 3, b: int = 1, c: int = 3) -> bytes:
     return reply(b"%02d%02d%02d%02d00" % (node, a, b, c))
 
 
-Responder = Callable[[sj.Request], list[tuple[float, bytes]]]
+Responder = Callable[[sj3.Request], list[tuple[float, bytes]]]
 
 
 @dataclass
@@ -52,18 +53,18 @@ class ScriptedPeer:
 
     respond: Responder
     send: Callable[[bytes], None]
-    requests: list[sj.Request] = field(default_factory=list)
+    requests: list[sj3.Request] = field(default_factory=list)
     bad: list[object] = field(default_factory=list)
     handles: list[asyncio.TimerHandle] = field(default_factory=list)
     closed: bool = False
 
     def __post_init__(self) -> None:
-        self._parser = sj.RequestParser()
+        self._parser = sj3.RequestParser()
 
     def data_received(self, data: bytes) -> None:
         loop = asyncio.get_running_loop()
         for event in self._parser.feed(data):
-            if not isinstance(event, sj.Request):
+            if not isinstance(event, sj3.Request):
                 self.bad.append(event)
                 continue
             self.requests.append(event)
@@ -82,18 +83,18 @@ class ScriptedPeer:
             handle.cancel()
 
 
-def answer_all(request: sj.Request) -> list[tuple[float, bytes]]:
+def answer_all(request: sj3.Request) -> list[tuple[float, bytes]]:
     """A healthy drive: answers every command immediately with a plausible reply."""
     node = request.node
     cmd = request.command
-    if cmd is sj.Command.READ_STATUS:
+    if cmd is sj3.Command.READ_STATUS:
         return [(0.0, status(node))]
-    if cmd is sj.Command.READ_PARAMETER:
+    if cmd is sj3.Command.READ_PARAMETER:
         return [(0.0, ack_value(node, 1000 + node))]
-    if cmd is sj.Command.CAN_STORE:
+    if cmd is sj3.Command.CAN_STORE:
         return [(0.0, reply(b"%02d\x0601" % node))]
-    if cmd in (sj.Command.READ_MONITOR, sj.Command.READ_TRIP_HISTORY):
-        length = 104 if cmd is sj.Command.READ_MONITOR else 440
+    if cmd in (sj3.Command.READ_MONITOR, sj3.Command.READ_TRIP_HISTORY):
+        length = 104 if cmd is sj3.Command.READ_MONITOR else 440
         return [(0.0, reply(b"%02d" % node + b"0" * length))]
     return [(0.0, ack(node))]
 
@@ -102,7 +103,7 @@ def answer_all(request: sj.Request) -> list[tuple[float, bytes]]:
 class Rig:
     bus: Bus
     peers: list[ScriptedPeer]
-    trace: list[sj.TraceRecord]
+    trace: list[sjbus.TraceRecord]
 
     @property
     def peer(self) -> ScriptedPeer:

@@ -8,6 +8,7 @@ import pytest
 from scripted import ack, ack_value, answer_all, nak, reply, status
 
 import sj300_async as sj
+from sj300_async import sj300 as sj3
 
 
 async def test_answer_is_decoded(scripted):
@@ -140,7 +141,7 @@ async def test_fifo_fairness_under_a_failing_node(scripted):
 
 async def test_stop_jumps_the_queue(scripted):
     def respond(req):
-        delay = 0.03 if req.command is sj.Command.READ_MONITOR else 0.0
+        delay = 0.03 if req.command is sj3.Command.READ_MONITOR else 0.0
         return [(delay, frame) for _, frame in answer_all(req)]
 
     async with scripted(respond) as rig:
@@ -152,8 +153,8 @@ async def test_stop_jumps_the_queue(scripted):
         stop = asyncio.create_task(bus.drive(20).stop())
         await asyncio.gather(in_flight, stop, *polls)
         commands = [(r.node, r.command) for r in rig.peer.requests]
-        assert commands[0] == (1, sj.Command.READ_MONITOR)
-        assert commands[1] == (20, sj.Command.RUN)  # before all ten queued polls
+        assert commands[0] == (1, sj3.Command.READ_MONITOR)
+        assert commands[1] == (20, sj3.Command.RUN)  # before all ten queued polls
         assert rig.peer.requests[1].data == b"0"
 
 
@@ -201,7 +202,7 @@ async def test_broadcast_refuses_unicast_only_commands(scripted):
     async with scripted() as rig:
         assert not hasattr(rig.bus.broadcast, "read_status")
         with pytest.raises(sj.LocalProtocolError, match="may not be broadcast"):
-            sj.Request.build(sj.BROADCAST, sj.Command.READ_STATUS)
+            sj3.Request.build(sj3.BROADCAST, sj3.Command.READ_STATUS)
         assert rig.peer.requests == []
 
 
@@ -261,7 +262,7 @@ async def test_read_only_refuses_every_mutating_command(scripted):
             with pytest.raises(sj.ReadOnlyError):
                 await call
         assert await d.read_status()
-        assert [r.command for r in rig.peer.requests] == [sj.Command.READ_STATUS]
+        assert [r.command for r in rig.peer.requests] == [sj3.Command.READ_STATUS]
 
 
 async def test_echo_is_stripped(scripted):

@@ -10,13 +10,14 @@ from hypothesis import strategies as st
 from scripted import ack_value, answer_all
 
 import sj300_async as sj
+from sj300_async import sj300 as sj3
 
 
 def node_specific(delay: float):
     """Each node answers a parameter read with a value that names the node and the code."""
 
-    def respond(req: sj.Request):
-        if req.command is sj.Command.READ_PARAMETER:
+    def respond(req: sj3.Request):
+        if req.command is sj3.Command.READ_PARAMETER:
             return [(delay, ack_value(req.node, req.node * 10000 + int(req.data[1:])))]
         return [(delay, frame) for _, frame in answer_all(req)]
 

@@ -15,7 +15,7 @@ import termios
 from dataclasses import dataclass
 from typing import Any
 
-from sj300_async.simulator import SimulatedBus
+from sj300_async.simulator.sj300 import SimulatedBus
 
 #: Generous per command: a cold interpreter start on a loaded CI machine.
 TIMEOUT = 20.0

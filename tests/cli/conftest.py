@@ -7,7 +7,8 @@ from collections.abc import AsyncIterator
 import pytest
 from clirun import TcpSim
 
-from sj300_async.simulator import SimulatedBus, serve_tcp
+from sj300_async.simulator import serve_tcp
+from sj300_async.simulator.sj300 import SimulatedBus
 
 
 @pytest.fixture

@@ -10,6 +10,7 @@ import pytest
 
 import sj300_async as sj
 from sj300_async import InverterStatus, StatusA, StatusB, StatusC, TripStatusB
+from sj300_async import sj300 as sj3
 from sj300_async.cli._demo import run_demo
 from sj300_async.cli._output import Column, format_raw, human, jsonable, plain_lines
 from sj300_async.simulator import RunState
@@ -30,11 +31,11 @@ def test_human_names() -> None:
 
 
 def test_format_raw_uses_the_resolution_and_unit() -> None:
-    assert format_raw(sj.parameter_info("F002"), 3000) == "30.00 s"
-    assert format_raw(sj.parameter_info("A004"), 600) == "60.0 Hz"
-    assert format_raw(sj.parameter_info("C078"), 40) == "40 ms"
-    assert format_raw(sj.parameter_info("A001"), 3) == "3"
-    assert format_raw(sj.parameter_info("P123"), 15) == "1.5"  # unknown: x 10
+    assert format_raw(sj3.parameter_info("F002"), 3000) == "30.00 s"
+    assert format_raw(sj3.parameter_info("A004"), 600) == "60.0 Hz"
+    assert format_raw(sj3.parameter_info("C078"), 40) == "40 ms"
+    assert format_raw(sj3.parameter_info("A001"), 3) == "3"
+    assert format_raw(sj3.parameter_info("P123"), 15) == "1.5"  # unknown: x 10
 
 
 def test_plain_lines_align_columns() -> None:

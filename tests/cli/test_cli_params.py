@@ -8,7 +8,7 @@ from pathlib import Path
 
 from clirun import TcpSim, sj300
 
-from sj300_async import PARAMETERS
+from sj300_async.sj300 import PARAMETERS
 
 
 async def test_backup_writes_the_documented_format(tcp_sim: TcpSim, tmp_path: Path) -> None:

@@ -14,13 +14,11 @@ from typing import Any
 
 import pytest
 
-from sj300_async import (
+from sj300_async import Direction, InputTerminal, LocalProtocolError
+from sj300_async.sj300 import (
     BROADCAST,
     PARAMETERS,
     Command,
-    Direction,
-    InputTerminal,
-    LocalProtocolError,
     encode_request,
     motor_capacity_kw,
     requests,

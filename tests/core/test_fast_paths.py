@@ -29,22 +29,13 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from sj300_async import (
-    AckDataReply,
-    AckReply,
-    BadFrame,
-    DataReply,
     Direction,
-    Discarded,
     InputMonitor,
     InverterStatus,
     MonitorData,
     NakCode,
-    NakReply,
     OutputTerminal,
     RemoteProtocolError,
-    Reply,
-    ReplyParser,
-    RequestParser,
     StatusA,
     StatusB,
     StatusC,
@@ -52,15 +43,25 @@ from sj300_async import (
     TripRecord,
     TripStatusB,
     TripStatusC,
+)
+from sj300_async.sj300 import (
+    AckDataReply,
+    AckReply,
+    DataReply,
+    NakReply,
+    Reply,
+    ReplyParser,
+    RequestParser,
     decode_monitor,
     decode_parameter_value,
     decode_status,
     decode_trip_history,
     encode_reply,
 )
-from sj300_async._events import slot_setters, unfrozen_twin
-from sj300_async._parser import _decode_reply_body
-from sj300_async._payloads import _input_monitor, _output_terminal, _trip_status_b
+from sj300_async.sj300._parser import _decode_reply_body
+from sj300_async.sj300._payloads import _input_monitor, _output_terminal, _trip_status_b
+from sj300_async.wire import BadFrame, Discarded
+from sj300_async.wire._fast_construct import slot_setters, unfrozen_twin
 
 PROPERTY = settings(max_examples=300, deadline=None)
 STX = b"\x02"

@@ -4,12 +4,12 @@ from __future__ import annotations
 
 import pytest
 
-from sj300_async import (
+from sj300_async import NakCode
+from sj300_async.sj300 import (
     BROADCAST,
     AckDataReply,
     AckReply,
     DataReply,
-    NakCode,
     NakReply,
     Reply,
     Request,

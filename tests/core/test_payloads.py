@@ -28,6 +28,8 @@ from sj300_async import (
     TripRecord,
     TripStatusB,
     TripStatusC,
+)
+from sj300_async.sj300 import (
     decode_can_store,
     decode_monitor,
     decode_parameter_value,

@@ -18,15 +18,13 @@ from operator import xor
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from sj300_async import (
+from sj300_async import NakCode
+from sj300_async.sj300 import (
     BROADCAST,
     PARAMETERS,
     AckDataReply,
     AckReply,
-    BadFrame,
     DataReply,
-    Discarded,
-    NakCode,
     NakReply,
     Reply,
     ReplyParser,
@@ -36,6 +34,7 @@ from sj300_async import (
     encode_reply,
     requests,
 )
+from sj300_async.wire import BadFrame, Discarded
 
 PROPERTY = settings(max_examples=250, deadline=None)
 STX = b"\x02"

@@ -12,9 +12,7 @@ import pytest
 
 import sj300_async
 from sj300_async import (
-    BROADCAST,
     BusClosedError,
-    Command,
     InputTerminal,
     LocalProtocolError,
     NakCode,
@@ -26,6 +24,7 @@ from sj300_async import (
     SJ300Error,
     TransportError,
 )
+from sj300_async.sj300 import BROADCAST, Command
 
 CORE_NAMES = {
     # codec

@@ -12,19 +12,9 @@ from operator import xor
 
 import pytest
 
-from sj300_async import (
-    AckDataReply,
-    AckReply,
-    BadFrame,
-    BadFrameReason,
-    DataReply,
-    Discarded,
-    DiscardReason,
-    NakCode,
-    NakReply,
-    ParserEvent,
-    ReplyParser,
-)
+from sj300_async import NakCode
+from sj300_async.sj300 import AckDataReply, AckReply, DataReply, NakReply, ParserEvent, ReplyParser
+from sj300_async.wire import BadFrame, BadFrameReason, Discarded, DiscardReason
 
 STX = b"\x02"
 ACK = b"\x06"

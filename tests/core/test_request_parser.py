@@ -7,18 +7,16 @@ from operator import xor
 
 import pytest
 
-from sj300_async import (
+from sj300_async import InputTerminal, NakCode
+from sj300_async.sj300 import (
     BROADCAST,
     NAK_FOR_BAD_REQUEST,
-    BadFrame,
-    BadFrameReason,
     Command,
-    InputTerminal,
-    NakCode,
     Request,
     RequestParser,
     requests,
 )
+from sj300_async.wire import BadFrame, BadFrameReason
 
 STX = b"\x02"
 CR = b"\r"

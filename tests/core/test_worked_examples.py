@@ -6,10 +6,10 @@ import re
 
 import pytest
 
-from sj300_async import (
+from sj300_async import InputTerminal
+from sj300_async.sj300 import (
     AckReply,
     Command,
-    InputTerminal,
     ReplyParser,
     bcc,
     encode_reply,

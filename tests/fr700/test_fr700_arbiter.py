@@ -5,6 +5,8 @@ from __future__ import annotations
 import pytest
 
 import sj300_async as sj
+from sj300_async import bus as sjbus
+from sj300_async import wire
 from sj300_async.fr700 import Fr700Dialect
 from sj300_async.simulator.fr700 import Fr700SimulatedBus
 
@@ -22,7 +24,7 @@ def sim_of(bus: sj.Bus) -> Fr700SimulatedBus:
 
 
 async def test_a_damaged_reply_is_asked_for_again_not_retried():
-    trace: list[sj.TraceRecord] = []
+    trace: list[sjbus.TraceRecord] = []
     async with fr700_bus(trace=trace.append) as bus:
         drive = bus.drive(2)
         await drive.set_frequency(33.0)
@@ -35,7 +37,7 @@ async def test_a_damaged_reply_is_asked_for_again_not_retried():
         assert sim_of(bus).stats.reoutputs == 1
     sent = [r for r in trace if r.direction == "tx"]
     assert sent[-1].data == NAK + b"02\r"  # format F
-    bad = next(r for r in trace if isinstance(r.event, sj.BadFrame))
+    bad = next(r for r in trace if isinstance(r.event, wire.BadFrame))
     # the host waits its processing delay (10 ms) before answering
     assert sent[-1].timestamp - bad.timestamp >= 0.010 - 1e-4
 
@@ -70,7 +72,7 @@ async def test_a_damaged_ack_is_not_asked_for_again():
 
 
 async def test_the_host_acknowledges_data_and_rests_10_ms():
-    trace: list[sj.TraceRecord] = []
+    trace: list[sjbus.TraceRecord] = []
     async with fr700_bus("&ack=1", trace=trace.append) as bus:
         drive = bus.drive(3)
         await drive.read_status()

@@ -6,17 +6,7 @@ import pickle
 
 import pytest
 
-from sj300_async import (
-    BadFrame,
-    BadFrameReason,
-    Discarded,
-    DiscardReason,
-    LocalProtocolError,
-    NakError,
-    RemoteProtocolError,
-    ReplyTimeoutError,
-)
-from sj300_async._dialect import SJ300_DIALECT
+from sj300_async import LocalProtocolError, NakError, RemoteProtocolError, ReplyTimeoutError
 from sj300_async.fr700 import (
     Fr700Ack,
     Fr700Data,
@@ -26,6 +16,8 @@ from sj300_async.fr700 import (
     Fr700ReplyParser,
     requests,
 )
+from sj300_async.sj300._dialect import SJ300_DIALECT
+from sj300_async.wire import BadFrame, BadFrameReason, Discarded, DiscardReason
 
 DIALECT = Fr700Dialect()
 READ_STATUS = requests.read(3, 0x7A)  # 2-digit reply

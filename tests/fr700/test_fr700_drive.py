@@ -7,6 +7,7 @@ import asyncio
 import pytest
 
 import sj300_async as sj
+from sj300_async import sj300 as sj3
 from sj300_async.fr700 import (
     Fr700Drive,
     Fr700Monitor,
@@ -292,7 +293,7 @@ async def test_protocol_mismatch_is_refused():
         async with sj.open_bus("sim://?terminator=cr"):
             pass
     with pytest.raises(sj.LocalProtocolError, match="does not speak"):
-        async with sj.open_bus("sim://?protocol=fr700", simulator=sj.simulator.SimulatedBus()):
+        async with sj.open_bus("sim://?protocol=fr700", simulator=sj3.simulator.SimulatedBus()):
             pass
 
 

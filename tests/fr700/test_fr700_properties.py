@@ -15,7 +15,6 @@ from fr700wire import ref_sum
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from sj300_async import BadFrame, Discarded
 from sj300_async.fr700 import (
     MAX_FRAME,
     Fr700Ack,
@@ -33,6 +32,7 @@ from sj300_async.fr700 import (
     sum_check,
 )
 from sj300_async.simulator.fr700 import HostRequest, RequestParser
+from sj300_async.wire import BadFrame, Discarded
 
 PROPERTY = settings(max_examples=250, deadline=None)
 TERMINATORS = (b"", b"\r", b"\r\n")

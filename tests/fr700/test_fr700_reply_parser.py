@@ -5,7 +5,7 @@ from __future__ import annotations
 import pytest
 from fr700wire import ACK, CR, ETX, LF, NAK, STX, ack, data_reply, nak, ref_sum
 
-from sj300_async import BadFrame, BadFrameReason, Discarded, DiscardReason, LocalProtocolError
+from sj300_async import LocalProtocolError
 from sj300_async.fr700 import (
     MAX_FRAME,
     Fr700Ack,
@@ -14,6 +14,7 @@ from sj300_async.fr700 import (
     Fr700NakCode,
     Fr700ReplyParser,
 )
+from sj300_async.wire import BadFrame, BadFrameReason, Discarded, DiscardReason
 
 TERMINATORS = [b"", CR, CR + LF]
 

@@ -5,17 +5,18 @@ from __future__ import annotations
 import pytest
 
 import sj300_async as sj
-from sj300_async._bus import make_dialect
-from sj300_async._dialect import SJ300_DIALECT
+from sj300_async import bus as sjbus
+from sj300_async.bus import make_dialect
 from sj300_async.fr700 import Fr700Dialect
+from sj300_async.sj300._dialect import SJ300_DIALECT
 
 
 def dialect_of(url: str, protocol: str | None = None) -> object:
-    return make_dialect(sj.parse_bus_url(url), protocol)  # type: ignore[arg-type]
+    return make_dialect(sjbus.parse_bus_url(url), protocol)  # type: ignore[arg-type]
 
 
 def test_protocol_in_the_url():
-    address = sj.parse_bus_url("tcp://10.0.0.5:4001?protocol=FR700&terminator=crlf&ack=1")
+    address = sjbus.parse_bus_url("tcp://10.0.0.5:4001?protocol=FR700&terminator=crlf&ack=1")
     assert address.protocol == "fr700"
     assert address.protocol_options == {"terminator": "crlf", "ack": "1"}
     dialect = make_dialect(address)
@@ -67,29 +68,29 @@ def test_bad_protocol_settings(url, protocol, match):
 
 
 def test_sim_nodes_are_stations_0_to_31_for_fr700():
-    assert sj.parse_bus_url("sim://?protocol=fr700&nodes=0-3,31").nodes == (0, 1, 2, 3, 31)
-    assert sj.parse_bus_url("sim://?protocol=fr700").nodes == tuple(range(8))
-    assert sj.parse_bus_url("sim://?protocol=fr700").description == "sim://(stations 0-7)"
+    assert sjbus.parse_bus_url("sim://?protocol=fr700&nodes=0-3,31").nodes == (0, 1, 2, 3, 31)
+    assert sjbus.parse_bus_url("sim://?protocol=fr700").nodes == tuple(range(8))
+    assert sjbus.parse_bus_url("sim://?protocol=fr700").description == "sim://(stations 0-7)"
     with pytest.raises(sj.LocalProtocolError, match=r"0\.\.31"):
-        sj.parse_bus_url("sim://?protocol=fr700&nodes=32")
+        sjbus.parse_bus_url("sim://?protocol=fr700&nodes=32")
     with pytest.raises(sj.LocalProtocolError, match=r"1\.\.32"):
-        sj.parse_bus_url("sim://?nodes=0")
+        sjbus.parse_bus_url("sim://?nodes=0")
 
 
 def test_the_protocol_argument_completes_the_url():
-    address = sj.parse_bus_url("sim://?nodes=0-1&terminator=crlf", protocol="fr700")
+    address = sjbus.parse_bus_url("sim://?nodes=0-1&terminator=crlf", protocol="fr700")
     assert (address.protocol, address.nodes) == ("fr700", (0, 1))
-    assert sj.parse_bus_url("tcp://h:1?protocol=fr700", protocol="fr700").protocol == "fr700"
+    assert sjbus.parse_bus_url("tcp://h:1?protocol=fr700", protocol="fr700").protocol == "fr700"
     with pytest.raises(sj.LocalProtocolError, match="URL says"):
-        sj.parse_bus_url("tcp://h:1?protocol=sj300", protocol="fr700")
+        sjbus.parse_bus_url("tcp://h:1?protocol=sj300", protocol="fr700")
     with pytest.raises(sj.LocalProtocolError, match="unknown protocol"):
-        sj.parse_bus_url("tcp://h:1", protocol="x")  # type: ignore[arg-type]
+        sjbus.parse_bus_url("tcp://h:1", protocol="x")  # type: ignore[arg-type]
 
 
 def test_node_list_range_is_a_parameter():
-    assert sj.parse_node_list("0-2", low=0, high=31) == (0, 1, 2)
+    assert sjbus.parse_node_list("0-2", low=0, high=31) == (0, 1, 2)
     with pytest.raises(sj.LocalProtocolError):
-        sj.parse_node_list("0-2")
+        sjbus.parse_node_list("0-2")
 
 
 async def test_dialect_argument_must_match_the_protocol():

@@ -5,7 +5,6 @@ from __future__ import annotations
 import pytest
 from fr700wire import ACK, CR, ENQ, ETX, LF, NAK, STX, data_reply, nak, ref_sum, request
 
-from sj300_async import BadFrame, BadFrameReason
 from sj300_async.fr700 import (
     Fr700Ack,
     Fr700Data,
@@ -24,6 +23,7 @@ from sj300_async.fr700 import (
     sum_check,
 )
 from sj300_async.fr700._codes import Fr700Instruction as I
+from sj300_async.wire import BadFrame, BadFrameReason
 
 WAIT_1 = Fr700LineOptions(wait_time_digit=1)
 

@@ -38,8 +38,9 @@ import random
 from collections.abc import Callable
 from dataclasses import dataclass, field
 
-import sj300_async as sj
-from sj300_async.simulator import SimulatedBus
+from sj300_async import sj300 as sj3
+from sj300_async import wire
+from sj300_async.simulator.sj300 import SimulatedBus
 from sj300_async.transports import LineFaults
 
 STX = 0x02
@@ -99,7 +100,7 @@ class FrameFaults(LineFaults):
     stray_rate: float = 0.0
     stray_nodes: tuple[int, ...] = tuple(range(20, 33))
     #: Judges whether a damaged frame is still valid: a ReplyParser or RequestParser factory.
-    parser_factory: Callable[[], sj.ReplyParser | sj.RequestParser] = sj.ReplyParser
+    parser_factory: Callable[[], sj3.ReplyParser | sj3.RequestParser] = sj3.ReplyParser
 
     def mangle(self, data: bytes) -> bytes:
         body = split_frame(data)
@@ -168,9 +169,9 @@ class FrameFaults(LineFaults):
     def _valid_frames(self, data: bytes) -> list[object]:
         events = self.parser_factory().feed(data)
         return [  # a request as what it asks: the case of its BCC does not matter
-            (e.node, e.command, e.data) if isinstance(e, sj.Request) else e
+            (e.node, e.command, e.data) if isinstance(e, sj3.Request) else e
             for e in events
-            if not isinstance(e, sj.BadFrame | sj.Discarded)
+            if not isinstance(e, wire.BadFrame | wire.Discarded)
         ]
 
 

@@ -26,17 +26,19 @@ import time
 from dataclasses import dataclass
 
 import sj300_async as sj
-from sj300_async._constants import MAX_REPLY_BODY, MAX_REQUEST_BODY
-from sj300_async.simulator import SimulatedBus
+from sj300_async import sj300 as sj3
+from sj300_async import wire
+from sj300_async.simulator.sj300 import SimulatedBus
+from sj300_async.sj300._constants import MAX_REPLY_BODY, MAX_REQUEST_BODY
 
-REPLY_EVENTS = (sj.AckReply, sj.AckDataReply, sj.DataReply, sj.NakReply)
+REPLY_EVENTS = (sj3.AckReply, sj3.AckDataReply, sj3.DataReply, sj3.NakReply)
 SIM_NODES = (1, 2, 3, 31)
 _DECODERS = {
-    (sj.DataReply, 8): sj.decode_status,
-    (sj.DataReply, 104): sj.decode_monitor,
-    (sj.DataReply, 440): sj.decode_trip_history,
-    (sj.AckDataReply, 8): sj.decode_parameter_value,
-    (sj.AckDataReply, 2): sj.decode_can_store,
+    (sj3.DataReply, 8): sj3.decode_status,
+    (sj3.DataReply, 104): sj3.decode_monitor,
+    (sj3.DataReply, 440): sj3.decode_trip_history,
+    (sj3.AckDataReply, 8): sj3.decode_parameter_value,
+    (sj3.AckDataReply, 2): sj3.decode_can_store,
 }
 
 
@@ -52,11 +54,11 @@ def _merged(events: list[object]) -> list[object]:
     for event in events:
         last = out[-1] if out else None
         if (
-            isinstance(event, sj.Discarded)
-            and isinstance(last, sj.Discarded)
+            isinstance(event, wire.Discarded)
+            and isinstance(last, wire.Discarded)
             and last.reason is event.reason
         ):
-            out[-1] = sj.Discarded(event.reason, last.data + event.data)
+            out[-1] = wire.Discarded(event.reason, last.data + event.data)
         else:
             out.append(event)
     return out
@@ -64,17 +66,17 @@ def _merged(events: list[object]) -> list[object]:
 
 def _length(event: object) -> int:
     """Bytes of the stream an event stands for."""
-    if isinstance(event, sj.Discarded):
+    if isinstance(event, wire.Discarded):
         return len(event.data)
-    if isinstance(event, sj.BadFrame):
+    if isinstance(event, wire.BadFrame):
         return len(event.body) + 2
-    if isinstance(event, sj.Request):
+    if isinstance(event, sj3.Request):
         return len(event.frame)
-    return len(sj.encode_reply(event))  # type: ignore[arg-type]
+    return len(sj3.encode_reply(event))  # type: ignore[arg-type]
 
 
 def _feed(
-    parser: sj.ReplyParser | sj.RequestParser,
+    parser: sj3.ReplyParser | sj3.RequestParser,
     pieces: list[bytes],
     allowed: tuple[type, ...],
     limit: int,
@@ -93,19 +95,19 @@ def _feed(
 def check_stream(data: bytes, cuts: list[int], *, requests: bool = False) -> list[object]:
     """Run *data* through a fresh parser (reply or request), whole and in chunks."""
     if requests:
-        make, limit = sj.RequestParser, MAX_REQUEST_BODY
-        allowed: tuple[type, ...] = (sj.Request, sj.BadFrame, sj.Discarded)
+        make, limit = sj3.RequestParser, MAX_REQUEST_BODY
+        allowed: tuple[type, ...] = (sj3.Request, wire.BadFrame, wire.Discarded)
     else:
-        make, limit = sj.ReplyParser, MAX_REPLY_BODY
-        allowed = (*REPLY_EVENTS, sj.BadFrame, sj.Discarded)
+        make, limit = sj3.ReplyParser, MAX_REPLY_BODY
+        allowed = (*REPLY_EVENTS, wire.BadFrame, wire.Discarded)
     parser = make()
     events = _feed(parser, chunks(data, cuts), allowed, limit)
     assert sum(map(_length, events)) == len(data), "bytes not accounted for"
-    frames = [e for e in events if not isinstance(e, sj.BadFrame | sj.Discarded)]
+    frames = [e for e in events if not isinstance(e, wire.BadFrame | wire.Discarded)]
     stats = parser.stats
     assert stats.frames == len(frames)
-    assert stats.bad_frames == sum(isinstance(e, sj.BadFrame) for e in events)
-    discarded = sum(len(e.data) for e in events if isinstance(e, sj.Discarded))
+    assert stats.bad_frames == sum(isinstance(e, wire.BadFrame) for e in events)
+    discarded = sum(len(e.data) for e in events if isinstance(e, wire.Discarded))
     assert stats.discarded_bytes == discarded
     whole = _feed(make(), [data], allowed, limit)
     assert _merged(events) == _merged(whole), "events depend on the chunking"
@@ -132,7 +134,7 @@ def check_simulator(data: bytes, cuts: list[int]) -> int:
     for piece in chunks(data, cuts):
         now += 0.001
         for transmission in sim.receive(piece, now):
-            events = sj.ReplyParser().feed(transmission.data)
+            events = sj3.ReplyParser().feed(transmission.data)
             assert len(events) == 1, f"not one frame: {transmission.data!r}"
             assert isinstance(events[0], REPLY_EVENTS), f"invalid reply {events[0]!r}"
             assert events[0].node in SIM_NODES
@@ -161,26 +163,26 @@ class Mutator:
     def _replies(rng: random.Random) -> list[bytes]:
         frames = []
         for node in (1, 2, 9, 31, 32):
-            frames.append(sj.encode_reply(sj.AckReply(node)))
-            frames.append(sj.encode_reply(sj.AckDataReply(node, b"%08d" % rng.randrange(10**8))))
-            frames.append(sj.encode_reply(sj.AckDataReply(node, b"01")))
-            frames.append(sj.encode_reply(sj.NakReply(node, sj.NakCode(16))))
-            frames.append(sj.encode_reply(sj.DataReply(node, b"03010300")))
+            frames.append(sj3.encode_reply(sj3.AckReply(node)))
+            frames.append(sj3.encode_reply(sj3.AckDataReply(node, b"%08d" % rng.randrange(10**8))))
+            frames.append(sj3.encode_reply(sj3.AckDataReply(node, b"01")))
+            frames.append(sj3.encode_reply(sj3.NakReply(node, sj.NakCode(16))))
+            frames.append(sj3.encode_reply(sj3.DataReply(node, b"03010300")))
             monitor = b"".join(b"%08d" % rng.randrange(10**4) for _ in range(13))
-            frames.append(sj.encode_reply(sj.DataReply(node, monitor)))
-            frames.append(sj.encode_reply(sj.DataReply(node, b"%08d" % 3 + b"00000000" * 54)))
+            frames.append(sj3.encode_reply(sj3.DataReply(node, monitor)))
+            frames.append(sj3.encode_reply(sj3.DataReply(node, b"%08d" % 3 + b"00000000" * 54)))
         return frames
 
     @staticmethod
     def _requests() -> list[bytes]:
-        rq = sj.requests
+        rq = sj3.requests
         frames = []
-        for node in (1, 2, 31, sj.BROADCAST):
+        for node in (1, 2, 31, sj3.BROADCAST):
             frames += [rq.run(node, sj.Direction.FORWARD).frame, rq.set_frequency(node, 12.5).frame]
             frames += [rq.set_terminals(node, sj.InputTerminal.RS).frame]
             frames += [rq.write_parameter_raw(node, "A020", 1234).frame, rq.initialize(node).frame]
             frames += [rq.store(node).frame]
-            if node != sj.BROADCAST:
+            if node != sj3.BROADCAST:
                 frames += [rq.read_status(node).frame, rq.read_monitor(node).frame]
                 frames += [rq.read_trip_history(node).frame, rq.read_parameter(node, "C072").frame]
                 frames += [rq.can_store(node).frame, rq.recalculate(node).frame]

@@ -24,6 +24,8 @@ import pytest
 from rel_leaks import Baseline
 
 import sj300_async as sj
+from sj300_async import bus as sjbus
+from sj300_async import sj300 as sj3
 
 
 @dataclass
@@ -31,7 +33,7 @@ class Rig:
     bus: sj.Bus
     written: list[bytes] = field(default_factory=list)
 
-    def trace(self, record: sj.TraceRecord) -> None:
+    def trace(self, record: sjbus.TraceRecord) -> None:
         if record.direction == "tx":
             self.written.append(record.data)
 
@@ -185,17 +187,17 @@ REQUEST_CASES = [
     pytest.param(1, "00", b"", "must be a Command", id="command '00'"),
     pytest.param(1, None, b"", "must be a Command", id="command None"),
     pytest.param(0, 0, b"1", "1..32", id="node 0"),
-    pytest.param(sj.BROADCAST, sj.Command.READ_STATUS, b"", "may not be broadcast", id="FF 04"),
-    pytest.param(sj.BROADCAST, sj.Command.RECALCULATE, b"", "may not be broadcast", id="FF 0B"),
-    pytest.param(1, sj.Command.RUN, b"3", "b'0', b'1' or b'2'", id="00 data 3"),
-    pytest.param(1, sj.Command.RUN, "1", "must be bytes", id="00 data str"),
-    pytest.param(1, sj.Command.SET_FREQUENCY, b"12345", "six decimal digits", id="01 five digits"),
-    pytest.param(1, sj.Command.SET_FREQUENCY, b"1234a6", "six decimal digits", id="01 letter"),
-    pytest.param(1, sj.Command.SET_TERMINALS, b"0" * 15, "sixteen hex", id="02 fifteen digits"),
-    pytest.param(1, sj.Command.SET_TERMINALS, b"0" * 15 + b"G", "sixteen hex", id="02 letter G"),
-    pytest.param(1, sj.Command.READ_STATUS, b"1", "takes no data", id="04 with data"),
-    pytest.param(1, sj.Command.READ_PARAMETER, b"A0201", "not a parameter code", id="06 A0201"),
-    pytest.param(1, sj.Command.WRITE_PARAMETER, b"A020123", "eight decimal digits", id="07 short"),
+    pytest.param(sj3.BROADCAST, sj3.Command.READ_STATUS, b"", "may not be broadcast", id="FF 04"),
+    pytest.param(sj3.BROADCAST, sj3.Command.RECALCULATE, b"", "may not be broadcast", id="FF 0B"),
+    pytest.param(1, sj3.Command.RUN, b"3", "b'0', b'1' or b'2'", id="00 data 3"),
+    pytest.param(1, sj3.Command.RUN, "1", "must be bytes", id="00 data str"),
+    pytest.param(1, sj3.Command.SET_FREQUENCY, b"12345", "six decimal digits", id="01 five digits"),
+    pytest.param(1, sj3.Command.SET_FREQUENCY, b"1234a6", "six decimal digits", id="01 letter"),
+    pytest.param(1, sj3.Command.SET_TERMINALS, b"0" * 15, "sixteen hex", id="02 fifteen digits"),
+    pytest.param(1, sj3.Command.SET_TERMINALS, b"0" * 15 + b"G", "sixteen hex", id="02 letter G"),
+    pytest.param(1, sj3.Command.READ_STATUS, b"1", "takes no data", id="04 with data"),
+    pytest.param(1, sj3.Command.READ_PARAMETER, b"A0201", "not a parameter code", id="06 A0201"),
+    pytest.param(1, sj3.Command.WRITE_PARAMETER, b"A020123", "eight decimal digits", id="07 short"),
 ]
 
 
@@ -203,7 +205,7 @@ REQUEST_CASES = [
 def test_encoder_refuses(node: Any, command: Any, data: Any, match: str) -> None:
     exc = None
     try:
-        sj.encode_request(node, command, data)
+        sj3.encode_request(node, command, data)
     except Exception as caught:
         exc = caught
     assert_refused(exc, sj.LocalProtocolError, match)

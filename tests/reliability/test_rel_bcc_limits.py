@@ -20,14 +20,16 @@ import pytest
 from rel_sizes import Sizes
 
 import sj300_async as sj
-from sj300_async.simulator import SimulatedBus
+from sj300_async import sj300 as sj3
+from sj300_async import wire
+from sj300_async.simulator.sj300 import SimulatedBus
 
 pytestmark = pytest.mark.soak
 
-rq = sj.requests
+rq = sj3.requests
 
 
-def _requests(node: int) -> list[sj.Request]:
+def _requests(node: int) -> list[sj3.Request]:
     return [
         rq.read_status(node),
         rq.read_monitor(node),
@@ -52,9 +54,9 @@ def _frames() -> tuple[list[bytes], list[bytes]]:
 def _valid(make: Callable[[], Any], data: bytes) -> list[object]:
     """The valid frames in *data*; a request as what it asks (its BCC's case does not matter)."""
     return [
-        (e.node, e.command, e.data) if isinstance(e, sj.Request) else e
+        (e.node, e.command, e.data) if isinstance(e, sj3.Request) else e
         for e in make().feed(data)
-        if not isinstance(e, sj.BadFrame | sj.Discarded)
+        if not isinstance(e, wire.BadFrame | wire.Discarded)
     ]
 
 
@@ -84,7 +86,7 @@ def test_every_single_byte_fault_is_detected(soak: bool, soak_figures: dict[str,
     replies, requests = _frames()
     outcomes: Counter[str] = Counter()
     escaped = []
-    for frames, make in ((replies, sj.ReplyParser), (requests, sj.RequestParser)):
+    for frames, make in ((replies, sj3.ReplyParser), (requests, sj3.RequestParser)):
         for frame in frames:
             for kind, damaged in _single_faults(frame, values):
                 verdict = _judge(make, frame, damaged)
@@ -114,8 +116,8 @@ def test_double_faults_can_escape_the_bcc(sizes: Sizes, soak_figures: dict[str, 
     figures = {}
     samples = sizes.fuzz_inputs // 4
     for name, frames, make in (
-        ("replies", replies, sj.ReplyParser),
-        ("requests", requests, sj.RequestParser),
+        ("replies", replies, sj3.ReplyParser),
+        ("requests", requests, sj3.RequestParser),
     ):
         outcomes: Counter[str] = Counter()
         for _ in range(samples):
@@ -138,4 +140,4 @@ def test_a_reply_from_the_wrong_node_is_never_taken(node: int) -> None:
         for bit in range(8):
             for at in (1, 2):
                 damaged = frame[:at] + bytes((frame[at] ^ 1 << bit,)) + frame[at + 1 :]
-                assert _judge(sj.ReplyParser, frame, damaged) != "undetected"
+                assert _judge(sj3.ReplyParser, frame, damaged) != "undetected"

@@ -25,6 +25,7 @@ from rel_oracle import KEYS, Oracle, value_for
 from rel_sizes import Sizes
 
 import sj300_async as sj
+from sj300_async import bus as sjbus
 
 pytestmark = pytest.mark.soak
 
@@ -55,7 +56,7 @@ class Storm:
         self.too_late = 0
         self.cancellations = 0
 
-    def trace(self, record: sj.TraceRecord) -> None:
+    def trace(self, record: sjbus.TraceRecord) -> None:
         if record.direction == "tx":
             self.last_tx = (record.timestamp, len(record.data))
 

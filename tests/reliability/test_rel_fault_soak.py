@@ -26,7 +26,8 @@ from rel_oracle import KEYS, Oracle, value_for
 from rel_sizes import Sizes
 
 import sj300_async as sj
-from sj300_async.simulator import SimulatedBus
+from sj300_async import sj300 as sj3
+from sj300_async.simulator.sj300 import SimulatedBus
 
 pytestmark = pytest.mark.soak
 
@@ -189,7 +190,7 @@ def line_faults(seed: int) -> tuple[FrameFaults, FrameFaults]:
         byte_fault_rate=0.012,
         garble_rate=0.005,
         fragment_max=4,
-        parser_factory=sj.RequestParser,
+        parser_factory=sj3.RequestParser,
     )
     to_host = FrameFaults(
         rng=random.Random(seed + 2),

@@ -29,7 +29,7 @@ from rel_fuzz_targets import Mutator, check_decoders, check_simulator, check_str
 from rel_leaks import peak_rss_mib
 from rel_sizes import Sizes
 
-import sj300_async as sj
+from sj300_async import sj300 as sj3
 
 pytestmark = pytest.mark.soak
 
@@ -204,7 +204,7 @@ def _feed_cost(unit: bytes, size: int, chunk: int, repeat: int) -> float:
     gc.disable()
     try:
         for _ in range(repeat):
-            parser = sj.ReplyParser()
+            parser = sj3.ReplyParser()
             begin = time.thread_time()  # CPU time: other processes do not count
             for at in range(0, len(data), chunk):
                 parser.feed(data[at : at + chunk])
@@ -237,7 +237,7 @@ def test_decoding_keeps_no_memory_per_distinct_value() -> None:
     def decode(n: int, start: int) -> None:
         for i in range(start, start + n):
             inputs, outputs = (i * 7919) & 0xFFFFFFFF, i & 0xFFFFFFFF
-            sj.decode_monitor(base + b"%08X" % inputs + b"%08X" % outputs + b"00000000" * 7)
+            sj3.decode_monitor(base + b"%08X" % inputs + b"%08X" % outputs + b"00000000" * 7)
 
     decode(1000, 0)  # warm up whatever is legitimately cached
     tracemalloc.start()

@@ -26,7 +26,8 @@ from rel_leaks import Baseline, CountingLogs, ErrorLog, MemoryWatch, bus_idle
 from rel_sizes import Sizes
 
 import sj300_async as sj
-from sj300_async.simulator import SimulatedBus, SimulatorServer, serve_tcp
+from sj300_async.simulator import SimulatorServer, serve_tcp
+from sj300_async.simulator.sj300 import SimulatedBus
 
 pytestmark = pytest.mark.soak
 

@@ -20,7 +20,8 @@ from pathlib import Path
 
 import pytest
 
-from sj300_async.simulator import SimulatedBus, serve_tcp
+from sj300_async.simulator import serve_tcp
+from sj300_async.simulator.sj300 import SimulatedBus
 
 ROOT = Path(__file__).parent.parent.parent
 

@@ -8,7 +8,7 @@ the simulator against the reference, not against itself.
 
 from __future__ import annotations
 
-from sj300_async.simulator import SimulatedBus
+from sj300_async.simulator.sj300 import SimulatedBus
 
 STX = b"\x02"
 ACK = b"\x06"

@@ -8,7 +8,8 @@ import pytest
 from simwire import ack, ack_data, data_reply, exchange, nak, request, xor_bcc
 
 from sj300_async import LocalProtocolError
-from sj300_async.simulator import DEFAULT_PROCESSING_S, LinePacing, SimulatedBus, Transmission
+from sj300_async.simulator import LinePacing, Transmission
+from sj300_async.simulator.sj300 import DEFAULT_PROCESSING_S, SimulatedBus
 
 
 def test_each_node_answers_for_itself() -> None:

@@ -26,7 +26,7 @@ from simwire import (
     xor_bcc,
 )
 
-from sj300_async.simulator import SimulatedBus
+from sj300_async.simulator.sj300 import SimulatedBus
 
 
 @pytest.fixture

@@ -7,7 +7,8 @@ import asyncio
 import pytest
 from simwire import ack, data_reply, request
 
-from sj300_async.simulator import LinePacing, PacedLine, SimulatedBus, SimulatorEndpoint
+from sj300_async.simulator import LinePacing, PacedLine, SimulatorEndpoint
+from sj300_async.simulator.sj300 import SimulatedBus
 
 
 class Host:

@@ -5,9 +5,15 @@ from __future__ import annotations
 import pytest
 from simwire import ack, ack_data, exchange, nak, request
 
-from sj300_async import LocalProtocolError, parameter_info
-from sj300_async.simulator import DEFAULT_EEPROM_WRITE_S, Country, SimulatedBus, SimulatedDrive
-from sj300_async.simulator._parameters_table import factory_table, value_error
+from sj300_async import LocalProtocolError
+from sj300_async.simulator.sj300 import (
+    DEFAULT_EEPROM_WRITE_S,
+    Country,
+    SimulatedBus,
+    SimulatedDrive,
+)
+from sj300_async.simulator.sj300._parameters_table import factory_table, value_error
+from sj300_async.sj300 import parameter_info
 
 
 def read(bus: SimulatedBus, code: bytes, now: float = 0.0) -> bytes:
@@ -115,7 +121,7 @@ def test_every_factory_value_is_one_the_drive_accepts(country: Country) -> None:
 
 
 def test_the_drive_knows_every_catalogued_parameter() -> None:
-    from sj300_async import PARAMETERS
+    from sj300_async.sj300 import PARAMETERS
 
     table = factory_table(Country.EUROPE, 1)
     assert set(PARAMETERS) <= set(table)

@@ -19,9 +19,12 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 from simwire import ack, exchange, fields, reply_data, request
 
-from sj300_async import BadFrame, LocalProtocolError, Request, RequestParser, TripHistory
-from sj300_async.simulator import Faults, RunState, SimulatedBus, SimulatedDrive
-from sj300_async.simulator._trips import TripLog
+from sj300_async import LocalProtocolError, TripHistory
+from sj300_async.simulator import Faults, RunState
+from sj300_async.simulator.sj300 import SimulatedBus, SimulatedDrive
+from sj300_async.simulator.sj300._trips import TripLog
+from sj300_async.sj300 import Request, RequestParser
+from sj300_async.wire import BadFrame
 
 RATE_HZ_PER_S = 50.0 / 30.0  # European factory values: A004 = 50.0 Hz, F002 = F003 = 30.00 s
 HOUR_S = 3600.0

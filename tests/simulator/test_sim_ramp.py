@@ -10,7 +10,8 @@ from __future__ import annotations
 import pytest
 from simwire import ack, exchange, fields, reply_data, request
 
-from sj300_async.simulator import RunState, SimulatedBus
+from sj300_async.simulator import RunState
+from sj300_async.simulator.sj300 import SimulatedBus
 
 RATE_HZ_PER_S = 50.0 / 30.0
 

@@ -14,12 +14,12 @@ from simwire import ack, ack_data, data_reply, request
 from sj300_async.simulator import (
     LinePacing,
     PtyServer,
-    SimulatedBus,
     SimulatorServer,
     open_pty_server,
     serve_serial_device,
     serve_tcp,
 )
+from sj300_async.simulator.sj300 import SimulatedBus
 
 TIMEOUT = 2.0
 

@@ -28,7 +28,8 @@ from pathlib import Path
 import pytest
 
 import sj300_async as sj
-from sj300_async.simulator import SimulatedBus, open_pty_server, serve_tcp
+from sj300_async.simulator import open_pty_server, serve_tcp
+from sj300_async.simulator.sj300 import SimulatedBus
 
 NODES = (1, 2, 3, 4)
 

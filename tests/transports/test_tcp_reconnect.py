@@ -7,7 +7,8 @@ import asyncio
 import pytest
 
 import sj300_async as sj
-from sj300_async.simulator import SimulatedBus, serve_tcp
+from sj300_async.simulator import serve_tcp
+from sj300_async.simulator.sj300 import SimulatedBus
 
 FAST = sj.ReconnectPolicy(initial_s=0.02, max_s=0.1, connect_timeout_s=1.0)
 

@@ -14,7 +14,7 @@ servers, baud pacing) serves it as it is::
 
 from __future__ import annotations
 
-from ._bus import Fr700SimulatedBus, Fr700SimulatorStats, corrupt
+from ._bus import Fr700SimulatedBus, Fr700SimulatorStats, corrupt, simulate
 from ._drive import DEFAULT_PROCESSING_S, FaultCode, Fr700SimulatedDrive
 from ._parameters import PARAMETERS, ParameterSpec
 from ._request_parser import BadRequest, HostAnswer, HostRequest, RequestParser
@@ -32,4 +32,5 @@ __all__ = [
     "ParameterSpec",
     "RequestParser",
     "corrupt",
+    "simulate",
 ]

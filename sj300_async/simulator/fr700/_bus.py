@@ -28,9 +28,6 @@ from __future__ import annotations
 import logging
 from collections.abc import Iterable
 
-from ..._errors import LocalProtocolError
-from ..._events import Discarded
-from ..._framing import ParserStats
 from ...fr700._codec import (
     Fr700LineOptions,
     encode_ack,
@@ -39,9 +36,13 @@ from ...fr700._codec import (
     terminator_bytes,
 )
 from ...fr700._codes import ETX, STX, Fr700Instruction
+from ...fr700._dialect import Fr700Dialect
 from ...fr700._events import Fr700Ack, Fr700Data, Fr700Nak, Fr700Reply
-from .._bus import LineCounters, Transmission
+from ...wire._errors import LocalProtocolError
+from ...wire._events import Discarded
+from ...wire._parser_stats import ParserStats
 from .._faults import Faults
+from .._model import LineCounters, Transmission
 from ._drive import DEFAULT_PROCESSING_S, Fr700SimulatedDrive
 from ._request_parser import BadRequest, HostAnswer, HostRequest, RequestParser
 
@@ -93,6 +94,9 @@ class Fr700SimulatedBus:
     Raises:
         LocalProtocolError: a station outside 0..31 or repeated, or a bad line option.
     """
+
+    #: The protocol its drives speak (a bus checks a given simulator against its own).
+    protocol = "fr700"
 
     def __init__(
         self,
@@ -197,3 +201,24 @@ class Fr700SimulatedBus:
         if isinstance(reply, Fr700Ack):
             return encode_ack(reply.station, self.terminator)
         return encode_nak(reply.station, reply.code, self.terminator)
+
+
+def simulate(
+    dialect: object, nodes: tuple[int, ...], *, factory_defaults: bool, wait_ms: int | None
+) -> Fr700SimulatedBus:
+    """The simulated line a ``sim://`` FR-700 bus talks to (the dialect's ``simulator``).
+
+    Its drives follow the dialect's line options (waiting-time field, terminator).
+    """
+    if not isinstance(dialect, Fr700Dialect):
+        raise LocalProtocolError(f"an FR-700 simulator needs an FR-700 dialect, got {dialect!r}")
+    bus = Fr700SimulatedBus(
+        nodes,
+        wait_field=dialect.options.wait_field,
+        terminator=dialect.options.terminator,
+        factory_defaults=factory_defaults,
+    )
+    if wait_ms is not None:
+        for drive in bus.drives.values():
+            drive.set_wait_ms(wait_ms)
+    return bus

@@ -56,8 +56,6 @@ from collections.abc import Callable, Mapping
 from types import MappingProxyType
 from typing import Final
 
-from ..._codes import Direction
-from ..._errors import LocalProtocolError
 from ...fr700._codes import (
     RESET_DATA,
     Fr700Instruction,
@@ -66,6 +64,8 @@ from ...fr700._codes import (
     Fr700StatusBits,
 )
 from ...fr700._events import Fr700Ack, Fr700Data, Fr700Nak, Fr700Reply
+from ...wire._enums import Direction
+from ...wire._errors import LocalProtocolError
 from .._electrical import MotorRating, electrical
 from .._motion import Output, Ramp, RunState, advance, classify
 from ._parameters import COMMUNICATION, NOT_USED, PARAMETERS, factory_values

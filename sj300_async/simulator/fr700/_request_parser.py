@@ -38,10 +38,10 @@ import re
 from dataclasses import dataclass
 from typing import Final
 
-from ..._events import Discarded, DiscardReason
-from ..._framing import ParserStats
 from ...fr700._codec import parse_station, sum_check
 from ...fr700._codes import A1_INSTRUCTIONS, ACK, CR, ENQ, LF, NAK, Fr700Instruction, Fr700NakCode
+from ...wire._events import Discarded, DiscardReason
+from ...wire._parser_stats import ParserStats
 
 __all__ = [
     "MAX_REQUEST",

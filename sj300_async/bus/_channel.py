@@ -1,0 +1,117 @@
+"""The bus as a drive sees it: requests of one protocol in, the data of their answers out.
+
+A drive class holds a :class:`Channel` typed in its protocol's request type,
+so the whole transaction path is typed: ``Channel[Request].transact(request)``
+runs the request through the bus's arbiter and returns the positive answer's
+data, as the dialect's :meth:`~._dialect.Dialect.accept` extracted it. The
+channel is where a closed or read-only bus refuses a request, before it
+queues for the line.
+"""
+
+from __future__ import annotations
+
+from typing import TYPE_CHECKING, Generic, Protocol
+
+from ..wire import BusClosedError, LocalProtocolError, ReadOnlyError
+from ._dialect import Dialect, RequestT
+from ._stats import TransactionStats
+
+if TYPE_CHECKING:
+    from ._arbiter import Arbiter
+
+__all__ = ["Channel"]
+
+
+class BusState(Protocol):
+    """What a channel reads of its bus (the bus itself)."""
+
+    @property
+    def description(self) -> str: ...
+
+    @property
+    def read_only(self) -> bool: ...
+
+    @property
+    def closed(self) -> bool: ...
+
+
+class Channel(Generic[RequestT]):
+    """A typed gate to one bus's arbiter (made by the bus, handed to its drives)."""
+
+    __slots__ = ("_arbiter", "_bus", "_dialect", "_retries")
+
+    def __init__(
+        self,
+        bus: BusState,
+        arbiter: Arbiter[RequestT, object],
+        dialect: Dialect[RequestT, object],
+        retries: int,
+    ) -> None:
+        self._bus = bus
+        self._arbiter = arbiter
+        self._dialect = dialect
+        self._retries = retries
+
+    @property
+    def description(self) -> str:
+        """The bus's description, e.g. ``tcp://127.0.0.1:4001``."""
+        return self._bus.description
+
+    @property
+    def read_only(self) -> bool:
+        """True when the bus refuses every request that changes a drive."""
+        return self._bus.read_only
+
+    @property
+    def dialect(self) -> Dialect[RequestT, object]:
+        """The bus's protocol."""
+        return self._dialect
+
+    def check(self, request: RequestT) -> None:
+        """Refuse *request* now if the bus is closed, or read-only and it writes.
+
+        Raises:
+            BusClosedError, ReadOnlyError.
+        """
+        bus = self._bus
+        if bus.closed:
+            raise BusClosedError(f"bus {bus.description} is closed")
+        if bus.read_only and self._dialect.writes(request):
+            raise ReadOnlyError(f"bus {bus.description} is read-only: {request.label} refused")
+
+    async def transact(
+        self,
+        request: RequestT,
+        stats: TransactionStats,
+        *,
+        wait_s: float = 0.0,
+        timeout_s: float | None = None,
+        urgent: bool = False,
+    ) -> bytes:
+        """Run a request that expects an answer; return the data of its positive answer.
+
+        Raises:
+            LocalProtocolError: the request expects no answer (use :meth:`send`).
+            NakError, ReplyTimeoutError, RemoteProtocolError, TransportError,
+            BusClosedError, ReadOnlyError.
+        """
+        self.check(request)
+        if not request.expects_reply:
+            raise LocalProtocolError(f"{request.label} gets no reply: send it with send()")
+        return await self._arbiter.transact(
+            request, stats, wait_s=wait_s, timeout_s=timeout_s, retries=self._retries, urgent=urgent
+        )
+
+    async def send(
+        self, request: RequestT, stats: TransactionStats, *, urgent: bool = False
+    ) -> None:
+        """Write a request that gets no answer (a broadcast, a reset), resting the line after it.
+
+        Raises:
+            LocalProtocolError: the request expects an answer (use :meth:`transact`).
+            TransportError, BusClosedError, ReadOnlyError.
+        """
+        self.check(request)
+        if request.expects_reply:
+            raise LocalProtocolError(f"{request.label} expects a reply: run it with transact()")
+        await self._arbiter.send(request, stats, urgent=urgent)

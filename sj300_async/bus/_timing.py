@@ -1,0 +1,106 @@
+"""How long to wait for a reply, and how long the line must rest between transactions.
+
+Sans-IO arithmetic from the line settings; the arbiter applies it.
+
+Response time-out = request wire time + the drive's wait time (C078)
++ reply wire time + margin. The margin covers the drive's own processing
+time and, for a TCP bridge, the network; it is the one number a user
+normally tunes. A fixed time-out can replace the whole sum.
+
+Guard interval: after every reply the line may rest ``guard_chars``
+character times, counted from the reply's arrival. By default it does not
+(0 characters), a decision: the SJ300 protocol sets no silence between a
+reply and the next request (frames are delimited by STX and CR, as Modbus
+ASCII's are, which needs no gap either), and a drive's RS-485 driver
+releases the line within microseconds of its last stop bit, sooner than any
+host turns around (a USB adapter alone takes longer). Every character of
+rest is about 1.4 % of a status/monitor poll's line time, which the default
+should not give away. A line with slow repeaters, isolators or
+direction-switching converters sets ``guard_chars`` (1 to 3.5 is usual);
+note that asyncio's default event loop waits in whole milliseconds, so a
+shorter rest costs about a millisecond. After a broadcast nobody answers,
+but every drive is busy for its processing time: the host waits the
+broadcast's own wire time plus ``broadcast_processing_s``.
+
+Drain after a failure: when a transaction ends without its answer (time-out,
+transport error, cancellation), a reply may still be on its way. Nothing is
+sent until the line has been quiet for the failed transaction's whole
+response time-out (at least the guard interval); every byte that arrives
+meanwhile restarts the quiet period and is discarded and counted. So a late
+reply is never taken as the answer to a later request, unless a drive
+answers more than twice its time-out late — which the protocol, having no
+sequence numbers, cannot detect; ``drain_max_s`` bounds a babbling line.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from typing import TYPE_CHECKING
+
+from ..wire._errors import LocalProtocolError
+from ..wire._line import LineSettings
+
+if TYPE_CHECKING:
+    from ._dialect import LineRequest
+
+__all__ = ["BusTiming"]
+
+
+def _finite_number(value: object) -> bool:
+    return isinstance(value, int | float) and not isinstance(value, bool) and math.isfinite(value)
+
+
+@dataclass(frozen=True, slots=True)
+class BusTiming:
+    """Timing policy of one bus. Every field is in seconds unless named otherwise."""
+
+    #: Added to the computed wire and wait times: drive processing, network, scheduling.
+    margin_s: float = 0.05
+    #: If set, the response time-out of every request, replacing the computed sum.
+    fixed_timeout_s: float | None = None
+    #: Rest after every reply, in character times of the line, counted from the
+    #: reply's arrival (see the module docstring for why the default is none).
+    #: The 3.5-character silence of Modbus RTU is a framing rule that this
+    #: STX..CR-delimited protocol does not need.
+    guard_chars: float = 0.0
+    #: Rest after a broadcast, on top of its wire time.
+    broadcast_processing_s: float = 0.01
+    #: Upper bound of a drain, so a line that never goes quiet cannot stall the bus.
+    drain_max_s: float = 5.0
+
+    def __post_init__(self) -> None:
+        for name in ("margin_s", "guard_chars", "broadcast_processing_s", "drain_max_s"):
+            value = getattr(self, name)
+            if not _finite_number(value) or value < 0:
+                raise LocalProtocolError(f"{name} must be a finite number >= 0, got {value!r}")
+        timeout = self.fixed_timeout_s
+        if timeout is not None and (not _finite_number(timeout) or timeout <= 0):
+            # An infinite time-out is the hang a time-out exists to prevent.
+            raise LocalProtocolError(f"timeout must be a finite number > 0, got {timeout!r}")
+
+    def response_timeout(
+        self, request: LineRequest, line: LineSettings, wait_s: float, reply_length: int
+    ) -> float:
+        """Seconds from the write of *request* until its answer must have arrived.
+
+        Args:
+            wait_s: the device's wait and processing time for this request.
+            reply_length: characters of the longest reply it can get.
+        """
+        if self.fixed_timeout_s is not None:
+            return self.fixed_timeout_s
+        wire = line.wire_time_s(len(request.frame) + reply_length)
+        return wire + wait_s + self.margin_s
+
+    def guard(self, line: LineSettings) -> float:
+        """Seconds the line rests after a reply."""
+        return self.guard_chars * line.char_time_s
+
+    def after_broadcast(self, request: LineRequest, line: LineSettings) -> float:
+        """Seconds the line rests after a broadcast was written."""
+        return line.wire_time_s(len(request.frame)) + self.broadcast_processing_s
+
+    def drain_quiet(self, failed_timeout: float, line: LineSettings) -> float:
+        """Quiet time required after a failed transaction before the next request."""
+        return max(failed_timeout, self.guard(line))

@@ -1,0 +1,135 @@
+"""The Hitachi SJ300 ASCII protocol as a dialect of the protocol-neutral async stack.
+
+What the bus learns from it:
+
+- Matching: a reply answers a request when it comes from the addressed node
+  and has the shape of the command's reply (:func:`~._matching.answers`); a
+  NAK from the node answers any request.
+- Acceptance: a positive reply gives its data (``b""`` for a bare ACK); a
+  NAK becomes :class:`~sj300_async.NakError` with its :class:`NakCode`.
+- Retries: NAK 01..08 are transmission errors, worth another attempt; 11,
+  13 and 16 are the drive's verdict.
+- Timing: replies are at most 449 characters; the drive states no
+  processing time beyond its C078 wait (the caller's ``wait_time_s``).
+- Around the line: nodes 1..32, :class:`~._drive.Drive` per node and
+  :class:`~._drive.Broadcast` for node FF; the commands in
+  :data:`MUTATING_COMMANDS` change a drive; no URL options; the simulator is
+  :func:`sj300_async.simulator.sj300.simulate`.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+from typing import TYPE_CHECKING, Final
+
+from ..wire import BadFrame, LocalProtocolError, NakError, SJ300Error
+from ._codes import NakCode
+from ._commands import Command, reply_frame_length
+from ._constants import MAX_NODE, MIN_NODE
+from ._drive import Broadcast, Drive
+from ._events import AckDataReply, AckReply, DataReply, NakReply, Reply
+from ._matching import answers
+from ._parameters import normalize_code
+from ._parser import ReplyParser
+from ._requests import Request
+
+if TYPE_CHECKING:
+    from ..bus import Channel
+
+__all__ = ["MUTATING_COMMANDS", "SJ300_DIALECT", "SJ300Dialect"]
+
+#: Commands that change a drive; a read-only bus refuses them.
+MUTATING_COMMANDS: Final = frozenset(
+    {
+        Command.RUN,
+        Command.SET_FREQUENCY,
+        Command.SET_TERMINALS,
+        Command.WRITE_PARAMETER,
+        Command.INITIALIZE,
+        Command.STORE,
+        Command.RECALCULATE,
+    }
+)
+
+
+class SJ300Dialect:
+    """The Hitachi SJ300 ASCII protocol (see the module docstring)."""
+
+    name = "sj300"
+    node_range = (MIN_NODE, MAX_NODE)
+    node_noun = "node"
+    default_sim_nodes = "1-8"
+    url_options: frozenset[str] = frozenset()
+    simulator = "sj300_async.simulator.sj300:simulate"
+
+    def __repr__(self) -> str:
+        return "SJ300Dialect()"
+
+    def configure(self, options: Mapping[str, str]) -> SJ300Dialect:
+        if options:
+            raise LocalProtocolError(f"the SJ300 protocol has no options: {sorted(options)}")
+        return self
+
+    def new_parser(self) -> ReplyParser:
+        return ReplyParser()
+
+    def answers(self, request: Request, reply: Reply) -> bool:
+        return answers(request, reply)
+
+    def accept(self, request: Request, reply: Reply) -> bytes:
+        # Most answers carry data: test for those first.
+        if isinstance(reply, DataReply | AckDataReply):
+            return reply.data
+        if isinstance(reply, AckReply):
+            return b""
+        raise NakError(reply.node, reply.code)
+
+    def retryable(self, exc: SJ300Error) -> bool:
+        # NAK 01..08 are transmission errors; 11, 13 and 16 are the drive's verdict.
+        if isinstance(exc, NakError):
+            return NakCode(exc.code).is_transmission_error
+        return True
+
+    def writes(self, request: Request) -> bool:
+        return request.command in MUTATING_COMMANDS
+
+    def reply_frame_length(self, request: Request) -> int:
+        return reply_frame_length(request.command)
+
+    def processing_s(self, request: Request) -> float:
+        return 0.0  # the SJ300 states none beyond C078; the margin covers it
+
+    def acknowledgement(self, request: Request, reply: Reply) -> bytes | None:
+        return None
+
+    def answer_delay_s(self) -> float:
+        return 0.0
+
+    def rest_after_acknowledgement_s(self) -> float:
+        return 0.0
+
+    def reoutput_request(self, request: Request, bad_frame: BadFrame) -> bytes | None:
+        return None  # an SJ300 cannot be asked to repeat a reply: the host retries
+
+    def describe(self, reply: Reply) -> str:
+        if isinstance(reply, NakReply):
+            return f"node {reply.node:02d} NAK {int(reply.code):02d} ({reply.code.description})"
+        if isinstance(reply, AckReply):
+            return f"node {reply.node:02d} ACK"
+        kind = "ACK + data" if isinstance(reply, AckDataReply) else "data"
+        return f"node {reply.node:02d} {kind} {reply.data.decode('ascii', 'replace')}"
+
+    def parameter_code(self, text: str) -> str | None:
+        try:
+            return normalize_code(text)
+        except LocalProtocolError:
+            return None
+
+    def make_drive(self, channel: Channel[Request], node: int) -> Drive:
+        return Drive(channel, node)
+
+    def make_broadcast(self, channel: Channel[Request]) -> Broadcast:
+        return Broadcast(channel)
+
+
+SJ300_DIALECT: Final = SJ300Dialect()
