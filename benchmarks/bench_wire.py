@@ -148,6 +148,33 @@ async def _poll_one_cycle(
             return stats.last_cycle_s
 
 
+@dataclass(frozen=True, slots=True)
+class _Reply:
+    """A reply as the trace saw it: its bytes, and when its last chunk arrived."""
+
+    length: int
+    timestamp: float
+
+
+def _transactions(trace: list[TraceRecord]) -> list[tuple[TraceRecord, _Reply]]:
+    """Pair each request with the chunks that came back before the next one."""
+    pairs: list[tuple[TraceRecord, _Reply]] = []
+    request: TraceRecord | None = None
+    length, done = 0, None
+    for record in [*trace, None]:
+        if record is not None and record.direction == "rx":
+            length += len(record.data)
+            if record.events:
+                done = record.timestamp
+            continue
+        if request is not None:
+            if done is None:
+                break  # unanswered: the cycle is over
+            pairs.append((request, _Reply(length, done)))
+        request, length, done = record, 0, None
+    return pairs
+
+
 def _analyse(
     trace: list[TraceRecord],
     line: LineSettings,
@@ -156,18 +183,17 @@ def _analyse(
     traced_s: float,
     guard_s: float,
 ) -> Cycle:
-    # Trace of one cycle: tx, rx, tx, rx... (the poller may have written the first
-    # request of the next cycle before it was stopped: pairs only).
-    tx = [r for r in trace if r.direction == "tx"]
-    rx = [r for r in trace if r.direction == "rx"]
-    pairs = list(zip(tx, rx, strict=False))[: 2 * drives]
-    if len(pairs) != 2 * drives or any(r.event is None for _, r in pairs):
+    # Trace of one cycle: a request (tx), then its reply in one or more chunks
+    # (rx). The poller may have written the first request of the next cycle
+    # before it was stopped: complete transactions only.
+    pairs = _transactions(trace)[: 2 * drives]
+    if len(pairs) != 2 * drives:
         raise RuntimeError(f"expected {2 * drives} clean transactions, traced {len(pairs)}")
     char_s = line.char_time_s
     processing = DEFAULT_PROCESSING_S
-    wire = sum((len(t.data) + len(r.data)) * char_s for t, r in pairs)
+    wire = sum((len(t.data) + r.length) * char_s for t, r in pairs)
     late = sum(
-        (r.timestamp - t.timestamp) - (len(t.data) + len(r.data)) * char_s - processing
+        (r.timestamp - t.timestamp) - (len(t.data) + r.length) * char_s - processing
         for t, r in pairs
     )
     gaps = [pairs[i + 1][0].timestamp - pairs[i][1].timestamp for i in range(len(pairs) - 1)]

@@ -415,13 +415,13 @@ def test_tcp_runs_on_uvloop(harness: ModuleType) -> None:
 
 def test_hotspots_profile_sees_the_library_per_transaction(harness: ModuleType) -> None:
     hotspots = importlib.import_module("benchmarks.hotspots")
-    assert hotspots.layer("/x/sj300_async/_arbiter.py") == "library"
-    assert hotspots.layer("/x/sj300_async/simulator/_drive.py") == "simulator"
+    assert hotspots.layer("/x/sj300_async/bus/_arbiter.py") == "library"
+    assert hotspots.layer("/x/sj300_async/simulator/sj300/_drive.py") == "simulator"
     assert hotspots.layer("/usr/lib/python3.11/asyncio/base_events.py") == "event loop"
     assert hotspots.layer("~") == "builtins"
     spots, done = hotspots.profile("loopback", 50)
     assert done == 50
     assert {"library", "simulator", "event loop"} <= {hotspots.layer(s.file) for s in spots}
-    reads = [s for s in spots if s.where.startswith("_drive.py:") and s.function == "read_status"]
+    reads = [s for s in spots if s.where.startswith("sj300/_drive.py:") and s.function == "read_status"]
     assert len(reads) == 1
     assert reads[0].calls >= 50  # a coroutine counts once more each time it resumes

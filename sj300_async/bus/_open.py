@@ -168,8 +168,6 @@ async def _open_bus(
     simulator: Any,
     dialect: Dialect[Any, Any] | None,
 ) -> AsyncIterator[Bus[Any, Any]]:
-    if dialect is not None and protocol is None:
-        protocol = dialect.name
     address = parse_bus_url(url, protocol=protocol)
     made = make_dialect(address, protocol)
     if dialect is None:

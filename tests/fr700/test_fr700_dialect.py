@@ -50,13 +50,18 @@ def test_answers(request_, event, answers):
 
 
 def test_a_nak_is_a_typed_refusal():
-    error = DIALECT.refusal(WRITE, Fr700Nak(3, Fr700NakCode.MODE))
-    assert isinstance(error, NakError)
+    with pytest.raises(NakError) as refused:
+        DIALECT.accept(WRITE, Fr700Nak(3, Fr700NakCode.MODE))
+    error = refused.value
     assert (error.node, error.code) == (3, Fr700NakCode.MODE)
     assert str(error) == "station 03 answered NAK A (mode error)"
     copy = pickle.loads(pickle.dumps(error))
     assert (copy.node, copy.code, str(copy)) == (3, Fr700NakCode.MODE, str(error))
-    assert DIALECT.refusal(WRITE, Fr700Ack(3)) is None
+
+
+def test_a_positive_reply_gives_its_data():
+    assert DIALECT.accept(WRITE, Fr700Ack(3)) == b""
+    assert DIALECT.accept(READ_STATUS, Fr700Data(3, b"4B")) == b"4B"
 
 
 @pytest.mark.parametrize(
@@ -129,13 +134,11 @@ def test_sj300_dialect_has_no_host_answers():
     assert SJ300_DIALECT.reoutput_request(object(), BadFrame(BadFrameReason.BAD_BCC, b"")) is None
 
 
-def test_trace_bytes_are_the_wire_bytes():
-    term_dialect = Fr700Dialect(terminator="\r\n")
-    for wire in (b"\x0603\r\n", b"\x1503C\r\n", b"\x02031770\x0332\r\n"):
-        (event,) = Fr700ReplyParser(b"\r\n").feed(wire)
-        assert term_dialect.trace_bytes(event) == wire
-    assert DIALECT.trace_bytes(Discarded(DiscardReason.GARBAGE, b"xy")) == b"xy"
-    assert DIALECT.trace_bytes(BadFrame(BadFrameReason.BAD_BCC, b"\x02ab")) == b"\x02ab"
+def test_replies_are_described_for_traces():
+    assert DIALECT.describe(Fr700Ack(3)) == "station 03 ACK"
+    assert DIALECT.describe(Fr700Nak(3, Fr700NakCode.MODE)) == "station 03 NAK A (mode error)"
+    assert DIALECT.describe(Fr700Data(3, b"1770")) == "station 03 data 1770"
+
 
 
 def test_options_are_validated():

@@ -17,6 +17,7 @@ from sj300_async.fr700 import (
     Fr700StatusBits,
 )
 from sj300_async.simulator.fr700 import Fr700SimulatedBus
+from sj300_async.simulator.sj300 import SimulatedBus
 
 URL = "sim://?protocol=fr700&nodes=0-3"
 
@@ -289,11 +290,11 @@ async def test_protocol_mismatch_is_refused():
     with pytest.raises(sj.LocalProtocolError, match="URL says"):
         async with sj.open_bus("sim://?protocol=fr700", protocol="sj300"):
             pass
-    with pytest.raises(sj.LocalProtocolError, match="FR-700 options"):
+    with pytest.raises(sj.LocalProtocolError, match="options of protocol fr700"):
         async with sj.open_bus("sim://?terminator=cr"):
             pass
     with pytest.raises(sj.LocalProtocolError, match="does not speak"):
-        async with sj.open_bus("sim://?protocol=fr700", simulator=sj3.simulator.SimulatedBus()):
+        async with sj.open_bus("sim://?protocol=fr700", simulator=SimulatedBus()):
             pass
 
 

@@ -56,7 +56,7 @@ def test_sj300_remains_the_default():
     [
         ("tcp://h:1?protocol=modbus", None, "unknown protocol"),
         ("tcp://h:1?protocol=fr700", "sj300", "URL says"),
-        ("tcp://h:1?ack=1", None, "FR-700 options"),
+        ("tcp://h:1?ack=1", None, "options of protocol fr700"),
         ("tcp://h:1?protocol=fr700&terminator=lf", None, "terminator"),
         ("tcp://h:1?protocol=fr700&ack=maybe", None, "ack"),
         ("tcp://h:1", "dnp3", "unknown protocol"),
