@@ -1,42 +1,82 @@
 # Every target creates .venv when it is missing, so a fresh machine needs only
-# Python >= 3.11 and make.
+# Python >= 3.11 and make (and, for the tests, the system packages below).
 PYTHON ?= python3
 VENV := .venv
 BIN := $(VENV)/bin
-STAMP := $(VENV)/.installed
+# The package with every extra (test, lint, bench, fuzz): what the checks need.
+DEV_STAMP := $(VENV)/.installed-dev
+# The package alone, without extras: what the demo runs on.
+RUN_STAMP := $(VENV)/.installed-run
 
-.PHONY: demo test lint typecheck pytest bench soak clean venv
+# Debian packages the tests need; each provides a command of the same name
+# (socat + ser2net: the real serial-device-server bridge test in tests/transports).
+SYSTEM_PACKAGES := socat ser2net
 
-$(STAMP): pyproject.toml
-	test -x $(BIN)/python || $(PYTHON) -m venv $(VENV)
+.PHONY: demo test lint typecheck lint-imports system-packages pytest bench bench-compare \
+	soak clean venv
+
+$(BIN)/python:
+	$(PYTHON) -m venv $(VENV)
 	$(BIN)/python -m pip install --quiet --upgrade pip
+
+$(DEV_STAMP): pyproject.toml | $(BIN)/python
 	$(BIN)/python -m pip install --quiet -e '.[dev]'
-	touch $(STAMP)
+	touch $@
 
-venv: $(STAMP)
+$(RUN_STAMP): pyproject.toml | $(BIN)/python
+	$(BIN)/python -m pip install --quiet -e .
+	touch $@
 
-demo: $(STAMP)
+venv: $(DEV_STAMP)
+
+demo: $(RUN_STAMP)
 	$(BIN)/sj300 monitor
 
-test: lint typecheck pytest
+# In this order; make stops at the first that fails.
+test: lint typecheck lint-imports pytest
 
-lint: $(STAMP)
+lint: $(DEV_STAMP)
 	$(BIN)/ruff check sj300_async tests benchmarks examples
 	$(BIN)/ruff format --check sj300_async tests benchmarks examples
 
-typecheck: $(STAMP)
-	$(BIN)/mypy --strict sj300_async
+typecheck: $(DEV_STAMP)
+	$(BIN)/mypy --strict sj300_async tests
 
-pytest: $(STAMP)
+# The import contracts in pyproject.toml ([tool.importlinter]).
+lint-imports: $(DEV_STAMP)
+	$(BIN)/lint-imports
+
+# Installs the missing ones as root; otherwise names them and fails (exit 2).
+system-packages:
+	@missing=; \
+	for package in $(SYSTEM_PACKAGES); do \
+		command -v $$package >/dev/null 2>&1 || missing="$$missing $$package"; \
+	done; \
+	if [ -z "$$missing" ]; then exit 0; fi; \
+	if [ "$$(id -u)" != 0 ]; then \
+		echo "the tests need these system packages: sudo apt-get install$$missing" >&2; \
+		exit 2; \
+	fi; \
+	echo "installing system packages:$$missing"; \
+	export DEBIAN_FRONTEND=noninteractive; \
+	apt-get update -qq && apt-get install -y -qq $$missing >/dev/null
+
+pytest: $(DEV_STAMP) system-packages
 	$(BIN)/pytest $(PYTEST_ARGS)
 
-bench: $(STAMP)
-	$(BIN)/python -m benchmarks
+bench: $(DEV_STAMP)
+	$(BIN)/python -m benchmarks $(BENCH_ARGS)
+
+# make bench-compare REF=<commit> [BENCH_ARGS='--only codec']: that commit's
+# benchmarks (in a temporary git worktree) against the working tree's.
+bench-compare: $(DEV_STAMP)
+	@test -n "$(REF)" || { echo "usage: make bench-compare REF=<commit> [BENCH_ARGS=...]" >&2; exit 2; }
+	$(BIN)/python -m benchmarks.compare --ref '$(REF)' $(BENCH_ARGS)
 
 # The long form of tests/reliability (docs/RELIABILITY.md); its figures are printed
 # at the end and written as JSON.
 SOAK_REPORT ?= $${TMPDIR:-/tmp}/sj300-soak-report.json
-soak: $(STAMP)
+soak: $(DEV_STAMP)
 	$(BIN)/pytest --soak -m soak --soak-report $(SOAK_REPORT) $(PYTEST_ARGS)
 
 clean:

@@ -3,12 +3,18 @@
 With ``--uvloop``, the benchmarks that run an event loop run once more on
 uvloop and get a table of their own: the targets hold on asyncio's default
 loop, uvloop is an optional speed-up.
+
+With ``--json PATH``, the rows are also written to PATH as a JSON list, one
+object per row (the fields of :class:`~benchmarks._harness.Result` and the
+``loop`` it ran on), for ``python -m benchmarks.compare``.
 """
 
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import importlib.util
+import json
 import os
 import platform
 import sys
@@ -43,6 +49,7 @@ def _parse_args(argv: Sequence[str] | None) -> argparse.Namespace:
     )
     parser.add_argument("--repeats", type=int, help="timed runs per side (default 5, quick 2)")
     parser.add_argument("--seed", type=int, default=DEFAULT_SEED, help="seed of every random input")
+    parser.add_argument("--json", metavar="PATH", help="also write the rows to PATH as JSON")
     args = parser.parse_args(argv)
     if args.uvloop and importlib.util.find_spec("uvloop") is None:
         parser.error("--uvloop needs uvloop: pip install uvloop")
@@ -104,6 +111,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     print()
     print(markdown_table(results, peer))
 
+    uv_results: list[Result] = []
     if args.uvloop:
         on_loop = [name for name in names if load(name).USES_EVENT_LOOP]
         uv_config = Config(quick=config.quick, repeats=repeats, seed=args.seed, loop="uvloop")
@@ -113,6 +121,11 @@ def main(argv: Sequence[str] | None = None) -> int:
         print(f"## results on uvloop {version('uvloop')} (the targets are for the default loop)")
         print()
         print(markdown_table(uv_results, peer))
+    if args.json:
+        rows = [{**dataclasses.asdict(r), "loop": "asyncio"} for r in results]
+        rows += [{**dataclasses.asdict(r), "loop": "uvloop"} for r in uv_results]
+        with open(args.json, "w", encoding="utf-8") as file:
+            json.dump(rows, file, indent=1)
     return 0 if ok else 1
 
 
