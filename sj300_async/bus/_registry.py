@@ -40,7 +40,7 @@ def register_protocol(name: str, dialect: str | Callable[[], AnyDialect]) -> Non
     """Make *name* a protocol a bus can speak.
 
     Args:
-        name: lower-case letters, digits and ``_``, e.g. ``"toy"``.
+        name: lower-case letters, digits and ``_``, e.g. ``"modbus_ascii"``.
         dialect: ``"module:attribute"`` of a dialect object, imported on first
             use, or a callable returning the dialect.
 

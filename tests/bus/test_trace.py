@@ -1,0 +1,49 @@
+"""The trace shows the bytes exactly as they crossed the line, and what the parser made of them."""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from contextlib import AbstractAsyncContextManager
+
+from scripted import Rig, reply
+
+import sj300_async as sj
+from sj300_async import sj300 as sj3
+
+MakeRig = Callable[..., AbstractAsyncContextManager[Rig]]
+
+# A monitor block whose two hex fields (the terminal monitors) are lower case
+# on the wire, as a drive may send them: 4 decimal items, 2 hex, 7 decimal.
+_MONITOR = b"0" * 32 + b"0000000e" + b"0000001f" + b"0" * 56
+
+
+def _monitor_in_pieces(request: sj3.Request) -> list[tuple[float, bytes]]:
+    frame = reply(b"%02d" % request.node + _MONITOR)
+    return [(0.0, b"xy" + frame[:10]), (0.001, frame[10:60]), (0.002, frame[60:])]
+
+
+async def test_rx_records_are_the_chunks_as_they_arrived(scripted: MakeRig) -> None:
+    async with scripted(_monitor_in_pieces) as rig:
+        monitor = await rig.bus.drive(4).read_monitor()
+    assert monitor.input_terminals.value == 0x0E
+    frame = reply(b"04" + _MONITOR)
+    tx = [r for r in rig.trace if r.direction == "tx"]
+    rx = [r for r in rig.trace if r.direction == "rx"]
+    assert [r.data for r in tx] == [sj3.requests.read_monitor(4).frame]
+    # Byte for byte, lower-case hex included, in the chunks the line delivered.
+    assert [r.data for r in rx] == [b"xy" + frame[:10], frame[10:60], frame[60:]]
+    assert b"0000000e" in b"".join(r.data for r in rx)
+    # The garbage is discarded with the first chunk; the reply completes with the last.
+    assert [type(e).__name__ for e in rx[0].events] == ["Discarded"]
+    assert rx[1].events == ()
+    (event,) = rx[2].events
+    assert isinstance(event, sj3.DataReply)
+    assert rig.bus.dialect.describe(event).startswith("node 04 data 0000")
+    assert rx[0].timestamp <= rx[1].timestamp <= rx[2].timestamp
+
+
+def test_replies_are_described_for_traces() -> None:
+    dialect = sj3.SJ300_DIALECT
+    assert dialect.describe(sj3.AckReply(3)) == "node 03 ACK"
+    assert dialect.describe(sj3.NakReply(3, sj.NakCode(16))).startswith("node 03 NAK 16 (")
+    assert dialect.describe(sj3.AckDataReply(3, b"00001000")) == "node 03 ACK + data 00001000"
