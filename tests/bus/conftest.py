@@ -9,11 +9,10 @@ import pytest
 from scripted import Responder, Rig, ScriptedPeer, answer_all
 
 import sj300_async as sj
-from sj300_async.wire._line import INSTANT_LINE
 from sj300_async import bus as sjbus
-from sj300_async import sj300 as sj3
 from sj300_async.bus._bus import Bus
 from sj300_async.transports import LineFaults, loopback_connector
+from sj300_async.wire._line import INSTANT_LINE
 
 
 @pytest.fixture

@@ -54,6 +54,8 @@ class ScriptedPeer:
     respond: Responder
     send: Callable[[bytes], None]
     requests: list[sj3.Request] = field(default_factory=list)
+    #: Every byte that reached the peer, as it arrived.
+    received: bytearray = field(default_factory=bytearray)
     bad: list[object] = field(default_factory=list)
     handles: list[asyncio.TimerHandle] = field(default_factory=list)
     closed: bool = False
@@ -62,6 +64,7 @@ class ScriptedPeer:
         self._parser = sj3.RequestParser()
 
     def data_received(self, data: bytes) -> None:
+        self.received += data
         loop = asyncio.get_running_loop()
         for event in self._parser.feed(data):
             if not isinstance(event, sj3.Request):

@@ -200,9 +200,14 @@ async def test_no_rest_after_a_reply_by_default(scripted):
 
 async def test_broadcast_refuses_unicast_only_commands(scripted):
     async with scripted() as rig:
+        # The broadcast object offers no reads, and the bus will not make a
+        # drive at the broadcast address to ask one through.
         assert not hasattr(rig.bus.broadcast, "read_status")
-        with pytest.raises(sj.LocalProtocolError, match="may not be broadcast"):
-            sj3.Request.build(sj3.BROADCAST, sj3.Command.READ_STATUS)
+        with pytest.raises(sj.LocalProtocolError, match=r"node must be 1\.\.32, got 255"):
+            await rig.bus.drive(sj3.BROADCAST).read_status()
+        # Refused before anything reached the wire.
+        assert rig.written() == []
+        assert rig.peer.received == b""
         assert rig.peer.requests == []
 
 
@@ -261,7 +266,9 @@ async def test_read_only_refuses_every_mutating_command(scripted):
         ):
             with pytest.raises(sj.ReadOnlyError):
                 await call
-        assert await d.read_status()
+        assert await d.read_status() == sj.InverterStatus(
+            sj.StatusA.RUNNING, sj.StatusB.RUNNING, sj.StatusC.CONSTANT_SPEED
+        )
         assert [r.command for r in rig.peer.requests] == [sj3.Command.READ_STATUS]
 
 

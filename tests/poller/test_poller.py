@@ -150,7 +150,15 @@ async def test_samples_iterator_ends_when_the_poller_stops():
             task = asyncio.create_task(reader())
             await asyncio.sleep(0.05)
         await asyncio.wait_for(task, 1)
-        assert got
+        # Node 1's samples, online, in order, until the poller stopped.
+        assert len(got) >= 2
+        assert {s.node for s in got} == {1}
+        assert {s.bus for s in got} == {bus.description}
+        assert all(s.online and s.error is None for s in got)
+        assert all(isinstance(s.status, sj.InverterStatus) for s in got)
+        timestamps = [s.timestamp for s in got]
+        assert timestamps == sorted(timestamps)
+        assert len(set(timestamps)) == len(timestamps)
 
 
 def test_bad_configuration_is_refused():
