@@ -5,6 +5,7 @@ from __future__ import annotations
 import asyncio
 
 import pytest
+from waiting import wait_for
 
 import sj300_async as sj
 
@@ -49,10 +50,15 @@ async def test_offline_after_n_failures_probed_less_often_then_back_online():
             assert health.consecutive_failures == 3
             assert "ReplyTimeoutError" in (health.last_error or "")
             # While offline, node 3 is probed at most every 0.2 s; node 1 keeps being polled.
+            loop = asyncio.get_running_loop()
             polls_3, polls_1 = health.polls, poller.health(bus, 1).polls
-            await asyncio.sleep(0.15)
-            assert poller.health(bus, 3).polls - polls_3 <= 1
-            assert poller.health(bus, 1).polls - polls_1 >= 5
+            start = loop.time()
+            await wait_for(
+                lambda: poller.health(bus, 1).polls - polls_1 >= 5, "five polls of node 1"
+            )
+            elapsed = loop.time() - start
+            probes = poller.health(bus, 3).polls - polls_3
+            assert probes <= 1 + int(elapsed / 0.2), (probes, elapsed)
             sim.faults.silence(3, False)
             async for sample in samples:
                 if sample.node == 3 and sample.online:
@@ -66,8 +72,8 @@ async def test_commands_interleave_without_waiting_for_a_cycle():
         poller.add(bus, range(1, 9))
         loop = asyncio.get_running_loop()
         async with poller:
-            while poller.bus_stats(bus).cycles < 2:  # polling at full speed
-                await asyncio.sleep(0.01)
+            # Polling at full speed.
+            await wait_for(lambda: poller.bus_stats(bus).cycles >= 2, "two polling cycles")
             cycle = poller.bus_stats(bus).mean_cycle_s
             assert cycle is not None
             start = loop.time()
@@ -90,7 +96,10 @@ async def test_two_buses_are_polled_concurrently():
         counts: dict[str, int] = {}
         poller.on_sample(lambda s: counts.__setitem__(s.bus, counts.get(s.bus, 0) + 1))
         async with poller:
-            await asyncio.sleep(0.2)
+            await wait_for(
+                lambda: counts.get(a.description, 0) >= 3 and counts.get(b.description, 0) >= 100,
+                "3 samples from bus A and 100 from bus B",
+            )
         assert set(counts) == {a.description, b.description}
         # B's cycle is not held back by A's slow drive.
         assert counts[b.description] > 3 * counts[a.description]
@@ -101,13 +110,16 @@ async def test_cancellation_stops_polling_cleanly():
         poller = sj.Poller(interval_s=0.001)
         poller.add(bus, [1, 2])
 
+        consumed = 0
+
         async def consume() -> None:
+            nonlocal consumed
             async with poller:
                 async for _ in poller.samples():
-                    pass
+                    consumed += 1
 
         task = asyncio.create_task(consume())
-        await asyncio.sleep(0.05)
+        await wait_for(lambda: consumed >= 3, "three samples consumed")
         task.cancel()
         with pytest.raises(asyncio.CancelledError):
             await task
@@ -129,7 +141,8 @@ async def test_slow_consumer_drops_are_counted():
         async with poller:
             samples = poller.samples()
             first = await samples.__anext__()
-            await asyncio.sleep(0.05)  # do not read: the buffer overflows
+            # Do not read: the buffer overflows.
+            await wait_for(lambda: poller.dropped_samples > 0, "a dropped sample")
             assert poller.dropped_samples > 0
             second = await samples.__anext__()
             assert second.timestamp > first.timestamp
@@ -148,7 +161,7 @@ async def test_samples_iterator_ends_when_the_poller_stops():
 
         async with poller:
             task = asyncio.create_task(reader())
-            await asyncio.sleep(0.05)
+            await wait_for(lambda: len(got) >= 3, "three samples")
         await asyncio.wait_for(task, 1)
         # Node 1's samples, online, in order, until the poller stopped.
         assert len(got) >= 2

@@ -12,6 +12,7 @@ import gc
 import os
 
 import pytest
+from waiting import wait_for
 
 import sj300_async as sj
 
@@ -19,6 +20,19 @@ import sj300_async as sj
 def _open_fds() -> int:
     gc.collect()  # earlier tests' unreachable objects may still hold descriptors
     return len(os.listdir("/proc/self/fd"))
+
+
+def _line_fds() -> set[tuple[str, str]]:
+    """The descriptors that carry a line: sockets and (pseudo-)terminals, with their targets."""
+    found = set()
+    for fd in os.listdir("/proc/self/fd"):
+        try:
+            target = os.readlink(f"/proc/self/fd/{fd}")
+        except OSError:  # closed meanwhile (e.g. listdir's own descriptor)
+            continue
+        if target.startswith(("socket:", "/dev/pts/", "/dev/ptmx", "/dev/tty")):
+            found.add((fd, target))
+    return found
 
 
 async def test_every_command_round_trips(line):
@@ -30,8 +44,13 @@ async def test_every_command_round_trips(line):
         assert await d.read_parameter_raw("C078") == 0
         await d.set_frequency(12.5)
         await d.run_forward()
-        await asyncio.sleep(0.6)
+        # Wait for the ramp (F002 = 0.5 s) to reach the setpoint, reading the monitor.
+        loop = asyncio.get_running_loop()
+        deadline = loop.time() + 5.0
         monitor = await d.read_monitor()
+        while monitor.output_frequency_hz != pytest.approx(12.5) and loop.time() < deadline:
+            await asyncio.sleep(0.02)
+            monitor = await d.read_monitor()
         assert monitor.output_frequency_hz == pytest.approx(12.5)
         assert monitor.direction is sj.Direction.FORWARD
         status = await d.read_status()
@@ -93,15 +112,22 @@ async def test_broadcast_reaches_every_drive(line):
 
 async def test_close_releases_everything(line):
     # Warm up once so lazily-opened files (e.g. /dev/urandom) are not counted.
+    idle_line = _line_fds()
     async with line.open() as bus:
         await bus.drive(1).read_status()
-    await asyncio.sleep(0.05)  # closing may finish in the background (serial: in a thread)
+    # Closing may finish in the background (serial: in a thread; the far end
+    # closes its side when it sees ours go): wait until the line's descriptors
+    # opened for the warm-up are gone.
+    await wait_for(lambda: _line_fds() <= idle_line, "the warm-up's line descriptors to close")
     before = _open_fds()
     async with line.open() as bus:
         await bus.drive(1).read_status()
         assert bus.connected
-    await asyncio.sleep(0.05)  # let the transport's connection_lost run
-    assert _open_fds() <= before
-    assert asyncio.all_tasks() == {asyncio.current_task()}
+    # The transport may finish closing in the background (pyserial's
+    # connection_lost runs in a task that waits for the port to close in a
+    # thread): no task may be left once it has.
+    me = asyncio.current_task()
+    await wait_for(lambda: asyncio.all_tasks() == {me}, "every task but the test's to end")
+    await wait_for(lambda: _open_fds() <= before, f"the open descriptors to return to {before}")
     with pytest.raises(sj.BusClosedError):
         await bus.drive(1).read_status()
