@@ -24,18 +24,14 @@ import logging
 import random
 import signal
 import sys
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from ..bus import get_dialect, parse_node_list
 from ..simulator import (
     LinePacing,
     PacedLine,
-    PtyServer,
-    SerialDeviceServer,
     SimulatorServer,
-    open_pty_server,
     precise_event_loop,
-    serve_serial_device,
     serve_tcp,
 )
 from ..simulator.fr700 import Fr700SimulatedBus, Fr700SimulatedDrive
@@ -44,6 +40,10 @@ from ..wire._errors import LocalProtocolError
 from ._args import DEFAULT_PORT, LOOPBACK, ListenAddress, format_nodes, parse_listen
 from ._common import positive_float
 from ._errors import CliError
+
+if TYPE_CHECKING:  # POSIX-only (pty, termios): imported where used, so --help works without them
+    from ..simulator._device import SerialDeviceServer
+    from ..simulator._pty import PtyServer
 
 __all__ = ["add_parser"]
 
@@ -226,12 +226,16 @@ async def _serve(
             servers.append(server)
             print(f"listening on {ListenAddress(server.host, server.port)}", flush=True)
         if args.pty:
+            from ..simulator._pty import open_pty_server
+
             try:
                 ttys.append(await open_pty_server(bus, line=line))
             except OSError as exc:
                 raise CliError(f"cannot open a pseudo-terminal: {exc.strerror or exc}") from None
             print(f"listening on {ttys[-1].path}", flush=True)
         for path in args.device or ():
+            from ..simulator._device import serve_serial_device
+
             try:
                 ttys.append(await serve_serial_device(bus, path, settings=settings, line=line))
             except (OSError, LocalProtocolError) as exc:
