@@ -1,16 +1,27 @@
-"""The public names of the core: present in ``__all__``, with the reference's values.
+"""The public names: every package's ``__all__`` pinned exactly, with the reference's values.
 
-More names will join ``__all__`` as the async layers land, so the core names
-are pinned as a subset, not as the whole list.
+The root package exports the user's API only (open a bus, get its drives,
+poll them, handle the typed errors); the codec's names live in
+:mod:`sj300_async.sj300`, the neutral ones in :mod:`sj300_async.wire` and
+:mod:`sj300_async.bus`, the simulated drives in :mod:`sj300_async.simulator`.
+Adding or removing a public name is a decision: it changes a pin here.
+(The FR-700 packages are pinned by tests/fr700/test_fr700_public_api.py.)
 """
 
 from __future__ import annotations
 
+import dataclasses
+import enum
+import importlib
+import inspect
 import pickle
+from types import ModuleType
+from typing import cast
 
 import pytest
 
 import sj300_async
+import sj300_async.sj300 as sj300
 from sj300_async import (
     BusClosedError,
     InputTerminal,
@@ -25,6 +36,64 @@ from sj300_async import (
     TransportError,
 )
 from sj300_async.sj300 import BROADCAST, Command
+
+#: The root's ``__all__``: the user's API, and nothing else.
+ROOT_NAMES = (
+    "Broadcast", "Bus", "BusClosedError", "BusPollStats", "BusStats", "BusTiming", "Direction",
+    "Drive", "DriveHealth", "Fr700Drive", "Fr700Monitor", "Fr700Status", "InputMonitor",
+    "InputTerminal", "InverterStatus", "LineSettings", "LocalProtocolError", "MonitorData",
+    "NakCode", "NakError", "OutputTerminal", "Poller", "ProtocolError", "ReadOnlyError",
+    "ReconnectPolicy", "RemoteProtocolError", "ReplyTimeoutError", "SJ300Error", "Sample",
+    "StatusA", "StatusB", "StatusC", "TransportError", "TripHistory", "TripRecord",
+    "TripStatusB", "TripStatusC", "__version__", "open_bus",
+)  # fmt: skip
+#: The user's API stays small enough to read in one go.
+MAX_ROOT_NAMES = 40
+
+SJ300_NAMES = (
+    "BROADCAST", "COMMAND_SPECS", "MAX_NODE", "MIN_NODE", "MUTATING_COMMANDS",
+    "NAK_FOR_BAD_REQUEST", "PARAMETERS", "SJ300_DIALECT", "AckDataReply", "AckReply",
+    "Broadcast", "Command", "CommandSpec", "DataReply", "Drive", "InputMonitor", "InputTerminal",
+    "InverterStatus", "MonitorData", "NakCode", "NakReply", "OutputTerminal", "ParameterInfo",
+    "ParserEvent", "Reply", "ReplyKind", "ReplyParser", "Request", "RequestData", "RequestParser",
+    "SJ300Dialect", "StatusA", "StatusB", "StatusC", "TripHistory", "TripRecord", "TripStatusB",
+    "TripStatusC", "answers", "bcc", "decode_can_store", "decode_monitor",
+    "decode_parameter_value", "decode_status", "decode_trip_history", "encode_monitor",
+    "encode_reply", "encode_request", "encode_status", "encode_trip_history",
+    "motor_capacity_kw", "normalize_code", "parameter_info", "requests",
+)  # fmt: skip
+WIRE_NAMES = (
+    "BadFrame", "BadFrameReason", "BusClosedError", "Direction", "DiscardReason", "Discarded",
+    "LineSettings", "LocalProtocolError", "NakError", "ParserStats", "ProtocolError",
+    "ReadOnlyError", "RemoteProtocolError", "ReplyTimeoutError", "SJ300Error",
+    "TolerantIntEnum", "TransportError",
+)  # fmt: skip
+BUS_NAMES = (
+    "DEFAULT_PROTOCOL", "Bus", "BusAddress", "BusStats", "BusTiming", "Channel", "Dialect",
+    "LineParser", "LineRequest", "ReconnectPolicy", "SimulatorFactory", "StatsSnapshot",
+    "TraceHook", "TraceRecord", "TransactionStats", "format_node_list", "get_dialect",
+    "make_dialect", "open_bus", "parse_bus_url", "parse_flag", "parse_node_list",
+    "protocol_names", "register_protocol", "unregister_protocol",
+)  # fmt: skip
+SIMULATOR_NAMES = (
+    "BusModel", "Faults", "LineCounters", "LinePacing", "PacedLine", "PtyServer", "RunState",
+    "SerialDeviceServer", "SimulatorEndpoint", "SimulatorServer", "Transmission",
+    "open_pty_server", "precise_event_loop", "serve_serial_device", "serve_tcp",
+)  # fmt: skip
+SIMULATOR_SJ300_NAMES = (
+    "DEFAULT_EEPROM_WRITE_S", "DEFAULT_PROCESSING_S", "Country", "SimulatedBus",
+    "SimulatedDrive", "SimulatorStats", "TripCode", "simulate",
+)  # fmt: skip
+
+#: Every package's pinned ``__all__``.
+PINNED = {
+    "sj300_async": ROOT_NAMES,
+    "sj300_async.sj300": SJ300_NAMES,
+    "sj300_async.wire": WIRE_NAMES,
+    "sj300_async.bus": BUS_NAMES,
+    "sj300_async.simulator": SIMULATOR_NAMES,
+    "sj300_async.simulator.sj300": SIMULATOR_SJ300_NAMES,
+}
 
 CORE_NAMES = {
     # codec
@@ -98,6 +167,24 @@ CORE_NAMES = {
     "TransportError",
     "BusClosedError",
 }
+#: The core names that are protocol-neutral, and so live in :mod:`sj300_async.wire`.
+WIRE_CORE_NAMES = {
+    "ParserStats",
+    "BadFrame",
+    "BadFrameReason",
+    "Discarded",
+    "DiscardReason",
+    "Direction",
+    "SJ300Error",
+    "ProtocolError",
+    "LocalProtocolError",
+    "RemoteProtocolError",
+    "ReadOnlyError",
+    "NakError",
+    "ReplyTimeoutError",
+    "TransportError",
+    "BusClosedError",
+}
 
 REQUEST_BUILDERS = {
     "encode_request",
@@ -117,9 +204,88 @@ REQUEST_BUILDERS = {
 }
 
 
+def public_names(module: ModuleType) -> list[str]:
+    return cast(list[str], vars(module)["__all__"])
+
+
+def undocumented(module: ModuleType) -> list[str]:
+    """The classes, functions and modules in *module*'s ``__all__`` with no docstring of their own.
+
+    A dataclass's generated signature and an enum's default text do not count.
+    """
+    missing = []
+    for name in public_names(module):
+        obj = getattr(module, name)
+        if inspect.isclass(obj):
+            doc = obj.__dict__.get("__doc__")
+            if dataclasses.is_dataclass(obj) and doc and doc.startswith(f"{obj.__name__}("):
+                doc = None
+            if issubclass(obj, enum.Enum) and doc and doc.startswith("An enumeration"):
+                doc = None
+        elif inspect.isfunction(obj) or inspect.isbuiltin(obj) or inspect.ismodule(obj):
+            doc = obj.__doc__
+        else:
+            continue  # a constant, an alias or an instance: documented where it is defined
+        if not (isinstance(doc, str) and doc.strip()):
+            missing.append(name)
+    return missing
+
+
+@pytest.mark.parametrize("package", PINNED)
+def test_all_is_pinned(package: str) -> None:
+    names = public_names(importlib.import_module(package))
+    assert len(names) == len(set(names))
+    assert sorted(names) == sorted(PINNED[package])
+
+
+@pytest.mark.parametrize("package", PINNED)
+def test_every_pinned_name_is_importable_and_documented(package: str) -> None:
+    module = importlib.import_module(package)
+    for name in public_names(module):
+        assert getattr(module, name) is not None, name
+    assert undocumented(module) == []
+
+
+def test_the_root_is_the_users_api_only() -> None:
+    assert len(sj300_async.__all__) <= MAX_ROOT_NAMES
+    assert sj300_async.__all__ == sorted(sj300_async.__all__, key=lambda n: (n[0].islower(), n))
+    assert isinstance(sj300_async.__version__, str)
+
+
+def test_root_names_are_the_subpackages_objects() -> None:
+    # A root name re-exports its home package's object; it is never a second definition,
+    # except the root's open_bus: the neutral one, typed with each built-in protocol's drives.
+    for package in PINNED:
+        module = importlib.import_module(package)
+        for name in set(public_names(module)) & set(ROOT_NAMES) - {"open_bus"}:
+            assert getattr(sj300_async, name) is getattr(module, name), (package, name)
+    assert sj300_async.open_bus.__module__ == "sj300_async._open"
+
+
+def test_the_undocumented_check_can_fail() -> None:
+    module = ModuleType("fake")
+
+    @dataclasses.dataclass
+    class Plain:
+        x: int
+
+    class Code(enum.IntEnum):
+        A = 1
+
+    def bare() -> None:
+        pass
+
+    vars(module).update(
+        Plain=Plain, Code=Code, bare=bare, VALUE=1, __all__=["Plain", "Code", "bare", "VALUE"]
+    )
+    assert undocumented(module) == ["Plain", "Code", "bare"]
+
+
 def test_core_names_are_exported() -> None:
-    missing = CORE_NAMES - set(sj300_async.__all__)
+    missing = CORE_NAMES - set(sj300.__all__) - set(sj300_async.wire.__all__)
     assert not missing
+    assert set(sj300.__all__) >= CORE_NAMES - WIRE_CORE_NAMES
+    assert set(sj300_async.wire.__all__) >= WIRE_CORE_NAMES
 
 
 def test_every_exported_name_exists_once() -> None:
@@ -130,20 +296,26 @@ def test_every_exported_name_exists_once() -> None:
 
 def test_star_import_gives_the_core_names() -> None:
     namespace: dict[str, object] = {}
-    exec("from sj300_async import *", namespace)
+    exec("from sj300_async.sj300 import *\nfrom sj300_async.wire import *", namespace)
     assert set(namespace) >= CORE_NAMES
 
 
+def test_star_import_of_the_root_gives_the_users_api() -> None:
+    namespace: dict[str, object] = {}
+    exec("from sj300_async import *", namespace)
+    assert set(namespace) - {"__builtins__"} == set(ROOT_NAMES)
+
+
 def test_request_builders() -> None:
-    assert set(sj300_async.requests.__all__) >= REQUEST_BUILDERS
+    assert set(sj300.requests.__all__) >= REQUEST_BUILDERS
     for name in REQUEST_BUILDERS:
-        assert callable(getattr(sj300_async.requests, name))
+        assert callable(getattr(sj300.requests, name))
 
 
 def test_broadcast_is_ff() -> None:
     assert BROADCAST == 0xFF
-    assert sj300_async.MIN_NODE == 1
-    assert sj300_async.MAX_NODE == 32
+    assert sj300.MIN_NODE == 1
+    assert sj300.MAX_NODE == 32
 
 
 def test_commands() -> None:

@@ -1,110 +1,99 @@
-"""The simulator's model is sans-IO: the drive, the bus, the faults and the pacing import no I/O.
+"""The simulator's model is sans-IO: the drives, the lines, the faults and the pacing import no I/O.
 
-Only the servers (``IO_MODULES``) touch the event loop. Two checks:
-an AST scan of every sans-IO module's imports, and a fresh interpreter that
-imports them without running either package ``__init__`` (which imports the
-servers, legitimately).
+The model is the shared part of :mod:`sj300_async.simulator`
+(:data:`sans_io_scan.SIMULATOR_MODEL`) and the simulated SJ300 drives of
+:mod:`sj300_async.simulator.sj300` (the FR-700 ones are checked by
+tests/fr700/test_fr700_sans_io.py). Only the servers
+(:data:`sans_io_scan.SIMULATOR_IO`) touch the event loop. Checks: the module
+lists cover the packages, an AST scan of every sans-IO module's imports, and
+a fresh interpreter that imports them without running the ``__init__`` of
+the packages that re-export the servers or the async drives, legitimately.
 """
 
 from __future__ import annotations
 
-import json
-import subprocess
-import sys
 import textwrap
-from pathlib import Path
 
 import pytest
-from sans_io_scan import CORE_MODULES, FORBIDDEN, package_dir, violations
-
-SANS_IO = (
-    "_bus",
-    "_drive",
-    "_electrical",
-    "_faults",
-    "_memory",
-    "_motion",
-    "_pacing",
-    "_parameters_table",
-    "_status",
-    "_trips",
+from sans_io_scan import (
+    CORE_MODULES,
+    SIMULATOR_FORBIDDEN,
+    SIMULATOR_IO,
+    SIMULATOR_MODEL,
+    SIMULATOR_SJ300,
+    module_violations,
+    modules_in,
+    params,
+    probe,
+    proven,
+    violations,
 )
-IO_MODULES = ("_device", "_endpoint", "_fd_link", "_precise_loop", "_pty", "_tcp")
 
-#: Beyond the core's list: the model is deterministic and touches no descriptor.
-EXTRA_FORBIDDEN = FORBIDDEN | {"os", "pty", "tty", "termios", "fcntl", "random"}
-ALLOWED = {*CORE_MODULES, *(f"simulator.{m}" for m in SANS_IO)}
+SANS_IO = (*SIMULATOR_MODEL, *SIMULATOR_SJ300)
+ALLOWED = proven(CORE_MODULES, SANS_IO)
 
 
-def simulator_dir() -> Path:
-    return package_dir() / "simulator"
-
-
-def import_violations(source: str) -> list[str]:
+def import_violations(source: str, package: tuple[str, ...] = ("simulator",)) -> list[str]:
     """Every import in *source* a sans-IO simulator module may not make."""
-    return violations(source, ("simulator",), ALLOWED, EXTRA_FORBIDDEN)
-
-
-def test_the_module_lists_cover_the_package() -> None:
-    found = {p.stem for p in simulator_dir().glob("_*.py")} - {"__init__"}
-    assert found == set(SANS_IO) | set(IO_MODULES)
-
-
-@pytest.mark.parametrize("module", SANS_IO)
-def test_sans_io_module_imports_nothing_io(module: str) -> None:
-    source = (simulator_dir() / f"{module}.py").read_text(encoding="utf-8")
-    assert import_violations(source) == []
+    return violations(source, package, ALLOWED, SIMULATOR_FORBIDDEN)
 
 
 @pytest.mark.parametrize(
-    "source",
+    ("package", "sans_io", "io"),
+    [("simulator", SIMULATOR_MODEL, SIMULATOR_IO), ("simulator.sj300", SIMULATOR_SJ300, ())],
+)
+def test_the_module_lists_cover_the_package(
+    package: str, sans_io: tuple[str, ...], io: tuple[str, ...]
+) -> None:
+    assert not set(sans_io) & set(io)
+    assert modules_in(package) == set(sans_io) | set(io)
+
+
+@pytest.mark.parametrize("module", params(SANS_IO))
+def test_sans_io_module_imports_nothing_io(module: str) -> None:
+    assert module_violations(module, ALLOWED, SIMULATOR_FORBIDDEN) == []
+
+
+@pytest.mark.parametrize(
+    ("source", "package"),
     [
-        "import asyncio",
-        "from asyncio import get_running_loop",
-        "def f():\n    import time",
-        "import os",
-        "from ._endpoint import SimulatorEndpoint",
-        "from . import _tcp",
-        "from .. import Bus",
-        "from .._bus import Bus",
-        "x = __import__('socket')",
+        ("import asyncio", ("simulator",)),
+        ("from asyncio import get_running_loop", ("simulator",)),
+        ("def f():\n    import time", ("simulator",)),
+        ("import os", ("simulator",)),
+        ("import random", ("simulator", "sj300")),
+        ("from ._endpoint import SimulatorEndpoint", ("simulator",)),
+        ("from . import _tcp", ("simulator",)),
+        ("from .. import Bus", ("simulator",)),
+        ("from .._bus import Bus", ("simulator",)),
+        ("from ..bus import Bus", ("simulator",)),
+        ("from ..sj300._drive import Drive", ("simulator",)),
+        ("from ..sj300._dialect import SJ300_DIALECT", ("simulator",)),
+        ("from .._endpoint import SimulatorEndpoint", ("simulator", "sj300")),
+        ("from .. import _tcp", ("simulator", "sj300")),
+        ("from ...sj300._drive import Drive", ("simulator", "sj300")),
+        ("from ...bus._bus import Bus", ("simulator", "sj300")),
+        ("from ...fr700._dialect import Fr700Dialect", ("simulator", "sj300")),
+        ("x = __import__('socket')", ("simulator",)),
     ],
 )
-def test_the_scan_can_fail(source: str) -> None:
-    assert import_violations(textwrap.dedent(source))
+def test_the_scan_can_fail(source: str, package: tuple[str, ...]) -> None:
+    assert import_violations(textwrap.dedent(source), package)
 
 
-_PROBE = """
-import json, sys, types, importlib
-forbidden = {forbidden!r}
-before = sorted(m for m in forbidden if m in sys.modules)
-for name, path in (("sj300_async", {root!r}), ("sj300_async.simulator", {sim!r})):
-    package = types.ModuleType(name)
-    package.__path__ = [path]
-    sys.modules[name] = package  # neither __init__ runs
-for name in {modules!r}:
-    importlib.import_module("sj300_async.simulator." + name)
-after = sorted(m for m in forbidden if m in sys.modules)
-print(json.dumps({{"before": before, "after": after}}))
-"""
+def test_the_scan_allows_the_model_and_the_codec() -> None:
+    source = (
+        "import math\nfrom ...sj300._codes import NakCode\nfrom .._motion import RunState\n"
+        "from ._memory import ParameterMemory\nfrom ...wire._enums import Direction\n"
+    )
+    assert import_violations(source, ("simulator", "sj300")) == []
 
 
 def test_importing_the_model_loads_no_io_modules() -> None:
-    sim = simulator_dir()
-    probe = _PROBE.format(
-        forbidden=("asyncio", "socket", "selectors", "ssl", "serial", "termios"),
-        root=str(sim.parent),
-        sim=str(sim),
-        modules=SANS_IO,
+    report = probe(
+        SANS_IO, forbidden=("asyncio", "socket", "selectors", "ssl", "serial", "termios")
     )
-    result = subprocess.run(
-        [sys.executable, "-I", "-S", "-c", probe],
-        capture_output=True,
-        text=True,
-        check=False,
-        timeout=60,
-    )
-    assert result.returncode == 0, result.stderr
-    report = json.loads(result.stdout)
     assert report["before"] == [], "the bare interpreter already loaded them: the check is void"
     assert report["after"] == []
+    # They were all imported, and nothing of the package outside the proven modules ran.
+    assert set(SANS_IO) <= set(report["loaded"]) <= ALLOWED
