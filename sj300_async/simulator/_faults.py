@@ -16,7 +16,6 @@ from collections import deque
 from collections.abc import Callable
 from dataclasses import dataclass
 
-from ..sj300._constants import MAX_NODE, MIN_NODE
 from ..wire._errors import LocalProtocolError
 
 __all__ = ["FaultedReply", "Faults"]
@@ -62,7 +61,8 @@ class Faults:
     """Hooks to drop, delay or corrupt replies, make a node late, or take it off the line.
 
     Args:
-        nodes: the addresses a fault may name (SJ300 1..32; FR-700 stations 0..31).
+        nodes: the addresses a fault may name (default 1..32, SJ300's nodes; each
+            protocol's simulator passes its own: FR-700 stations 0..31).
         corrupt: how :meth:`corrupt_next` damages a reply frame so its check fails
             (the protocol's frames differ: see :func:`corrupt` for SJ300's).
     """
@@ -70,7 +70,7 @@ class Faults:
     def __init__(
         self,
         *,
-        nodes: range = range(MIN_NODE, MAX_NODE + 1),
+        nodes: range = range(1, 33),
         corrupt: Callable[[bytes], bytes] = corrupt,
     ) -> None:
         self._nodes = nodes

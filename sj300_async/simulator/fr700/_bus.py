@@ -36,7 +36,6 @@ from ...fr700._codec import (
     terminator_bytes,
 )
 from ...fr700._codes import ETX, STX, Fr700Instruction
-from ...fr700._dialect import Fr700Dialect
 from ...fr700._events import Fr700Ack, Fr700Data, Fr700Nak, Fr700Reply
 from ...wire._errors import LocalProtocolError
 from ...wire._events import Discarded
@@ -210,12 +209,14 @@ def simulate(
 
     Its drives follow the dialect's line options (waiting-time field, terminator).
     """
-    if not isinstance(dialect, Fr700Dialect):
+    # Duck-typed: the dialect module imports the async drive, the simulator stays sans-IO.
+    options = getattr(dialect, "options", None)
+    if not isinstance(options, Fr700LineOptions):
         raise LocalProtocolError(f"an FR-700 simulator needs an FR-700 dialect, got {dialect!r}")
     bus = Fr700SimulatedBus(
         nodes,
-        wait_field=dialect.options.wait_field,
-        terminator=dialect.options.terminator,
+        wait_field=options.wait_field,
+        terminator=options.terminator,
         factory_defaults=factory_defaults,
     )
     if wait_ms is not None:
