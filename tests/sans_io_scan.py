@@ -122,11 +122,6 @@ NOT_SANS_IO_YET: Final[Mapping[str, str]] = {
         "imports bus._registry: parse_bus_url() and BusAddress call get_dialect(), "
         "which imports the protocol's dialect -> drive -> sj300_async.bus -> asyncio"
     ),
-    "simulator.fr700._bus": (
-        "imports fr700._dialect (simulate()'s isinstance check), whose make_drive() imports "
-        "fr700._drive (asyncio) and configure() imports sj300_async.bus (asyncio)"
-    ),
-    "simulator.fr700": "its __init__ imports simulator.fr700._bus (above)",
 }
 
 #: Not sans-IO, by design. The package ``__init__`` modules re-export the async classes.
