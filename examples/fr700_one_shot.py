@@ -16,7 +16,7 @@ from sj300_async.fr700 import Fr700NakCode
 async def main(url: str) -> None:
     async with sj.open_bus(url, protocol="fr700", timeout=0.5) as bus:
         drive = bus.drive(0)  # FR-700 stations are 0..31
-        await drive.write_parameter(7, 20)  # Pr.7 acceleration time: 2.0 s
+        await drive.write_parameter(7, 2.0)  # Pr.7 acceleration time in s (raw 20)
         await drive.set_frequency(30.0)  # HED: RAM only
         await drive.run_forward()  # HFA H02
         await asyncio.sleep(0.5)

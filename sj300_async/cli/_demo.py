@@ -82,9 +82,9 @@ class _Demo:
         for node in self._nodes:
             ramp = self._rng.choice((2.0, 3.0, 5.0, 8.0))
             drive = self._bus.drive(node)
-            if isinstance(drive, Fr700Drive):  # Pr.7 / Pr.8 in 0.1 s
-                await self._do(drive.write_parameter(7, round(ramp * 10)))
-                await self._do(drive.write_parameter(8, round(ramp * 10)))
+            if isinstance(drive, Fr700Drive):  # Pr.7 / Pr.8: acceleration / deceleration time
+                await self._do(drive.write_parameter(7, ramp))
+                await self._do(drive.write_parameter(8, ramp))
             else:
                 await self._do(drive.write_parameter("F002", ramp))
                 await self._do(drive.write_parameter("F003", ramp))

@@ -7,7 +7,8 @@ host's ACK) are :class:`Fr700Dialect`'s arguments, or the URL's
 ``wait_field=``, ``terminator=`` (``none``, ``cr``, ``crlf``) and ``ack=``.
 
 The sans-IO core (:mod:`._codec`, :mod:`._parser`, :mod:`._requests`,
-:mod:`._payloads`, :mod:`._dialect`) imports no asyncio; only
+:mod:`._payloads`, :mod:`._dialect`, the parameter catalogue
+:mod:`._parameters`) imports no asyncio; only
 :class:`Fr700Drive` is async. Every decision the reference leaves open is
 recorded in the docstring of the module that makes it.
 """
@@ -41,6 +42,13 @@ from ._codes import (
 from ._dialect import Fr700Dialect
 from ._drive import Fr700Drive
 from ._events import Fr700Ack, Fr700Data, Fr700Nak, Fr700ParserEvent, Fr700Reply
+from ._parameters import (
+    FR700_PARAMETERS,
+    PARAMETER_RAW_MAX,
+    Fr700ParameterInfo,
+    fr700_parameter_info,
+    parameter_number,
+)
 from ._parser import MAX_FRAME, Fr700ReplyParser, decode_frame
 from ._payloads import Fr700Monitor, Fr700MultiReply, Fr700Status, decode_hex, decode_multi_reply
 from ._requests import Fr700MultiReceive, Fr700Request, Fr700RequestKind
@@ -48,10 +56,12 @@ from ._requests import Fr700MultiReceive, Fr700Request, Fr700RequestKind
 __all__ = [
     "A1_INSTRUCTIONS",
     "DEFAULT_LINE_OPTIONS",
+    "FR700_PARAMETERS",
     "MAX_FRAME",
     "MAX_REPLY_DATA",
     "MAX_STATION",
     "MIN_STATION",
+    "PARAMETER_RAW_MAX",
     "RESET_DATA",
     "Fr700Ack",
     "Fr700Data",
@@ -65,6 +75,7 @@ __all__ = [
     "Fr700Nak",
     "Fr700NakCode",
     "Fr700OperationMode",
+    "Fr700ParameterInfo",
     "Fr700ParserEvent",
     "Fr700Reply",
     "Fr700ReplyParser",
@@ -81,6 +92,8 @@ __all__ = [
     "encode_nak",
     "encode_reoutput_request",
     "encode_request",
+    "fr700_parameter_info",
+    "parameter_number",
     "parse_station",
     "requests",
     "sum_check",

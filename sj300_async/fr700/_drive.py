@@ -9,7 +9,12 @@ errors: :class:`~sj300_async.LocalProtocolError` (nothing sent),
 :class:`~sj300_async.RemoteProtocolError`,
 :class:`~sj300_async.TransportError`, :class:`~sj300_async.ReadOnlyError`.
 
-Parameters go through the link-parameter extension: the bank is written
+Parameters: :meth:`Fr700Drive.read_parameter` / :meth:`~Fr700Drive.write_parameter`
+take and return the value in the parameter's unit (Pr.7 = 5.0 s), scaled
+by the catalogue (:mod:`._parameters`, which refuses numbers it does not
+list); :meth:`~Fr700Drive.read_parameter_raw` /
+:meth:`~Fr700Drive.write_parameter_raw` the raw integer 0..65535 of any
+parameter. Either way they go through the link-parameter extension: the bank is written
 with HFF, then the parameter is read or written at its offset. The two
 transactions hold a per-drive lock, so another task cannot switch the bank
 in between; the bank last written is remembered and not written again
@@ -29,6 +34,7 @@ from ..wire._enums import Direction
 from . import _requests as rq
 from ._codec import DEFAULT_LINE_OPTIONS, Fr700LineOptions
 from ._codes import Fr700Instruction, Fr700OperationMode, Fr700StatusBits
+from ._parameters import fr700_parameter_info
 from ._payloads import Fr700Monitor, Fr700MultiReply, Fr700Status, decode_hex, decode_multi_reply
 from ._requests import Fr700MultiReceive, Fr700Request
 
@@ -282,11 +288,45 @@ class Fr700Drive:
 
     # -- parameters ----------------------------------------------------------------------------
 
-    async def read_parameter(self, number: int | str) -> int:
+    async def read_parameter(self, number: int | str) -> float:
+        """Read parameter *number* (``7`` or ``"Pr.7"``) in its unit, scaled by the catalogue.
+
+        Pr.7 (acceleration time, 0.1 s increments) reading raw 50 returns
+        5.0; a special setting returns itself (Pr.122 "9999" is 9999.0). See
+        :data:`~sj300_async.fr700.FR700_PARAMETERS`.
+
+        Raises:
+            LocalProtocolError: not a parameter number, or one the catalogue
+                does not list (use :meth:`read_parameter_raw`); nothing sent.
+            NakError: e.g. B for a parameter the drive does not have.
+            ReplyTimeoutError, RemoteProtocolError, TransportError.
+        """
+        info = fr700_parameter_info(number)
+        return info.from_raw(await self.read_parameter_raw(info.number))
+
+    async def write_parameter(self, number: int | str, value: float) -> None:
+        """Write *value*, in the parameter's unit, to parameter *number* (``7`` or ``"Pr.7"``).
+
+        ``write_parameter(7, 2.5)`` sets a 2.5 s acceleration time (raw 25).
+        Special settings are written as such (``write_parameter(122, 9999)``).
+
+        Raises:
+            LocalProtocolError: not a parameter number, one the catalogue does
+                not list (use :meth:`write_parameter_raw`), or a value out of
+                range or finer than the increment (nothing sent).
+            NakError: A (not writable in this mode or while running), B (no such
+                parameter), C (out of range).
+            ReplyTimeoutError, RemoteProtocolError, TransportError, ReadOnlyError.
+        """
+        info = fr700_parameter_info(number)
+        await self.write_parameter_raw(info.number, info.to_raw(value))
+
+    async def read_parameter_raw(self, number: int | str) -> int:
         """Read parameter *number* (0..999, or ``"Pr.7"``): its raw value 0..65535.
 
-        The value is in the parameter's own unit (Pr.7 in 0.1 s...): this
-        library has no FR-700 parameter catalogue.
+        The value counts the parameter's setting increment (Pr.7 in 0.1 s);
+        any number is accepted, the drive judges. :meth:`read_parameter`
+        scales it.
 
         Raises:
             LocalProtocolError: not a parameter number (nothing sent).
@@ -303,7 +343,7 @@ class Fr700Drive:
                 self._bank = None
                 raise
 
-    async def write_parameter(self, number: int | str, value: int) -> None:
+    async def write_parameter_raw(self, number: int | str, value: int) -> None:
         """Write the raw *value* (0..65535) to parameter *number* (0..999, or ``"Pr.7"``).
 
         Raises:

@@ -24,10 +24,10 @@ def _open_fds() -> int:
 async def test_every_instruction_round_trips(fr700_line):
     async with fr700_line.open() as bus:
         d = bus.drive(2)
-        await d.write_parameter(7, 5)  # 0.5 s from 0 to 60 Hz
-        assert await d.read_parameter(7) == 5
-        await d.write_parameter(122, 100)  # bank 1
-        assert await d.read_parameter("Pr.122") == 100
+        await d.write_parameter_raw(7, 5)  # 0.5 s from 0 to 60 Hz
+        assert await d.read_parameter_raw(7) == 5
+        await d.write_parameter_raw(122, 100)  # bank 1
+        assert await d.read_parameter_raw("Pr.122") == 100
         assert await d.read_operation_mode() is Fr700OperationMode.NETWORK
         await d.set_frequency(12.5)
         await d.set_frequency(12.5, eeprom=True)
@@ -62,10 +62,10 @@ async def test_many_sequential_transactions_keep_their_values(fr700_line):
 async def test_concurrent_callers_all_get_their_own_answers(fr700_line):
     async with fr700_line.open() as bus:
         for station in (0, 1, 2, 3):
-            await bus.drive(station).write_parameter(7, 10 + station)
+            await bus.drive(station).write_parameter_raw(7, 10 + station)
 
         async def reader(station: int) -> list[int]:
-            return [await bus.drive(station).read_parameter(7) for _ in range(5)]
+            return [await bus.drive(station).read_parameter_raw(7) for _ in range(5)]
 
         results = await asyncio.gather(*(reader(n) for n in (0, 1, 2, 3)))
         assert results == [[10 + n] * 5 for n in (0, 1, 2, 3)]

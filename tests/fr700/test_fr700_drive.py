@@ -27,8 +27,8 @@ def fr700_bus(url: str = URL, **kwargs: object):
 
 
 async def quick_ramps(drive: Fr700Drive) -> None:
-    await drive.write_parameter(7, 0)  # 0 s: the output steps to the set frequency
-    await drive.write_parameter(8, 0)
+    await drive.write_parameter_raw(7, 0)  # 0 s: the output steps to the set frequency
+    await drive.write_parameter_raw(8, 0)
 
 
 async def test_bus_hands_out_fr700_drives_on_stations_0_to_31():
@@ -83,7 +83,7 @@ async def test_run_ramp_status_and_monitors():
 async def test_the_ramp_takes_time():
     async with fr700_bus() as bus:
         drive = bus.drive(1)
-        await drive.write_parameter(7, 5)  # 0.5 s from 0 to 60 Hz (Pr.20)
+        await drive.write_parameter_raw(7, 5)  # 0.5 s from 0 to 60 Hz (Pr.20)
         await drive.set_frequency(60.0)
         await drive.run_forward()
         first = await drive.read_output_frequency()
@@ -115,7 +115,7 @@ async def test_frequency_above_maximum_is_nak_c():
             await drive.set_frequency(120.01)  # Pr.1 = 120 Hz
         assert (info.value.node, info.value.code) == (0, Fr700NakCode.DATA_RANGE)
         assert bus.stats.transactions.retries == 0  # the drive's verdict: not retried
-        await drive.write_parameter(1, 6000)
+        await drive.write_parameter_raw(1, 6000)
         with pytest.raises(sj.NakError):
             await drive.set_frequency(60.01)
 
@@ -126,7 +126,7 @@ async def test_operation_mode_and_mode_errors():
         assert await drive.read_operation_mode() is Fr700OperationMode.NETWORK
         await drive.set_operation_mode(Fr700OperationMode.EXTERNAL)
         assert await drive.read_operation_mode() is Fr700OperationMode.EXTERNAL
-        for write in (drive.run_forward(), drive.set_frequency(5), drive.write_parameter(7, 1)):
+        for write in (drive.run_forward(), drive.set_frequency(5), drive.write_parameter_raw(7, 1)):
             with pytest.raises(sj.NakError) as info:
                 await write
             assert info.value.code is Fr700NakCode.MODE
@@ -149,19 +149,19 @@ async def test_parameters_through_the_link_extension():
         drive = bus.drive(1)
         sim = bus.simulator
         assert isinstance(sim, Fr700SimulatedBus)
-        await drive.write_parameter(7, 123)
-        await drive.write_parameter(123, 0)  # bank 1
-        await drive.write_parameter("Pr.340", 1)  # bank 3
-        assert await drive.read_parameter(7) == 123
-        assert await drive.read_parameter(123) == 0
-        assert await drive.read_parameter("pr.340") == 1
+        await drive.write_parameter_raw(7, 123)
+        await drive.write_parameter_raw(123, 0)  # bank 1
+        await drive.write_parameter_raw("Pr.340", 1)  # bank 3
+        assert await drive.read_parameter_raw(7) == 123
+        assert await drive.read_parameter_raw(123) == 0
+        assert await drive.read_parameter_raw("pr.340") == 1
         assert sim.drives[1].parameters[7] == 123
         assert sim.drives[1].parameters[123] == 0
         with pytest.raises(sj.NakError) as info:
-            await drive.read_parameter(555)  # no such parameter
+            await drive.read_parameter_raw(555)  # no such parameter
         assert info.value.code is Fr700NakCode.INSTRUCTION_CODE
         with pytest.raises(sj.NakError) as info:
-            await drive.write_parameter(7, 40000)
+            await drive.write_parameter_raw(7, 40000)
         assert info.value.code is Fr700NakCode.DATA_RANGE
 
 
@@ -170,10 +170,10 @@ async def test_the_bank_is_written_only_when_it_changes():
         drive = bus.drive(1)
         sent: list[bytes] = []
         bus.trace = lambda record: sent.append(record.data) if record.direction == "tx" else None
-        await drive.read_parameter(7)
-        await drive.read_parameter(8)
-        await drive.read_parameter(117)
-        await drive.read_parameter(118)
+        await drive.read_parameter_raw(7)
+        await drive.read_parameter_raw(8)
+        await drive.read_parameter_raw(117)
+        await drive.read_parameter_raw(118)
         codes = [frame[3:5] for frame in sent]
         assert codes == [b"FF", b"07", b"08", b"FF", b"11", b"12"]
 
@@ -181,11 +181,11 @@ async def test_the_bank_is_written_only_when_it_changes():
 async def test_concurrent_parameter_reads_never_mix_banks():
     async with fr700_bus() as bus:
         drive = bus.drive(2)
-        await drive.write_parameter(7, 77)
-        await drive.write_parameter(117, 2)
+        await drive.write_parameter_raw(7, 77)
+        await drive.write_parameter_raw(117, 2)
 
         async def read(number: int) -> list[int]:
-            return [await drive.read_parameter(number) for _ in range(10)]
+            return [await drive.read_parameter_raw(number) for _ in range(10)]
 
         low, high = await asyncio.gather(read(7), read(117))
         assert low == [77] * 10
@@ -197,14 +197,14 @@ async def test_an_inverter_reset_is_not_answered_and_forgets_the_bank():
         drive = bus.drive(0)
         sim = bus.simulator
         assert isinstance(sim, Fr700SimulatedBus)
-        await drive.read_parameter(117)  # bank 1
+        await drive.read_parameter_raw(117)  # bank 1
         sim.drives[0].trip(now=asyncio.get_running_loop().time())
         assert (await drive.read_status()).tripped
         await drive.reset()
         assert bus.stats.transactions.timeouts == 0
         assert not (await drive.read_status()).tripped
         assert sim.drives[0].parameter_bank == 0
-        assert await drive.read_parameter(118) == 192  # the bank is written again
+        assert await drive.read_parameter_raw(118) == 192  # the bank is written again
 
 
 async def test_multi_command():
@@ -266,9 +266,9 @@ async def test_fault_history():
 async def test_read_only_bus_reads_parameters_but_refuses_writes():
     async with fr700_bus(read_only=True) as bus:
         drive = bus.drive(1)
-        assert await drive.read_parameter(118) == 192  # the bank switch is allowed
+        assert await drive.read_parameter_raw(118) == 192  # the bank switch is allowed
         for write in (
-            drive.write_parameter(7, 1),
+            drive.write_parameter_raw(7, 1),
             drive.set_frequency(1),
             drive.run_forward(),
             drive.reset(),
@@ -315,7 +315,7 @@ async def test_every_line_option_works_end_to_end(query):
         await drive.set_frequency(12.34)
         await drive.run_forward()
         assert await drive.read_output_frequency() == 12.34
-        assert await drive.read_parameter(123) == (0 if "wait_field=0" in query else 9999)
+        assert await drive.read_parameter_raw(123) == (0 if "wait_field=0" in query else 9999)
         assert bus.stats.transactions.timeouts == 0
         assert bus.stats.bad_frames == 0
         await drive.read_status()

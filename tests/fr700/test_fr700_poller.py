@@ -13,7 +13,7 @@ async def test_fr700_samples_carry_typed_reads_and_parameters():
     async with sj.open_bus(
         "sim://?protocol=fr700&nodes=0-3", protocol="fr700", timeout=0.05, retries=0
     ) as bus:
-        await bus.drive(2).write_parameter(7, 33)
+        await bus.drive(2).write_parameter(7, 3.3)  # s
         poller = sj.Poller(interval_s=0.01, parameters=["Pr.7", "pr123", "F002"])
         poller.add(bus, [0, 2])
         seen: dict[int, sj.Sample] = {}
@@ -27,8 +27,8 @@ async def test_fr700_samples_carry_typed_reads_and_parameters():
         assert sample.error is None
         assert isinstance(sample.status, Fr700Status)
         assert isinstance(sample.monitor, Fr700Monitor)
-        # the FR-700 bus reads its own parameters, not the SJ300 code
-        assert sample.parameters == {"Pr.7": 33, "Pr.123": 9999}
+        # the FR-700 bus reads its own parameters in their units, not the SJ300 code
+        assert sample.parameters == {"Pr.7": 3.3, "Pr.123": 9999}
 
 
 async def test_fr700_drive_goes_offline_and_back():
