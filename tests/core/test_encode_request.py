@@ -252,7 +252,8 @@ def test_b084_lower_case_via_builders() -> None:
 
 
 def test_bytearray_data_is_accepted() -> None:
-    assert encode_request(1, 0x01, bytearray(b"000500")) == encode_request(1, 0x01, b"000500")
+    data = bytearray(b"000500")  # typed as bytes; a bytearray is accepted at run time
+    assert encode_request(1, 0x01, data) == encode_request(1, 0x01, b"000500")  # type: ignore[arg-type]
 
 
 # -- typed builders: run ----------------------------------------------------

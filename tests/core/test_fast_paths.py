@@ -420,7 +420,7 @@ def same_outcome(
     assert got == expected
     assert repr(got) == repr(expected)
     assert hash(got) == hash(expected)
-    if dataclasses.is_dataclass(got):
+    if dataclasses.is_dataclass(got) and not isinstance(got, type):
         # Built through a twin or slot setters, the object is still frozen.
         name = dataclasses.fields(got)[0].name
         with pytest.raises(dataclasses.FrozenInstanceError):
@@ -499,9 +499,10 @@ def test_negative_zero_scaled_fields_decode_as_zero() -> None:
 
 
 @pytest.mark.parametrize("cls", [MonitorData, TripRecord])
-def test_unfrozen_twins_have_the_same_slots(cls: type) -> None:
+def test_unfrozen_twins_have_the_same_slots(cls: type[Any]) -> None:
     twin = unfrozen_twin(cls)
-    assert twin.__slots__ == cls.__slots__ == tuple(f.name for f in dataclasses.fields(cls))
+    fields = tuple(f.name for f in dataclasses.fields(cls))
+    assert twin.__dict__["__slots__"] == cls.__dict__["__slots__"] == fields
 
 
 @pytest.mark.parametrize(
@@ -516,7 +517,7 @@ def test_unfrozen_twins_have_the_same_slots(cls: type) -> None:
     ],
 )
 def test_slot_setters_build_what_the_constructor_builds(cls: type, values: tuple[Any, ...]) -> None:
-    obj = object.__new__(cls)
+    obj: object = object.__new__(cls)
     for setter, value in zip(slot_setters(cls), values, strict=True):
         setter(obj, value)
     reference = cls(*values)

@@ -28,7 +28,7 @@ ACK_COMMANDS = [
     requests.store(NODE),
     requests.recalculate(NODE),
 ]
-SHAPED = [
+SHAPED: list[tuple[Request, Reply]] = [
     (requests.read_parameter(NODE, "A004"), AckDataReply(NODE, b"00000500")),
     (requests.can_store(NODE), AckDataReply(NODE, b"01")),
     (requests.read_status(NODE), DataReply(NODE, b"03010300")),

@@ -170,9 +170,9 @@ def test_decode_monitor_reference_scales() -> None:
 
 def test_monitor_terminal_bits_match_the_reference() -> None:
     assert [int(t) for t in InputMonitor] == [1 << i for i in range(9)]
-    assert InputMonitor.FW == 1
-    assert InputMonitor.IN8 == 0x100
-    assert OutputTerminal.AL == 1
+    assert int(InputMonitor.FW) == 1
+    assert int(InputMonitor.IN8) == 0x100
+    assert int(OutputTerminal.AL) == 1
     assert [OutputTerminal.OUT11, OutputTerminal.OUT12, OutputTerminal.OUT13] == [2, 4, 8]
     assert [OutputTerminal.OUT14, OutputTerminal.OUT15] == [0x10, 0x20]
 

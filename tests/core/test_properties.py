@@ -12,6 +12,7 @@ from __future__ import annotations
 import itertools
 import math
 import re
+from collections.abc import Sequence
 from functools import reduce
 from operator import xor
 
@@ -117,11 +118,11 @@ def feed_chunks(parser: ReplyParser | RequestParser, chunks: list[bytes]) -> lis
     return events
 
 
-def kept(events: list[object]) -> list[object]:
+def kept(events: Sequence[object]) -> list[object]:
     return [e for e in events if not isinstance(e, Discarded)]
 
 
-def discarded_total(events: list[object]) -> int:
+def discarded_total(events: Sequence[object]) -> int:
     return sum(len(e.data) for e in events if isinstance(e, Discarded))
 
 
@@ -269,6 +270,7 @@ def test_every_byte_is_accounted_for(parts: list[bytes], cuts: list[int]) -> Non
         elif isinstance(event, BadFrame):
             accounted += len(event.body) + 2
         else:
+            assert isinstance(event, (AckReply, AckDataReply, DataReply, NakReply))
             accounted += len(encode_reply(event))
     assert accounted == len(stream)
 
