@@ -46,7 +46,8 @@ from ._codec import (
 from ._codes import Fr700Instruction, Fr700NakCode
 from ._events import Fr700Ack, Fr700Data, Fr700Nak, Fr700Reply
 from ._parser import Fr700ReplyParser
-from ._requests import Fr700Request, Fr700RequestKind, parameter_bank
+from ._parameters import fr700_parameter_info
+from ._requests import Fr700Request, Fr700RequestKind
 
 if TYPE_CHECKING:
     from ..bus import Channel
@@ -244,10 +245,11 @@ class Fr700Dialect:
         if not isinstance(text, str) or not text.strip().upper().startswith("PR"):
             return None
         try:
-            bank, offset = parameter_bank(text)
+            # Only catalogued parameters: their values have a unit (read_parameter's meaning).
+            number = fr700_parameter_info(text).number
         except LocalProtocolError:
             return None
-        return f"Pr.{bank * 100 + offset}"
+        return f"Pr.{number}"
 
     def make_drive(self, channel: Channel[Fr700Request], node: int) -> Fr700Drive:
         from ._drive import Fr700Drive
