@@ -13,11 +13,10 @@ from sj300_async.fr700 import (
     Fr700Dialect,
     Fr700Nak,
     Fr700NakCode,
-    Fr700ReplyParser,
     requests,
 )
 from sj300_async.sj300._dialect import SJ300_DIALECT
-from sj300_async.wire import BadFrame, BadFrameReason, Discarded, DiscardReason
+from sj300_async.wire import BadFrame, BadFrameReason
 
 DIALECT = Fr700Dialect()
 READ_STATUS = requests.read(3, 0x7A)  # 2-digit reply
@@ -138,7 +137,6 @@ def test_replies_are_described_for_traces():
     assert DIALECT.describe(Fr700Ack(3)) == "station 03 ACK"
     assert DIALECT.describe(Fr700Nak(3, Fr700NakCode.MODE)) == "station 03 NAK A (mode error)"
     assert DIALECT.describe(Fr700Data(3, b"1770")) == "station 03 data 1770"
-
 
 
 def test_options_are_validated():

@@ -7,7 +7,6 @@ import asyncio
 import pytest
 
 import sj300_async as sj
-from sj300_async import sj300 as sj3
 from sj300_async.fr700 import (
     Fr700Drive,
     Fr700Monitor,
