@@ -100,6 +100,8 @@ class LoopbackTransport(asyncio.Transport):
         self._to_host_faults = to_host
         self._closing = False
         self._reading = True
+        # What arrived while reading was paused (pause_reading), in order.
+        self._held: list[bytes] = []
         # True while the peer is inside data_received: what it sends meanwhile
         # must wait for a later loop turn (no re-entrant delivery to the host).
         self._in_peer = False
@@ -149,8 +151,12 @@ class LoopbackTransport(asyncio.Transport):
             self._in_peer = False
 
     def _deliver_to_host(self, data: bytes) -> None:
-        if not self._closing:
-            self._protocol.data_received(data)
+        if self._closing:
+            return
+        if not self._reading:
+            self._held.append(data)  # delivered, in order, when reading resumes
+            return
+        self._protocol.data_received(data)
 
     def inject(self, data: bytes) -> None:
         """Deliver *data* to the host as if it came from the line (tests: stray frames)."""
@@ -180,7 +186,12 @@ class LoopbackTransport(asyncio.Transport):
         self._reading = False
 
     def resume_reading(self) -> None:
+        if self._reading:
+            return
         self._reading = True
+        held, self._held = self._held, []
+        for data in held:
+            self._to_host.push(0.0, data)  # after this call returns, as a socket would
 
     def close(self) -> None:
         self._shutdown(None)

@@ -44,6 +44,11 @@ def serial_connector(
             )
         except serial.SerialException as exc:
             raise TransportError(f"cannot open serial port {device}: {exc}") from exc
+        # The transport hands itself to the protocol (connection_made) and starts
+        # reading from callbacks it has queued with call_soon. One loop turn runs
+        # them, in order, so the caller gets a transport that is fully connected:
+        # a pause_reading() right away is not undone by the reader starting later.
+        await asyncio.sleep(0)
         return transport
 
     return connect

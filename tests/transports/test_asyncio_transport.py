@@ -59,14 +59,6 @@ async def _close(transport: asyncio.Transport, recorder: Recorder) -> None:
 async def test_pause_reading_holds_data_and_resume_delivers_all_of_it(
     raw: RawLine, request: pytest.FixtureRequest
 ) -> None:
-    if raw.kind == "loopback":
-        request.applymarker(
-            pytest.mark.xfail(
-                strict=True,
-                reason="library bug: LoopbackTransport.pause_reading() only sets a flag; "
-                "_deliver_to_host() still calls data_received",
-            )
-        )
     transport, recorder = await raw.open()
     try:
         transport.pause_reading()
