@@ -162,9 +162,9 @@ class LineProtocol(asyncio.Protocol, Generic[ReplyT]):
         return data
 
     def _account(self, event: ReplyT | BadFrame | Discarded) -> None:
-        if isinstance(event, Discarded):
+        if type(event) is Discarded:
             self._stats.discarded_bytes += len(event.data)
-        elif isinstance(event, BadFrame):
+        elif type(event) is BadFrame:
             self._stats.bad_frames += 1
         elif _log.isEnabledFor(logging.DEBUG):
             _log.debug("rx %s", event)  # discards and bad frames are logged by the parser
