@@ -34,6 +34,7 @@ from ..bus._url import parse_bus_url
 from ..sj300._constants import MAX_NODE, MIN_NODE
 from ..wire._errors import LocalProtocolError
 from ..wire._line import LineSettings
+from ._session import lent_bus
 
 __all__ = [
     "DEFAULT_URL",
@@ -184,6 +185,14 @@ async def open_cli_bus(
         LocalProtocolError: a bad URL or setting, or another protocol.
         TransportError: the bus cannot be reached.
     """
+    lent = lent_bus()
+    if lent is not None:  # in `sj300 shell`: its bus, which stays open
+        if not any_protocol and lent.dialect.name != "sj300":
+            raise LocalProtocolError(
+                f"this command works with SJ300 drives only, not {lent.dialect.name}"
+            )
+        yield lent
+        return
     url = url or bus_url(args) or DEFAULT_URL
     protocol = getattr(args, "protocol", None)
     if not any_protocol:

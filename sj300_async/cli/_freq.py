@@ -9,7 +9,6 @@ JSON: ``{"node": 1, "frequency_hz": 30.0}``.
 from __future__ import annotations
 
 import argparse
-import asyncio
 from typing import Any
 
 from ..sj300._codes import NakCode
@@ -17,6 +16,7 @@ from ..wire._errors import NakError
 from ._common import add_bus_options, add_json_option, add_node_option, open_cli_bus
 from ._errors import FAILURE, CliError
 from ._output import print_json
+from ._session import run_async
 
 __all__ = ["add_parser"]
 
@@ -49,7 +49,7 @@ def add_parser(subparsers: Any) -> None:
 
 def run(args: argparse.Namespace) -> int:
     """Send the frequency; return 0."""
-    return asyncio.run(_freq(args))
+    return run_async(_freq(args))
 
 
 async def _freq(args: argparse.Namespace) -> int:

@@ -41,6 +41,7 @@ from ._args import parse_any_nodes
 from ._common import add_bus_options, add_json_option, bus_url, open_cli_bus, positive_float
 from ._demo import run_demo
 from ._output import Column, human, is_terminal, jsonable, print_json
+from ._session import run_async
 
 __all__ = ["add_parser"]
 
@@ -108,7 +109,7 @@ def add_parser(subparsers: Any) -> None:
 def run(args: argparse.Namespace) -> int:
     """Monitor until done or interrupted; return 0."""
     try:
-        return asyncio.run(_monitor(args))
+        return run_async(_monitor(args))
     except KeyboardInterrupt:  # the normal way to stop a monitor
         return 0
 

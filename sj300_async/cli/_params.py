@@ -26,7 +26,6 @@ and diff.
 from __future__ import annotations
 
 import argparse
-import asyncio
 from collections.abc import Callable, Coroutine
 from pathlib import Path
 from typing import Any, Final
@@ -47,6 +46,7 @@ from ._errors import FAILURE, USAGE, CliError
 from ._output import Column, format_raw, print_json, print_table
 from ._progress import progress
 from ._read import parameter_code
+from ._session import run_async
 from ._snapshot import Snapshot
 
 __all__ = ["COMM_CODES", "NODE_ADDRESS", "add_parser"]
@@ -115,7 +115,7 @@ def _runner(
     step: Callable[[argparse.Namespace], Coroutine[Any, Any, int]],
 ) -> Callable[[argparse.Namespace], int]:
     def run(args: argparse.Namespace) -> int:
-        return asyncio.run(step(args))
+        return run_async(step(args))
 
     return run
 

@@ -12,7 +12,6 @@ both, whatever ``--raw`` says.
 from __future__ import annotations
 
 import argparse
-import asyncio
 from typing import Any
 
 from ..sj300._drive import Drive
@@ -21,6 +20,7 @@ from ..wire._errors import NakError
 from ._common import add_bus_options, add_json_option, add_node_option, open_cli_bus
 from ._errors import FAILURE, CliError
 from ._output import Column, format_raw, print_json, print_table
+from ._session import run_async
 
 __all__ = ["add_parser", "parameter_code", "parameter_json", "read_raw"]
 
@@ -50,7 +50,7 @@ def add_parser(subparsers: Any) -> None:
 
 def run(args: argparse.Namespace) -> int:
     """Print the parameters; return 0."""
-    return asyncio.run(_read(args))
+    return run_async(_read(args))
 
 
 async def read_raw(drive: Drive, code: str) -> int:

@@ -6,7 +6,6 @@ JSON: ``{"node": 1, "direction": "FORWARD"}``.
 from __future__ import annotations
 
 import argparse
-import asyncio
 from typing import Any
 
 from ..sj300._codes import NakCode
@@ -15,6 +14,7 @@ from ..wire._errors import NakError
 from ._common import add_bus_options, add_json_option, add_node_option, open_cli_bus
 from ._errors import FAILURE, CliError
 from ._output import human, print_json
+from ._session import run_async
 
 __all__ = ["add_parser"]
 
@@ -37,7 +37,7 @@ def add_parser(subparsers: Any) -> None:
 
 def run(args: argparse.Namespace) -> int:
     """Send the run command; return 0."""
-    return asyncio.run(_run(args))
+    return run_async(_run(args))
 
 
 async def _run(args: argparse.Namespace) -> int:

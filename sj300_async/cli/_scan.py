@@ -16,7 +16,6 @@ JSON: ``{"scanned": [1, ..., 32], "answering": [1, ..., 8]}``.
 from __future__ import annotations
 
 import argparse
-import asyncio
 import sys
 from collections.abc import Callable
 from typing import Any
@@ -27,6 +26,7 @@ from ._args import format_nodes, parse_nodes
 from ._common import add_bus_options, add_json_option, open_cli_bus
 from ._errors import FAILURE
 from ._output import is_terminal, print_json
+from ._session import run_async
 
 __all__ = ["add_parser"]
 
@@ -52,7 +52,7 @@ def add_parser(subparsers: Any) -> None:
 
 def run(args: argparse.Namespace) -> int:
     """Scan; return 0 when a node answers, 1 when none does."""
-    return asyncio.run(_scan(args))
+    return run_async(_scan(args))
 
 
 async def probe(bus: Bus, node: int) -> bool:

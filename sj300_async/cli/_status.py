@@ -9,12 +9,12 @@ fields of :class:`~sj300_async.InverterStatus` and
 from __future__ import annotations
 
 import argparse
-import asyncio
 from typing import Any
 
 from ..sj300._payloads import InverterStatus, MonitorData
 from ._common import add_bus_options, add_json_option, add_node_option, open_cli_bus
 from ._output import Column, human, print_json, print_table
+from ._session import run_async
 
 __all__ = ["add_parser", "status_rows"]
 
@@ -34,7 +34,7 @@ def add_parser(subparsers: Any) -> None:
 
 def run(args: argparse.Namespace) -> int:
     """Print the status of ``--node``; return 0."""
-    return asyncio.run(_status(args))
+    return run_async(_status(args))
 
 
 async def _status(args: argparse.Namespace) -> int:

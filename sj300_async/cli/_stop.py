@@ -8,11 +8,11 @@ JSON: ``{"node": 1, "broadcast": false}`` (``"node": null`` with ``--all``).
 from __future__ import annotations
 
 import argparse
-import asyncio
 from typing import Any
 
 from ._common import add_bus_options, add_json_option, add_node_option, open_cli_bus
 from ._output import print_json
+from ._session import run_async
 
 __all__ = ["add_parser"]
 
@@ -33,7 +33,7 @@ def add_parser(subparsers: Any) -> None:
 
 def run(args: argparse.Namespace) -> int:
     """Send the stop command; return 0."""
-    return asyncio.run(_stop(args))
+    return run_async(_stop(args))
 
 
 async def _stop(args: argparse.Namespace) -> int:

@@ -11,12 +11,12 @@ JSON: ``{"node": 1, "total_count": 3, "records": [{"error_code": "E07",
 from __future__ import annotations
 
 import argparse
-import asyncio
 from typing import Any
 
 from ..sj300._payloads import TripRecord
 from ._common import add_bus_options, add_json_option, add_node_option, open_cli_bus
 from ._output import Column, human, jsonable, print_json, print_table
+from ._session import run_async
 
 __all__ = ["add_parser"]
 
@@ -36,7 +36,7 @@ def add_parser(subparsers: Any) -> None:
 
 def run(args: argparse.Namespace) -> int:
     """Print the trip history; return 0."""
-    return asyncio.run(_trips(args))
+    return run_async(_trips(args))
 
 
 def _record_json(record: TripRecord) -> dict[str, Any]:

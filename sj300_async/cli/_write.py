@@ -13,7 +13,6 @@ JSON: ``{"node": 1, "code": "F002", "name": ..., "unit": "s", "old_value":
 from __future__ import annotations
 
 import argparse
-import asyncio
 from typing import Any
 
 from ..sj300._drive import Drive
@@ -23,6 +22,7 @@ from ._common import add_bus_options, add_json_option, add_node_option, open_cli
 from ._errors import FAILURE, CliError
 from ._output import format_raw, print_json
 from ._read import parameter_code, read_raw
+from ._session import run_async
 
 __all__ = ["add_parser", "write_raw"]
 
@@ -46,7 +46,7 @@ def add_parser(subparsers: Any) -> None:
 
 def run(args: argparse.Namespace) -> int:
     """Write, verify and print; return 0."""
-    return asyncio.run(_write(args))
+    return run_async(_write(args))
 
 
 def _raw_value(code: str, text: str, raw: bool) -> int:
