@@ -16,6 +16,7 @@ from ._codes import (
     StatusA,
     StatusB,
     StatusC,
+    TripCode,
     TripStatusB,
     TripStatusC,
 )
@@ -96,6 +97,7 @@ __all__ = [
     "StatusA",
     "StatusB",
     "StatusC",
+    "TripCode",
     "TripHistory",
     "TripRecord",
     "TripStatusB",

@@ -1,4 +1,4 @@
-"""Enumerations of the codes drives send: status A/B/C, trip-record fields, NAK error codes.
+"""Enumerations of the codes drives send: status A/B/C, trip codes and records, NAK codes.
 
 Every enum here is *tolerant*: a code the manual does not list (newer
 firmware, option cards) becomes a pseudo-member named ``UNKNOWN_<n>`` instead
@@ -17,6 +17,7 @@ __all__ = [
     "StatusA",
     "StatusB",
     "StatusC",
+    "TripCode",
     "TripStatusB",
     "TripStatusC",
 ]
@@ -84,6 +85,85 @@ class TripStatusB(enum.IntFlag):
     IGBT_V = 1 << 5  #: E30
     IGBT_W = 1 << 6  #: E30
     GATE_ARRAY = 1 << 7  #: E23
+
+
+_TRIP_DESCRIPTIONS = {
+    1: "over-current at constant speed",
+    2: "over-current while decelerating",
+    3: "over-current while accelerating",
+    4: "over-current (other)",
+    5: "overload",
+    6: "braking resistor overload",
+    7: "over-voltage",
+    8: "EEPROM error",
+    9: "under-voltage",
+    10: "CT error",
+    11: "CPU error",
+    12: "external trip",
+    13: "USP (unattended start protection)",
+    14: "ground fault",
+    15: "input over-voltage",
+    16: "momentary power failure",
+    21: "thermal trip",
+    23: "gate array error",
+    24: "phase loss",
+    30: "IGBT error",
+    35: "thermistor",
+    36: "brake error",
+    **dict.fromkeys(range(60, 70), "option card error"),
+}
+
+
+class TripCode(TolerantIntEnum):
+    """A trip factor: the number of the E-code on the drive's display (7 is E07).
+
+    The SJ300 error codes commonly published (the reference has no table of
+    its own); any other number is kept as an ``UNKNOWN_<n>`` pseudo-member.
+    :attr:`description` is the meaning, :attr:`error_code` the display's text.
+    """
+
+    OVER_CURRENT_CONSTANT = 1  #: E01, over-current at constant speed
+    OVER_CURRENT_DECEL = 2  #: E02, over-current while decelerating
+    OVER_CURRENT_ACCEL = 3  #: E03, over-current while accelerating
+    OVER_CURRENT_OTHER = 4  #: E04, over-current otherwise (stopped)
+    OVERLOAD = 5  #: E05, overload
+    BRAKING_RESISTOR_OVERLOAD = 6  #: E06, braking resistor overload
+    OVER_VOLTAGE = 7  #: E07, over-voltage
+    EEPROM = 8  #: E08, EEPROM error
+    UNDER_VOLTAGE = 9  #: E09, under-voltage
+    CT = 10  #: E10, current transformer error
+    CPU = 11  #: E11, CPU error
+    EXTERNAL = 12  #: E12, external trip (the EXT terminal)
+    USP = 13  #: E13, unattended start protection
+    GROUND_FAULT = 14  #: E14, ground fault
+    INPUT_OVER_VOLTAGE = 15  #: E15, input over-voltage
+    MOMENTARY_POWER_FAILURE = 16  #: E16, momentary power failure
+    THERMAL = 21  #: E21, thermal trip
+    GATE_ARRAY = 23  #: E23, gate array error
+    PHASE_LOSS = 24  #: E24, input phase loss
+    IGBT = 30  #: E30, IGBT error
+    THERMISTOR = 35  #: E35, thermistor
+    BRAKE = 36  #: E36, brake error
+    OPTION_CARD_60 = 60  #: E60..E69, option card errors
+    OPTION_CARD_61 = 61
+    OPTION_CARD_62 = 62
+    OPTION_CARD_63 = 63
+    OPTION_CARD_64 = 64
+    OPTION_CARD_65 = 65
+    OPTION_CARD_66 = 66
+    OPTION_CARD_67 = 67
+    OPTION_CARD_68 = 68
+    OPTION_CARD_69 = 69
+
+    @property
+    def description(self) -> str:
+        """The meaning of the code (``"over-voltage"``); ``"unknown trip"`` when not listed."""
+        return _TRIP_DESCRIPTIONS.get(self.value, "unknown trip")
+
+    @property
+    def error_code(self) -> str:
+        """The code as the drive's display shows it: ``"E07"``."""
+        return f"E{self.value:02d}"
 
 
 _NAK_DESCRIPTIONS = {

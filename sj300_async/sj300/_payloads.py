@@ -12,7 +12,7 @@ from typing import Any, Final, TypeVar
 from ..wire._enums import Direction
 from ..wire._errors import RemoteProtocolError
 from ..wire._fast_construct import slot_setters, unfrozen_twin
-from ._codes import StatusA, StatusB, StatusC, TripStatusB, TripStatusC
+from ._codes import StatusA, StatusB, StatusC, TripCode, TripStatusB, TripStatusC
 from ._constants import MONITOR_DATA_LEN, STATUS_DATA_LEN, TRIP_HISTORY_DATA_LEN
 from ._parser import DATA_PATTERNS, DECIMAL_FIELD
 from ._terminals import InputMonitor, OutputTerminal
@@ -232,7 +232,8 @@ _UnfrozenMonitorData: Final[Any] = unfrozen_twin(MonitorData)
 class TripRecord:
     """One trip-history record: the cause and the drive's state at the moment of the trip."""
 
-    trip_factor: int  #: the E-code number (7 = E07); unknown codes kept as numbers
+    #: The E-code number (7 = E07), as it came; :attr:`trip_code` gives its meaning.
+    trip_factor: int
     status_a: StatusA  #: operating state at trip
     status_b: TripStatusB  #: hardware causes (bit field)
     status_c: TripStatusC  #: what the output was doing
@@ -251,6 +252,14 @@ class TripRecord:
     def error_code(self) -> str:
         """The trip as the drive's display shows it, e.g. ``"E07"``."""
         return f"E{self.trip_factor:02d}"
+
+    @property
+    def trip_code(self) -> TripCode:
+        """The trip factor as a :class:`TripCode` (``.description`` is its meaning).
+
+        A number the codec does not list is kept (``UNKNOWN_<n>``).
+        """
+        return TripCode(self.trip_factor)
 
 
 @dataclass(frozen=True, slots=True)

@@ -2,10 +2,10 @@
 
 from __future__ import annotations
 
+from ...sj300._codes import TripCode
 from ._bus import SimulatedBus, SimulatorStats, simulate
 from ._drive import DEFAULT_EEPROM_WRITE_S, DEFAULT_PROCESSING_S, SimulatedDrive
 from ._parameters_table import Country
-from ._trips import TripCode
 
 __all__ = [
     "DEFAULT_EEPROM_WRITE_S",

@@ -42,7 +42,7 @@ import logging
 from collections.abc import Callable, Mapping
 from typing import Final
 
-from ...sj300._codes import NakCode
+from ...sj300._codes import NakCode, TripCode
 from ...sj300._commands import Command
 from ...sj300._constants import BROADCAST, MAX_NODE, MIN_NODE
 from ...sj300._events import AckDataReply, AckReply, DataReply, NakReply, Reply
@@ -65,7 +65,7 @@ from ._parameters_table import (
     factory_table,
 )
 from ._status import inverter_status, trip_status_a, trip_status_c
-from ._trips import TripCode, TripLog, overcurrent_code, trip_status_b
+from ._trips import TripLog, overcurrent_code, trip_status_b
 
 __all__ = ["DEFAULT_EEPROM_WRITE_S", "DEFAULT_PROCESSING_S", "SimulatedDrive"]
 

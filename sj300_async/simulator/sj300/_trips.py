@@ -1,4 +1,7 @@
-"""Trip codes and the six-deep trip history a drive keeps in non-volatile memory.
+"""The six-deep trip history a drive keeps in non-volatile memory, and what a trip records.
+
+The trip codes themselves (:class:`~sj300_async.sj300.TripCode`, with their
+meanings) belong to the codec; this module uses them.
 
 The history survives a power cycle (a real drive writes it at the moment of
 the trip); only command 08 with B084 = 00 or 02 clears it. The total count
@@ -7,40 +10,16 @@ keeps counting past six.
 
 from __future__ import annotations
 
-import enum
 from typing import Final
 
-from ...sj300._codes import StatusA, TripStatusB, TripStatusC
+from ...sj300._codes import StatusA, TripCode, TripStatusB, TripStatusC
 from ...sj300._payloads import TripHistory, TripRecord
 from .._motion import RunState
 
-__all__ = ["EMPTY_RECORD", "TripCode", "TripLog", "overcurrent_code", "trip_status_b"]
+__all__ = ["EMPTY_RECORD", "TripLog", "overcurrent_code", "trip_status_b"]
 
 _DEPTH: Final = 6
 _MAX_COUNT: Final = 99_999_999  # what the 8-digit total field can carry
-
-
-class TripCode(enum.IntEnum):
-    """Trip factors (the number of the E-code on the display) a simulated drive knows.
-
-    :meth:`SimulatedDrive.trip` takes any number; these are the commonly
-    published SJ300 codes.
-    """
-
-    OVER_CURRENT_CONSTANT = 1  #: E01, over-current at constant speed
-    OVER_CURRENT_DECEL = 2  #: E02, over-current while decelerating
-    OVER_CURRENT_ACCEL = 3  #: E03, over-current while accelerating
-    OVER_CURRENT_OTHER = 4  #: E04, over-current otherwise (stopped)
-    OVERLOAD = 5  #: E05
-    BRAKING_RESISTOR_OVERLOAD = 6  #: E06
-    OVER_VOLTAGE = 7  #: E07
-    EEPROM = 8  #: E08
-    UNDER_VOLTAGE = 9  #: E09
-    EXTERNAL = 12  #: E12, the EXT terminal
-    GROUND_FAULT = 14  #: E14
-    THERMAL = 21  #: E21
-    GATE_ARRAY = 23  #: E23
-    IGBT = 30  #: E30
 
 
 #: The trip-record Status B bit each hardware trip sets (the manual's bit table).
