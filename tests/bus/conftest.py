@@ -6,7 +6,6 @@ import contextlib
 from collections.abc import AsyncIterator, Callable
 
 import pytest
-from scripted import Responder, Rig, ScriptedPeer, answer_all
 
 import sj300_async as sj
 from sj300_async import bus as sjbus
@@ -14,9 +13,11 @@ from sj300_async.bus._bus import Bus
 from sj300_async.transports import LineFaults, loopback_connector
 from sj300_async.wire._line import INSTANT_LINE
 
+from .scripted import MakeRig, Responder, Rig, ScriptedPeer, answer_all
+
 
 @pytest.fixture
-def scripted() -> Callable[..., object]:
+def scripted() -> MakeRig:
     """``async with scripted(respond, timeout=..., retries=...) as rig:``"""
 
     @contextlib.asynccontextmanager

@@ -12,11 +12,15 @@ import asyncio
 import functools
 import operator
 from collections.abc import Callable
+from contextlib import AbstractAsyncContextManager
 from dataclasses import dataclass, field
+from typing import Protocol
 
+import sj300_async as sj
 from sj300_async import bus as sjbus
 from sj300_async import sj300 as sj3
 from sj300_async.bus._bus import Bus
+from sj300_async.transports import LineFaults
 
 
 def xor_bcc(body: bytes) -> bytes:
@@ -44,7 +48,9 @@ def status(node: int, a: int = 3, b: int = 1, c: int = 3) -> bytes:
     return reply(b"%02d%02d%02d%02d00" % (node, a, b, c))
 
 
-Responder = Callable[[sj3.Request], list[tuple[float, bytes]]]
+#: What the peer sends back for one request: (delay in seconds, bytes) pairs.
+Frames = list[tuple[float, bytes]]
+Responder = Callable[[sj3.Request], Frames]
 
 
 @dataclass
@@ -86,7 +92,7 @@ class ScriptedPeer:
             handle.cancel()
 
 
-def answer_all(request: sj3.Request) -> list[tuple[float, bytes]]:
+def answer_all(request: sj3.Request) -> Frames:
     """A healthy drive: answers every command immediately with a plausible reply."""
     node = request.node
     cmd = request.command
@@ -104,7 +110,7 @@ def answer_all(request: sj3.Request) -> list[tuple[float, bytes]]:
 
 @dataclass
 class Rig:
-    bus: Bus
+    bus: Bus[sj.Drive, sj.Broadcast]
     peers: list[ScriptedPeer]
     trace: list[sjbus.TraceRecord]
 
@@ -114,3 +120,17 @@ class Rig:
 
     def written(self) -> list[bytes]:
         return [r.data for r in self.trace if r.direction == "tx"]
+
+
+class MakeRig(Protocol):
+    """The ``scripted`` fixture: ``async with scripted(respond, retries=...) as rig:``."""
+
+    def __call__(
+        self,
+        respond: Responder = ...,
+        *,
+        to_host: LineFaults | None = None,
+        to_peer: LineFaults | None = None,
+        strip_echo: bool = False,
+        **bus_kwargs: object,
+    ) -> AbstractAsyncContextManager[Rig]: ...

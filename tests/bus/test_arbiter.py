@@ -5,13 +5,15 @@ from __future__ import annotations
 import asyncio
 
 import pytest
-from scripted import ack, ack_value, answer_all, nak, reply, status
 
 import sj300_async as sj
 from sj300_async import sj300 as sj3
+from sj300_async.transports import LoopbackTransport
+
+from .scripted import Frames, MakeRig, ack, ack_value, answer_all, nak, reply, status
 
 
-async def test_answer_is_decoded(scripted):
+async def test_answer_is_decoded(scripted: MakeRig) -> None:
     async with scripted() as rig:
         st = await rig.bus.drive(3).read_status()
         assert st == sj.InverterStatus(
@@ -23,8 +25,10 @@ async def test_answer_is_decoded(scripted):
         assert rig.bus.stats.transactions.replies == 2
 
 
-async def test_frames_from_other_nodes_are_discarded_and_the_wait_goes_on(scripted):
-    def respond(req):
+async def test_frames_from_other_nodes_are_discarded_and_the_wait_goes_on(
+    scripted: MakeRig,
+) -> None:
+    def respond(req: sj3.Request) -> Frames:
         # Node 7 chimes in first (a late reply from an earlier era), then the real answer.
         return [(0.0, ack_value(7, 99999)), (0.005, ack_value(req.node, 1234))]
 
@@ -34,8 +38,8 @@ async def test_frames_from_other_nodes_are_discarded_and_the_wait_goes_on(script
         assert rig.bus.drive(2).stats.discarded_frames == 1
 
 
-async def test_same_node_wrong_shape_is_not_an_answer(scripted):
-    def respond(req):
+async def test_same_node_wrong_shape_is_not_an_answer(scripted: MakeRig) -> None:
+    def respond(req: sj3.Request) -> Frames:
         # A status reply (another command's shape) from the same node, then the ACK+value.
         return [(0.0, status(req.node)), (0.005, ack_value(req.node, 42))]
 
@@ -44,8 +48,8 @@ async def test_same_node_wrong_shape_is_not_an_answer(scripted):
         assert rig.bus.stats.stray_frames == 1
 
 
-async def test_garbage_and_corrupt_frames_are_counted_not_fatal(scripted):
-    def respond(req):
+async def test_garbage_and_corrupt_frames_are_counted_not_fatal(scripted: MakeRig) -> None:
+    def respond(req: sj3.Request) -> Frames:
         corrupt = bytearray(ack_value(req.node, 1))
         corrupt[-3] ^= 0x01  # break the BCC
         return [(0.0, b"\x00\xffnoise" + bytes(corrupt)), (0.005, ack_value(req.node, 77))]
@@ -56,8 +60,8 @@ async def test_garbage_and_corrupt_frames_are_counted_not_fatal(scripted):
         assert rig.bus.stats.bad_frames == 1
 
 
-async def test_only_corrupt_answer_fails_typed_after_deadline(scripted):
-    def respond(req):
+async def test_only_corrupt_answer_fails_typed_after_deadline(scripted: MakeRig) -> None:
+    def respond(req: sj3.Request) -> Frames:
         frame = bytearray(ack_value(req.node, 1))
         frame[5] = ord("X")  # a letter where digits belong...
         body = bytes(frame[1:-3])
@@ -73,10 +77,10 @@ async def test_only_corrupt_answer_fails_typed_after_deadline(scripted):
         assert rig.bus.stats.transactions.protocol_errors == 1
 
 
-async def test_late_reply_after_timeout_is_never_the_next_answer(scripted):
+async def test_late_reply_after_timeout_is_never_the_next_answer(scripted: MakeRig) -> None:
     calls = 0
 
-    def respond(req):
+    def respond(req: sj3.Request) -> Frames:
         nonlocal calls
         calls += 1
         if calls == 1:
@@ -96,7 +100,7 @@ async def test_late_reply_after_timeout_is_never_the_next_answer(scripted):
         assert tx_times[1] > rx_late  # the second request went out after the late reply
 
 
-async def test_timeout_is_a_timeouterror_and_retried_then_counted(scripted):
+async def test_timeout_is_a_timeouterror_and_retried_then_counted(scripted: MakeRig) -> None:
     async with scripted(lambda req: [], retries=2) as rig:
         with pytest.raises(TimeoutError):
             await rig.bus.drive(9).read_status()
@@ -105,7 +109,7 @@ async def test_timeout_is_a_timeouterror_and_retried_then_counted(scripted):
 
 
 @pytest.mark.parametrize(("code", "attempts"), [(2, 3), (8, 3), (11, 1), (13, 1), (16, 1)])
-async def test_nak_retry_policy(scripted, code, attempts):
+async def test_nak_retry_policy(scripted: MakeRig, code: int, attempts: int) -> None:
     async with scripted(lambda req: [(0.0, nak(req.node, code))], retries=2) as rig:
         with pytest.raises(sj.NakError) as info:
             await rig.bus.drive(6).write_parameter_raw("A004", 500)
@@ -114,19 +118,19 @@ async def test_nak_retry_policy(scripted, code, attempts):
         assert rig.bus.drive(6).stats.naks[code] == attempts
 
 
-async def test_fifo_fairness_under_a_failing_node(scripted):
-    def respond(req):
+async def test_fifo_fairness_under_a_failing_node(scripted: MakeRig) -> None:
+    def respond(req: sj3.Request) -> Frames:
         return [] if req.node == 13 else answer_all(req)
 
     async with scripted(respond, retries=3) as rig:
         order: list[str] = []
 
-        async def dead():
+        async def dead() -> None:
             with pytest.raises(sj.ReplyTimeoutError):
                 await rig.bus.drive(13).read_status()
             order.append("dead-failed")
 
-        async def healthy():
+        async def healthy() -> None:
             for _ in range(3):
                 await rig.bus.drive(1).read_status()
                 order.append("ok")
@@ -139,8 +143,8 @@ async def test_fifo_fairness_under_a_failing_node(scripted):
         assert 1 in nodes[first_dead:last_dead]
 
 
-async def test_stop_jumps_the_queue(scripted):
-    def respond(req):
+async def test_stop_jumps_the_queue(scripted: MakeRig) -> None:
+    def respond(req: sj3.Request) -> Frames:
         delay = 0.03 if req.command is sj3.Command.READ_MONITOR else 0.0
         return [(delay, frame) for _, frame in answer_all(req)]
 
@@ -158,7 +162,7 @@ async def test_stop_jumps_the_queue(scripted):
         assert rig.peer.requests[1].data == b"0"
 
 
-async def test_broadcast_gets_no_reply_and_the_line_rests(scripted):
+async def test_broadcast_gets_no_reply_and_the_line_rests(scripted: MakeRig) -> None:
     timing = sj.BusTiming(margin_s=0.05, broadcast_processing_s=0.02)
     async with scripted(timing=timing) as rig:
         await rig.bus.broadcast.stop()
@@ -170,7 +174,7 @@ async def test_broadcast_gets_no_reply_and_the_line_rests(scripted):
         assert rig.bus.broadcast.stats.broadcasts == 1
 
 
-async def test_a_guard_rests_the_line_after_each_reply(scripted):
+async def test_a_guard_rests_the_line_after_each_reply(scripted: MakeRig) -> None:
     # 1200 baud 8N1: a character is 8.33 ms; a 3-character guard is 25 ms,
     # counted from the reply's arrival (the trace's rx stamp).
     line = sj.LineSettings(1200)
@@ -184,7 +188,7 @@ async def test_a_guard_rests_the_line_after_each_reply(scripted):
             assert next_write - reply_at >= 3 * line.char_time_s
 
 
-async def test_no_rest_after_a_reply_by_default(scripted):
+async def test_no_rest_after_a_reply_by_default(scripted: MakeRig) -> None:
     # The default guard is 0 characters (see _timing.py): at 1200 baud a
     # 1-character rest alone would be 8 ms between reply and next request.
     assert sj.BusTiming().guard_chars == 0
@@ -198,7 +202,7 @@ async def test_no_rest_after_a_reply_by_default(scripted):
         assert min(gaps) < sj.LineSettings(1200).char_time_s
 
 
-async def test_broadcast_refuses_unicast_only_commands(scripted):
+async def test_broadcast_refuses_unicast_only_commands(scripted: MakeRig) -> None:
     async with scripted() as rig:
         # The broadcast object offers no reads, and the bus will not make a
         # drive at the broadcast address to ask one through.
@@ -211,14 +215,14 @@ async def test_broadcast_refuses_unicast_only_commands(scripted):
         assert rig.peer.requests == []
 
 
-async def test_closed_bus_refuses(scripted):
+async def test_closed_bus_refuses(scripted: MakeRig) -> None:
     async with scripted() as rig:
         pass
     with pytest.raises(sj.BusClosedError):
         await rig.bus.drive(1).read_status()
 
 
-async def test_request_while_link_down_fails_promptly(scripted):
+async def test_request_while_link_down_fails_promptly(scripted: MakeRig) -> None:
     policy = sj.ReconnectPolicy(initial_s=5.0, max_s=5.0)
     async with scripted(reconnect=policy) as rig:
         rig.bus.link.drop()
@@ -231,7 +235,7 @@ async def test_request_while_link_down_fails_promptly(scripted):
         assert loop.time() - start < 0.01
 
 
-async def test_link_drop_mid_transaction_fails_waiter_and_reconnects(scripted):
+async def test_link_drop_mid_transaction_fails_waiter_and_reconnects(scripted: MakeRig) -> None:
     policy = sj.ReconnectPolicy(initial_s=0.01, max_s=0.02)
     async with scripted(lambda req: [], reconnect=policy, retries=0) as rig:
         task = asyncio.create_task(rig.bus.drive(1).read_status())
@@ -248,7 +252,7 @@ async def test_link_drop_mid_transaction_fails_waiter_and_reconnects(scripted):
         assert rig.bus.stats.connects == 2
 
 
-async def test_read_only_refuses_every_mutating_command(scripted):
+async def test_read_only_refuses_every_mutating_command(scripted: MakeRig) -> None:
     async with scripted(read_only=True) as rig:
         d = rig.bus.drive(1)
         for call in (
@@ -272,8 +276,8 @@ async def test_read_only_refuses_every_mutating_command(scripted):
         assert [r.command for r in rig.peer.requests] == [sj3.Command.READ_STATUS]
 
 
-async def test_echo_is_stripped(scripted):
-    def respond(req):
+async def test_echo_is_stripped(scripted: MakeRig) -> None:
+    def respond(req: sj3.Request) -> Frames:
         return [(0.0, req.frame + ack(req.node))]  # the adapter hands our request back first
 
     async with scripted(respond, strip_echo=True) as rig:
@@ -282,8 +286,8 @@ async def test_echo_is_stripped(scripted):
         assert rig.bus.stats.bad_frames == 0
 
 
-async def test_without_echo_stripping_the_echo_is_a_counted_bad_frame(scripted):
-    def respond(req):
+async def test_without_echo_stripping_the_echo_is_a_counted_bad_frame(scripted: MakeRig) -> None:
+    def respond(req: sj3.Request) -> Frames:
         return [(0.0, req.frame + ack(req.node))]
 
     async with scripted(respond) as rig:
@@ -291,9 +295,12 @@ async def test_without_echo_stripping_the_echo_is_a_counted_bad_frame(scripted):
         assert rig.bus.stats.bad_frames == 1
 
 
-async def test_unsolicited_frames_between_transactions_are_counted(scripted):
+async def test_unsolicited_frames_between_transactions_are_counted(scripted: MakeRig) -> None:
     async with scripted() as rig:
-        transport = rig.bus.link.protocol._transport
+        protocol = rig.bus.link.protocol
+        assert protocol is not None
+        transport = protocol._transport
+        assert isinstance(transport, LoopbackTransport)
         transport.inject(reply(b"05\x06"))
         await asyncio.sleep(0.001)
         assert rig.bus.stats.unsolicited_frames == 1

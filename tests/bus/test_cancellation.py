@@ -7,16 +7,17 @@ import asyncio
 import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
-from scripted import ack_value, answer_all
 
 import sj300_async as sj
 from sj300_async import sj300 as sj3
 
+from .scripted import Frames, MakeRig, Responder, ack_value, answer_all
 
-def node_specific(delay: float):
+
+def node_specific(delay: float) -> Responder:
     """Each node answers a parameter read with a value that names the node and the code."""
 
-    def respond(req: sj3.Request):
+    def respond(req: sj3.Request) -> Frames:
         if req.command is sj3.Command.READ_PARAMETER:
             return [(delay, ack_value(req.node, req.node * 10000 + int(req.data[1:])))]
         return [(delay, frame) for _, frame in answer_all(req)]
@@ -24,7 +25,7 @@ def node_specific(delay: float):
     return respond
 
 
-async def _scenario(scripted, steps: int, delay: float, queued: int) -> None:
+async def _scenario(scripted: MakeRig, steps: int, delay: float, queued: int) -> None:
     async with scripted(node_specific(delay), retries=0) as rig:
         bus = rig.bus
         victim = asyncio.create_task(bus.drive(1).read_parameter_raw("F002"))
@@ -55,11 +56,11 @@ async def _scenario(scripted, steps: int, delay: float, queued: int) -> None:
     delay=st.sampled_from([0.0, 0.002]),
     queued=st.integers(min_value=0, max_value=3),
 )
-def test_cancel_at_any_point(scripted, steps, delay, queued):
+def test_cancel_at_any_point(scripted: MakeRig, steps: int, delay: float, queued: int) -> None:
     asyncio.run(_scenario(scripted, steps, delay, queued))
 
 
-async def test_cancel_while_queued_sends_nothing(scripted):
+async def test_cancel_while_queued_sends_nothing(scripted: MakeRig) -> None:
     async with scripted(node_specific(0.01)) as rig:
         first = asyncio.create_task(rig.bus.drive(1).read_status())
         await asyncio.sleep(0)
@@ -72,7 +73,7 @@ async def test_cancel_while_queued_sends_nothing(scripted):
         assert rig.bus.stats.drains == 0
 
 
-async def test_cancel_in_flight_drains_and_is_counted(scripted):
+async def test_cancel_in_flight_drains_and_is_counted(scripted: MakeRig) -> None:
     async with scripted(node_specific(0.02)) as rig:
         task = asyncio.create_task(rig.bus.drive(1).read_parameter_raw("F002"))
         await asyncio.sleep(0.005)
@@ -86,7 +87,7 @@ async def test_cancel_in_flight_drains_and_is_counted(scripted):
         assert rig.bus.stats.drains == 1
 
 
-async def test_cancellederror_is_never_wrapped(scripted):
+async def test_cancellederror_is_never_wrapped(scripted: MakeRig) -> None:
     async with scripted(lambda req: []) as rig:
         task = asyncio.create_task(rig.bus.drive(1).read_status())
         await asyncio.sleep(0.001)

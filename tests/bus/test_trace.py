@@ -2,15 +2,10 @@
 
 from __future__ import annotations
 
-from collections.abc import Callable
-from contextlib import AbstractAsyncContextManager
-
-from scripted import Rig, reply
-
 import sj300_async as sj
 from sj300_async import sj300 as sj3
 
-MakeRig = Callable[..., AbstractAsyncContextManager[Rig]]
+from .scripted import MakeRig, reply
 
 # A monitor block whose two hex fields (the terminal monitors) are lower case
 # on the wire, as a drive may send them: 4 decimal items, 2 hex, 7 decimal.
