@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import asyncio
+from contextlib import AbstractAsyncContextManager
 
 import pytest
 from waiting import wait_for
@@ -10,11 +11,11 @@ from waiting import wait_for
 import sj300_async as sj
 
 
-def _fast_bus(nodes: str = "1-4"):
+def _fast_bus(nodes: str = "1-4") -> AbstractAsyncContextManager[sj.Bus[sj.Drive, sj.Broadcast]]:
     return sj.open_bus(f"sim://?nodes={nodes}", timeout=0.02, retries=0)
 
 
-async def test_samples_carry_typed_reads_and_parameters():
+async def test_samples_carry_typed_reads_and_parameters() -> None:
     async with _fast_bus() as bus:
         await bus.drive(2).write_parameter("F002", 7.5)
         poller = sj.Poller(interval_s=0.01, parameters=["F002"])
@@ -34,7 +35,7 @@ async def test_samples_carry_typed_reads_and_parameters():
         assert s.latency_s is not None
 
 
-async def test_offline_after_n_failures_probed_less_often_then_back_online():
+async def test_offline_after_n_failures_probed_less_often_then_back_online() -> None:
     async with _fast_bus() as bus:
         sim = bus.simulator
         assert sim is not None
@@ -66,7 +67,7 @@ async def test_offline_after_n_failures_probed_less_often_then_back_online():
             assert poller.health(bus, 3).consecutive_failures == 0
 
 
-async def test_commands_interleave_without_waiting_for_a_cycle():
+async def test_commands_interleave_without_waiting_for_a_cycle() -> None:
     async with _fast_bus("1-8") as bus:
         poller = sj.Poller(interval_s=0.0, parameters=["F002", "F003", "A004"])
         poller.add(bus, range(1, 9))
@@ -87,7 +88,7 @@ async def test_commands_interleave_without_waiting_for_a_cycle():
         assert stop_waited < cycle / 4, (stop_waited, cycle)
 
 
-async def test_two_buses_are_polled_concurrently():
+async def test_two_buses_are_polled_concurrently() -> None:
     async with _fast_bus("1-2") as a, _fast_bus("1-3") as b:
         a.simulator.faults.late(1, 0.01)  # bus A is slow; B must not wait for it
         poller = sj.Poller(interval_s=0.0)
@@ -105,7 +106,7 @@ async def test_two_buses_are_polled_concurrently():
         assert counts[b.description] > 3 * counts[a.description]
 
 
-async def test_cancellation_stops_polling_cleanly():
+async def test_cancellation_stops_polling_cleanly() -> None:
     async with _fast_bus() as bus:
         poller = sj.Poller(interval_s=0.001)
         poller.add(bus, [1, 2])
@@ -134,7 +135,7 @@ def _bus_tasks() -> set[asyncio.Task[object]]:
     return {t for t in asyncio.all_tasks() if t.get_name().startswith("sj300 link")}
 
 
-async def test_slow_consumer_drops_are_counted():
+async def test_slow_consumer_drops_are_counted() -> None:
     async with _fast_bus() as bus:
         poller = sj.Poller(interval_s=0.0, buffer=2)
         poller.add(bus, [1])
@@ -146,14 +147,15 @@ async def test_slow_consumer_drops_are_counted():
             assert poller.dropped_samples > 0
             second = await samples.__anext__()
             assert second.timestamp > first.timestamp
-            await samples.aclose()
+            # samples() is an async generator, annotated AsyncIterator[Sample] (no aclose).
+            await samples.aclose()  # type: ignore[attr-defined]
 
 
-async def test_samples_iterator_ends_when_the_poller_stops():
+async def test_samples_iterator_ends_when_the_poller_stops() -> None:
     async with _fast_bus() as bus:
         poller = sj.Poller(interval_s=0.01)
         poller.add(bus, [1])
-        got = []
+        got: list[sj.Sample] = []
 
         async def reader() -> None:
             async for s in poller.samples():
@@ -174,9 +176,9 @@ async def test_samples_iterator_ends_when_the_poller_stops():
         assert len(set(timestamps)) == len(timestamps)
 
 
-def test_bad_configuration_is_refused():
+def test_bad_configuration_is_refused() -> None:
     with pytest.raises(sj.LocalProtocolError):
-        sj.Poller(reads=["temperature"])
+        sj.Poller(reads=["temperature"])  # type: ignore[list-item]
     with pytest.raises(sj.LocalProtocolError):
         sj.Poller(offline_after=0)
     with pytest.raises(sj.LocalProtocolError):
