@@ -5,11 +5,12 @@ from __future__ import annotations
 import logging
 
 import pytest
-from simwire import ack, ack_data, data_reply, exchange, nak, request, xor_bcc
 
 from sj300_async import LocalProtocolError
 from sj300_async.simulator import LinePacing, Transmission
 from sj300_async.simulator.sj300 import DEFAULT_PROCESSING_S, SimulatedBus
+
+from .simwire import ack, ack_data, data_reply, exchange, nak, request, xor_bcc
 
 
 def test_each_node_answers_for_itself() -> None:

@@ -11,10 +11,11 @@ import sys
 from collections.abc import AsyncIterator
 
 import pytest
-from simwire import ack, ack_data, nak, request
 
 from sj300_async.cli import main
 from sj300_async.cli._args import format_nodes, parse_listen, parse_nodes
+
+from .simwire import ack, ack_data, nak, request
 
 TIMEOUT = 10.0  # generous: a cold interpreter start on a loaded CI machine
 

@@ -9,7 +9,10 @@ simulator's default: European factory values (A004 = 50.0 Hz, F002 = F003 =
 from __future__ import annotations
 
 import pytest
-from simwire import (
+
+from sj300_async.simulator.sj300 import SimulatedBus
+
+from .simwire import (
     ACK,
     CR,
     NAK,
@@ -25,8 +28,6 @@ from simwire import (
     request,
     xor_bcc,
 )
-
-from sj300_async.simulator.sj300 import SimulatedBus
 
 
 @pytest.fixture
@@ -233,7 +234,7 @@ def test_unknown_command_gets_nak_11(bus: SimulatedBus, command: bytes) -> None:
     assert exchange(bus, request(b"01", command)) == [nak(b"01", b"11")]
 
 
-@pytest.mark.parametrize("code", [b"A999", b"Z001", b"P001", b"F009"])
+@pytest.mark.parametrize("code", [b"A999", b"Z001", b"P099", b"F009"])
 def test_06_unknown_parameter_gets_nak_16(bus: SimulatedBus, code: bytes) -> None:
     assert exchange(bus, request(b"01", b"06", code)) == [nak(b"01", b"16")]
 

@@ -5,10 +5,11 @@ from __future__ import annotations
 import asyncio
 
 import pytest
-from simwire import ack, data_reply, request
 
 from sj300_async.simulator import LinePacing, PacedLine, SimulatorEndpoint
 from sj300_async.simulator.sj300 import SimulatedBus
+
+from .simwire import ack, data_reply, request
 
 
 class Host:

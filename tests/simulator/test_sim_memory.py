@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import pytest
-from simwire import ack, ack_data, exchange, nak, request
 
 from sj300_async import LocalProtocolError
 from sj300_async.simulator.sj300 import (
@@ -14,6 +13,8 @@ from sj300_async.simulator.sj300 import (
 )
 from sj300_async.simulator.sj300._parameters_table import factory_table, value_error
 from sj300_async.sj300 import parameter_info
+
+from .simwire import ack, ack_data, exchange, nak, request
 
 
 def read(bus: SimulatedBus, code: bytes, now: float = 0.0) -> bytes:

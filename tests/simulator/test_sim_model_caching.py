@@ -17,7 +17,6 @@ from typing import Any
 import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
-from simwire import ack, exchange, fields, reply_data, request
 
 from sj300_async import LocalProtocolError, TripHistory
 from sj300_async.simulator import Faults, RunState
@@ -25,6 +24,8 @@ from sj300_async.simulator.sj300 import SimulatedBus, SimulatedDrive
 from sj300_async.simulator.sj300._trips import TripLog
 from sj300_async.sj300 import Request, RequestParser
 from sj300_async.wire import BadFrame
+
+from .simwire import ack, exchange, fields, reply_data, request
 
 RATE_HZ_PER_S = 50.0 / 30.0  # European factory values: A004 = 50.0 Hz, F002 = F003 = 30.00 s
 HOUR_S = 3600.0
@@ -319,7 +320,7 @@ def test_cached_drives_answer_as_drives_that_keep_nothing(
             assert cached.receive(action, now) == fresh.receive(action, now)
             continue
         name, arg = action
-        results = []
+        results: list[bool | str] = []  # what trip/reset return, or the refusal's message
         for drive in (cached.drives[node], fresh.drives[node]):
             if name == "trip":
                 results.append(drive.trip(arg, now=now))

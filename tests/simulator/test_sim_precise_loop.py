@@ -20,13 +20,17 @@ _DELAY_S = 0.0003
 _SAMPLES = 41
 
 
+def _stamp(fired: asyncio.Future[float], loop: asyncio.AbstractEventLoop) -> None:
+    fired.set_result(loop.time())
+
+
 async def _lateness() -> list[float]:
     loop = asyncio.get_running_loop()
     late: list[float] = []
     for _ in range(_SAMPLES):
         fired: asyncio.Future[float] = loop.create_future()
         due = loop.time() + _DELAY_S
-        loop.call_at(due, lambda f=fired: f.set_result(loop.time()))
+        loop.call_at(due, _stamp, fired, loop)
         late.append(await fired - due)
     return late
 

@@ -8,10 +8,11 @@ output ramps at 50 / 30 Hz per second both ways.
 from __future__ import annotations
 
 import pytest
-from simwire import ack, exchange, fields, reply_data, request
 
 from sj300_async.simulator import RunState
 from sj300_async.simulator.sj300 import SimulatedBus
+
+from .simwire import ack, exchange, fields, reply_data, request
 
 RATE_HZ_PER_S = 50.0 / 30.0
 

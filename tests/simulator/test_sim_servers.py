@@ -9,7 +9,6 @@ from collections.abc import AsyncIterator
 
 import pytest
 import serial  # pyserial
-from simwire import ack, ack_data, data_reply, request
 
 from sj300_async.simulator import (
     LinePacing,
@@ -20,6 +19,8 @@ from sj300_async.simulator import (
     serve_tcp,
 )
 from sj300_async.simulator.sj300 import SimulatedBus
+
+from .simwire import ack, ack_data, data_reply, request
 
 TIMEOUT = 2.0
 

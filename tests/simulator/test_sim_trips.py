@@ -3,11 +3,12 @@
 from __future__ import annotations
 
 import pytest
-from simwire import ack, exchange, fields, reply_data, request
 
 from sj300_async import LocalProtocolError
 from sj300_async.simulator import RunState
 from sj300_async.simulator.sj300 import SimulatedBus
+
+from .simwire import ack, exchange, fields, reply_data, request
 
 RS = b"0000000000040000"  # bit 18
 EXT = b"0000000000001000"  # bit 12
