@@ -15,17 +15,27 @@ drives the test can inspect (``line.sim``). Transports:
 from __future__ import annotations
 
 import contextlib
-from collections.abc import AsyncIterator, Callable
+from collections.abc import AsyncIterator
 from dataclasses import dataclass
+from typing import Protocol
 
 import pytest
-from bridges import socat_ser2net
 
 import sj300_async as sj
 from sj300_async.simulator import open_pty_server, serve_tcp
 from sj300_async.simulator.sj300 import SimulatedBus
 
+from .bridges import socat_ser2net
+
 NODES = (1, 2, 3, 4)
+
+
+class OpenBus(Protocol):
+    """``line.open(timeout=..., retries=...)``: a bus through the transport under test."""
+
+    def __call__(
+        self, *, timeout: float | None = None, retries: int = 2
+    ) -> contextlib.AbstractAsyncContextManager[sj.Bus[sj.Drive, sj.Broadcast]]: ...
 
 
 @dataclass
@@ -33,7 +43,7 @@ class Line:
     kind: str
     sim: SimulatedBus
     url: str
-    open: Callable[..., contextlib.AbstractAsyncContextManager[sj.Bus]]
+    open: OpenBus
 
 
 @contextlib.asynccontextmanager
@@ -61,11 +71,11 @@ async def line(request: pytest.FixtureRequest) -> AsyncIterator[Line]:
         else:
             url = await stack.enter_async_context(_ser2net_bridge(sim))
 
-        def open_line(**kwargs: object) -> contextlib.AbstractAsyncContextManager[sj.Bus]:
+        def open_line(
+            *, timeout: float | None = None, retries: int = 2
+        ) -> contextlib.AbstractAsyncContextManager[sj.Bus[sj.Drive, sj.Broadcast]]:
             if kind == "loopback":
-                kwargs["simulator"] = sim
-            else:
-                kwargs.setdefault("timeout", 0.5)
-            return sj.open_bus(url, **kwargs)  # type: ignore[arg-type]
+                return sj.open_bus(url, simulator=sim, timeout=timeout, retries=retries)
+            return sj.open_bus(url, timeout=0.5 if timeout is None else timeout, retries=retries)
 
         yield Line(kind, sim, url, open_line)

@@ -20,11 +20,12 @@ from collections.abc import AsyncIterator, Awaitable, Callable
 from dataclasses import dataclass, field
 from typing import Any
 
-from bridges import socat_ser2net
 from waiting import wait_for
 
 from sj300_async import LineSettings
 from sj300_async.transports import loopback_connector, serial_connector, tcp_connector
+
+from .bridges import socat_ser2net
 
 KINDS = ("loopback", "tcp", "pty", "ser2net")
 

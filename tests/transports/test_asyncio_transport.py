@@ -16,8 +16,9 @@ import asyncio
 from collections.abc import AsyncIterator
 
 import pytest
-from rawline import KINDS, Far, LoopbackFar, RawLine, Recorder, open_raw_line
 from waiting import wait_for
+
+from .rawline import KINDS, Far, LoopbackFar, RawLine, Recorder, open_raw_line
 
 HIGH, LOW = 16 * 1024, 4 * 1024
 CHUNK = 64 * 1024

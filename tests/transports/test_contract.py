@@ -16,6 +16,8 @@ from waiting import wait_for
 
 import sj300_async as sj
 
+from .conftest import Line
+
 
 def _open_fds() -> int:
     gc.collect()  # earlier tests' unreachable objects may still hold descriptors
@@ -24,7 +26,7 @@ def _open_fds() -> int:
 
 def _line_fds() -> set[tuple[str, str]]:
     """The descriptors that carry a line: sockets and (pseudo-)terminals, with their targets."""
-    found = set()
+    found: set[tuple[str, str]] = set()
     for fd in os.listdir("/proc/self/fd"):
         try:
             target = os.readlink(f"/proc/self/fd/{fd}")
@@ -35,7 +37,7 @@ def _line_fds() -> set[tuple[str, str]]:
     return found
 
 
-async def test_every_command_round_trips(line):
+async def test_every_command_round_trips(line: Line) -> None:
     async with line.open() as bus:
         d = bus.drive(2)
         await d.write_parameter("F002", 0.5)  # 0.5 s from 0 to maximum frequency
@@ -65,7 +67,7 @@ async def test_every_command_round_trips(line):
         assert line.sim.drives[2].stored_parameters["F002"] == 50
 
 
-async def test_many_sequential_transactions_keep_their_values(line):
+async def test_many_sequential_transactions_keep_their_values(line: Line) -> None:
     async with line.open() as bus:
         for node in (1, 2, 3, 4):
             await bus.drive(node).write_parameter_raw("A020", 100 * node)
@@ -76,7 +78,7 @@ async def test_many_sequential_transactions_keep_their_values(line):
         assert bus.stats.bad_frames == 0
 
 
-async def test_concurrent_callers_all_get_their_own_answers(line):
+async def test_concurrent_callers_all_get_their_own_answers(line: Line) -> None:
     async with line.open() as bus:
         for node in (1, 2, 3, 4):
             await bus.drive(node).write_parameter_raw("A020", 1000 + node)
@@ -88,7 +90,7 @@ async def test_concurrent_callers_all_get_their_own_answers(line):
         assert results == [[1000 + n] * 10 for n in (1, 2, 3, 4)]
 
 
-async def test_absent_node_times_out_and_the_bus_goes_on(line):
+async def test_absent_node_times_out_and_the_bus_goes_on(line: Line) -> None:
     async with line.open(timeout=0.1, retries=1) as bus:
         with pytest.raises(sj.ReplyTimeoutError):
             await bus.drive(30).read_status()
@@ -96,21 +98,21 @@ async def test_absent_node_times_out_and_the_bus_goes_on(line):
         assert (await bus.drive(1).read_status()).b is sj.StatusB.STOPPED
 
 
-async def test_nak_is_typed(line):
+async def test_nak_is_typed(line: Line) -> None:
     async with line.open() as bus:
         with pytest.raises(sj.NakError) as info:
             await bus.drive(3).read_parameter_raw("A999")
         assert (info.value.node, info.value.code) == (3, sj.NakCode.ABNORMAL_PARAMETER)
 
 
-async def test_broadcast_reaches_every_drive(line):
+async def test_broadcast_reaches_every_drive(line: Line) -> None:
     async with line.open() as bus:
         await bus.broadcast.write_parameter_raw("A020", 4242)
         for node in (1, 2, 3, 4):
             assert await bus.drive(node).read_parameter_raw("A020") == 4242
 
 
-async def test_close_releases_everything(line):
+async def test_close_releases_everything(line: Line) -> None:
     # Warm up once so lazily-opened files (e.g. /dev/urandom) are not counted.
     idle_line = _line_fds()
     async with line.open() as bus:

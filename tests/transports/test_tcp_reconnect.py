@@ -13,7 +13,7 @@ from sj300_async.simulator.sj300 import SimulatedBus
 FAST = sj.ReconnectPolicy(initial_s=0.02, max_s=0.1, connect_timeout_s=1.0)
 
 
-async def test_requests_fail_promptly_while_down_and_work_after_restart():
+async def test_requests_fail_promptly_while_down_and_work_after_restart() -> None:
     sim = SimulatedBus(nodes=[1])
     server = await serve_tcp(sim)
     port = server.port
@@ -43,7 +43,7 @@ async def test_requests_fail_promptly_while_down_and_work_after_restart():
     await server.wait_closed()
 
 
-async def test_unreachable_bridge_fails_at_open():
+async def test_unreachable_bridge_fails_at_open() -> None:
     sim = SimulatedBus(nodes=[1])
     server = await serve_tcp(sim)
     port = server.port
