@@ -1,32 +1,44 @@
 """The simulated drive's parameter table: which codes it knows, their factory values and limits.
 
-A simulated drive knows every parameter of the library's catalogue
-(:data:`sj300_async.PARAMETERS`) plus the input terminal assignments
-C001..C008; any other code gets NAK 16, as a real drive answers for a code
-its firmware lacks. Values are stored raw (the eight digits of commands 06 /
-07); limits come from the catalogue's range times its scale, so the drive
-and the host library agree by construction.
+A simulated drive knows every code of the library's catalogue
+(:data:`sj300_async.PARAMETERS`, the SJ300's whole function-code table):
+the catalogue is the one list of codes, and this module adds none. Any other
+code gets NAK 16, as a real drive answers for a code its firmware lacks.
+Values are stored raw (the eight digits of commands 06 / 07); limits come
+from the catalogue's range times its scale, so the drive and the host
+library agree by construction.
+
+Factory values: the catalogue's ``default`` (the manual's factory setting)
+where it has one; else what this module's model says (below); else 0, or
+the lowest raw value of the range when 0 is outside it.
 
 Decisions (not in the seeds; the SJ300 manual's factory-setting tables and
 common practice):
 
 - The simulated model is a 5.5 kW, 400 V class drive (SJ300-055H): H003 =
-  11 (5.5 kW in both the US and the EU table), B012 = 12.0 A rated current,
-  A082 = 400 V (460 V for the US).
+  H203 = 11 (5.5 kW in both the US and the EU table), 12.0 A rated current
+  (B012 / B212 / B312 electronic thermal level, C041 / C111 overload
+  signal levels, B126 brake release current), 18.0 A overload restriction
+  (B022 / B025, 1.5 x rated), the 400 V class voltages (B051 440 V, B052
+  720 V, B096 720 V) and A082 = 400 V (460 V for the US).
 - B085 country code: 00 Japan, 01 Europe, 02 USA. It selects the base and
-  maximum frequency (A003 / A004: 50 Hz in Europe, 60 Hz elsewhere) and the
-  AVR voltage. The simulator's default country is Europe.
+  maximum frequency (A003 / A004 and the 2nd / 3rd motor's A203 / A204 /
+  A303 / A304: 50 Hz in Europe, 60 Hz elsewhere) and the AVR voltage. The
+  simulator's default country is Europe.
 - True factory defaults take the run command and frequency from the
   terminals (A001 = A002 = 01), so a serial 00 / 01 is refused with NAK 13.
   :data:`SERIAL_CONTROL` is the small change an integrator makes first, and
   what a simulated drive starts with unless asked for factory defaults.
 - C001..C008 carry the SJ300's factory terminal functions (RS, AT, JG, FRS,
   2CH, CF2, CF1, RV). A function code is the bit number of that function in
-  command 02, which is how the monitor block shows terminals set by 02.
+  command 02, which is how the monitor block shows terminals set by 02, and
+  why C001..C008 accept only the function codes command 02 can carry.
 - Command 08 keeps B085 (it is the input of the initialization) and the
   line settings C071..C075: the simulated line is fixed by the server, and
   a drive whose readback disagreed with the line it answers on would only
   mislead.
+- The codes the model does not use (most of them) are stored and read
+  back, checked against their range only.
 """
 
 from __future__ import annotations
@@ -67,61 +79,60 @@ SERIAL_CONTROL: Final[dict[str, int]] = {"A001": SOURCE_SERIAL, "A002": SOURCE_S
 #: Parameters command 08 leaves alone (see the module docstring).
 KEPT_BY_INITIALIZATION: Final = ("B085", "C071", "C072", "C073", "C074", "C075")
 
-# Raw values (the eight digits on the wire), same for every country.
-_COMMON: Final[dict[str, int]] = {
-    "F001": 0,  # 0.00 Hz
-    "F002": 3000,  # 30.00 s
-    "F003": 3000,  # 30.00 s
-    "F004": 0,  # keypad run key: forward
-    "A001": 1,  # frequency from the terminals
-    "A002": 1,  # run command from the terminals
-    "A020": 0,  # 0.00 Hz
-    "A038": 100,  # 1.00 Hz
-    "A044": 0,  # constant torque V/f
-    "A061": 0,  # 0.00 Hz: upper limit disabled
-    "A062": 0,  # 0.00 Hz: lower limit disabled
-    "A092": 1500,  # 15.00 s
-    "A093": 1500,  # 15.00 s
-    "B001": 0,  # restart: alarm output after trip
-    "B012": 120,  # 12.0 A electronic thermal level = rated current
-    "B031": 1,  # software lock mode
-    "B084": 0,  # initialization mode: clear the trip history
-    "C001": InputTerminal.RS.bit_length() - 1,  # 18
-    "C002": InputTerminal.AT.bit_length() - 1,  # 16
-    "C003": InputTerminal.JG.bit_length() - 1,  # 6
-    "C004": InputTerminal.FRS.bit_length() - 1,  # 11
-    "C005": InputTerminal.TWO_CH.bit_length() - 1,  # 9
-    "C006": InputTerminal.CF2.bit_length() - 1,  # 3
-    "C007": InputTerminal.CF1.bit_length() - 1,  # 2
-    "C008": InputTerminal.RV.bit_length() - 1,  # 1
-    "C070": 2,  # data command source: operator
-    "C071": 4,  # 4800 bps
-    "C073": 7,  # 7 data bits
-    "C074": 0,  # no parity
-    "C075": 1,  # 1 stop bit
-    "C078": 0,  # 0 ms wait
+# Raw values (the eight digits on the wire) the simulated model gives, same for every country.
+_RATED_DECIAMPS: Final = 120  # 12.0 A
+_MODEL: Final[dict[str, int]] = {
+    "B012": _RATED_DECIAMPS,
+    "B212": _RATED_DECIAMPS,
+    "B312": _RATED_DECIAMPS,
+    "B022": _RATED_DECIAMPS * 3 // 2,
+    "B025": _RATED_DECIAMPS * 3 // 2,
+    "B126": _RATED_DECIAMPS,
+    "C041": _RATED_DECIAMPS,
+    "C111": _RATED_DECIAMPS,
+    "B051": 4400,  # 440.0 V
+    "B052": 7200,  # 720.0 V
+    "B096": 720,  # V
     "H003": 11,  # 5.5 kW
-    "H004": 4,  # 4 poles
-    "H006": 100,
     "H203": 11,
-    "H204": 4,
 }
 
 _BY_COUNTRY: Final[dict[Country, dict[str, int]]] = {
-    Country.JAPAN: {"A003": 600, "A004": 600, "A082": 400},
-    Country.EUROPE: {"A003": 500, "A004": 500, "A082": 400},
-    Country.USA: {"A003": 600, "A004": 600, "A082": 460},
+    country: dict.fromkeys(("A003", "A203", "A303", "A004", "A204", "A304"), hz) | {"A082": volts}
+    for country, hz, volts in (
+        (Country.JAPAN, 600, 400),
+        (Country.EUROPE, 500, 400),
+        (Country.USA, 600, 460),
+    )
 }
 
-# C001..C008 are not in the host catalogue: their range is the set of
-# function codes command 02 can carry (FW, bit 0, has a terminal of its own).
+
+def _catalogue_range(code: str) -> tuple[int, int]:
+    info = PARAMETERS[code]
+    return round(info.minimum * info.scale), round(info.maximum * info.scale)
+
+
+def _catalogue_factory(code: str) -> int:
+    """The catalogue's default (raw), else 0 within the range."""
+    info = PARAMETERS[code]
+    if info.default is not None:
+        return info.to_raw(info.default)
+    low, high = _catalogue_range(code)
+    return min(max(0, low), high)
+
+
+#: Every catalogued code's factory value, before the model and the country.
+_CATALOGUE: Final[dict[str, int]] = {code: _catalogue_factory(code) for code in PARAMETERS}
+
+# C001..C008: their range is the set of function codes command 02 can carry
+# (FW, bit 0, has a terminal of its own).
 _TERMINAL_FUNCTIONS: Final = frozenset(t.bit_length() - 1 for t in InputTerminal) - {0}
 _TERMINAL_CODES: Final = frozenset(f"C00{i}" for i in range(1, 9))
 
 
 def factory_table(country: Country, node: int) -> dict[str, int]:
     """Return the factory values (raw) of a drive at *node* for *country*."""
-    table = _COMMON | _BY_COUNTRY[country]
+    table = _CATALOGUE | _MODEL | _BY_COUNTRY[country]
     table["B085"] = int(country)
     table["C072"] = node
     return table
@@ -143,11 +154,6 @@ def line_parameters(line: LinePacing) -> dict[str, int]:
     if speed is not None:
         settings["C071"] = speed
     return settings
-
-
-def _catalogue_range(code: str) -> tuple[int, int]:
-    info = PARAMETERS[code]
-    return round(info.minimum * info.scale), round(info.maximum * info.scale)
 
 
 def value_error(code: str, raw: int, table: dict[str, int]) -> str | None:
