@@ -44,6 +44,7 @@ _SUBCOMMANDS = (
     "._write",
     "._run",
     "._stop",
+    "._reset",
     "._freq",
     "._trips",
     "._params",

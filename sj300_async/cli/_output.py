@@ -6,6 +6,10 @@ way everywhere (:func:`jsonable`): an enumeration becomes its member's name
 (``"RUNNING"``; an undocumented code ``"UNKNOWN_12"``), a bit field
 (terminals, trip status B) its integer value, a nested dataclass an object.
 
+States read as a person would (:func:`drive_state`: ``stopped``,
+``accelerating``, ``tripped``), mapped here from the manual's codes, which
+the enums keep as the manual words them ("on stopping").
+
 Tables go to stdout. On a terminal they are rich tables; otherwise (a pipe,
 a file, a CI log) the same rows as space-aligned plain text without colour
 or box characters, so ``grep`` and ``awk`` work on them.
@@ -19,12 +23,16 @@ import json
 import math
 import sys
 from collections.abc import Mapping, Sequence
-from typing import Any, Literal, TextIO
+from typing import Any, Final, Literal, TextIO
 
+from ..fr700._payloads import Fr700Status
+from ..sj300._codes import StatusA, StatusC
 from ..sj300._parameters import ParameterInfo
+from ..sj300._payloads import InverterStatus
 
 __all__ = [
     "Column",
+    "drive_state",
     "format_raw",
     "human",
     "is_terminal",
@@ -84,6 +92,48 @@ def human(member: enum.Enum) -> str:
         names = [m.name for m in type(member) if m.name and m in member]
         return "|".join(names) if names else "-"
     return (member.name or str(member.value)).lower().replace("_", " ")
+
+
+#: Status A as a person says it; RUNNING is told apart by status C (:data:`_MOVING`).
+_STATES: Final[dict[StatusA, str]] = {
+    StatusA.INITIAL: "starting up",
+    StatusA.STOPPING: "stopped",  # "on stopping": the output is off
+    StatusA.FREE_RUN_STOP: "coasting",
+    StatusA.JOGGING: "jogging",
+    StatusA.DYNAMIC_BRAKING: "braking",
+    StatusA.RETRY: "retrying",
+    StatusA.TRIP: "tripped",
+    StatusA.UNDER_VOLTAGE: "under-voltage",
+}
+#: What a running drive's output does, by status C (anything else: "running").
+_MOVING: Final[dict[StatusC, str]] = {
+    StatusC.ACCELERATING: "accelerating",
+    StatusC.DECELERATING: "decelerating",
+    StatusC.FORWARD_START: "starting",
+    StatusC.REVERSE_START: "starting",
+    StatusC.REVERSE_FROM_FORWARD: "reversing",
+    StatusC.FORWARD_FROM_REVERSE: "reversing",
+}
+
+
+def drive_state(status: InverterStatus | Fr700Status) -> str:
+    """A drive's state in a word or two: ``stopped``, ``running``, ``accelerating``, ``tripped``.
+
+    SJ300: status A, with status C telling how a running drive's output
+    moves; a code the manual does not list reads ``state 42``. FR-700: its
+    status bits (``running reverse`` when the reverse bit is set).
+    """
+    if status.tripped:
+        return "tripped"
+    if isinstance(status, Fr700Status):
+        if status.running:
+            return "running reverse" if status.reverse else "running"
+        return "stopped"
+    if status.a == StatusA.RUNNING:
+        return _MOVING.get(status.c, "running")
+    if status.a == StatusA.STOPPING and status.c == StatusC.DECELERATING:
+        return "stopping"  # ramping down to a stop
+    return _STATES.get(status.a) or f"state {int(status.a)}"
 
 
 def format_raw(info: ParameterInfo, raw: int) -> str:

@@ -1,5 +1,9 @@
 """``sj300 run forward|reverse``: start a drive (command 00; the drive needs A002 = 03).
 
+The status is read first: a tripped drive acknowledges a run command and
+stays tripped, so the command is refused, naming the trip (exit 1, nothing
+sent): clear it with ``sj300 reset``.
+
 JSON: ``{"node": 1, "direction": "FORWARD"}``.
 """
 
@@ -14,6 +18,7 @@ from ..wire._errors import NakError
 from ._common import add_bus_options, add_json_option, add_node_option, open_cli_bus
 from ._errors import FAILURE, CliError
 from ._output import human, print_json
+from ._reset import trip_or_none
 from ._session import run_async
 
 __all__ = ["add_parser"]
@@ -36,7 +41,7 @@ def add_parser(subparsers: Any) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    """Send the run command; return 0."""
+    """Send the run command; return 0 (a tripped drive: exit 1, nothing sent)."""
     return run_async(_run(args))
 
 
@@ -44,6 +49,13 @@ async def _run(args: argparse.Namespace) -> int:
     direction = _DIRECTIONS[args.direction]
     async with open_cli_bus(args) as bus:
         drive = bus.drive(args.node)
+        if (await drive.read_status()).tripped:
+            trip = await trip_or_none(drive)
+            what = f": {trip}" if trip is not None else ""
+            raise CliError(
+                f"node {args.node:02d} is tripped{what}; clear it with sj300 reset",
+                status=FAILURE,
+            )
         try:
             if direction is Direction.FORWARD:
                 await drive.run_forward()

@@ -1,11 +1,20 @@
 """``sj300 trips``: a drive's trip count and its latest trips, newest first (command 05).
 
+Each trip shows its code and meaning (``E07 over-voltage``, from
+:class:`~sj300_async.sj300.TripCode`; a code the reference does not list
+reads ``unknown trip``). ``sj300 trips --codes`` lists every known code with
+its meaning, without asking a drive.
+
 JSON: ``{"node": 1, "total_count": 3, "records": [{"error_code": "E07",
-"trip_factor": 7, "status_a": "RUNNING", "status_b": 8, "status_c":
-"CONSTANT_SPEED", "output_frequency_hz": 50.0, ...}]}``: the fields of
+"name": "OVER_VOLTAGE", "meaning": "over-voltage", "trip_factor": 7,
+"status_a": "RUNNING", "status_b": 8, "status_c": "CONSTANT_SPEED",
+"output_frequency_hz": 50.0, ...}]}``: the fields of
 :class:`~sj300_async.TripHistory` and :class:`~sj300_async.TripRecord`, with
-``error_code`` added and the empty slots of the six-deep history left out.
-``status_b`` is a bit field (:class:`~sj300_async.TripStatusB`).
+``error_code``, ``name`` and ``meaning`` added and the empty slots of the
+six-deep history left out. ``status_b`` is a bit field
+(:class:`~sj300_async.TripStatusB`). With ``--codes``: ``{"codes":
+[{"code": "E01", "number": 1, "name": "OVER_CURRENT_CONSTANT", "meaning":
+"over-current at constant speed"}, ...]}``.
 """
 
 from __future__ import annotations
@@ -13,10 +22,12 @@ from __future__ import annotations
 import argparse
 from typing import Any
 
+from ..sj300._codes import TripCode
 from ..sj300._payloads import TripRecord
 from ._common import add_bus_options, add_json_option, add_node_option, open_cli_bus
 from ._output import Column, human, jsonable, print_json, print_table
 from ._session import run_async
+from ._tripinfo import sj300_trip
 
 __all__ = ["add_parser"]
 
@@ -26,7 +37,11 @@ def add_parser(subparsers: Any) -> None:
     p = subparsers.add_parser(
         "trips",
         help="trip history",
-        description="Read the trip count and the six latest trips (command 05).",
+        description="Read the trip count and the six latest trips (command 05), each with "
+        "its meaning; --codes lists every trip code the reference gives.",
+    )
+    p.add_argument(
+        "--codes", action="store_true", help="list the trip codes and their meanings (no drive)"
     )
     add_node_option(p)
     add_json_option(p)
@@ -35,12 +50,30 @@ def add_parser(subparsers: Any) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    """Print the trip history; return 0."""
+    """Print the trip history (or with ``--codes`` the code table); return 0."""
+    if args.codes:
+        return _codes(args)
     return run_async(_trips(args))
 
 
+def _codes(args: argparse.Namespace) -> int:
+    trips = [sj300_trip(code) for code in TripCode]
+    if args.json:
+        print_json({"codes": [trip.as_json() for trip in trips]})
+    else:
+        rows = [(trip.code, trip.meaning or "", trip.name or "") for trip in trips]
+        print_table((Column("code"), Column("meaning"), Column("name")), rows)
+    return 0
+
+
 def _record_json(record: TripRecord) -> dict[str, Any]:
-    return {"error_code": record.error_code, **jsonable(record)}
+    code = record.trip_code
+    return {
+        "error_code": record.error_code,
+        "name": code.name,
+        "meaning": code.description,
+        **jsonable(record),
+    }
 
 
 async def _trips(args: argparse.Namespace) -> int:
@@ -57,6 +90,7 @@ async def _trips(args: argparse.Namespace) -> int:
     columns = (
         Column("#", "right"),
         Column("trip"),
+        Column("meaning"),
         Column("state"),
         Column("output"),
         Column("causes"),
@@ -70,6 +104,7 @@ async def _trips(args: argparse.Namespace) -> int:
         (
             str(i),
             r.error_code,
+            r.trip_code.description,
             human(r.status_a),
             human(r.status_c),
             human(r.status_b),
