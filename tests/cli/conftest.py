@@ -5,10 +5,11 @@ from __future__ import annotations
 from collections.abc import AsyncIterator
 
 import pytest
-from clirun import TcpSim
 
 from sj300_async.simulator import serve_tcp
 from sj300_async.simulator.sj300 import SimulatedBus
+
+from .clirun import TcpSim
 
 
 @pytest.fixture

@@ -4,10 +4,10 @@ from __future__ import annotations
 
 import asyncio
 
-from clirun import TcpSim, sj300, sj300_on_terminal
-
 from sj300_async import StatusA
 from sj300_async.simulator import RunState
+
+from .clirun import TcpSim, sj300, sj300_on_terminal
 
 
 async def test_status_out_of_the_box_uses_the_in_memory_simulator() -> None:

@@ -9,9 +9,10 @@ without an interpreter start each.
 from __future__ import annotations
 
 import pytest
-from clirun import Result, TcpSim, closed_port, sj300
 
 from sj300_async.cli import main
+
+from .clirun import Result, TcpSim, closed_port, sj300
 
 
 async def test_time_out_against_an_absent_node() -> None:

@@ -10,9 +10,10 @@ import sys
 import time
 
 import pytest
-from clirun import TIMEOUT, TcpSim, cli_env, closed_port, sj300, sj300_on_terminal
 
 from sj300_async import Sample
+
+from .clirun import TIMEOUT, TcpSim, cli_env, closed_port, sj300, sj300_on_terminal
 
 _LINE = re.compile(
     r"\d\d:\d\d:\d\d\.\d{3} node (0[1-8]) (online |offline) .+ set +[\d.]+ Hz  out +[\d.]+ Hz"
