@@ -12,8 +12,8 @@ RUN_STAMP := $(VENV)/.installed-run
 # (socat + ser2net: the real serial-device-server bridge test in tests/transports).
 SYSTEM_PACKAGES := socat ser2net
 
-.PHONY: demo test lint typecheck lint-imports system-packages pytest bench bench-compare \
-	soak clean venv
+.PHONY: demo examples test lint typecheck lint-imports system-packages pytest bench \
+	bench-compare soak clean venv
 
 $(BIN)/python:
 	$(PYTHON) -m venv $(VENV)
@@ -31,6 +31,13 @@ venv: $(DEV_STAMP)
 
 demo: $(RUN_STAMP)
 	$(BIN)/sj300 monitor
+
+# Every example against the in-memory simulator, as tests/test_examples.py runs them.
+examples: $(RUN_STAMP)
+	$(BIN)/python examples/one_shot.py 'sim://?nodes=1-2'
+	$(BIN)/python examples/fr700_one_shot.py 'sim://?protocol=fr700&nodes=0-3'
+	$(BIN)/python examples/polling_loop.py 'sim://?nodes=1-4' --duration 2
+	$(BIN)/python examples/service.py 'sim://?nodes=1-3' --port 0 --run-for 2
 
 # In this order; make stops at the first that fails.
 test: lint typecheck lint-imports pytest

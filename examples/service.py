@@ -3,13 +3,19 @@
 A tiny HTTP service (standard library only) that keeps the state of a few
 drives up to date in the background and serves it as JSON:
 
-    python examples/service.py [URL] [--port 8080] [--run-for SECONDS]
-    curl http://127.0.0.1:8080/          -> {"1": {"output_frequency_hz": ...}, ...}
+    .venv/bin/python examples/service.py [URL] [--port 8080] [--run-for SECONDS]
+    curl http://127.0.0.1:8080/       -> {"1": {"output_frequency_hz": 10.0, "direction": "FORWARD",
+                                                ...}, ...}
     curl -X POST http://127.0.0.1:8080/stop
+
+Any other path answers 404 (a known path with the wrong method, 405). The
+JSON is written the way the ``sj300`` command writes it: an enumeration as
+its member's name, a bit field (terminals) as its integer value.
 
 The bus is opened once for the life of the service; the poll loop and the
 HTTP handlers share it, and the arbiter serializes their requests. A stop
-request from HTTP goes before any queued poll.
+request from HTTP goes before any queued poll. Ctrl-C stops every drive and
+exits with status 130, without a traceback.
 """
 
 from __future__ import annotations
@@ -17,16 +23,31 @@ from __future__ import annotations
 import argparse
 import asyncio
 import dataclasses
+import enum
 import json
+import sys
 
 import sj300_async as sj
+
+ROUTES = {"/": "GET", "/stop": "POST"}  # path -> the method it answers
+
+
+def jsonable(value: object) -> object:
+    """*value* as JSON data: a result dataclass as an object, an enumeration by name."""
+    if dataclasses.is_dataclass(value) and not isinstance(value, type):
+        return {f.name: jsonable(getattr(value, f.name)) for f in dataclasses.fields(value)}
+    if isinstance(value, enum.Flag):  # terminals: the bits as one integer
+        return value.value
+    if isinstance(value, enum.Enum):  # "FORWARD", not 1
+        return value.name
+    return value
 
 
 class DriveService:
     def __init__(self, bus: sj.Bus, nodes: list[int]) -> None:
         self.bus = bus
         self.nodes = nodes
-        self.state: dict[int, dict[str, object]] = {}
+        self.state: dict[int, object] = {}
 
     async def poll_forever(self, interval_s: float = 0.2) -> None:
         while True:
@@ -36,22 +57,32 @@ class DriveService:
                 except sj.SJ300Error as exc:  # a time-out or NAK is data here, not a crash
                     self.state[node] = {"error": str(exc)}
                 else:
-                    self.state[node] = dataclasses.asdict(monitor)
+                    self.state[node] = jsonable(monitor)
             await asyncio.sleep(interval_s)
 
     async def handle(self, reader: asyncio.StreamReader, writer: asyncio.StreamWriter) -> None:
-        request_line = (await reader.readline()).decode(errors="replace").split()
+        try:
+            method, path, *_ = (await reader.readline()).decode(errors="replace").split()
+        except ValueError:  # not an HTTP request line (or the client went away)
+            writer.close()
+            return
         while (await reader.readline()).strip():
             pass  # skip headers
-        if request_line[:2] == ["POST", "/stop"]:
+        body: object
+        if path not in ROUTES:
+            status, body = "404 Not Found", {"error": f"no such path: {path}"}
+        elif method != ROUTES[path]:
+            status, body = "405 Method Not Allowed", {"error": f"{path} takes {ROUTES[path]}"}
+        elif path == "/stop":
             await self.bus.broadcast.stop()
-            body = {"stopped": True}
+            status, body = "200 OK", {"stopped": True}
         else:
-            body = {str(k): v for k, v in self.state.items()}
+            status, body = "200 OK", {str(k): v for k, v in self.state.items()}
         payload = json.dumps(body).encode()
         writer.write(
-            b"HTTP/1.1 200 OK\r\nContent-Type: application/json\r\n"
-            b"Content-Length: %d\r\nConnection: close\r\n\r\n%s" % (len(payload), payload)
+            b"HTTP/1.1 %s\r\nContent-Type: application/json\r\n"
+            b"Content-Length: %d\r\nConnection: close\r\n\r\n%s"
+            % (status.encode(), len(payload), payload)
         )
         await writer.drain()
         writer.close()
@@ -87,4 +118,7 @@ if __name__ == "__main__":
     parser.add_argument("--port", type=int, default=8080)
     parser.add_argument("--run-for", type=float, default=None)
     args = parser.parse_args()
-    asyncio.run(main(args.url, args.port, args.run_for))
+    try:
+        asyncio.run(main(args.url, args.port, args.run_for))
+    except KeyboardInterrupt:  # Ctrl-C: asyncio.run has cancelled main(), which stopped the drives
+        sys.exit(130)
