@@ -71,7 +71,8 @@ class Channel(Generic[RequestT]):
         """Refuse *request* now if the bus is closed, or read-only and it writes.
 
         Raises:
-            BusClosedError, ReadOnlyError.
+            BusClosedError: the bus is closed (nothing sent).
+            ReadOnlyError: the bus is read-only and the request changes a drive (nothing sent).
         """
         bus = self._bus
         if bus.closed:
@@ -94,8 +95,12 @@ class Channel(Generic[RequestT]):
         (:meth:`send` says so in its type).
 
         Raises:
-            NakError, ReplyTimeoutError, RemoteProtocolError, TransportError,
-            BusClosedError, ReadOnlyError.
+            NakError: the drive refused the request.
+            ReplyTimeoutError: no valid answer in time (after the bus's retries).
+            RemoteProtocolError: the answer broke the protocol (after the bus's retries).
+            TransportError: the link is down, or a write failed.
+            BusClosedError: the bus is closed (nothing sent).
+            ReadOnlyError: the bus is read-only and the request changes a drive (nothing sent).
         """
         # check() written out: this runs once per transaction.
         bus = self._bus
@@ -112,7 +117,9 @@ class Channel(Generic[RequestT]):
 
         Raises:
             LocalProtocolError: the request expects an answer (use :meth:`transact`).
-            TransportError, BusClosedError, ReadOnlyError.
+            TransportError: the link is down, or a write failed.
+            BusClosedError: the bus is closed (nothing sent).
+            ReadOnlyError: the bus is read-only and the request changes a drive (nothing sent).
         """
         self.check(request)
         if request.expects_reply:

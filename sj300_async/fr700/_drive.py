@@ -123,7 +123,9 @@ class Fr700Drive:
         Raises:
             LocalProtocolError: not a read code (nothing sent).
             NakError: e.g. B when the drive has no such instruction.
-            ReplyTimeoutError, RemoteProtocolError, TransportError.
+            ReplyTimeoutError: no valid answer in time (after the bus's retries).
+            RemoteProtocolError: the answer broke the protocol (after the bus's retries).
+            TransportError: the link is down, or a write failed.
         """
         request = rq.read(self._station, code, options=self._options, reply_width=width)
         return await self._data(request)
@@ -145,7 +147,10 @@ class Fr700Drive:
             LocalProtocolError: not a write code, or a value that does not fit (nothing sent).
             NakError: A (mode), B (no such instruction), C (data range) and
                 transmission errors.
-            ReplyTimeoutError, RemoteProtocolError, TransportError, ReadOnlyError.
+            ReplyTimeoutError: no valid answer in time (after the bus's retries).
+            RemoteProtocolError: the answer broke the protocol (after the bus's retries).
+            TransportError: the link is down, or a write failed.
+            ReadOnlyError: the bus is read-only and the request changes a drive (nothing sent).
         """
         request = rq.write(self._station, code, value, options=self._options, digits=digits)
         await self._execute(request)
@@ -158,7 +163,10 @@ class Fr700Drive:
         """H7A: the status monitor (RUN, forward, reverse, SU, OL, IPF, FU, ABC1).
 
         Raises:
-            NakError, ReplyTimeoutError, RemoteProtocolError, TransportError.
+            NakError: the drive refused the request.
+            ReplyTimeoutError: no valid answer in time (after the bus's retries).
+            RemoteProtocolError: the answer broke the protocol (after the bus's retries).
+            TransportError: the link is down, or a write failed.
         """
         return Fr700Status(Fr700StatusBits(await self._value(I.STATUS)))
 
@@ -193,7 +201,10 @@ class Fr700Drive:
 
         Raises:
             NakError: A when the drive is not in network operation mode.
-            ReplyTimeoutError, RemoteProtocolError, TransportError, ReadOnlyError.
+            ReplyTimeoutError: no valid answer in time (after the bus's retries).
+            RemoteProtocolError: the answer broke the protocol (after the bus's retries).
+            TransportError: the link is down, or a write failed.
+            ReadOnlyError: the bus is read-only and the request changes a drive (nothing sent).
         """
         await self._execute(rq.run(self._station, Direction.FORWARD, options=self._options))
 
@@ -215,7 +226,10 @@ class Fr700Drive:
         Raises:
             LocalProtocolError: not a number in 0..655.35 or finer than 0.01 Hz (nothing sent).
             NakError: C above the drive's maximum frequency, A outside network mode.
-            ReplyTimeoutError, RemoteProtocolError, TransportError, ReadOnlyError.
+            ReplyTimeoutError: no valid answer in time (after the bus's retries).
+            RemoteProtocolError: the answer broke the protocol (after the bus's retries).
+            TransportError: the link is down, or a write failed.
+            ReadOnlyError: the bus is read-only and the request changes a drive (nothing sent).
         """
         await self._execute(
             rq.set_frequency(self._station, hz, eeprom=eeprom, options=self._options)
@@ -246,7 +260,10 @@ class Fr700Drive:
         Raises:
             LocalProtocolError: a bad direction, frequency or receive type (nothing sent).
             NakError: errors other than mode and range (e.g. transmission errors).
-            ReplyTimeoutError, RemoteProtocolError, TransportError, ReadOnlyError.
+            ReplyTimeoutError: no valid answer in time (after the bus's retries).
+            RemoteProtocolError: the answer broke the protocol (after the bus's retries).
+            TransportError: the link is down, or a write failed.
+            ReadOnlyError: the bus is read-only and the request changes a drive (nothing sent).
         """
         request = rq.multi_command(
             self._station,
@@ -270,7 +287,10 @@ class Fr700Drive:
         Raises:
             LocalProtocolError: not NETWORK, EXTERNAL or PU (nothing sent).
             NakError: A while running, C for a mode the drive refuses.
-            ReplyTimeoutError, RemoteProtocolError, TransportError, ReadOnlyError.
+            ReplyTimeoutError: no valid answer in time (after the bus's retries).
+            RemoteProtocolError: the answer broke the protocol (after the bus's retries).
+            TransportError: the link is down, or a write failed.
+            ReadOnlyError: the bus is read-only and the request changes a drive (nothing sent).
         """
         await self._execute(rq.write_operation_mode(self._station, mode, options=self._options))
 
@@ -281,7 +301,8 @@ class Fr700Drive:
         meanwhile: the next request may time out and be retried.
 
         Raises:
-            TransportError, ReadOnlyError.
+            TransportError: the link is down, or a write failed.
+            ReadOnlyError: the bus is read-only and the request changes a drive (nothing sent).
         """
         self._bank = None
         await self._execute(rq.reset(self._station, options=self._options))
@@ -299,7 +320,9 @@ class Fr700Drive:
             LocalProtocolError: not a parameter number, or one the catalogue
                 does not list (use :meth:`read_parameter_raw`); nothing sent.
             NakError: e.g. B for a parameter the drive does not have.
-            ReplyTimeoutError, RemoteProtocolError, TransportError.
+            ReplyTimeoutError: no valid answer in time (after the bus's retries).
+            RemoteProtocolError: the answer broke the protocol (after the bus's retries).
+            TransportError: the link is down, or a write failed.
         """
         info = fr700_parameter_info(number)
         return info.from_raw(await self.read_parameter_raw(info.number))
@@ -316,7 +339,10 @@ class Fr700Drive:
                 range or finer than the increment (nothing sent).
             NakError: A (not writable in this mode or while running), B (no such
                 parameter), C (out of range).
-            ReplyTimeoutError, RemoteProtocolError, TransportError, ReadOnlyError.
+            ReplyTimeoutError: no valid answer in time (after the bus's retries).
+            RemoteProtocolError: the answer broke the protocol (after the bus's retries).
+            TransportError: the link is down, or a write failed.
+            ReadOnlyError: the bus is read-only and the request changes a drive (nothing sent).
         """
         info = fr700_parameter_info(number)
         await self.write_parameter_raw(info.number, info.to_raw(value))
@@ -331,7 +357,9 @@ class Fr700Drive:
         Raises:
             LocalProtocolError: not a parameter number (nothing sent).
             NakError: e.g. B for a parameter the drive does not have.
-            ReplyTimeoutError, RemoteProtocolError, TransportError.
+            ReplyTimeoutError: no valid answer in time (after the bus's retries).
+            RemoteProtocolError: the answer broke the protocol (after the bus's retries).
+            TransportError: the link is down, or a write failed.
         """
         bank, _offset = rq.parameter_bank(number)
         async with self._bank_lock:
@@ -350,7 +378,10 @@ class Fr700Drive:
             LocalProtocolError: bad number or value (nothing sent).
             NakError: A (not writable in this mode or while running), B (no such
                 parameter), C (out of range).
-            ReplyTimeoutError, RemoteProtocolError, TransportError, ReadOnlyError.
+            ReplyTimeoutError: no valid answer in time (after the bus's retries).
+            RemoteProtocolError: the answer broke the protocol (after the bus's retries).
+            TransportError: the link is down, or a write failed.
+            ReadOnlyError: the bus is read-only and the request changes a drive (nothing sent).
         """
         request = rq.write_parameter(self._station, number, value, options=self._options)
         self._channel.check(request)  # refuse before switching the bank, not after it

@@ -48,7 +48,10 @@ class _Commands:
 
         Raises:
             NakError: e.g. code 13 when the run command source is not serial.
-            ReplyTimeoutError, RemoteProtocolError, TransportError, ReadOnlyError.
+            ReplyTimeoutError: no valid answer in time (after the bus's retries).
+            RemoteProtocolError: the answer broke the protocol (after the bus's retries).
+            TransportError: the link is down, or a write failed.
+            ReadOnlyError: the bus is read-only and the request changes a drive (nothing sent).
         """
         await self._execute(rq.run(self._node, Direction.FORWARD))
 
@@ -69,7 +72,10 @@ class _Commands:
         Raises:
             LocalProtocolError: not a number in range or finer than 0.01 Hz (nothing sent).
             NakError: e.g. 16 above the drive's maximum frequency, 13 when not serial.
-            ReplyTimeoutError, RemoteProtocolError, TransportError, ReadOnlyError.
+            ReplyTimeoutError: no valid answer in time (after the bus's retries).
+            RemoteProtocolError: the answer broke the protocol (after the bus's retries).
+            TransportError: the link is down, or a write failed.
+            ReadOnlyError: the bus is read-only and the request changes a drive (nothing sent).
         """
         await self._execute(rq.set_frequency(self._node, hz))
 
@@ -78,7 +84,11 @@ class _Commands:
 
         Raises:
             LocalProtocolError: an unassigned bit (nothing sent).
-            NakError, ReplyTimeoutError, RemoteProtocolError, TransportError, ReadOnlyError.
+            NakError: the drive refused the request.
+            ReplyTimeoutError: no valid answer in time (after the bus's retries).
+            RemoteProtocolError: the answer broke the protocol (after the bus's retries).
+            TransportError: the link is down, or a write failed.
+            ReadOnlyError: the bus is read-only and the request changes a drive (nothing sent).
         """
         await self._execute(rq.set_terminals(self._node, terminals))
 
@@ -88,7 +98,10 @@ class _Commands:
         Raises:
             LocalProtocolError: bad code, value out of range or too fine (nothing sent).
             NakError: 16 when the drive does not know the code or refuses the value.
-            ReplyTimeoutError, RemoteProtocolError, TransportError, ReadOnlyError.
+            ReplyTimeoutError: no valid answer in time (after the bus's retries).
+            RemoteProtocolError: the answer broke the protocol (after the bus's retries).
+            TransportError: the link is down, or a write failed.
+            ReadOnlyError: the bus is read-only and the request changes a drive (nothing sent).
         """
         await self._execute(rq.write_parameter(self._node, code, value))
 
@@ -147,7 +160,10 @@ class Drive(_Commands):
         """Command 04: status A/B/C.
 
         Raises:
-            NakError, ReplyTimeoutError, RemoteProtocolError, TransportError.
+            NakError: the drive refused the request.
+            ReplyTimeoutError: no valid answer in time (after the bus's retries).
+            RemoteProtocolError: the answer broke the protocol (after the bus's retries).
+            TransportError: the link is down, or a write failed.
         """
         # The reply parser has checked every character: decode without checking again.
         return _decode_status(await self._data(rq.read_status(self._node)))
@@ -166,7 +182,9 @@ class Drive(_Commands):
         Raises:
             LocalProtocolError: *code* is not a parameter code (nothing sent).
             NakError: 16 when the drive does not know the code.
-            ReplyTimeoutError, RemoteProtocolError, TransportError.
+            ReplyTimeoutError: no valid answer in time (after the bus's retries).
+            RemoteProtocolError: the answer broke the protocol (after the bus's retries).
+            TransportError: the link is down, or a write failed.
         """
         return decode_parameter_value(await self._data(rq.read_parameter(self._node, code)))
 
