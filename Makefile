@@ -12,7 +12,7 @@ RUN_STAMP := $(VENV)/.installed-run
 # (socat + ser2net: the real serial-device-server bridge test in tests/transports).
 SYSTEM_PACKAGES := socat ser2net
 
-.PHONY: demo examples test lint typecheck lint-imports system-packages pytest bench \
+.PHONY: demo examples test lint typecheck lint-imports docs system-packages pytest bench \
 	bench-compare soak clean venv
 
 $(BIN)/python:
@@ -40,7 +40,7 @@ examples: $(RUN_STAMP)
 	$(BIN)/python examples/service.py 'sim://?nodes=1-3' --port 0 --run-for 2
 
 # In this order; make stops at the first that fails.
-test: lint typecheck lint-imports pytest
+test: lint typecheck lint-imports docs pytest
 
 lint: $(DEV_STAMP)
 	$(BIN)/ruff check sj300_async tests benchmarks examples
@@ -52,6 +52,11 @@ typecheck: $(DEV_STAMP)
 # The import contracts in pyproject.toml ([tool.importlinter]).
 lint-imports: $(DEV_STAMP)
 	$(BIN)/lint-imports
+
+# The user guide and the API reference (mkdocs.yml) into site/; --strict: a broken
+# link or reference, or a docstring mkdocstrings cannot read, fails the build.
+docs: $(DEV_STAMP)
+	NO_MKDOCS_2_WARNING=1 $(BIN)/mkdocs build --strict
 
 # Installs the missing ones as root; otherwise names them and fails (exit 2).
 system-packages:
@@ -87,4 +92,4 @@ soak: $(DEV_STAMP)
 	$(BIN)/pytest --soak -m soak --soak-report $(SOAK_REPORT) $(PYTEST_ARGS)
 
 clean:
-	rm -rf $(VENV) .mypy_cache .ruff_cache .pytest_cache .hypothesis
+	rm -rf $(VENV) .mypy_cache .ruff_cache .pytest_cache .hypothesis site
