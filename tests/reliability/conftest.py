@@ -5,7 +5,8 @@ from __future__ import annotations
 from pathlib import Path
 
 import pytest
-from rel_sizes import LONG, SHORT, Sizes
+
+from .rel_sizes import LONG, SHORT, Sizes
 
 _HERE = Path(__file__).parent
 #: The long form runs for minutes; the suite's 120 s per-test limit is for the short form.

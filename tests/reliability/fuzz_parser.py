@@ -15,11 +15,16 @@ reports as a crash together with the input that caused it.
 from __future__ import annotations
 
 import sys
+from pathlib import Path
 
 import atheris
 
+# Run as a script, this directory is on sys.path; its helpers are the package
+# ``reliability`` under tests/ (as pytest and mypy import them), so tests/ goes first.
+sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
+
 with atheris.instrument_imports(include=["sj300_async"]):
-    from rel_fuzz_targets import check_input
+    from reliability.rel_fuzz_targets import check_input
 
 
 def test_one_input(data: bytes) -> None:

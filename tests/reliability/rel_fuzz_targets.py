@@ -94,6 +94,7 @@ def _feed(
 
 def check_stream(data: bytes, cuts: list[int], *, requests: bool = False) -> list[object]:
     """Run *data* through a fresh parser (reply or request), whole and in chunks."""
+    make: type[sj3.RequestParser | sj3.ReplyParser]
     if requests:
         make, limit = sj3.RequestParser, MAX_REQUEST_BODY
         allowed: tuple[type, ...] = (sj3.Request, wire.BadFrame, wire.Discarded)

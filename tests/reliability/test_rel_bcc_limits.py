@@ -17,12 +17,13 @@ from collections.abc import Callable, Iterator
 from typing import Any
 
 import pytest
-from rel_sizes import Sizes
 
 import sj300_async as sj
 from sj300_async import sj300 as sj3
 from sj300_async import wire
 from sj300_async.simulator.sj300 import SimulatedBus
+
+from .rel_sizes import Sizes
 
 pytestmark = pytest.mark.soak
 

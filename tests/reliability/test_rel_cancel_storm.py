@@ -20,12 +20,14 @@ from collections import Counter
 from typing import Any
 
 import pytest
-from rel_leaks import Baseline, ErrorLog, bus_idle, peak_rss_mib
-from rel_oracle import KEYS, Oracle, value_for
-from rel_sizes import Sizes
 
 import sj300_async as sj
 from sj300_async import bus as sjbus
+from sj300_async import sj300 as sj3
+
+from .rel_leaks import Baseline, ErrorLog, bus_idle, peak_rss_mib
+from .rel_oracle import KEYS, Oracle, value_for
+from .rel_sizes import Sizes
 
 pytestmark = pytest.mark.soak
 
@@ -43,7 +45,7 @@ ON_THE_LINE = (MID_WRITE, AWAITING, MID_REPLY)
 
 
 class Storm:
-    def __init__(self, bus: sj.Bus, seed: int) -> None:
+    def __init__(self, bus: sj.Bus[sj.Drive, sj.Broadcast], seed: int) -> None:
         self.bus = bus
         self.rng = random.Random(seed)
         self.oracle = Oracle()
@@ -105,7 +107,9 @@ class Storm:
         sent_at, length = self.last_tx
         if asyncio.get_running_loop().time() < sent_at + length * CHAR_S:
             return MID_WRITE
-        if self.bus._parser.buffered > 0:
+        parser = self.bus._parser
+        assert isinstance(parser, sj3.ReplyParser)  # the SJ300 dialect's
+        if parser.buffered > 0:
             return MID_REPLY
         return AWAITING
 

@@ -20,14 +20,15 @@ from collections.abc import Awaitable, Callable
 from typing import Any
 
 import pytest
-from rel_faults import DriveChaos, FrameFaults
-from rel_leaks import Baseline, ErrorLog, bus_idle, peak_rss_mib
-from rel_oracle import KEYS, Oracle, value_for
-from rel_sizes import Sizes
 
 import sj300_async as sj
 from sj300_async import sj300 as sj3
 from sj300_async.simulator.sj300 import SimulatedBus
+
+from .rel_faults import DriveChaos, FrameFaults
+from .rel_leaks import Baseline, ErrorLog, bus_idle, peak_rss_mib
+from .rel_oracle import KEYS, Oracle, value_for
+from .rel_sizes import Sizes
 
 pytestmark = pytest.mark.soak
 

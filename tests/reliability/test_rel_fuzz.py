@@ -25,11 +25,12 @@ from typing import Any
 import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
-from rel_fuzz_targets import Mutator, check_decoders, check_simulator, check_stream, mutation_loop
-from rel_leaks import peak_rss_mib
-from rel_sizes import Sizes
 
 from sj300_async import sj300 as sj3
+
+from .rel_fuzz_targets import Mutator, check_decoders, check_simulator, check_stream, mutation_loop
+from .rel_leaks import peak_rss_mib
+from .rel_sizes import Sizes
 
 pytestmark = pytest.mark.soak
 

@@ -13,6 +13,7 @@ task or timer may be left and memory must not have grown with the cycles.
 from __future__ import annotations
 
 import asyncio
+import functools
 import random
 import socket
 import struct
@@ -22,12 +23,13 @@ from collections.abc import Callable
 from typing import Any
 
 import pytest
-from rel_leaks import Baseline, CountingLogs, ErrorLog, MemoryWatch, bus_idle
-from rel_sizes import Sizes
 
 import sj300_async as sj
 from sj300_async.simulator import SimulatorServer, serve_tcp
 from sj300_async.simulator.sj300 import SimulatedBus
+
+from .rel_leaks import Baseline, CountingLogs, ErrorLog, MemoryWatch, bus_idle
+from .rel_sizes import Sizes
 
 pytestmark = pytest.mark.soak
 
@@ -67,7 +69,7 @@ async def until(condition: Callable[[], bool], timeout: float, what: str) -> flo
 class Client:
     """Asks a question every few milliseconds and times every failure."""
 
-    def __init__(self, bus: sj.Bus, seed: int) -> None:
+    def __init__(self, bus: sj.Bus[sj.Drive, sj.Broadcast], seed: int) -> None:
         self.bus = bus
         self.rng = random.Random(seed)
         self.last_ok = 0.0
@@ -135,6 +137,13 @@ async def run_cycles(cycles: int, seed: int) -> dict[str, Any]:
             poller.add(bus, NODES)
             poller.on_sample(on_sample)
             client = Client(bus, seed)
+
+            def recovered(since: float) -> bool:
+                return client.last_ok > since and all(last_good.get(n, 0) > since for n in NODES)
+
+            def answered(since: float) -> bool:
+                return client.last_ok > since
+
             async with poller:
                 asking = asyncio.create_task(client.run(), name="reconnect client")
                 restarted = loop.time()
@@ -142,9 +151,7 @@ async def run_cycles(cycles: int, seed: int) -> dict[str, Any]:
                     # Up: every drive polled well and the client answered, since the restart.
                     recoveries.append(
                         await until(
-                            lambda t=restarted: (
-                                client.last_ok > t and all(last_good.get(n, 0) > t for n in NODES)
-                            ),
+                            functools.partial(recovered, restarted),
                             RECOVERY_BOUND_S,
                             f"recovery in cycle {cycle}",
                         )
@@ -161,7 +168,7 @@ async def run_cycles(cycles: int, seed: int) -> dict[str, Any]:
                     restarted = loop.time()
                 recoveries.append(
                     await until(
-                        lambda t=restarted: client.last_ok > t, RECOVERY_BOUND_S, "last recovery"
+                        functools.partial(answered, restarted), RECOVERY_BOUND_S, "last recovery"
                     )
                 )
                 asking.cancel()
