@@ -49,6 +49,7 @@ _SUBCOMMANDS = (
     "._trips",
     "._params",
     "._simulate",
+    "._shell",
 )
 
 _EPILOG = """\

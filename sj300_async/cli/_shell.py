@@ -1,0 +1,390 @@
+"""``sj300 shell``: an interactive session on one bus, held open throughout.
+
+Each line is a subcommand as on the command line (``status -n 3``, ``run
+forward -n 1``, ``read F002``, ``params backup DIR/file.json``), parsed by
+the same parsers, plus ``help [COMMAND]`` and ``exit`` / ``quit`` (or
+Ctrl-D). The bus is opened once, by the options given to ``shell`` (the
+same rules as every command: ``--url``, else ``$SJ300_URL``, else the
+simulator of drives 1-8), and every command uses it: on ``sim://`` the
+simulated drives keep their state from one command to the next.
+
+Bus options belong to the session: a command giving ``--url``,
+``--protocol``, ``--timeout``, ``--retries`` or line settings different
+from the session's is refused (give them before ``shell``).
+
+A failing command prints the command line's one-line error and the session
+goes on. Ctrl-C at the prompt clears the line; during a command it stops
+that command (``monitor`` runs until then) and returns to the prompt.
+
+On a terminal, with :mod:`readline` (POSIX; imported here, only when it is
+used): line editing, history kept in ``$SJ300_HISTORY``, else
+``~/.sj300_history`` (``SJ300_HISTORY=`` keeps none), and Tab completion of
+command names, options, choices and parameter codes (the SJ300 catalogue,
+or FR-700 ``Pr.N`` on an FR-700 bus). Without readline, or when stdin is
+not a terminal, lines are read plainly (``sj300 shell < commands.txt``).
+"""
+
+from __future__ import annotations
+
+import argparse
+import asyncio
+import os
+import shlex
+import sys
+import traceback
+from collections.abc import Callable, Iterator
+from contextlib import AsyncExitStack, suppress
+from pathlib import Path
+from typing import Any, Final
+
+from ..bus import Bus
+from ..fr700._parameters import FR700_PARAMETERS
+from ..sj300._parameters import PARAMETERS
+from . import _Expected, _fail, _first_expected, build_parser
+from ._common import DEFAULT_URL, add_bus_options, bus_url, open_cli_bus
+from ._errors import CliError
+from ._session import lending
+
+__all__ = ["add_parser"]
+
+#: The environment variable naming the history file.
+ENV_HISTORY: Final = "SJ300_HISTORY"
+#: The history file when the environment does not name one.
+DEFAULT_HISTORY: Final = "~/.sj300_history"
+_HISTORY_LENGTH: Final = 1000
+
+PROMPT: Final = "sj300> "
+_EXIT: Final = ("exit", "quit")
+#: The options that choose and configure a bus: the session's, not a command's.
+_BUS_DESTS: Final = (
+    "url",
+    "protocol",
+    "timeout",
+    "retries",
+    "baud",
+    "parity",
+    "bytesize",
+    "stopbits",
+)
+#: Arguments whose values are parameter codes (``read``, ``write``, ``params backup --codes``).
+_CODE_DESTS: Final = frozenset({"code", "codes"})
+#: A bus option's default in the shell's parser: not given on the line, the session's value.
+_UNSET: Final = object()
+
+
+def add_parser(subparsers: Any) -> None:
+    """Add ``shell`` to the ``sj300`` subcommands."""
+    p = subparsers.add_parser(
+        "shell",
+        help="an interactive session on one bus (sim:// drives keep their state)",
+        description="Run commands interactively on one bus held open for the session: "
+        "`status -n 3`, `run forward -n 1`, `read F002`... as on the command line; `help`, "
+        "`exit`. On sim:// the simulated drives keep their state from one command to the next.",
+    )
+    add_bus_options(p)
+    p.set_defaults(run=run)
+
+
+def run(args: argparse.Namespace) -> int:
+    """Hold the bus and run commands until ``exit`` or end of input; return 0."""
+    url = bus_url(args) or DEFAULT_URL
+    with asyncio.Runner() as runner:
+        stack = AsyncExitStack()
+        bus = runner.run(stack.enter_async_context(open_cli_bus(args, url, any_protocol=True)))
+        try:
+            return _Shell(args, url, runner, bus).loop()
+        finally:
+            runner.run(stack.aclose())
+
+
+class _Shell:
+    """The read-run loop."""
+
+    def __init__(
+        self, args: argparse.Namespace, url: str, runner: asyncio.Runner, bus: Bus
+    ) -> None:
+        self._args = args
+        self._url = url
+        self._runner = runner
+        self._bus = bus
+        self._parser = build_parser()
+        _unset_bus_defaults(self._parser)
+        self._commands = _subcommands(self._parser)
+        self._commands.pop("shell", None)
+        self._interactive = sys.stdin.isatty()
+
+    def loop(self) -> int:
+        """Read and run lines until ``exit`` or end of input; return 0."""
+        history = _History.open(self._completer()) if self._interactive else None
+        prompt = PROMPT if self._interactive else ""
+        if self._interactive:
+            simulated = " (simulated drives keep their state until you leave)"
+            print(f"sj300 shell on {self._url}{simulated if self._bus.simulator else ''}")
+            print("help lists the commands; exit, quit or Ctrl-D leaves.")
+        try:
+            while True:
+                try:
+                    line = input(prompt)
+                except KeyboardInterrupt:  # clears the line
+                    print()
+                    continue
+                except EOFError:
+                    if self._interactive:
+                        print()
+                    return 0
+                if not self.execute(line):
+                    return 0
+        finally:
+            if history is not None:
+                history.save()
+
+    def execute(self, line: str) -> bool:
+        """Run one line; False when it ends the session."""
+        try:
+            words = shlex.split(line, comments=True)
+        except ValueError as exc:
+            print(f"sj300 shell: error: {exc}", file=sys.stderr, flush=True)
+            return True
+        if not words:
+            return True
+        name = words[0]
+        if name in _EXIT:
+            return False
+        if name == "help":
+            self._help(words[1:])
+        elif name == "shell":
+            print("sj300 shell: error: this is the shell already", file=sys.stderr, flush=True)
+        elif name not in self._commands:
+            what = "options come after a command" if name.startswith("-") else "help lists them"
+            print(f"sj300 shell: error: no command {name!r} ({what})", file=sys.stderr, flush=True)
+        else:
+            self._run(words)
+        return True
+
+    def _run(self, words: list[str]) -> int:
+        """Parse and run a command as ``sj300 WORDS`` would, on the session's bus."""
+        try:
+            args = self._parser.parse_args(words)
+        except SystemExit as done:  # a usage error (printed) or --help
+            return done.code if isinstance(done.code, int) else 2
+        run_command: Callable[[argparse.Namespace], int] | None = getattr(args, "run", None)
+        if run_command is None:
+            return 0
+        refused = self._session_options(args)
+        if refused is not None:
+            return _fail(args, refused)
+        try:
+            with lending(self._runner, self._bus):
+                return int(run_command(args))
+        except KeyboardInterrupt:
+            print()
+            return 130
+        except _Expected as exc:
+            return _fail(args, exc)
+        except BaseExceptionGroup as group:
+            leaf = _first_expected(group)
+            if leaf is None:
+                traceback.print_exc()
+                return 1
+            return _fail(args, leaf)
+        except SystemExit as done:
+            return done.code if isinstance(done.code, int) else 1
+        except Exception:  # a bug: show it, but keep the session (and its drives' state)
+            traceback.print_exc()
+            return 1
+
+    def _session_options(self, args: argparse.Namespace) -> CliError | None:
+        """Give *args* the session's bus options; an error when it names others."""
+        session: dict[str, object] = {dest: getattr(self._args, dest, None) for dest in _BUS_DESTS}
+        session["url"] = self._url
+        session["protocol"] = self._bus.dialect.name
+        for dest in _BUS_DESTS:
+            value = getattr(args, dest, None)
+            if value is _UNSET:
+                setattr(args, dest, session[dest])
+            elif hasattr(args, dest) and value != session[dest]:
+                option = "--" + dest.replace("_", "-")
+                return CliError(
+                    f"{option} belongs to the session (its bus is {self._url}): "
+                    "give it before `shell`"
+                )
+        # What bus_url() gives: monitor and the rest see the session's URL.
+        args.default_url = self._url
+        return None
+
+    def _help(self, words: list[str]) -> None:
+        if words:
+            if words[0] in self._commands:
+                self._run([*words, "--help"])
+            else:
+                print(f"sj300 shell: error: no command {words[0]!r}", file=sys.stderr, flush=True)
+            return
+        width = max(len(name) for name in self._commands) + 2
+        print("commands (COMMAND --help, or help COMMAND, for its options):")
+        for name, parser in self._commands.items():
+            summary = _summary(self._parser, name) or parser.description or ""
+            print(f"  {name:<{width}}{summary}")
+        print(f"  {'help':<{width}}this list, or help COMMAND")
+        print(f"  {'exit':<{width}}leave (also quit, Ctrl-D)")
+        print(f"The bus, for the whole session: {self._url}")
+
+    def _completer(self) -> _Completer:
+        if self._bus.dialect.name == "fr700":
+            codes = [f"Pr.{n}" for n in sorted(FR700_PARAMETERS)]
+        else:
+            codes = list(PARAMETERS)
+        return _Completer(self._parser, self._commands, codes)
+
+
+class _Completer:
+    """Tab completion: command names, then options, choices and parameter codes."""
+
+    def __init__(
+        self,
+        parser: argparse.ArgumentParser,
+        commands: dict[str, argparse.ArgumentParser],
+        codes: list[str],
+    ) -> None:
+        self._parser = parser
+        self._commands = commands
+        self._codes = codes
+        self._matches: list[str] = []
+
+    def candidates(self, before: str, text: str) -> list[str]:
+        """What may replace *text*, the word being typed after *before*."""
+        words = before.split()
+        if not words:
+            names = [*self._commands, "help", *_EXIT]
+            return sorted(n for n in names if n.startswith(text))
+        if words[0] == "help":
+            return (
+                sorted(n for n in self._commands if n.startswith(text)) if len(words) == 1 else []
+            )
+        parser = self._commands.get(words[0])
+        if parser is None:
+            return []
+        for word in words[1:]:
+            nested = _subcommands(parser)
+            if word in nested:
+                parser = nested[word]
+        wanted: list[str] = []
+        last = words[-1] if len(words) > 1 else ""
+        takes_value = _option(parser, last)
+        if takes_value is not None and takes_value.nargs != 0:
+            if takes_value.dest in _CODE_DESTS:
+                wanted = self._codes
+            elif takes_value.choices is not None:
+                wanted = [str(c) for c in takes_value.choices]
+        elif text.startswith("-"):
+            wanted = [s for a in parser._actions for s in a.option_strings if s.startswith("--")]
+        else:
+            for action in parser._actions:
+                if action.option_strings:
+                    continue
+                if isinstance(action, argparse._SubParsersAction):
+                    wanted.extend(action.choices)
+                elif action.dest in _CODE_DESTS:
+                    wanted.extend(self._codes)
+                elif action.choices is not None:
+                    wanted.extend(str(c) for c in action.choices)
+        upper = text.upper()
+        return sorted({w for w in wanted if w.upper().startswith(upper)})
+
+    def __call__(self, text: str, state: int) -> str | None:
+        """readline's completer: the *state*-th candidate for *text*."""
+        if state == 0:
+            import readline
+
+            before = readline.get_line_buffer()[: readline.get_begidx()]
+            try:
+                self._matches = self.candidates(before, text)
+            except Exception:
+                self._matches = []
+        return self._matches[state] if state < len(self._matches) else None
+
+
+class _History:
+    """readline's history file, and its completion set up."""
+
+    def __init__(self, path: Path | None) -> None:
+        self._path = path
+
+    @classmethod
+    def open(cls, completer: _Completer) -> _History | None:
+        """Set up readline; None when there is no readline."""
+        try:
+            import readline
+        except ImportError:  # Windows, or a Python built without it
+            return None
+        readline.set_completer(completer)
+        readline.set_completer_delims(" \t\n")
+        if "libedit" in (readline.__doc__ or ""):
+            readline.parse_and_bind("bind ^I rl_complete")
+        else:
+            readline.parse_and_bind("tab: complete")
+        readline.set_history_length(_HISTORY_LENGTH)
+        path = _history_path()
+        if path is not None:
+            with suppress(OSError):  # none yet, or unreadable: start afresh
+                readline.read_history_file(path)
+        return cls(path)
+
+    def save(self) -> None:
+        """Write the history file (quietly not, when it cannot be written)."""
+        if self._path is None:
+            return
+        import readline
+
+        with suppress(OSError):
+            readline.write_history_file(self._path)
+
+
+def _history_path() -> Path | None:
+    value = os.environ.get(ENV_HISTORY)
+    if value is None:
+        return Path(DEFAULT_HISTORY).expanduser()
+    return Path(value).expanduser() if value else None
+
+
+def _unset_bus_defaults(parser: argparse.ArgumentParser) -> None:
+    """Default every bus option of *parser* and its subcommands to :data:`_UNSET`."""
+    for action in parser._actions:
+        if action.dest in _BUS_DESTS and action.default is not argparse.SUPPRESS:
+            action.default = _UNSET
+    for sub in _subcommands(parser).values():
+        _unset_bus_defaults(sub)
+
+
+def _subcommands(parser: argparse.ArgumentParser) -> dict[str, argparse.ArgumentParser]:
+    """*parser*'s subcommands by name (empty when it has none)."""
+    found: dict[str, argparse.ArgumentParser] = {}
+    for action in _subparser_actions(parser):
+        found.update(action.choices)
+    return found
+
+
+def _subparser_actions(
+    parser: argparse.ArgumentParser,
+) -> Iterator[argparse._SubParsersAction[Any]]:
+    for action in parser._actions:
+        if isinstance(action, argparse._SubParsersAction):
+            yield action
+
+
+def _summary(parser: argparse.ArgumentParser, name: str) -> str | None:
+    """The one-line help ``sj300 --help`` shows for subcommand *name*."""
+    for action in _subparser_actions(parser):
+        for choice in action._choices_actions:
+            if choice.dest == name:
+                return choice.help
+    return None
+
+
+def _option(parser: argparse.ArgumentParser, word: str) -> argparse.Action | None:
+    """The option of *parser* spelled *word*, if it is one."""
+    if not word.startswith("-"):
+        return None
+    for action in parser._actions:
+        if word in action.option_strings:
+            return action
+    return None
