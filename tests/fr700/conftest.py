@@ -15,8 +15,9 @@ and with the other extreme (no field, CR LF, the host's ACK after data).
 from __future__ import annotations
 
 import contextlib
-from collections.abc import AsyncIterator, Callable
+from collections.abc import AsyncIterator
 from dataclasses import dataclass
+from typing import Protocol, TypedDict
 
 import pytest
 
@@ -25,8 +26,17 @@ from sj300_async.simulator import open_pty_server, serve_tcp
 from sj300_async.simulator.fr700 import Fr700SimulatedBus
 
 STATIONS = (0, 1, 2, 3)
+
+
+class SimOptions(TypedDict, total=False):
+    """Line options of the simulated drives (Fr700SimulatedBus keyword arguments)."""
+
+    wait_field: bool
+    terminator: str
+
+
 #: Line options: (simulator kwargs, URL query).
-OPTIONS = {
+OPTIONS: dict[str, tuple[SimOptions, str]] = {
     "factory": ({}, "protocol=fr700"),
     "crlf-nowait-ack": (
         {"wait_field": False, "terminator": "\r\n"},
@@ -35,12 +45,20 @@ OPTIONS = {
 }
 
 
+class OpenFr700Bus(Protocol):
+    """``fr700_line.open(timeout=..., retries=...)``: a bus through the transport under test."""
+
+    def __call__(
+        self, *, timeout: float | None = None, retries: int = 2
+    ) -> contextlib.AbstractAsyncContextManager[sj.Bus[sj.Fr700Drive, None]]: ...
+
+
 @dataclass
 class Fr700Line:
     kind: str
     sim: Fr700SimulatedBus
     url: str
-    open: Callable[..., contextlib.AbstractAsyncContextManager[sj.Bus]]
+    open: OpenFr700Bus
 
 
 @pytest.fixture(params=[(t, o) for t in ("loopback", "tcp", "pty") for o in OPTIONS], ids=str)
@@ -48,7 +66,7 @@ async def fr700_line(request: pytest.FixtureRequest) -> AsyncIterator[Fr700Line]
     kind, option = request.param
     sim_kwargs, query = OPTIONS[option]
     async with contextlib.AsyncExitStack() as stack:
-        sim = Fr700SimulatedBus(STATIONS, **sim_kwargs)  # type: ignore[arg-type]
+        sim = Fr700SimulatedBus(STATIONS, **sim_kwargs)
         if kind == "loopback":
             url = f"sim://?{query}"
         elif kind == "tcp":
@@ -58,11 +76,14 @@ async def fr700_line(request: pytest.FixtureRequest) -> AsyncIterator[Fr700Line]
             pty = await stack.enter_async_context(await open_pty_server(sim))
             url = f"serial://{pty.path}?baudrate=19200&{query}"
 
-        def open_line(**kwargs: object) -> contextlib.AbstractAsyncContextManager[sj.Bus]:
+        def open_line(
+            *, timeout: float | None = None, retries: int = 2
+        ) -> contextlib.AbstractAsyncContextManager[sj.Bus[sj.Fr700Drive, None]]:
             if kind == "loopback":
-                kwargs["simulator"] = sim
-            else:
-                kwargs.setdefault("timeout", 0.5)
-            return sj.open_bus(url, protocol="fr700", **kwargs)  # type: ignore[call-overload]
+                return sj.open_bus(
+                    url, protocol="fr700", simulator=sim, timeout=timeout, retries=retries
+                )
+            timeout = 0.5 if timeout is None else timeout
+            return sj.open_bus(url, protocol="fr700", timeout=timeout, retries=retries)
 
         yield Fr700Line(kind, sim, url, open_line)

@@ -18,7 +18,7 @@ def run(capsys: pytest.CaptureFixture[str], *args: str) -> tuple[int, str, str]:
     return code, out, err
 
 
-def test_monitor_shows_fr700_drives(capsys):
+def test_monitor_shows_fr700_drives(capsys: pytest.CaptureFixture[str]) -> None:
     code, out, err = run(
         capsys,
         "monitor",
@@ -36,7 +36,9 @@ def test_monitor_shows_fr700_drives(capsys):
         assert set(sample["monitor"]) >= {"output_frequency_hz", "output_current_a"}
 
 
-def test_monitor_demo_runs_fr700_drives_with_the_protocol_option(capsys):
+def test_monitor_demo_runs_fr700_drives_with_the_protocol_option(
+    capsys: pytest.CaptureFixture[str],
+) -> None:
     code, out, err = run(
         capsys, "monitor", "--protocol", "fr700", "--duration", "1.0", "--interval", "0.05"
     )
@@ -46,7 +48,7 @@ def test_monitor_demo_runs_fr700_drives_with_the_protocol_option(capsys):
     assert "Traceback" not in err
 
 
-def test_monitor_plain_lines_for_fr700(capsys):
+def test_monitor_plain_lines_for_fr700(capsys: pytest.CaptureFixture[str]) -> None:
     code, out, err = run(
         capsys,
         "monitor",
@@ -61,7 +63,7 @@ def test_monitor_plain_lines_for_fr700(capsys):
     assert "stop" in out
 
 
-def test_sj300_commands_refuse_fr700(capsys):
+def test_sj300_commands_refuse_fr700(capsys: pytest.CaptureFixture[str]) -> None:
     code, _out, err = run(capsys, "status", "--protocol", "fr700")
     assert code == 2
     assert "SJ300 drives only" in err
@@ -70,7 +72,7 @@ def test_sj300_commands_refuse_fr700(capsys):
     assert err.count("\n") == 1
 
 
-def test_sj300_monitor_still_refuses_node_0(capsys):
+def test_sj300_monitor_still_refuses_node_0(capsys: pytest.CaptureFixture[str]) -> None:
     code, _out, err = run(
         capsys, "monitor", "--url", "sim://?nodes=1", "--nodes", "0", "--count", "1"
     )

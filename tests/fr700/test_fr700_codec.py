@@ -21,20 +21,20 @@ from sj300_async.fr700._codes import Fr700Instruction as I
 
 
 @pytest.mark.parametrize("station", [-1, 32, 255, True, 1.0, "1", None])
-def test_station_must_be_0_to_31(station):
+def test_station_must_be_0_to_31(station: object) -> None:
     with pytest.raises(LocalProtocolError, match="station"):
-        encode_request(station, 0x7A)
+        encode_request(station, 0x7A)  # type: ignore[arg-type]
 
 
 @pytest.mark.parametrize("station", [0, 31])
-def test_station_limits_are_allowed(station):
+def test_station_limits_are_allowed(station: int) -> None:
     assert encode_request(station, 0x7A)[1:3] == b"%02X" % station
 
 
 @pytest.mark.parametrize("code", [-1, 256, True, "7A", 1.5])
-def test_instruction_must_be_two_hex_characters(code):
+def test_instruction_must_be_two_hex_characters(code: object) -> None:
     with pytest.raises(LocalProtocolError, match="instruction"):
-        encode_request(1, code)
+        encode_request(1, code)  # type: ignore[arg-type]
 
 
 @pytest.mark.parametrize(
@@ -50,12 +50,12 @@ def test_instruction_must_be_two_hex_characters(code):
         (0xED, "1770"),  # bytes, not str
     ],
 )
-def test_data_widths_and_characters(code, data):
+def test_data_widths_and_characters(code: int, data: object) -> None:
     with pytest.raises(LocalProtocolError):
-        encode_request(1, code, data)
+        encode_request(1, code, data)  # type: ignore[arg-type]
 
 
-def test_line_options_are_checked():
+def test_line_options_are_checked() -> None:
     with pytest.raises(LocalProtocolError, match="terminator"):
         Fr700LineOptions(terminator=b"\n")
     with pytest.raises(LocalProtocolError, match="wait_time_digit"):
@@ -67,7 +67,7 @@ def test_line_options_are_checked():
     assert Fr700LineOptions(wait_field=False, wait_time_digit=12).wait_s == 0.0
 
 
-def test_reads_and_writes_are_told_apart_by_the_code():
+def test_reads_and_writes_are_told_apart_by_the_code() -> None:
     with pytest.raises(LocalProtocolError, match="write code"):
         requests.read(1, 0xED)
     with pytest.raises(LocalProtocolError, match="read code"):
@@ -77,17 +77,17 @@ def test_reads_and_writes_are_told_apart_by_the_code():
 
 
 @pytest.mark.parametrize(("text", "code"), [("H7A", 0x7A), ("7a", 0x7A), ("0xED", 0xED)])
-def test_instruction_codes_as_text(text, code):
+def test_instruction_codes_as_text(text: str, code: int) -> None:
     assert requests.parse_instruction(text) == code
 
 
 @pytest.mark.parametrize("text", ["7", "H7AA", "XY", "", "H"])
-def test_bad_instruction_text(text):
+def test_bad_instruction_text(text: str) -> None:
     with pytest.raises(LocalProtocolError):
         requests.parse_instruction(text)
 
 
-def test_write_widths_follow_the_instruction():
+def test_write_widths_follow_the_instruction() -> None:
     assert requests.write(1, I.RUN_COMMAND, 2).data == b"02"  # A1
     assert requests.write(1, I.WRITE_LINK_EXTENSION, 1).data == b"01"  # A1
     assert requests.write(1, I.WRITE_OPERATION_MODE, 0).data == b"0000"  # A
@@ -105,7 +105,7 @@ def test_write_widths_follow_the_instruction():
         requests.write(1, 0xED, 1.0)  # type: ignore[arg-type]
 
 
-def test_reset_is_a_request_without_reply():
+def test_reset_is_a_request_without_reply() -> None:
     reset = requests.write(1, I.INVERTER_RESET, 0x9696)
     assert reset.kind is Fr700RequestKind.RESET
     assert not reset.expects_reply
@@ -113,24 +113,24 @@ def test_reset_is_a_request_without_reply():
 
 
 @pytest.mark.parametrize("hz", [-0.01, 655.36, math.nan, math.inf, 1.001, True, "50"])
-def test_frequency_is_checked(hz):
+def test_frequency_is_checked(hz: object) -> None:
     with pytest.raises(LocalProtocolError, match="frequency"):
-        requests.set_frequency(1, hz)
+        requests.set_frequency(1, hz)  # type: ignore[arg-type]
 
 
-def test_frequency_limits():
+def test_frequency_limits() -> None:
     assert requests.set_frequency(1, 0).data == b"0000"
     assert requests.set_frequency(1, 655.35).data == b"FFFF"
     assert requests.set_frequency(1, 60, eeprom=True).instruction == I.WRITE_SET_FREQUENCY_EEPROM
 
 
-def test_run_directions():
+def test_run_directions() -> None:
     assert [requests.run(1, d).data for d in Direction] == [b"00", b"02", b"04"]
     with pytest.raises(LocalProtocolError, match="direction"):
         requests.run(1, 3)
 
 
-def test_operation_mode_values():
+def test_operation_mode_values() -> None:
     assert requests.write_operation_mode(1, Fr700OperationMode.PU).data == b"0002"
     with pytest.raises(LocalProtocolError, match="NETWORK"):
         requests.write_operation_mode(1, 7)
@@ -150,17 +150,17 @@ def test_operation_mode_values():
         ("pr 340", 3, 40),
     ],
 )
-def test_parameter_bank_and_offset(number, bank, offset):
+def test_parameter_bank_and_offset(number: int | str, bank: int, offset: int) -> None:
     assert requests.parameter_bank(number) == (bank, offset)
 
 
 @pytest.mark.parametrize("number", [-1, 1000, "Pr.x", "", True, 7.0])
-def test_bad_parameter_numbers(number):
+def test_bad_parameter_numbers(number: object) -> None:
     with pytest.raises(LocalProtocolError):
-        requests.parameter_bank(number)
+        requests.parameter_bank(number)  # type: ignore[arg-type]
 
 
-def test_parameter_requests_address_the_offset():
+def test_parameter_requests_address_the_offset() -> None:
     assert requests.read_parameter(1, 123).instruction == 23
     assert requests.write_parameter(1, 123, 5).instruction == 0x80 + 23
     assert requests.read_parameter(1, 123).reply_width == 4
@@ -168,13 +168,13 @@ def test_parameter_requests_address_the_offset():
         requests.link_extension(1, 10)
 
 
-def test_bank_switch_for_a_read_does_not_count_as_changing_the_drive():
+def test_bank_switch_for_a_read_does_not_count_as_changing_the_drive() -> None:
     assert not requests.link_extension(1, 2, changes_drive=False).mutating
     assert requests.link_extension(1, 2).mutating
     assert not requests.read(1, 0x7A).mutating
 
 
-def test_multi_command_is_checked():
+def test_multi_command_is_checked() -> None:
     with pytest.raises(LocalProtocolError, match="run_bits"):
         requests.multi_command(1, 0x10000, 10)
     with pytest.raises(LocalProtocolError, match="receive"):
@@ -186,7 +186,7 @@ def test_multi_command_is_checked():
     assert request.reply_width == 12
 
 
-def test_read_width_override_is_checked():
+def test_read_width_override_is_checked() -> None:
     assert requests.read(1, 0x7A).reply_width == 2
     assert requests.read(1, 0x7C).reply_width is None  # unknown: any width
     assert requests.read(1, 0x7C, reply_width=20).reply_width == 20
@@ -195,7 +195,7 @@ def test_read_width_override_is_checked():
             requests.read(1, 0x7C, reply_width=width)
 
 
-def test_reply_encoders_are_checked():
+def test_reply_encoders_are_checked() -> None:
     with pytest.raises(LocalProtocolError):
         encode_data_reply(1, b"")
     with pytest.raises(LocalProtocolError):
@@ -206,6 +206,6 @@ def test_reply_encoders_are_checked():
         encode_nak(1, 16)
 
 
-def test_request_labels_and_nodes():
+def test_request_labels_and_nodes() -> None:
     request = requests.read(9, 0x6F)
     assert (request.node, request.label, request.expects_reply) == (9, "instruction H6F", True)

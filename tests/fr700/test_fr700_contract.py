@@ -15,13 +15,15 @@ import pytest
 import sj300_async as sj
 from sj300_async.fr700 import Fr700NakCode, Fr700OperationMode
 
+from .conftest import Fr700Line
+
 
 def _open_fds() -> int:
     gc.collect()
     return len(os.listdir("/proc/self/fd"))
 
 
-async def test_every_instruction_round_trips(fr700_line):
+async def test_every_instruction_round_trips(fr700_line: Fr700Line) -> None:
     async with fr700_line.open() as bus:
         d = bus.drive(2)
         await d.write_parameter_raw(7, 5)  # 0.5 s from 0 to 60 Hz
@@ -48,7 +50,7 @@ async def test_every_instruction_round_trips(fr700_line):
         assert fr700_line.sim.drives[2].stored_frequency_hz == 12.5
 
 
-async def test_many_sequential_transactions_keep_their_values(fr700_line):
+async def test_many_sequential_transactions_keep_their_values(fr700_line: Fr700Line) -> None:
     async with fr700_line.open() as bus:
         for station in (0, 1, 2, 3):
             await bus.drive(station).set_frequency(10.0 + station)
@@ -59,7 +61,7 @@ async def test_many_sequential_transactions_keep_their_values(fr700_line):
         assert bus.stats.bad_frames == 0
 
 
-async def test_concurrent_callers_all_get_their_own_answers(fr700_line):
+async def test_concurrent_callers_all_get_their_own_answers(fr700_line: Fr700Line) -> None:
     async with fr700_line.open() as bus:
         for station in (0, 1, 2, 3):
             await bus.drive(station).write_parameter_raw(7, 10 + station)
@@ -71,7 +73,7 @@ async def test_concurrent_callers_all_get_their_own_answers(fr700_line):
         assert results == [[10 + n] * 5 for n in (0, 1, 2, 3)]
 
 
-async def test_absent_station_times_out_and_the_bus_goes_on(fr700_line):
+async def test_absent_station_times_out_and_the_bus_goes_on(fr700_line: Fr700Line) -> None:
     async with fr700_line.open(timeout=0.1, retries=1) as bus:
         with pytest.raises(sj.ReplyTimeoutError):
             await bus.drive(30).read_status()
@@ -79,14 +81,14 @@ async def test_absent_station_times_out_and_the_bus_goes_on(fr700_line):
         assert not (await bus.drive(1).read_status()).running
 
 
-async def test_nak_is_typed(fr700_line):
+async def test_nak_is_typed(fr700_line: Fr700Line) -> None:
     async with fr700_line.open() as bus:
         with pytest.raises(sj.NakError) as info:
             await bus.drive(3).set_frequency(400.0)
         assert (info.value.node, info.value.code) == (3, Fr700NakCode.DATA_RANGE)
 
 
-async def test_reset_reaches_the_drive(fr700_line):
+async def test_reset_reaches_the_drive(fr700_line: Fr700Line) -> None:
     async with fr700_line.open() as bus:
         fr700_line.sim.drives[1].trip(now=asyncio.get_running_loop().time())
         assert (await bus.drive(1).read_status()).tripped
@@ -94,7 +96,7 @@ async def test_reset_reaches_the_drive(fr700_line):
         assert not (await bus.drive(1).read_status()).tripped
 
 
-async def test_close_releases_everything(fr700_line):
+async def test_close_releases_everything(fr700_line: Fr700Line) -> None:
     async with fr700_line.open() as bus:
         await bus.drive(1).read_status()
     await asyncio.sleep(0.05)

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import asyncio
+from contextlib import AbstractAsyncContextManager
 
 import pytest
 
@@ -21,8 +22,14 @@ from sj300_async.simulator.sj300 import SimulatedBus
 URL = "sim://?protocol=fr700&nodes=0-3"
 
 
-def fr700_bus(url: str = URL, **kwargs: object):
-    return sj.open_bus(url, protocol="fr700", **kwargs)  # type: ignore[call-overload]
+def fr700_bus(
+    url: str = URL,
+    *,
+    timeout: float | None = None,
+    retries: int = 2,
+    read_only: bool = False,
+) -> AbstractAsyncContextManager[sj.Bus[Fr700Drive, None]]:
+    return sj.open_bus(url, protocol="fr700", timeout=timeout, retries=retries, read_only=read_only)
 
 
 async def quick_ramps(drive: Fr700Drive) -> None:
@@ -30,7 +37,7 @@ async def quick_ramps(drive: Fr700Drive) -> None:
     await drive.write_parameter_raw(8, 0)
 
 
-async def test_bus_hands_out_fr700_drives_on_stations_0_to_31():
+async def test_bus_hands_out_fr700_drives_on_stations_0_to_31() -> None:
     async with fr700_bus() as bus:
         drive = bus.drive(0)
         assert isinstance(drive, Fr700Drive)
@@ -46,13 +53,14 @@ async def test_bus_hands_out_fr700_drives_on_stations_0_to_31():
         assert repr(drive) == "<Fr700Drive 00 on sim://(stations 0-3)>"
 
 
-async def test_url_alone_selects_the_protocol():
+async def test_url_alone_selects_the_protocol() -> None:
     async with sj.open_bus("sim://?protocol=fr700&nodes=5") as bus:
-        assert isinstance(bus.drive(5), Fr700Drive)
-        assert not (await bus.drive(5).read_status()).running
+        drive = bus.drive(5)
+        assert isinstance(drive, Fr700Drive)
+        assert not (await drive.read_status()).running
 
 
-async def test_run_ramp_status_and_monitors():
+async def test_run_ramp_status_and_monitors() -> None:
     async with fr700_bus() as bus:
         drive = bus.drive(1)
         await quick_ramps(drive)
@@ -79,7 +87,7 @@ async def test_run_ramp_status_and_monitors():
         assert status.bits == Fr700StatusBits(0)
 
 
-async def test_the_ramp_takes_time():
+async def test_the_ramp_takes_time() -> None:
     async with fr700_bus() as bus:
         drive = bus.drive(1)
         await drive.write_parameter_raw(7, 5)  # 0.5 s from 0 to 60 Hz (Pr.20)
@@ -92,7 +100,7 @@ async def test_the_ramp_takes_time():
         assert await drive.read_output_frequency() == 60.0
 
 
-async def test_ram_and_eeprom_frequency():
+async def test_ram_and_eeprom_frequency() -> None:
     async with fr700_bus() as bus:
         drive = bus.drive(2)
         await drive.set_frequency(30.0)
@@ -107,7 +115,7 @@ async def test_ram_and_eeprom_frequency():
         assert await drive.read_set_frequency() == 40.0
 
 
-async def test_frequency_above_maximum_is_nak_c():
+async def test_frequency_above_maximum_is_nak_c() -> None:
     async with fr700_bus() as bus:
         drive = bus.drive(0)
         with pytest.raises(sj.NakError) as info:
@@ -119,7 +127,7 @@ async def test_frequency_above_maximum_is_nak_c():
             await drive.set_frequency(60.01)
 
 
-async def test_operation_mode_and_mode_errors():
+async def test_operation_mode_and_mode_errors() -> None:
     async with fr700_bus() as bus:
         drive = bus.drive(3)
         assert await drive.read_operation_mode() is Fr700OperationMode.NETWORK
@@ -138,12 +146,12 @@ async def test_operation_mode_and_mode_errors():
         assert info.value.code is Fr700NakCode.MODE
 
 
-async def test_factory_defaults_start_in_external_mode():
+async def test_factory_defaults_start_in_external_mode() -> None:
     async with fr700_bus("sim://?protocol=fr700&nodes=0&factory_defaults=1") as bus:
         assert await bus.drive(0).read_operation_mode() is Fr700OperationMode.EXTERNAL
 
 
-async def test_parameters_through_the_link_extension():
+async def test_parameters_through_the_link_extension() -> None:
     async with fr700_bus() as bus:
         drive = bus.drive(1)
         sim = bus.simulator
@@ -164,7 +172,7 @@ async def test_parameters_through_the_link_extension():
         assert info.value.code is Fr700NakCode.DATA_RANGE
 
 
-async def test_the_bank_is_written_only_when_it_changes():
+async def test_the_bank_is_written_only_when_it_changes() -> None:
     async with fr700_bus() as bus:
         drive = bus.drive(1)
         sent: list[bytes] = []
@@ -177,7 +185,7 @@ async def test_the_bank_is_written_only_when_it_changes():
         assert codes == [b"FF", b"07", b"08", b"FF", b"11", b"12"]
 
 
-async def test_concurrent_parameter_reads_never_mix_banks():
+async def test_concurrent_parameter_reads_never_mix_banks() -> None:
     async with fr700_bus() as bus:
         drive = bus.drive(2)
         await drive.write_parameter_raw(7, 77)
@@ -191,7 +199,7 @@ async def test_concurrent_parameter_reads_never_mix_banks():
         assert high == [2] * 10
 
 
-async def test_an_inverter_reset_is_not_answered_and_forgets_the_bank():
+async def test_an_inverter_reset_is_not_answered_and_forgets_the_bank() -> None:
     async with fr700_bus() as bus:
         drive = bus.drive(0)
         sim = bus.simulator
@@ -206,7 +214,7 @@ async def test_an_inverter_reset_is_not_answered_and_forgets_the_bank():
         assert await drive.read_parameter_raw(118) == 192  # the bank is written again
 
 
-async def test_multi_command():
+async def test_multi_command() -> None:
     async with fr700_bus() as bus:
         drive = bus.drive(1)
         await quick_ramps(drive)
@@ -228,7 +236,7 @@ async def test_multi_command():
         assert (await drive.read_status()).reverse
 
 
-async def test_raw_read_and_write():
+async def test_raw_read_and_write() -> None:
     async with fr700_bus() as bus:
         drive = bus.drive(1)
         await drive.write(0xED, 0x1388)
@@ -246,7 +254,7 @@ async def test_raw_read_and_write():
             await drive.write(0x6D, 1)
 
 
-async def test_fault_history():
+async def test_fault_history() -> None:
     async with fr700_bus() as bus:
         drive = bus.drive(1)
         sim = bus.simulator
@@ -262,7 +270,7 @@ async def test_fault_history():
         assert await drive.read(0x74) == 0
 
 
-async def test_read_only_bus_reads_parameters_but_refuses_writes():
+async def test_read_only_bus_reads_parameters_but_refuses_writes() -> None:
     async with fr700_bus(read_only=True) as bus:
         drive = bus.drive(1)
         assert await drive.read_parameter_raw(118) == 192  # the bank switch is allowed
@@ -278,14 +286,14 @@ async def test_read_only_bus_reads_parameters_but_refuses_writes():
                 await write
 
 
-async def test_absent_station_times_out():
+async def test_absent_station_times_out() -> None:
     async with fr700_bus(timeout=0.05, retries=1) as bus:
         with pytest.raises(sj.ReplyTimeoutError):
             await bus.drive(9).read_status()
         assert bus.drive(9).stats.timeouts == 2
 
 
-async def test_protocol_mismatch_is_refused():
+async def test_protocol_mismatch_is_refused() -> None:
     with pytest.raises(sj.LocalProtocolError, match="URL says"):
         async with sj.open_bus("sim://?protocol=fr700", protocol="sj300"):
             pass
@@ -307,7 +315,7 @@ async def test_protocol_mismatch_is_refused():
         "terminator=none&wait_field=0&ack=1",
     ],
 )
-async def test_every_line_option_works_end_to_end(query):
+async def test_every_line_option_works_end_to_end(query: str) -> None:
     async with fr700_bus(f"sim://?protocol=fr700&nodes=0-1&{query}") as bus:
         drive = bus.drive(1)
         await quick_ramps(drive)

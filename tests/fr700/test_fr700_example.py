@@ -10,7 +10,7 @@ from pathlib import Path
 EXAMPLE = Path(__file__).resolve().parents[2] / "examples" / "fr700_one_shot.py"
 
 
-def test_fr700_one_shot():
+def test_fr700_one_shot() -> None:
     done = subprocess.run(
         [sys.executable, str(EXAMPLE)], capture_output=True, text=True, timeout=60, check=False
     )

@@ -9,7 +9,7 @@ from sj300_async.fr700 import Fr700Monitor, Fr700Status
 from sj300_async.simulator.fr700 import Fr700SimulatedBus
 
 
-async def test_fr700_samples_carry_typed_reads_and_parameters():
+async def test_fr700_samples_carry_typed_reads_and_parameters() -> None:
     async with sj.open_bus(
         "sim://?protocol=fr700&nodes=0-3", protocol="fr700", timeout=0.05, retries=0
     ) as bus:
@@ -31,7 +31,7 @@ async def test_fr700_samples_carry_typed_reads_and_parameters():
         assert sample.parameters == {"Pr.7": 3.3, "Pr.123": 9999}
 
 
-async def test_fr700_drive_goes_offline_and_back():
+async def test_fr700_drive_goes_offline_and_back() -> None:
     async with sj.open_bus(
         "sim://?protocol=fr700&nodes=0-3", protocol="fr700", timeout=0.02, retries=0
     ) as bus:
@@ -52,7 +52,7 @@ async def test_fr700_drive_goes_offline_and_back():
                     break
 
 
-async def test_one_poller_for_both_protocols():
+async def test_one_poller_for_both_protocols() -> None:
     async with (
         sj.open_bus("sim://?nodes=1-2", timeout=0.05) as sj300,
         sj.open_bus("sim://?protocol=fr700&nodes=0-1", protocol="fr700", timeout=0.05) as fr700,
@@ -76,7 +76,7 @@ async def test_one_poller_for_both_protocols():
                 assert set(sample.parameters) == {"F002"}
 
 
-def test_parameter_names_are_checked():
+def test_parameter_names_are_checked() -> None:
     with pytest.raises(sj.LocalProtocolError):
         sj.Poller(parameters=["Pr.1000"])
     with pytest.raises(sj.LocalProtocolError):

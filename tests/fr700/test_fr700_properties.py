@@ -10,8 +10,8 @@
 from __future__ import annotations
 
 import itertools
+from collections.abc import Callable, Sequence
 
-from fr700wire import ref_sum
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
@@ -33,6 +33,8 @@ from sj300_async.fr700 import (
 )
 from sj300_async.simulator.fr700 import HostRequest, RequestParser
 from sj300_async.wire import BadFrame, Discarded
+
+from .fr700wire import ref_sum
 
 PROPERTY = settings(max_examples=250, deadline=None)
 TERMINATORS = (b"", b"\r", b"\r\n")
@@ -91,11 +93,11 @@ def feed_chunks(parser: Fr700ReplyParser, chunks: list[bytes]) -> list[object]:
     return events
 
 
-def kept(events: list[object]) -> list[object]:
+def kept(events: Sequence[object]) -> list[object]:
     return [e for e in events if not isinstance(e, Discarded)]
 
 
-def discarded_total(events: list[object]) -> int:
+def discarded_total(events: Sequence[object]) -> int:
     return sum(len(e.data) for e in events if isinstance(e, Discarded))
 
 
@@ -261,29 +263,26 @@ options = st.builds(
 def built_requests(draw: st.DrawFn) -> tuple[Fr700LineOptions, Fr700Request]:
     opts = draw(options)
     station = draw(stations)
-    build = draw(
-        st.sampled_from(
-            [
-                lambda: requests.read(station, draw(st.integers(0, 0x7F)), options=opts),
-                lambda: requests.write(
-                    station,
-                    draw(st.sampled_from([0xED, 0xEE, 0xFB, 0xFD, 0x85])),
-                    draw(st.integers(0, 0xFFFF)),
-                    options=opts,
-                ),
-                lambda: requests.run(station, draw(st.integers(0, 2)), options=opts),
-                lambda: requests.link_extension(station, draw(st.integers(0, 9)), options=opts),
-                lambda: requests.multi_command(
-                    station,
-                    draw(st.integers(0, 0xFFFF)),
-                    draw(st.integers(0, 65535)) / 100,
-                    eeprom=draw(st.booleans()),
-                    receive=draw(st.integers(0, 3)),
-                    options=opts,
-                ),
-            ]
-        )
-    )
+    builders: list[Callable[[], Fr700Request]] = [
+        lambda: requests.read(station, draw(st.integers(0, 0x7F)), options=opts),
+        lambda: requests.write(
+            station,
+            draw(st.sampled_from([0xED, 0xEE, 0xFB, 0xFD, 0x85])),
+            draw(st.integers(0, 0xFFFF)),
+            options=opts,
+        ),
+        lambda: requests.run(station, draw(st.integers(0, 2)), options=opts),
+        lambda: requests.link_extension(station, draw(st.integers(0, 9)), options=opts),
+        lambda: requests.multi_command(
+            station,
+            draw(st.integers(0, 0xFFFF)),
+            draw(st.integers(0, 65535)) / 100,
+            eeprom=draw(st.booleans()),
+            receive=draw(st.integers(0, 3)),
+            options=opts,
+        ),
+    ]
+    build = draw(st.sampled_from(builders))
     return opts, build()
 
 

@@ -8,9 +8,10 @@ import signal
 import sys
 
 import pytest
-from fr700wire import ack, data_reply, nak, request
 
 from sj300_async.cli import main
+
+from .fr700wire import ack, data_reply, nak, request
 
 TIMEOUT = 10.0
 
@@ -52,7 +53,7 @@ async def finish(proc: asyncio.subprocess.Process) -> tuple[int | None, str]:
     return proc.returncode, err.decode()
 
 
-async def test_factory_line_settings_by_default():
+async def test_factory_line_settings_by_default() -> None:
     proc = await start("--listen", "tcp://127.0.0.1:0", "--nodes", "0-3")
     try:
         port = await port_of(proc)
@@ -71,7 +72,7 @@ async def test_factory_line_settings_by_default():
             await proc.wait()
 
 
-async def test_line_settings_are_configurable():
+async def test_line_settings_are_configurable() -> None:
     proc = await start(
         "--listen", "tcp://127.0.0.1:0", "--nodes", "31", "--terminator", "none",
         "--no-wait-field", "--wait-ms", "20", "--factory-defaults",
@@ -99,7 +100,10 @@ async def test_line_settings_are_configurable():
         (["--terminator", "lf"], "invalid choice"),
     ],
 )
-def test_bad_fr700_arguments_print_one_line_and_exit_2(capsys, args, message):
+def test_bad_fr700_arguments_print_one_line_and_exit_2(
+    capsys: pytest.CaptureFixture[str], args: list[str], message: str
+) -> None:
+    code: int | str | None
     try:
         code = main(["simulate", "--protocol", "fr700", "--listen", "tcp://127.0.0.1:0", *args])
     except SystemExit as exc:

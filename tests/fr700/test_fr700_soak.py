@@ -38,7 +38,7 @@ def noisy(seed: int) -> LineFaults:
 
 
 @pytest.mark.parametrize("query", ["", "&terminator=none&ack=1"])
-async def test_every_request_ends_with_the_right_value_or_a_typed_error(query):
+async def test_every_request_ends_with_the_right_value_or_a_typed_error(query: str) -> None:
     to_drive, to_host = noisy(8), noisy(9)
     errors: dict[str, int] = {}
     async with sj.open_bus(

@@ -12,10 +12,10 @@ from sj300_async.sj300._dialect import SJ300_DIALECT
 
 
 def dialect_of(url: str, protocol: str | None = None) -> object:
-    return make_dialect(sjbus.parse_bus_url(url), protocol)  # type: ignore[arg-type]
+    return make_dialect(sjbus.parse_bus_url(url), protocol)
 
 
-def test_protocol_in_the_url():
+def test_protocol_in_the_url() -> None:
     address = sjbus.parse_bus_url("tcp://10.0.0.5:4001?protocol=FR700&terminator=crlf&ack=1")
     assert address.protocol == "fr700"
     assert address.protocol_options == {"terminator": "crlf", "ack": "1"}
@@ -26,7 +26,7 @@ def test_protocol_in_the_url():
     assert dialect.options.wait_field
 
 
-def test_defaults_are_the_drives_factory_settings():
+def test_defaults_are_the_drives_factory_settings() -> None:
     dialect = dialect_of("serial:///dev/ttyUSB0?protocol=fr700")
     assert isinstance(dialect, Fr700Dialect)
     assert dialect.options.terminator == b"\r"
@@ -38,13 +38,13 @@ def test_defaults_are_the_drives_factory_settings():
     ("query", "terminator", "wait_field"),
     [("terminator=none", b"", True), ("terminator=cr&wait_field=off", b"\r", False)],
 )
-def test_line_options(query, terminator, wait_field):
+def test_line_options(query: str, terminator: bytes, wait_field: bool) -> None:
     dialect = dialect_of(f"sim://?protocol=fr700&{query}")
     assert isinstance(dialect, Fr700Dialect)
     assert (dialect.options.terminator, dialect.options.wait_field) == (terminator, wait_field)
 
 
-def test_sj300_remains_the_default():
+def test_sj300_remains_the_default() -> None:
     assert dialect_of("tcp://h:1") is SJ300_DIALECT
     assert dialect_of("tcp://h:1?protocol=sj300") is SJ300_DIALECT
     assert dialect_of("tcp://h:1", "sj300") is SJ300_DIALECT
@@ -62,12 +62,12 @@ def test_sj300_remains_the_default():
         ("tcp://h:1", "dnp3", "unknown protocol"),
     ],
 )
-def test_bad_protocol_settings(url, protocol, match):
+def test_bad_protocol_settings(url: str, protocol: str | None, match: str) -> None:
     with pytest.raises(sj.LocalProtocolError, match=match):
         dialect_of(url, protocol)
 
 
-def test_sim_nodes_are_stations_0_to_31_for_fr700():
+def test_sim_nodes_are_stations_0_to_31_for_fr700() -> None:
     assert sjbus.parse_bus_url("sim://?protocol=fr700&nodes=0-3,31").nodes == (0, 1, 2, 3, 31)
     assert sjbus.parse_bus_url("sim://?protocol=fr700").nodes == tuple(range(8))
     assert sjbus.parse_bus_url("sim://?protocol=fr700").description == "sim://(stations 0-7)"
@@ -77,27 +77,29 @@ def test_sim_nodes_are_stations_0_to_31_for_fr700():
         sjbus.parse_bus_url("sim://?nodes=0")
 
 
-def test_the_protocol_argument_completes_the_url():
+def test_the_protocol_argument_completes_the_url() -> None:
     address = sjbus.parse_bus_url("sim://?nodes=0-1&terminator=crlf", protocol="fr700")
     assert (address.protocol, address.nodes) == ("fr700", (0, 1))
     assert sjbus.parse_bus_url("tcp://h:1?protocol=fr700", protocol="fr700").protocol == "fr700"
     with pytest.raises(sj.LocalProtocolError, match="URL says"):
         sjbus.parse_bus_url("tcp://h:1?protocol=sj300", protocol="fr700")
     with pytest.raises(sj.LocalProtocolError, match="unknown protocol"):
-        sjbus.parse_bus_url("tcp://h:1", protocol="x")  # type: ignore[arg-type]
+        sjbus.parse_bus_url("tcp://h:1", protocol="x")
 
 
-def test_node_list_range_is_a_parameter():
+def test_node_list_range_is_a_parameter() -> None:
     assert sjbus.parse_node_list("0-2", low=0, high=31) == (0, 1, 2)
     with pytest.raises(sj.LocalProtocolError):
         sjbus.parse_node_list("0-2")
 
 
-async def test_dialect_argument_must_match_the_protocol():
+async def test_dialect_argument_must_match_the_protocol() -> None:
+    # The ignores: Fr700Dialect is not a Dialect to mypy (LineParser.reset() is annotated
+    # list[Discarded], the parsers' reset() list[Event]), so no open_bus overload matches.
     with pytest.raises(sj.LocalProtocolError, match="dialect"):
-        async with sj.open_bus("sim://", dialect=Fr700Dialect()):
+        async with sj.open_bus("sim://", dialect=Fr700Dialect()):  # type: ignore[call-overload]
             pass
-    async with sj.open_bus(
+    async with sj.open_bus(  # type: ignore[call-overload]
         "sim://?protocol=fr700&nodes=1", dialect=Fr700Dialect(terminator="\r\n")
     ) as bus:
         assert not (await bus.drive(1).read_status()).running
