@@ -422,6 +422,8 @@ def test_hotspots_profile_sees_the_library_per_transaction(harness: ModuleType) 
     spots, done = hotspots.profile("loopback", 50)
     assert done == 50
     assert {"library", "simulator", "event loop"} <= {hotspots.layer(s.file) for s in spots}
-    reads = [s for s in spots if s.where.startswith("sj300/_drive.py:") and s.function == "read_status"]
+    reads = [
+        s for s in spots if s.where.startswith("sj300/_drive.py:") and s.function == "read_status"
+    ]
     assert len(reads) == 1
     assert reads[0].calls >= 50  # a coroutine counts once more each time it resumes
