@@ -1,16 +1,27 @@
 """``sj300 params backup|restore|diff FILE``: a drive's parameters to and from a JSON snapshot.
 
-- ``backup FILE`` reads every catalogue parameter (or ``--codes``) and saves
-  the raw values (format: :mod:`._snapshot`). A code the drive answers NAK
-  16 for is recorded as absent, not an error: drives differ by firmware.
-- ``restore FILE`` writes every value with command 07, then reads each
-  back and compares. Any mismatch is listed and the exit status is 1. A
-  write refused with a NAK is tried again after the others, since drives
-  check some values against others (a base frequency above the maximum
-  frequency is refused until the maximum is written). ``--store`` stores
-  to EEPROM at the end if everything matched.
-- ``diff FILE`` compares the file with the drive: exit 0 when equal, 1
-  when different, 2 on trouble (diff(1)'s convention).
+- ``backup FILE`` reads every parameter of the SJ300 function-code table
+  (:data:`sj300_async.PARAMETERS`, 335 codes; or ``--codes``) and saves
+  each one's code, name, unit, value in its unit and raw value, with the
+  node, the protocol, the time (UTC) and the library version (format:
+  :mod:`._snapshot`). A code the drive answers NAK 16 for is recorded as
+  absent with the reason, not an error: drives differ by firmware. A
+  progress bar shows on a terminal. FILE's directory must exist (checked
+  before anything is sent: one line, exit 2, as for a missing file).
+- ``restore FILE`` refuses a file taken from another node than the target
+  (``-n``) unless ``--force``, and a file of another protocol always (an
+  FR-700 file's codes are not SJ300 parameters; ``--force`` cannot make
+  them so). It then writes every raw value with command 07 (exact: raw,
+  not the value in its unit), then reads each back and compares. Any
+  mismatch is listed and the exit status is 1. A write refused with a NAK
+  is tried again after the others, since drives check some values against
+  others (a base frequency above the maximum frequency is refused until
+  the maximum is written). ``--store`` stores to EEPROM at the end if
+  everything matched. Absent codes are not written.
+- ``diff FILE`` compares the file with the drive code by code (the file's
+  codes, absent ones included), showing values in their units: exit 0 when
+  equal, 1 when different, 2 on trouble (diff(1)'s convention). Comparing
+  with another node is allowed (nothing is written).
 
 Communication settings are not restored: C072 (node address) never, the
 line settings C071 (speed), C073 (data bits), C074 (parity) and C075 (stop
@@ -21,19 +32,29 @@ on, and C072 from another drive's backup would re-address this one. Use
 
 ``--node`` defaults to 1 for a backup and to the file's node for restore
 and diff.
+
+FR-700 buses (``--protocol fr700``, ``protocol=fr700`` in the URL) are
+refused with one line, exit 2: a decision, not an oversight. The FR-700
+catalogue names only the parameters the library models, parameter numbers
+are not SJ300 codes, and its raw values, NAK codes and drive class differ;
+a backup of a few dozen of several hundred parameters would pass for a
+whole one. The file's ``protocol`` field keeps the door open for an
+FR-700 backup later, and keeps one from ever being restored onto an SJ300.
 """
 
 from __future__ import annotations
 
 import argparse
+import os
 from collections.abc import Callable, Coroutine
 from pathlib import Path
 from typing import Any, Final
 
+from ..bus._url import parse_bus_url
 from ..sj300._codes import NakCode
 from ..sj300._drive import Drive
 from ..sj300._parameters import PARAMETERS, parameter_info
-from ..wire._errors import NakError
+from ..wire._errors import LocalProtocolError, NakError
 from ._common import (
     DEFAULT_URL,
     add_bus_options,
@@ -47,7 +68,7 @@ from ._output import Column, format_raw, print_json, print_table
 from ._progress import progress
 from ._read import parameter_code
 from ._session import run_async
-from ._snapshot import Snapshot
+from ._snapshot import PROTOCOL, Snapshot, utc_now
 
 __all__ = ["COMM_CODES", "NODE_ADDRESS", "add_parser"]
 
@@ -73,8 +94,9 @@ def add_parser(subparsers: Any) -> None:
     backup = actions.add_parser(
         "backup",
         help="save the drive's parameters to FILE",
-        description="Read every catalogue parameter (or --codes) and save the raw values as "
-        "JSON. Codes the drive does not have (NAK 16) are recorded as absent.",
+        description="Read every parameter of the SJ300 function-code table (or --codes) and "
+        "save each one's code, name, unit, value and raw value as JSON, with the node, the "
+        "protocol and the time. Codes the drive does not have (NAK 16) are recorded as absent.",
     )
     backup.add_argument(
         "--codes",
@@ -86,8 +108,14 @@ def add_parser(subparsers: Any) -> None:
         "restore",
         help="write FILE's parameters and verify them",
         description="Write FILE's values (raw, command 07), read each back and compare; exit 1 "
-        "on any mismatch. C072 (node address) is never written, the line settings C071 and "
+        "on any mismatch. A file from another node is refused unless --force, one of another "
+        "protocol always. C072 (node address) is never written, the line settings C071 and "
         "C073-C075 only with --include-comm: a new value there cuts the drive off this line.",
+    )
+    restore.add_argument(
+        "--force",
+        action="store_true",
+        help="restore a file taken from another node than -n names",
     )
     restore.add_argument(
         "--include-comm",
@@ -115,23 +143,43 @@ def _runner(
     step: Callable[[argparse.Namespace], Coroutine[Any, Any, int]],
 ) -> Callable[[argparse.Namespace], int]:
     def run(args: argparse.Namespace) -> int:
+        _refuse_other_protocols(args)
         return run_async(step(args))
 
     return run
 
 
-async def _read_or_absent(drive: Drive, code: str) -> int | None:
-    """The raw value of *code*, None when the drive does not have it (NAK 16)."""
+def _refuse_other_protocols(args: argparse.Namespace) -> None:
+    """Stop with one line (exit 2) when the bus speaks another protocol than SJ300."""
+    try:
+        named = args.protocol or parse_bus_url(bus_url(args) or DEFAULT_URL).protocol
+    except LocalProtocolError:
+        return  # a bad URL: opening the bus says what is wrong with it
+    if named not in (None, PROTOCOL):
+        raise CliError(
+            f"params works with SJ300 drives only, not {named}: "
+            "there is no backup format for its parameters"
+        )
+
+
+def _absent_reason(exc: NakError) -> str:
+    description = getattr(exc.code, "description", None) or "no description"
+    return f"NAK {int(exc.code):02d} ({description})"
+
+
+async def _read_or_absent(drive: Drive, code: str) -> int | str:
+    """The raw value of *code*, or why it is absent (NAK 16: the drive does not have it)."""
     try:
         return await drive.read_parameter_raw(code)
     except NakError as exc:
         if exc.code == NakCode.ABNORMAL_PARAMETER:
-            return None
+            return _absent_reason(exc)
         raise CliError(f"{code}: {exc}", status=FAILURE) from None
 
 
-async def _read_all(drive: Drive, codes: list[str], what: str) -> dict[str, int | None]:
-    values: dict[str, int | None] = {}
+async def _read_all(drive: Drive, codes: list[str], what: str) -> dict[str, int | str]:
+    """Each code's raw value, or the reason it is absent, with a progress bar on a terminal."""
+    values: dict[str, int | str] = {}
     with progress(what, len(codes)) as advance:
         for code in codes:
             values[code] = await _read_or_absent(drive, code)
@@ -139,18 +187,37 @@ async def _read_all(drive: Drive, codes: list[str], what: str) -> dict[str, int 
     return values
 
 
+def _raw_or_none(value: int | str) -> int | None:
+    return value if isinstance(value, int) else None
+
+
 # -- backup ---------------------------------------------------------------------
 
 
+def _check_destination(file: Path) -> None:
+    """Refuse (exit 2, nothing sent) a backup file whose directory is missing or unwritable."""
+    directory = file.parent
+    if not directory.is_dir():
+        what = "Not a directory" if directory.exists() else "No such file or directory"
+        raise CliError(f"{directory}: {what}")
+    if file.is_dir():
+        raise CliError(f"{file}: Is a directory")
+    if not os.access(directory, os.W_OK | os.X_OK):
+        raise CliError(f"{directory}: Permission denied")
+
+
 async def _backup(args: argparse.Namespace) -> int:
+    _check_destination(args.file)
     codes: list[str] = list(dict.fromkeys(args.codes or PARAMETERS))
+    taken_at = utc_now()
     async with open_cli_bus(args) as bus:
         values = await _read_all(bus.drive(args.node), codes, "reading")
     snapshot = Snapshot(
         node=args.node,
         url=bus_url(args) or DEFAULT_URL,
-        parameters={code: raw for code, raw in values.items() if raw is not None},
-        absent=tuple(code for code, raw in values.items() if raw is None),
+        parameters={code: raw for code, raw in values.items() if isinstance(raw, int)},
+        absent={code: why for code, why in values.items() if isinstance(why, str)},
+        taken_at=taken_at,
     )
     snapshot.save(args.file)
     if args.json:
@@ -197,12 +264,20 @@ async def _write_all(drive: Drive, values: dict[str, int]) -> dict[str, str]:
 async def _restore(args: argparse.Namespace) -> int:
     snapshot = Snapshot.load(args.file)
     node: int = args.node or snapshot.node
+    if node != snapshot.node and not args.force:
+        raise CliError(
+            f"{args.file} was taken from node {snapshot.node:02d}, not node {node:02d}: "
+            "--force restores it there"
+        )
     skipped = sorted([NODE_ADDRESS, *(() if args.include_comm else COMM_CODES)])
     values = {c: raw for c, raw in snapshot.parameters.items() if c not in skipped}
     async with open_cli_bus(args) as bus:
         drive = bus.drive(node)
         errors = await _write_all(drive, values)
-        back = await _read_all(drive, list(values), "verifying")
+        back = {
+            c: _raw_or_none(v)
+            for c, v in (await _read_all(drive, list(values), "verifying")).items()
+        }
         mismatches = [code for code, raw in values.items() if back[code] != raw]
         stored = bool(args.store and not mismatches)
         if stored:
@@ -253,7 +328,8 @@ async def _diff(args: argparse.Namespace) -> int:
     expected: dict[str, int | None] = dict(snapshot.parameters)
     expected.update(dict.fromkeys(snapshot.absent))
     async with open_cli_bus(args) as bus:
-        actual = await _read_all(bus.drive(node), list(expected), "reading")
+        read = await _read_all(bus.drive(node), list(expected), "reading")
+    actual = {code: _raw_or_none(value) for code, value in read.items()}
     different = [code for code in expected if expected[code] != actual[code]]
     if args.json:
         print_json(

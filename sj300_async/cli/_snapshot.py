@@ -1,22 +1,40 @@
-"""The parameter snapshot file of ``sj300 params``: JSON, raw integers.
+"""The parameter snapshot file of ``sj300 params``: JSON, each value in its unit and raw.
 
-Format (version 1)::
+Format (version 2, what ``params backup`` writes)::
 
     {
       "format": "sj300-params",
-      "version": 1,
+      "version": 2,
+      "protocol": "sj300",            the drives' protocol
       "node": 1,                      the drive it was read from
       "url": "tcp://10.0.0.5:4001",   the bus it was read over (informative)
-      "created": "2025-01-31T12:00:00+00:00",
-      "parameters": {"F001": 5000, "F002": 3000, ...},
-      "absent": ["P031"]              codes the drive answered NAK 16 for
+      "taken_at": "2025-01-31T12:00:00Z",   ISO 8601, UTC
+      "library_version": "0.1.0",     the sj300_async that wrote it
+      "parameters": [
+        {"code": "F002", "name": "acceleration time 1", "unit": "s",
+         "value": 30.0, "raw": 3000},
+        {"code": "P044", "name": "DeviceNet communication watchdog timer",
+         "unit": "s", "value": null, "raw": null,
+         "absent": "NAK 16 (abnormal parameter code or value)"},
+        ...
+      ]
     }
 
-Values are the raw integers of commands 06 / 07 (F002 = 30.00 s is 3000),
-not engineering values: a raw value round-trips exactly, whatever scale a
-catalogue (or a firmware) gives the code, and a code the catalogue does not
-know is kept too. ``sj300 read --raw`` shows the same numbers. Readers
-ignore keys they do not know; ``created`` and ``absent`` are optional.
+Entries come in the catalogue's order (codes it lacks last, sorting is
+stable). ``raw`` is the integer of commands 06 / 07 (F002 = 30.00 s is 3000) and the
+one number ``params restore`` writes: it round-trips exactly, whatever
+scale a catalogue (or a firmware) gives the code, and a code the catalogue
+does not know is kept too. ``name``, ``unit`` and ``value`` (raw scaled by
+the catalogue of the version that wrote the file) are for people and other
+tools; a reader takes ``raw`` and ignores them, so a hand edit must change
+``raw``. A code the drive refused (NAK 16: its firmware lacks it) has
+``raw`` and ``value`` null and the reason in ``absent``.
+
+Version 1 files (raw integers only: ``"parameters": {"F002": 3000, ...}``,
+``"absent": ["P031"]``, ``"created"`` for the time, no protocol) are still
+read: only ``params`` wrote them, and it only ever talked to SJ300 drives, so
+their protocol is ``sj300``. Nothing is lost by reading them; a new backup
+writes version 2. Readers ignore keys they do not know.
 """
 
 from __future__ import annotations
@@ -24,20 +42,40 @@ from __future__ import annotations
 import json
 import os
 import tempfile
+from collections.abc import Mapping
 from dataclasses import dataclass, field
 from datetime import UTC, datetime
 from pathlib import Path
 from typing import Any, Final
 
+from .._version import __version__
 from ..sj300._constants import MAX_NODE, MIN_NODE
-from ..sj300._parameters import RAW_VALUE_MAX, RAW_VALUE_MIN, normalize_code
+from ..sj300._parameters import (
+    PARAMETERS,
+    RAW_VALUE_MAX,
+    RAW_VALUE_MIN,
+    normalize_code,
+    parameter_info,
+)
 from ..wire._errors import LocalProtocolError
 from ._errors import CliError
 
-__all__ = ["FORMAT", "VERSION", "Snapshot"]
+__all__ = ["FORMAT", "PROTOCOL", "READABLE_VERSIONS", "VERSION", "Snapshot"]
 
 FORMAT: Final = "sj300-params"
-VERSION: Final = 1
+#: The version a backup writes.
+VERSION: Final = 2
+#: The versions a restore or diff reads.
+READABLE_VERSIONS: Final = (1, 2)
+#: The protocol of the drives ``sj300 params`` backs up.
+PROTOCOL: Final = "sj300"
+#: The reason a version 1 file gives for an absent code (it recorded none).
+_V1_ABSENT: Final = "absent (version 1 file: no reason recorded)"
+
+
+def utc_now() -> str:
+    """The current time, ISO 8601 in UTC to the second: ``2025-01-31T12:00:00Z``."""
+    return datetime.now(UTC).strftime("%Y-%m-%dT%H:%M:%SZ")
 
 
 @dataclass(frozen=True, slots=True)
@@ -48,21 +86,40 @@ class Snapshot:
     url: str
     #: Raw values by upper-case code, in the order they were read.
     parameters: dict[str, int]
-    #: Codes the drive does not have (NAK 16 when read).
-    absent: tuple[str, ...] = ()
-    #: When the backup was taken (ISO 8601), if known.
-    created: str | None = field(default=None)
+    #: Codes the drive does not have (NAK 16 when read), with the reason.
+    absent: Mapping[str, str] = field(default_factory=dict)
+    #: When the backup was taken (ISO 8601, UTC), if known.
+    taken_at: str | None = None
+    #: The drives' protocol.
+    protocol: str = PROTOCOL
+    #: The library version that wrote the file, if known.
+    library_version: str | None = None
+    #: The file's format version (a new snapshot: :data:`VERSION`).
+    version: int = VERSION
 
     def to_json(self) -> dict[str, Any]:
-        """The file's JSON object."""
+        """The file's JSON object (version 2)."""
+        readings: dict[str, int | str] = {**self.parameters, **self.absent}
+        position = {code: i for i, code in enumerate(PARAMETERS)}
+        entries: list[dict[str, Any]] = []
+        for code in sorted(readings, key=lambda c: position.get(c, len(position))):
+            info = parameter_info(code)
+            reading = readings[code]
+            entry: dict[str, Any] = {"code": code, "name": info.name, "unit": info.unit}
+            if isinstance(reading, int):
+                entry |= {"value": info.from_raw(reading), "raw": reading}
+            else:
+                entry |= {"value": None, "raw": None, "absent": reading}
+            entries.append(entry)
         return {
             "format": FORMAT,
             "version": VERSION,
+            "protocol": self.protocol,
             "node": self.node,
             "url": self.url,
-            "created": self.created or datetime.now(UTC).isoformat(timespec="seconds"),
-            "parameters": self.parameters,
-            "absent": list(self.absent),
+            "taken_at": self.taken_at or utc_now(),
+            "library_version": self.library_version or __version__,
+            "parameters": entries,
         }
 
     def save(self, path: Path) -> None:
@@ -84,10 +141,11 @@ class Snapshot:
 
     @classmethod
     def load(cls, path: Path) -> Snapshot:
-        """Read and check a snapshot file.
+        """Read and check a snapshot file of SJ300 drives.
 
         Raises:
-            CliError: it cannot be read or is not a valid version-1 snapshot.
+            CliError: it cannot be read, is not a valid version 1 or 2
+                snapshot, or holds another protocol's parameters.
         """
         try:
             data = json.loads(path.read_text(encoding="utf-8"))
@@ -96,27 +154,68 @@ class Snapshot:
         except (json.JSONDecodeError, UnicodeDecodeError) as exc:
             raise CliError(f"{path}: not JSON ({exc})") from None
         try:
+            _check_header(data)
+        except ValueError as exc:
+            raise CliError(f"{path}: not an {FORMAT} file: {exc}") from None
+        protocol = data.get("protocol", PROTOCOL)
+        if protocol != PROTOCOL:
+            raise CliError(
+                f"{path}: a backup of {protocol} drives: its codes are not SJ300 parameters, "
+                "so it is never restored onto or compared with an SJ300 drive"
+            )
+        try:
             return cls._from_json(data)
         except (KeyError, TypeError, ValueError) as exc:
-            raise CliError(f"{path}: not an {FORMAT} version {VERSION} file: {exc}") from None
+            version = data["version"]
+            raise CliError(f"{path}: not an {FORMAT} version {version} file: {exc}") from None
 
     @classmethod
-    def _from_json(cls, data: Any) -> Snapshot:
-        if not isinstance(data, dict) or data.get("format") != FORMAT:
-            raise ValueError(f'no "format": "{FORMAT}"')
-        if data.get("version") != VERSION:
-            raise ValueError(f"version {data.get('version')!r} is not {VERSION}")
+    def _from_json(cls, data: dict[str, Any]) -> Snapshot:
         node = data["node"]
         if type(node) is not int or not MIN_NODE <= node <= MAX_NODE:
             raise ValueError(f"node {node!r} is not {MIN_NODE}..{MAX_NODE}")
-        parameters: dict[str, int] = {}
-        for code, raw in dict(data["parameters"]).items():
-            if type(raw) is not int or not RAW_VALUE_MIN <= raw <= RAW_VALUE_MAX:
-                raise ValueError(f"{code}: {raw!r} is not a raw value 0..{RAW_VALUE_MAX}")
-            parameters[_code(code)] = raw
-        absent = tuple(_code(code) for code in data.get("absent", ()))
-        created = data.get("created")
-        return cls(node, str(data.get("url", "")), parameters, absent, created)
+        url = str(data.get("url", ""))
+        if data["version"] == 1:
+            parameters = {
+                _code(code): _raw(code, raw) for code, raw in dict(data["parameters"]).items()
+            }
+            absent = dict.fromkeys((_code(code) for code in data.get("absent", ())), _V1_ABSENT)
+            return cls(node, url, parameters, absent, _text(data, "created"), version=1)
+        parameters = {}
+        absent = {}
+        entries = data["parameters"]
+        if not isinstance(entries, list):
+            raise TypeError('"parameters" is not a list')
+        for entry in entries:
+            if not isinstance(entry, dict):
+                raise TypeError(f"parameter entry {entry!r} is not an object")
+            code = _code(entry["code"])
+            if "absent" in entry and entry.get("raw") is None:
+                absent[code] = str(entry["absent"])
+            else:
+                parameters[code] = _raw(code, entry["raw"])
+        return cls(
+            node,
+            url,
+            parameters,
+            absent,
+            _text(data, "taken_at"),
+            PROTOCOL,
+            _text(data, "library_version"),
+            version=2,
+        )
+
+
+def _check_header(data: Any) -> None:
+    if not isinstance(data, dict) or data.get("format") != FORMAT:
+        raise ValueError(f'no "format": "{FORMAT}"')
+    version = data.get("version")
+    if version not in READABLE_VERSIONS:
+        readable = " or ".join(map(str, READABLE_VERSIONS))
+        raise ValueError(f"version {version!r} is not {readable}")
+    protocol = data.get("protocol", PROTOCOL)
+    if not isinstance(protocol, str):
+        raise ValueError(f"protocol {protocol!r} is not a name")
 
 
 def _code(code: Any) -> str:
@@ -126,3 +225,14 @@ def _code(code: Any) -> str:
         return normalize_code(code)
     except LocalProtocolError as exc:
         raise ValueError(str(exc)) from None
+
+
+def _raw(code: Any, raw: Any) -> int:
+    if type(raw) is not int or not RAW_VALUE_MIN <= raw <= RAW_VALUE_MAX:
+        raise ValueError(f"{code}: {raw!r} is not a raw value 0..{RAW_VALUE_MAX}")
+    return raw
+
+
+def _text(data: dict[str, Any], key: str) -> str | None:
+    value = data.get(key)
+    return None if value is None else str(value)
