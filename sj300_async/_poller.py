@@ -12,6 +12,13 @@ drive does not eat the line with time-outs; the first good reply brings it
 back online. While online, a poll stops at its first failed read for the
 same reason.
 
+A drive that has never answered is not known to be there: ``answered`` (on
+:class:`DriveHealth` and on each :class:`Sample`) stays False until its
+first reply (a refusal counts: the drive is there). ``online`` describes the
+polling (a drive starts online, is polled in full and goes offline after
+``offline_after`` failures); a drive is up only when it is ``online`` *and*
+has ``answered``, which is how ``sj300 monitor`` shows it.
+
 Every protocol's drives are polled the same way: the poller calls the
 drive's ``read_status``, ``read_monitor`` and ``read_parameter``.
 ``parameters`` may mix protocols' codes (SJ300's ``"F002"``, FR-700's
@@ -39,7 +46,7 @@ import anyio.abc
 from .bus import Bus, get_dialect, protocol_names
 from .fr700 import Fr700Monitor, Fr700Status
 from .sj300 import InverterStatus, MonitorData
-from .wire import LocalProtocolError, SJ300Error
+from .wire import LocalProtocolError, NakError, SJ300Error
 
 __all__ = ["BusPollStats", "DriveHealth", "Poller", "Sample"]
 
@@ -56,19 +63,29 @@ class Sample:
     bus: str  #: the bus's description, e.g. ``tcp://127.0.0.1:4001``
     node: int
     timestamp: float  #: event-loop time of the poll's end
-    online: bool  #: the drive's health after this poll
+    online: bool  #: the drive's health after this poll (see ``answered``)
     status: InverterStatus | Fr700Status | None  #: None when not read or failed
     monitor: MonitorData | Fr700Monitor | None  #: None when not read or failed
     parameters: Mapping[str, float]  #: the parameters read, engineering values
     error: str | None  #: the poll's error, None when every read succeeded
     latency_s: float | None  #: mean time per successful read of this poll
+    #: The drive has answered at least once, this poll or before (False: never heard from).
+    answered: bool = False
 
 
 @dataclass(slots=True)
 class DriveHealth:
-    """What the poller knows of one drive's health."""
+    """What the poller knows of one drive's health.
+
+    ``online`` starts True: a drive is polled in full until ``offline_after``
+    failures say otherwise. ``answered`` starts False and turns True at the
+    drive's first reply: a drive that has never answered is not online in
+    any sense a user means, whatever ``online`` says.
+    """
 
     online: bool = True
+    #: True once the drive has replied (anything, a NAK too); False: never heard from.
+    answered: bool = False
     consecutive_failures: int = 0
     last_error: str | None = None
     polls: int = 0
@@ -290,9 +307,12 @@ class Poller:
                     parameters[read] = await drive.read_parameter(read)
             except SJ300Error as exc:
                 error = f"{type(exc).__name__}: {exc}"
+                if isinstance(exc, NakError):  # a refusal: the drive is there
+                    health.answered = True
                 break  # a failing drive gets no more of the line this cycle
             spent += clock() - begin
             ok_reads += 1
+            health.answered = True
         now = clock()
         self._update_health(target, node, health, error, now)
         return Sample(
@@ -305,6 +325,7 @@ class Poller:
             parameters=parameters,
             error=error,
             latency_s=spent / ok_reads if ok_reads else None,
+            answered=health.answered,
         )
 
     def _update_health(

@@ -14,8 +14,8 @@ Exit status:
   nobody). ``params diff`` follows diff(1): 1 means different, 2 trouble.
 - 2: bad arguments or a request the protocol does not allow (nothing was
   sent), a bad snapshot file.
-- 130: interrupted (Ctrl-C), except ``monitor``, for which Ctrl-C is the
-  normal way to stop (0).
+- 130: interrupted (Ctrl-C), ``monitor`` included (Ctrl-C is its usual way
+  to stop; ``--count``, ``--duration`` and SIGTERM end it with 0).
 
 Every expected failure is one line on stderr, ``sj300 COMMAND: error:
 message``; never a traceback.

@@ -4,21 +4,41 @@ Without ``--url`` and without ``SJ300_URL`` it is a demo: an in-memory bus
 of eight simulated drives that :mod:`._demo` keeps busy (ramping, reversing,
 one tripping now and then and being reset).
 
+Which drives: ``--nodes``; without it, on a real bus (a serial port, a TCP
+bridge: not ``sim://``) the monitor first scans the protocol's whole node
+range (a progress bar on a terminal's stderr, one status request per node
+without retries, as ``sj300 scan``) and monitors the nodes that answered
+(none: one line, exit 1); on ``sim://`` the simulated drives (the demo's
+1-8).
+
 Output, by where stdout goes:
 
 - a terminal: a table refreshing in place (rich ``Live``), one row per
-  drive: node, state (status A / status C), set frequency (F001), output
-  frequency, current, voltage, torque, power, last error, latency, link;
+  drive. Its columns fit the terminal's width: from 100 columns node, state,
+  set frequency (F001), output frequency, current, voltage, torque, power,
+  last error, latency and link (the widest of these layouts that fits);
+  below 100 a compact one: node, state, set and output frequency, current,
+  voltage, link. The node and frequency columns are never cut; the state
+  column is (with ``…``) when the room runs out;
 - anything else: one plain line per drive per poll, for logs;
 - ``--json`` (either way): one JSON object per sample per line, flushed:
   the fields of :class:`~sj300_async.Sample` (``status``, ``monitor`` as in
   ``sj300 status --json``; ``parameters`` holds ``F001``), plus ``time``,
   the wall-clock time (Unix seconds; ``timestamp`` is the event loop's).
 
-It runs until Ctrl-C (exit 0), or ``--count`` samples, or ``--duration``
-seconds. A drive that stops answering turns offline and is probed every few
-seconds instead of being polled; the monitor itself never stops for a
-failing drive or a dropped link.
+States read as a person would (``stopped``, ``accelerating``, ``running``,
+``tripped``: :func:`~._output.drive_state`). A tripped drive's row names its
+trip (``tripped E07 over-voltage``; an FR-700 ``tripped fault H10``), read
+once per trip from the drive's trip history. A drive that has never
+answered is ``offline`` (:attr:`~sj300_async.Sample.answered`); one that
+stops answering turns offline and is probed every few seconds instead of
+being polled; the monitor itself never stops for a failing drive or a
+dropped link.
+
+It runs until Ctrl-C (exit 130, as for any command), SIGTERM (exit 0),
+``--count`` cycles (a cycle is one sample of every node; a node set aside
+as offline between its probes is not waited for) or ``--duration``
+seconds.
 """
 
 from __future__ import annotations
@@ -28,6 +48,7 @@ import asyncio
 import contextlib
 import logging
 import signal
+import sys
 import time
 from collections.abc import AsyncIterator, Coroutine
 from dataclasses import dataclass
@@ -35,13 +56,19 @@ from typing import Any, Final
 
 from .._poller import Poller, Sample
 from ..bus._bus import Bus
+from ..bus._url import parse_bus_url
 from ..sj300._codes import StatusA
 from ..sj300._payloads import InverterStatus, MonitorData
-from ._args import parse_any_nodes
+from ..wire._errors import SJ300Error
+from ._args import format_nodes, parse_any_nodes
 from ._common import add_bus_options, add_json_option, bus_url, open_cli_bus, positive_float
 from ._demo import run_demo
-from ._output import Column, human, is_terminal, jsonable, print_json
+from ._errors import FAILURE, CliError
+from ._output import Justify, drive_state, is_terminal, jsonable, print_json
+from ._progress import progress
+from ._scan import probe
 from ._session import run_async
+from ._tripinfo import Trip, latest_trip
 
 __all__ = ["add_parser"]
 
@@ -49,21 +76,72 @@ _log = logging.getLogger("sj300_async.cli.monitor")
 
 #: The embedded demo's bus.
 DEMO_URL: Final = "sim://?nodes=1-8"
+#: The nodes polled on a ``sim://`` bus whose simulated drives are not known.
+_DEFAULT_NODES: Final = tuple(range(1, 9))
 #: The setpoint each poll reads along with status and monitor.
 _SETPOINT: Final = "F001"
+#: Exit status of Ctrl-C (SIGINT), as for every command.
+INTERRUPTED: Final = 130
+#: Below this many terminal columns the table takes its compact layout.
+COMPACT_BELOW: Final = 100
 
-_COLUMNS: Final = (
-    Column("node", "right"),
-    Column("state"),
-    Column("set Hz", "right"),
-    Column("out Hz", "right"),
-    Column("current A", "right"),
-    Column("voltage V", "right"),
-    Column("torque %", "right"),
-    Column("power kW", "right"),
-    Column("last error"),
-    Column("latency ms", "right"),
-    Column("link"),
+
+@dataclass(frozen=True, slots=True)
+class _Field:
+    """A column of the live table: its header, how it lines up, the cell it shows."""
+
+    header: str
+    key: str  #: the cell's key in :meth:`_Board.cells`
+    justify: Justify = "right"
+    #: Takes the room the others leave, cut with … when short (never a number column).
+    flexible: bool = False
+    #: A flexible column's least width (and, for ``max_width``, its most).
+    min_width: int = 0
+    max_width: int | None = None
+
+
+_NODE = _Field("node", "node")
+_STATE = _Field("state", "state", "left", flexible=True, min_width=12)
+_SET_HZ = _Field("set Hz", "set_hz")
+_OUT_HZ = _Field("out Hz", "out_hz")
+_LINK = _Field("link", "link", "left")
+_ERROR = _Field("last error", "error", "left", flexible=True, min_width=10, max_width=40)
+
+#: The table's layouts, richest first: the first that fits the terminal is used
+#: (from :data:`COMPACT_BELOW` columns on; below, always the compact one).
+_LAYOUTS: Final = (
+    (
+        _NODE,
+        _STATE,
+        _SET_HZ,
+        _OUT_HZ,
+        _Field("current A", "amps"),
+        _Field("voltage V", "volts"),
+        _Field("torque %", "torque"),
+        _Field("power kW", "kw"),
+        _ERROR,
+        _Field("latency ms", "latency"),
+        _LINK,
+    ),
+    (
+        _NODE,
+        _STATE,
+        _SET_HZ,
+        _OUT_HZ,
+        _Field("current A", "amps"),
+        _Field("voltage V", "volts"),
+        _ERROR,
+        _LINK,
+    ),
+)
+_COMPACT: Final = (
+    _NODE,
+    _Field("state", "state", "left", flexible=True, min_width=7),
+    _SET_HZ,
+    _OUT_HZ,
+    _Field("A", "amps"),
+    _Field("V", "volts"),
+    _LINK,
 )
 
 
@@ -83,14 +161,15 @@ def add_parser(subparsers: Any) -> None:
         "monitor",
         help="live view of the drives (a demo of 8 simulated drives without --url)",
         description="Poll drives and show their state live. Without --url or $SJ300_URL: "
-        "a demo of eight simulated drives.",
+        "a demo of eight simulated drives. On a real bus without --nodes, the nodes a scan "
+        "finds. Ctrl-C stops it (exit 130).",
     )
     p.add_argument(
         "--nodes",
         type=parse_any_nodes,
-        default=list(range(1, 9)),
         metavar="LIST",
-        help="drives to poll, e.g. 1-4,7 (default 1-8)",
+        help="drives to poll, e.g. 1-4,7 (default: on a real bus the nodes a scan finds, "
+        "else the simulated ones, 1-8)",
     )
     p.add_argument(
         "--interval",
@@ -99,7 +178,12 @@ def add_parser(subparsers: Any) -> None:
         metavar="SECONDS",
         help="time between polls of a drive (default 0.5)",
     )
-    p.add_argument("--count", type=_positive_int, metavar="N", help="stop after N samples")
+    p.add_argument(
+        "--count",
+        type=_positive_int,
+        metavar="N",
+        help="stop after N cycles (a cycle: one sample of every node)",
+    )
     p.add_argument("--duration", type=positive_float, metavar="SECONDS", help="stop after this")
     add_json_option(p)
     add_bus_options(p, default_url=None)
@@ -107,34 +191,94 @@ def add_parser(subparsers: Any) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    """Monitor until done or interrupted; return 0."""
+    """Monitor until done (0) or interrupted by Ctrl-C (130)."""
     try:
         return run_async(_monitor(args))
-    except KeyboardInterrupt:  # the normal way to stop a monitor
-        return 0
+    except KeyboardInterrupt:
+        return INTERRUPTED
 
 
 async def _monitor(args: argparse.Namespace) -> int:
     url = bus_url(args)
+    nodes: list[int] | None = args.nodes
+    if nodes is None and url is not None and _real_bus(args, url):
+        nodes = await _scan_first(args, url)
     async with open_cli_bus(args, url or DEMO_URL, any_protocol=True) as bus:
+        if nodes is None:
+            nodes = await _simulated_or_scanned(args, bus)
         poller = Poller(interval_s=args.interval, parameters=(_SETPOINT,))
-        poller.add(bus, args.nodes)
+        poller.add(bus, nodes)
         # Subscribed before polling starts, so not even the first sample is missed.
         # Unbounded, but printing is synchronous: the poller cannot run ahead of it.
         samples: asyncio.Queue[Sample] = asyncio.Queue()
         poller.on_sample(samples.put_nowait)
-        board = _Board(bus, args.nodes, demo=url is None)
+        board = _Board(bus, nodes, demo=url is None)
         async with poller, _demo(bus, enabled=url is None):
-            with board.live(enabled=is_terminal() and not args.json):
-                await _until_terminated(_consume(args, samples, board))
+            try:
+                with board.live(enabled=is_terminal() and not args.json):
+                    await _until_terminated(_consume(args, poller, bus, samples, board))
+            finally:
+                board.trips.close()
     return 0
+
+
+def _real_bus(args: argparse.Namespace, url: str) -> bool:
+    """True for a serial port or a TCP bridge, False for ``sim://``.
+
+    Raises:
+        LocalProtocolError: a bad URL.
+    """
+    return parse_bus_url(url, protocol=getattr(args, "protocol", None)).scheme != "sim"
+
+
+async def _scan_first(args: argparse.Namespace, url: str) -> list[int]:
+    """Scan the protocol's node range on a bus of its own without retries, as ``sj300 scan``.
+
+    Raises:
+        CliError: no node answers (exit 1).
+        TransportError: the bus cannot be reached.
+    """
+    scan_args = argparse.Namespace(**{**vars(args), "retries": 0})
+    async with open_cli_bus(scan_args, url, any_protocol=True) as bus:
+        return await _scan(bus)
+
+
+async def _simulated_or_scanned(args: argparse.Namespace, bus: Bus) -> list[int]:
+    """The simulated drives of a ``sim://`` bus; any other bus (a shell's) is scanned."""
+    if bus.simulator is None:
+        return await _scan(bus)
+    drives = getattr(bus.simulator, "drives", None)
+    return sorted(drives) if drives else list(_DEFAULT_NODES)
+
+
+async def _scan(bus: Bus) -> list[int]:
+    low, high = bus.dialect.node_range
+    candidates = list(range(low, high + 1))
+    found: list[int] = []
+    with progress("scanning node", len(candidates)) as advance:
+        for node in candidates:
+            if await probe(bus, node):
+                found.append(node)
+            advance(f"{node:02d}")
+    if not found:
+        raise CliError(
+            f"no node answers on {bus.description} (scanned {format_nodes(candidates)})",
+            status=FAILURE,
+        )
+    print(
+        f"sj300 monitor: nodes answering: {format_nodes(found)} "
+        f"({len(found)} of {len(candidates)})",
+        file=sys.stderr,
+        flush=True,
+    )
+    return found
 
 
 async def _until_terminated(work: Coroutine[Any, Any, None]) -> None:
     """Run *work* until it ends or SIGTERM comes (then cancel it and return normally).
 
     SIGINT needs nothing: asyncio.run turns it into KeyboardInterrupt after
-    cleaning up, and :func:`run` makes that exit 0.
+    cleaning up, and :func:`run` makes that exit 130.
     """
     loop = asyncio.get_running_loop()
     task = asyncio.ensure_future(work)
@@ -173,18 +317,76 @@ async def _demo(bus: Bus, *, enabled: bool) -> AsyncIterator[None]:
             _log.warning("the demo stopped: %s", task.exception())
 
 
-async def _consume(args: argparse.Namespace, samples: asyncio.Queue[Sample], board: _Board) -> None:
-    count = 0
+async def _consume(
+    args: argparse.Namespace,
+    poller: Poller,
+    bus: Bus,
+    samples: asyncio.Queue[Sample],
+    board: _Board,
+) -> None:
+    cycles = 0
+    pending = set(board.nodes)  # the nodes not sampled yet this cycle
     with contextlib.suppress(TimeoutError):  # --duration is up
         async with asyncio.timeout(args.duration):
-            while args.count is None or count < args.count:
+            while args.count is None or cycles < args.count:
                 sample = await samples.get()
                 board.update(sample)
                 if args.json:
                     print_json({**jsonable(sample), "time": time.time()})
                 elif not board.is_live:
                     print(board.plain_line(sample), flush=True)
-                count += 1
+                pending.discard(sample.node)
+                # A node the poller has set aside as offline is probed only now and then:
+                # the cycle does not wait for it.
+                if not any(poller.health(bus, node).online for node in pending):
+                    cycles += 1
+                    pending = set(board.nodes)
+
+
+class _TripNames:
+    """The trip each tripped drive is in, read once per trip from its history.
+
+    The status says only that a drive is tripped; :func:`latest_trip` reads
+    which trip, in a task of its own (the poll goes on meanwhile). A read
+    that fails is tried again at the next tripped sample.
+    """
+
+    def __init__(self, bus: Bus) -> None:
+        self._bus = bus
+        self._known: dict[int, Trip | None] = {}
+        self._reading: dict[int, asyncio.Task[None]] = {}
+
+    def update(self, sample: Sample) -> None:
+        status = sample.status
+        node = sample.node
+        if status is None:  # not read this poll: nothing learnt
+            return
+        if not status.tripped:
+            self._known.pop(node, None)
+            task = self._reading.pop(node, None)
+            if task is not None:
+                task.cancel()
+            return
+        if node not in self._known and node not in self._reading:
+            self._reading[node] = asyncio.create_task(self._read(node))
+
+    def get(self, node: int) -> Trip | None:
+        """The trip *node* is in, if known."""
+        return self._known.get(node)
+
+    async def _read(self, node: int) -> None:
+        try:
+            self._known[node] = await latest_trip(self._bus.drive(node))
+        except SJ300Error as exc:
+            _log.debug("node %02d: trip history not read: %s", node, exc)
+        finally:
+            self._reading.pop(node, None)
+
+    def close(self) -> None:
+        """Cancel the reads still under way."""
+        for task in self._reading.values():
+            task.cancel()
+        self._reading.clear()
 
 
 @dataclass(slots=True)
@@ -198,14 +400,17 @@ class _Board:
 
     def __init__(self, bus: Bus, nodes: list[int], *, demo: bool) -> None:
         self._bus = bus
-        self._nodes = nodes
+        self.nodes = nodes
         self._demo = demo
         self._samples: dict[int, Sample] = {}
         self._errors: dict[int, _LastError] = {}
+        self.trips = _TripNames(bus)
         self.is_live = False
+        self._console: Any = None
 
     def update(self, sample: Sample) -> None:
         self._samples[sample.node] = sample
+        self.trips.update(sample)
         if sample.error is not None:
             self._errors[sample.node] = _LastError(sample.error, time.time())
 
@@ -214,44 +419,55 @@ class _Board:
         if not enabled:
             yield
             return
+        from rich.console import Console
         from rich.live import Live
 
-        with Live(get_renderable=self._table, refresh_per_second=4):
+        self._console = Console()
+        with Live(get_renderable=self.table, console=self._console, refresh_per_second=4):
             self.is_live = True
             try:
                 yield
             finally:
                 self.is_live = False
 
-    def _table(self) -> Any:
+    def table(self, width: int | None = None) -> Any:
+        """The rich table of every drive, laid out for *width* columns (default: the console's)."""
         from rich import box
         from rich.table import Table
         from rich.text import Text
 
+        if width is None:
+            width = self._console.width if self._console is not None else 160
+        rows = [self._row(node) for node in self.nodes]
+        fields, widths = _layout(width, rows)
         what = "demo: 8 simulated drives" if self._demo else self._bus.description
         table = Table(
             title=f"sj300 monitor — {what}", caption="Ctrl-C to stop", box=box.SIMPLE_HEAD
         )
-        for column in _COLUMNS:
+        for field in fields:
             table.add_column(
-                column.header,
-                justify=column.justify,
+                field.header,
+                justify=field.justify,
                 no_wrap=True,
-                max_width=40 if column.header == "last error" else None,
-                min_width=26 if column.header == "state" else None,
+                min_width=widths[field.key],
+                max_width=widths[field.key],
                 overflow="ellipsis",
             )
-        for node in self._nodes:
+        for node, cells in zip(self.nodes, rows, strict=True):
             sample = self._samples.get(node)
-            if sample is None:
-                table.add_row(f"{node:02d}", "…", *[""] * (len(_COLUMNS) - 2))
-                continue
-            cells: list[Any] = self._cells(sample)
-            cells[1] = Text(cells[1], style=_state_style(sample))
-            cells[8] = Text(self._error_text(sample), style="red" if sample.error else "dim")
-            cells[10] = Text(cells[10], style="green" if sample.online else "bold red")
-            table.add_row(*cells)
+            styled: dict[str, Any] = dict(cells)
+            if sample is not None:
+                styled["state"] = Text(cells["state"], style=_state_style(sample))
+                styled["error"] = Text(cells["error"], style="red" if sample.error else "dim")
+                styled["link"] = Text(cells["link"], style="green" if _up(sample) else "bold red")
+            table.add_row(*(styled[field.key] for field in fields))
         return table
+
+    def _row(self, node: int) -> dict[str, str]:
+        sample = self._samples.get(node)
+        if sample is None:
+            return dict.fromkeys(_KEYS, "") | {"node": f"{node:02d}", "state": "…"}
+        return self.cells(sample) | {"error": self._error_text(sample)}
 
     def _error_text(self, sample: Sample) -> str:
         last = self._errors.get(sample.node)
@@ -261,50 +477,84 @@ class _Board:
             return last.message
         return f"{last.message} ({time.time() - last.at:.0f} s ago)"
 
-    def _cells(self, sample: Sample) -> list[str]:
+    def cells(self, sample: Sample) -> dict[str, str]:
+        """Every cell of *sample*'s row as text, keyed as :class:`_Field` names them."""
         m = sample.monitor
         setpoint = sample.parameters.get(_SETPOINT)
         latency = "-" if sample.latency_s is None else f"{sample.latency_s * 1000:.1f}"
-        return [
-            f"{sample.node:02d}",
-            _state(sample),
-            "-" if setpoint is None else f"{setpoint:.2f}",
-            "-" if m is None else f"{m.output_frequency_hz:.2f}",
-            "-" if m is None else f"{m.output_current_a:.1f}",
-            "-" if m is None else f"{m.output_voltage_v:.1f}",
-            "-" if not isinstance(m, MonitorData) else str(m.output_torque_percent),
-            "-" if not isinstance(m, MonitorData) else f"{m.power_kw:.1f}",
-            sample.error or "",
-            latency,
-            "online" if sample.online else "offline",
-        ]
+        return {
+            "node": f"{sample.node:02d}",
+            "state": self._state(sample),
+            "set_hz": "-" if setpoint is None else f"{setpoint:.2f}",
+            "out_hz": "-" if m is None else f"{m.output_frequency_hz:.2f}",
+            "amps": "-" if m is None else f"{m.output_current_a:.1f}",
+            "volts": "-" if m is None else f"{m.output_voltage_v:.1f}",
+            "torque": "-" if not isinstance(m, MonitorData) else str(m.output_torque_percent),
+            "kw": "-" if not isinstance(m, MonitorData) else f"{m.power_kw:.1f}",
+            "error": sample.error or "",
+            "latency": latency,
+            "link": "online" if _up(sample) else "offline",
+        }
+
+    def _state(self, sample: Sample) -> str:
+        status = sample.status
+        if status is None:
+            return "-"
+        state = drive_state(status)
+        if status.tripped:
+            trip = self.trips.get(sample.node)
+            if trip is not None:
+                return f"{state} {trip}"
+        return state
 
     def plain_line(self, sample: Sample) -> str:
         """One line for a log: time, node, link, state, values with units, then any error."""
-        (node, state, set_hz, out_hz, amps, volts, torque, kw, error, latency, link) = self._cells(
-            sample
-        )
+        c = self.cells(sample)
         now = time.time()
         clock = time.strftime("%H:%M:%S", time.localtime(now)) + f".{int(now % 1 * 1000):03d}"
         line = (
-            f"{clock} node {node} {link:<7} {state:<30} set {set_hz:>6} Hz  out {out_hz:>6} Hz"
-            f"  {amps:>6} A  {volts:>6} V  {torque:>4} %  {kw:>6} kW  {latency:>6} ms"
+            f"{clock} node {c['node']} {c['link']:<7} {c['state']:<24}"
+            f" set {c['set_hz']:>6} Hz  out {c['out_hz']:>6} Hz  {c['amps']:>6} A"
+            f"  {c['volts']:>6} V  {c['torque']:>4} %  {c['kw']:>6} kW  {c['latency']:>6} ms"
         )
-        return f"{line}  error: {error}" if error else line
+        return f"{line}  error: {c['error']}" if c["error"] else line
 
 
-def _state(sample: Sample) -> str:
-    status = sample.status
-    if status is None:
-        return "-"
-    if isinstance(status, InverterStatus):
-        return f"{human(status.a)} / {human(status.c)}"
-    # An FR-700 reports bits, not states.
-    if status.tripped:
-        return "trip"
-    if status.running:
-        return "run reverse" if status.reverse else "run forward"
-    return "stop"
+_KEYS: Final = frozenset(f.key for layout in (*_LAYOUTS, _COMPACT) for f in layout)
+
+
+def _layout(width: int, rows: list[dict[str, str]]) -> tuple[tuple[_Field, ...], dict[str, int]]:
+    """The layout for *width* columns and each of its columns' width.
+
+    A fixed column is as wide as its widest cell or header; the flexible ones
+    (state, last error) share the rest, each at least its ``min_width``.
+    """
+    from rich.cells import cell_len
+
+    def natural(field: _Field) -> int:
+        return max([cell_len(field.header), *(cell_len(row[field.key]) for row in rows)])
+
+    candidates = (_COMPACT,) if width < COMPACT_BELOW else (*_LAYOUTS, _COMPACT)
+    for fields in candidates:
+        # Per column: one space of padding each side and a divider; the edges: 1 more.
+        room = width - (3 * len(fields) + 1)
+        fixed = {f.key: natural(f) for f in fields if not f.flexible}
+        flexible = [f for f in fields if f.flexible]
+        left = room - sum(fixed.values())
+        if left >= sum(f.min_width for f in flexible) or fields is _COMPACT:
+            break
+    widths = dict(fixed)
+    for i, field in enumerate(flexible):
+        later = sum(f.min_width for f in flexible[i + 1 :])
+        want = min(natural(field), field.max_width or natural(field))
+        widths[field.key] = max(1, min(want, left - later))
+        left -= widths[field.key]
+    return fields, widths
+
+
+def _up(sample: Sample) -> bool:
+    """Online and heard from: a drive that has never answered is offline."""
+    return sample.online and sample.answered
 
 
 def _state_style(sample: Sample) -> str:
