@@ -35,7 +35,7 @@ from __future__ import annotations
 import asyncio
 import contextlib
 import logging
-from collections.abc import AsyncIterator, Callable, Iterable, Mapping
+from collections.abc import AsyncGenerator, Callable, Iterable, Mapping
 from dataclasses import dataclass, field
 from types import TracebackType
 from typing import Any, Final, Literal
@@ -246,7 +246,7 @@ class Poller:
         if stack is not None:
             await stack.aclose()
 
-    async def samples(self) -> AsyncIterator[Sample]:
+    async def samples(self) -> AsyncGenerator[Sample, None]:
         """Yield samples as they are polled, until the poller stops."""
         queue: asyncio.Queue[object] = asyncio.Queue(self.buffer)
         self._queues.append(queue)

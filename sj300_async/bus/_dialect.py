@@ -5,8 +5,9 @@ protocol-neutral; a dialect tells them everything protocol-specific:
 
 - on the line: how to parse it, which reply answers which request, what a
   positive reply carries and what a negative one means, what may be retried,
-  frame lengths and processing times, and the host's own answers to a reply
-  (FR-700's ACK and re-output request);
+  frame lengths (the longest and the shortest reply) and processing times,
+  the host's own answers to a reply (FR-700's ACK and re-output request), and
+  the request that resynchronizes a node that missed an answer;
 - around the line: its drive class and broadcast, which requests change a
   drive (a read-only bus refuses them), the range of node numbers, its URL
   options, and the simulator that serves it on ``sim://``.
@@ -21,7 +22,7 @@ Dialects are found by name through :mod:`._registry`.
 
 from __future__ import annotations
 
-from collections.abc import Mapping
+from collections.abc import Mapping, Sequence
 from typing import TYPE_CHECKING, Protocol, TypeVar, runtime_checkable
 
 from ..wire import BadFrame, Discarded, SJ300Error
@@ -65,8 +66,8 @@ class LineParser(Protocol[ReplyT]):
     def feed(self, data: bytes) -> list[ReplyT | BadFrame | Discarded]:
         """Consume a chunk; return the events it completed."""
 
-    def reset(self) -> list[Discarded]:
-        """Forget a partial frame; return it as discarded events."""
+    def reset(self) -> list[ReplyT | BadFrame | Discarded]:
+        """Forget a partial frame; return it as events (``Discarded``, in practice)."""
 
 
 class SimulatorFactory(Protocol):
@@ -133,6 +134,28 @@ class Dialect(Protocol[RequestT, ReplyT]):
 
     def reply_frame_length(self, request: RequestT) -> int:
         """Length of the longest reply the request can get (for the time-out)."""
+
+    def shortest_reply_length(self, request: RequestT) -> int:
+        """Length of the shortest reply the request can get, a refusal included.
+
+        With the request's own length it sets the plausibility floor
+        (:meth:`~._timing.BusTiming.answer_floor`): a frame shaped like the
+        answer that arrives sooner than the line could carry both is a
+        duplicate or a stray, not the answer. Too short a value only weakens
+        that check; too long a value would reject genuine answers.
+        """
+
+    def sync_request(self, node: int, pending: Sequence[RequestT]) -> RequestT | None:
+        """A read-only request to *node* whose answer no reply to *pending* can pass for.
+
+        After a time-out or a corrupted answer, *node*'s replies to *pending*
+        may still come, late. Before the node's next request the arbiter sends
+        this one and waits for its positive answer (a NAK could belong to any
+        request, so it does not count): the node answers in order, so every
+        late reply is then behind. Return None when no request of another
+        shape exists; the arbiter then waits out the late replies instead
+        (:data:`~._timing.LATE_REPLY_HORIZON` time-outs).
+        """
 
     def processing_s(self, request: RequestT) -> float:
         """The device's own processing time for *request*, beyond the wire and wait times."""

@@ -18,7 +18,14 @@ Exit status:
   to stop; ``--count``, ``--duration`` and SIGTERM end it with 0).
 
 Every expected failure is one line on stderr, ``sj300 COMMAND: error:
-message``; never a traceback.
+message``; never a traceback. An OS error too, including the ``termios.error``
+a serial port answers line settings it cannot do with (not an ``OSError``):
+then the line ends with the troubleshooting guide's hint. On the implicit
+simulator (no ``--url``, ``--sim`` or ``SJ300_URL``) a ``note:`` line comes
+first, once the bus is open (see :mod:`._common`).
+
+The bus options and ``--json`` are global: before or after the subcommand
+(see :mod:`._common`).
 """
 
 from __future__ import annotations
@@ -27,10 +34,12 @@ import argparse
 import importlib
 import os
 import sys
-from typing import NoReturn
+from typing import Final, NoReturn
 
 from .. import __version__
+from ..transports._serial import SerialSettingsError
 from ..wire._errors import LocalProtocolError, SJ300Error
+from ._common import GlobalOptionsOnParent, add_global_options, misplaced_option
 from ._errors import FAILURE, USAGE, CliError
 
 __all__ = ["CliError", "main"]
@@ -53,19 +62,43 @@ _SUBCOMMANDS = (
 )
 
 _EPILOG = """\
-The bus: --url URL, else $SJ300_URL, else an in-memory simulator of drives 1-8
-(sim://?nodes=1-8) that lives as long as the command: nothing persists between
-two commands on it. `sj300 simulate` serves simulated drives over TCP, whose
-state does persist. URLs: tcp://HOST:PORT, /dev/ttyUSB0,
+The bus: --url URL, else $SJ300_URL, else --sim: an in-memory simulator of
+drives 1-8 (sim://?nodes=1-8) that lives as long as the command: nothing
+persists between two commands on it. Without any of the three, commands that
+change drives (run, stop, freq, write, params restore, reset) refuse (exit 2);
+the others run on that simulator and say so: a note on stderr, and
+"simulated": true in JSON objects. `sj300 simulate` serves simulated drives
+over TCP, whose state does persist. URLs: tcp://HOST:PORT, /dev/ttyUSB0,
 serial:///dev/ttyUSB0?baudrate=9600&parity=E, sim://?nodes=1-8.
 `sj300 monitor` without a URL is a live demo of eight busy drives.
 
+Global options (--url, --sim, --protocol, --timeout, --retries, --baud,
+--parity, --bytesize, --stopbits, --trace, --json) go before or after
+COMMAND: `sj300 --url tcp://bridge:4001 scan` = `sj300 scan --url ...`;
+given on both sides, the one after COMMAND wins.
 --json prints results as JSON, keys named after the result fields.
+--trace prints every frame on stderr: seconds since the start, → tx / ← rx,
+the bytes in hex, and their meaning.
 Exit status: 0 success; 1 the bus or a drive failed (time-out, NAK, no
 connection) or a check failed; 2 bad arguments; 130 interrupted.
 """
 
-_Expected = (CliError, SJ300Error, OSError)
+
+def _os_errors() -> tuple[type[Exception], ...]:
+    try:
+        import termios
+    except ImportError:  # not POSIX
+        return (OSError,)
+    return (OSError, termios.error)  # termios.error is no OSError
+
+
+_OS_ERRORS: Final[tuple[type[Exception], ...]] = _os_errors()
+_Expected: Final[tuple[type[Exception], ...]] = (CliError, SJ300Error, *_OS_ERRORS)
+#: Ends the error line of a port that refuses line settings.
+SETTINGS_HINT: Final = (
+    "a pseudo-terminal or some USB adapters do not support parity or 7 data bits "
+    "(see docs/guide/troubleshooting.md)"
+)
 
 
 class _Parser(argparse.ArgumentParser):
@@ -73,6 +106,10 @@ class _Parser(argparse.ArgumentParser):
 
     def error(self, message: str) -> NoReturn:
         self.exit(2, f"{self.prog}: error: {message} (see --help)\n")
+
+
+class _SubParser(_Parser, GlobalOptionsOnParent):
+    """A subcommand's parser: its copies of the global options leave ``sj300``'s values be."""
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -84,7 +121,8 @@ def build_parser() -> argparse.ArgumentParser:
         formatter_class=argparse.RawDescriptionHelpFormatter,
     )
     parser.add_argument("--version", action="version", version=f"%(prog)s {__version__}")
-    subparsers = parser.add_subparsers(dest="command", metavar="COMMAND")
+    add_global_options(parser)
+    subparsers = parser.add_subparsers(dest="command", metavar="COMMAND", parser_class=_SubParser)
     for name in _SUBCOMMANDS:
         importlib.import_module(name, __name__).add_parser(subparsers)
     return parser
@@ -98,6 +136,9 @@ def main(argv: list[str] | None = None) -> int:
     if run is None:
         parser.print_help(sys.stderr)
         return 2
+    misplaced = misplaced_option(args)
+    if misplaced is not None:
+        parser.error(misplaced)
     try:
         return int(run(args))
     except KeyboardInterrupt:
@@ -133,7 +174,13 @@ def _fail(args: argparse.Namespace, exc: BaseException) -> int:
 def _message(exc: BaseException) -> str:
     if isinstance(exc, OSError) and not isinstance(exc, SJ300Error) and exc.strerror:
         return f"{exc.filename}: {exc.strerror}" if exc.filename else exc.strerror
+    if isinstance(exc, _OS_ERRORS) and not isinstance(exc, OSError):  # termios.error
+        args = exc.args
+        text = f"{args[1]} (errno {args[0]})" if len(args) == 2 else " ".join(map(str, args))
+        return f"{text}: {SETTINGS_HINT}"
     text = " ".join(str(exc).split())  # one line, whatever the message holds
+    if isinstance(exc, SerialSettingsError):
+        return f"{text}: {SETTINGS_HINT}"
     return text or type(exc).__name__
 
 

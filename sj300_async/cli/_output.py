@@ -17,6 +17,7 @@ or box characters, so ``grep`` and ``awk`` work on them.
 
 from __future__ import annotations
 
+import contextvars
 import dataclasses
 import enum
 import json
@@ -39,7 +40,15 @@ __all__ = [
     "jsonable",
     "print_json",
     "print_table",
+    "simulated_output",
 ]
+
+#: True once a command runs on the simulator nobody asked for (no --url, no --sim, no
+#: $SJ300_URL): :func:`print_json` then adds ``"simulated": true`` to every JSON object.
+#: Set by ``open_cli_bus``; a context variable, so it ends with the command's event loop.
+simulated_output: contextvars.ContextVar[bool] = contextvars.ContextVar(
+    "sj300_simulated_output", default=False
+)
 
 Justify = Literal["left", "right"]
 
@@ -79,8 +88,14 @@ def jsonable(value: Any) -> Any:
 
 
 def print_json(value: Any) -> None:
-    """Print *value* as one line of JSON and flush (a reader may be waiting for it)."""
-    print(json.dumps(jsonable(value)), flush=True)
+    """Print *value* as one line of JSON and flush (a reader may be waiting for it).
+
+    An object gets ``"simulated": true`` last while :data:`simulated_output` is set.
+    """
+    data = jsonable(value)
+    if isinstance(data, dict) and simulated_output.get():
+        data["simulated"] = True
+    print(json.dumps(data), flush=True)
 
 
 def human(member: enum.Enum) -> str:

@@ -43,7 +43,7 @@ async def test_read_scales_by_the_catalogue() -> None:
 
 
 async def test_read_json_has_value_and_raw() -> None:
-    data = (await sj300("read", "F002", "A004", "--json")).json()
+    data = (await sj300("read", "F002", "A004", "--json", "--sim")).json()
     assert data == {
         "node": 1,
         "parameters": [

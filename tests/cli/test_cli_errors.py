@@ -16,7 +16,7 @@ from .clirun import Result, TcpSim, closed_port, sj300
 
 
 async def test_time_out_against_an_absent_node() -> None:
-    (await sj300("status", "-n", "12")).assert_one_line_error(1, "node 12 did not answer")
+    (await sj300("status", "-n", "12", "--sim")).assert_one_line_error(1, "node 12 did not answer")
 
 
 async def test_time_out_over_tcp_with_retries(tcp_sim: TcpSim) -> None:
@@ -25,7 +25,7 @@ async def test_time_out_over_tcp_with_retries(tcp_sim: TcpSim) -> None:
 
 
 async def test_nak_for_an_unknown_parameter() -> None:
-    result = await sj300("read", "F999")
+    result = await sj300("read", "F999", "--sim")
     result.assert_one_line_error(
         1, "sj300 read: error: F999: node 01 answered NAK 16 (abnormal parameter code or value)"
     )
@@ -60,17 +60,17 @@ async def test_no_subcommand_prints_help_and_exits_2() -> None:
 @pytest.mark.parametrize(
     ("args", "code", "fragments"),
     [
-        (["trips", "-n", "9", "--timeout", "0.05"], 1, ["did not answer"]),
-        (["write", "P123", "5"], 1, ["P123: node 01 answered NAK 16"]),
-        (["write", "C072", "5"], 1, ["C072 = 5: node 01 answered NAK 16"]),
-        (["freq", "70"], 1, ["NAK 16", "A004"]),
+        (["trips", "-n", "9", "--timeout", "0.05", "--sim"], 1, ["did not answer"]),
+        (["write", "P123", "5", "--sim"], 1, ["P123: node 01 answered NAK 16"]),
+        (["write", "C072", "5", "--sim"], 1, ["C072 = 5: node 01 answered NAK 16"]),
+        (["freq", "70", "--sim"], 1, ["NAK 16", "A004"]),
         (["run", "forward", "--url", "sim://?factory_defaults=1"], 1, ["NAK 13", "A002"]),
         (["freq", "5", "--url", "sim://?factory_defaults=1"], 1, ["NAK 13", "A001"]),
         (["read", "X12"], 2, ["not a parameter code"]),
         (["write", "F002", "1.234"], 2, ["resolution"]),
         (["write", "F002", "fast"], 2, ["VALUE must be a number"]),
         (["write", "F002", "-3", "--raw"], 2, ["raw value is 0..99999999"]),
-        (["freq", "1.234"], 2, ["0.01"]),
+        (["freq", "1.234", "--sim"], 2, ["0.01"]),
         (["freq", "x"], 2, ["HZ must be a number"]),
         (["run", "sideways"], 2, ["invalid choice"]),
         (["status", "--url", "ftp://x"], 2, ["unknown bus URL scheme"]),

@@ -24,7 +24,9 @@ _LINE = re.compile(
 async def test_demo_prints_plain_lines_when_not_on_a_terminal() -> None:
     result = await sj300("monitor", "--count", "2", "--interval", "0.1")  # 2 cycles of 8
     assert result.code == 0, result.err
-    assert result.err == ""
+    assert result.err == "sj300 monitor: note: no --url given: these are simulated drives " + (
+        "(sim://?nodes=1-8)\n"  # the demo: no --url, no --sim
+    )
     lines = result.out.splitlines()
     assert len(lines) == 16
     for line in lines:
@@ -39,7 +41,7 @@ async def test_demo_json_lines_carry_the_sample_fields() -> None:
     assert len(samples) == 24
     fields = {f.name for f in dataclasses.fields(Sample)}
     for sample in samples:
-        assert set(sample) == fields | {"time"}
+        assert set(sample) == fields | {"time", "simulated"}  # the demo: no --url
         assert sample["bus"] == "sim://(nodes 1-8)"
         assert sample["online"] is True
         assert sample["error"] is None
@@ -108,6 +110,7 @@ async def test_a_signal_stops_it_cleanly(sig: signal.Signals, code: int) -> None
         "-m",
         "sj300_async",
         "monitor",
+        "--sim",
         "--interval",
         "0.1",
         stdout=asyncio.subprocess.PIPE,

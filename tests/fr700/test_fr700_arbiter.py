@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 from contextlib import AbstractAsyncContextManager
-from typing import Any, cast
 
 import pytest
 
@@ -31,9 +30,7 @@ def fr700_bus(
         timeout=timeout,
         retries=retries,
         trace=trace,
-        # cast: Fr700Dialect is not a Dialect to mypy (LineParser.reset() is annotated
-        # list[Discarded], the parsers' reset() list[Event]): a library annotation bug.
-        dialect=cast("sjbus.Dialect[Any, Any] | None", dialect),
+        dialect=dialect,
     )
 
 

@@ -94,13 +94,14 @@ def test_node_list_range_is_a_parameter() -> None:
 
 
 async def test_dialect_argument_must_match_the_protocol() -> None:
-    # The ignores: Fr700Dialect is not a Dialect to mypy (LineParser.reset() is annotated
-    # list[Discarded], the parsers' reset() list[Event]), so no open_bus overload matches.
     with pytest.raises(sj.LocalProtocolError, match="dialect"):
-        async with sj.open_bus("sim://", dialect=Fr700Dialect()):  # type: ignore[call-overload]
+        async with sj.open_bus("sim://", dialect=Fr700Dialect()):
             pass
-    async with sj.open_bus(  # type: ignore[call-overload]
+    async with sj.open_bus(
         "sim://?protocol=fr700&nodes=1", dialect=Fr700Dialect(terminator="\r\n")
     ) as bus:
-        assert not (await bus.drive(1).read_status()).running
+        # Typed as SJ300's (the protocol is named in the URL only): narrow.
+        drive = bus.drive(1)
+        assert isinstance(drive, sj.Fr700Drive)
+        assert not (await drive.read_status()).running
         assert bus.simulator is not None

@@ -147,8 +147,7 @@ async def test_slow_consumer_drops_are_counted() -> None:
             assert poller.dropped_samples > 0
             second = await samples.__anext__()
             assert second.timestamp > first.timestamp
-            # samples() is an async generator, annotated AsyncIterator[Sample] (no aclose).
-            await samples.aclose()  # type: ignore[attr-defined]
+            await samples.aclose()
 
 
 async def test_samples_iterator_ends_when_the_poller_stops() -> None:
