@@ -8,9 +8,11 @@ same rules as every command: ``--url``, else ``$SJ300_URL``, else the
 simulator of drives 1-8), and every command uses it: on ``sim://`` the
 simulated drives keep their state from one command to the next.
 
-Bus options belong to the session: a command giving ``--url``,
-``--protocol``, ``--timeout``, ``--retries`` or line settings different
-from the session's is refused (give them before ``shell``).
+The bus options belong to the session: a command giving ``--url``,
+``--sim``, ``--protocol``, ``--timeout``, ``--retries`` or line settings
+other than the session's is refused (give them to ``shell``). ``--trace``
+and ``--json`` given to ``shell`` hold for every command; a command may
+give them itself.
 
 A failing command prints the command line's one-line error and the session
 goes on. Ctrl-C at the prompt clears the line; during a command it stops
@@ -41,8 +43,16 @@ from ..bus import Bus
 from ..fr700._parameters import FR700_PARAMETERS
 from ..sj300._parameters import PARAMETERS
 from . import _Expected, _fail, _first_expected, build_parser
-from ._common import DEFAULT_URL, add_bus_options, bus_url, open_cli_bus
-from ._errors import CliError
+from ._common import (
+    DEFAULT_URL,
+    add_bus_options,
+    add_json_option,
+    bus_url,
+    command_name,
+    misplaced_option,
+    open_cli_bus,
+)
+from ._errors import USAGE, CliError
 from ._session import lending
 
 __all__ = ["add_parser"]
@@ -56,8 +66,9 @@ _HISTORY_LENGTH: Final = 1000
 PROMPT: Final = "sj300> "
 _EXIT: Final = ("exit", "quit")
 #: The options that choose and configure a bus: the session's, not a command's.
-_BUS_DESTS: Final = (
+_SESSION_DESTS: Final = (
     "url",
+    "sim",
     "protocol",
     "timeout",
     "retries",
@@ -66,9 +77,11 @@ _BUS_DESTS: Final = (
     "bytesize",
     "stopbits",
 )
+#: Global options a command takes from the session unless it gives them.
+_INHERITED_DESTS: Final = ("trace", "json")
 #: Arguments whose values are parameter codes (``read``, ``write``, ``params backup --codes``).
 _CODE_DESTS: Final = frozenset({"code", "codes"})
-#: A bus option's default in the shell's parser: not given on the line, the session's value.
+#: A global option's default in the shell's parser: not given on the line.
 _UNSET: Final = object()
 
 
@@ -81,6 +94,7 @@ def add_parser(subparsers: Any) -> None:
         "`status -n 3`, `run forward -n 1`, `read F002`... as on the command line; `help`, "
         "`exit`. On sim:// the simulated drives keep their state from one command to the next.",
     )
+    add_json_option(p)
     add_bus_options(p)
     p.set_defaults(run=run)
 
@@ -108,7 +122,7 @@ class _Shell:
         self._runner = runner
         self._bus = bus
         self._parser = build_parser()
-        _unset_bus_defaults(self._parser)
+        self._defaults = _unset_global_defaults(self._parser)
         self._commands = _subcommands(self._parser)
         self._commands.pop("shell", None)
         self._interactive = sys.stdin.isatty()
@@ -143,7 +157,7 @@ class _Shell:
         try:
             words = shlex.split(line, comments=True)
         except ValueError as exc:
-            print(f"sj300 shell: error: {exc}", file=sys.stderr, flush=True)
+            self._error(str(exc))
             return True
         if not words:
             return True
@@ -153,11 +167,10 @@ class _Shell:
         if name == "help":
             self._help(words[1:])
         elif name == "shell":
-            print("sj300 shell: error: this is the shell already", file=sys.stderr, flush=True)
-        elif name not in self._commands:
-            what = "options come after a command" if name.startswith("-") else "help lists them"
-            print(f"sj300 shell: error: no command {name!r} ({what})", file=sys.stderr, flush=True)
-        else:
+            self._error("this is the shell already")
+        elif name not in self._commands and not name.startswith("-"):
+            self._error(f"no command {name!r} (help lists them)")
+        else:  # a command, or global options before one
             self._run(words)
         return True
 
@@ -165,11 +178,15 @@ class _Shell:
         """Parse and run a command as ``sj300 WORDS`` would, on the session's bus."""
         try:
             args = self._parser.parse_args(words)
+            run_command: Callable[[argparse.Namespace], int] | None = getattr(args, "run", None)
+            if run_command is None or command_name(args) == "shell":
+                self._error("this is the shell already" if run_command else "no command given")
+                return USAGE
+            misplaced = misplaced_option(args)
+            if misplaced is not None:
+                self._parser.error(misplaced)
         except SystemExit as done:  # a usage error (printed) or --help
-            return done.code if isinstance(done.code, int) else 2
-        run_command: Callable[[argparse.Namespace], int] | None = getattr(args, "run", None)
-        if run_command is None:
-            return 0
+            return done.code if isinstance(done.code, int) else USAGE
         refused = self._session_options(args)
         if refused is not None:
             return _fail(args, refused)
@@ -194,30 +211,48 @@ class _Shell:
             return 1
 
     def _session_options(self, args: argparse.Namespace) -> CliError | None:
-        """Give *args* the session's bus options; an error when it names others."""
-        session: dict[str, object] = {dest: getattr(self._args, dest, None) for dest in _BUS_DESTS}
-        session["url"] = self._url
-        session["protocol"] = self._bus.dialect.name
-        for dest in _BUS_DESTS:
-            value = getattr(args, dest, None)
-            if value is _UNSET:
-                setattr(args, dest, session[dest])
-            elif hasattr(args, dest) and value != session[dest]:
+        """Give *args* the session's global options; an error when it names another bus.
+
+        Each command then names the session's bus explicitly (``--url``, no
+        ``--sim``): ``monitor`` polls it, rather than running its demo.
+        """
+        for dest in _INHERITED_DESTS:
+            if getattr(args, dest, None) is _UNSET:
+                setattr(args, dest, getattr(self._args, dest, self._defaults[dest]))
+        if not getattr(args, "takes_bus_options", False):  # simulate: nothing of the bus
+            for dest in _SESSION_DESTS:
+                if getattr(args, dest, None) is _UNSET:
+                    setattr(args, dest, self._defaults[dest])
+            return None
+        session: dict[str, object] = {
+            dest: getattr(self._args, dest, None) for dest in _SESSION_DESTS
+        }
+        session |= {"url": self._url, "sim": False, "retries": self._bus.retries}
+        for dest in _SESSION_DESTS:
+            value = getattr(args, dest, _UNSET)
+            agrees = (
+                value is _UNSET
+                or value == session[dest]
+                or (dest == "sim" and self._bus.simulator is not None)
+                or (dest == "protocol" and value == self._bus.dialect.name)
+            )
+            if not agrees:
                 option = "--" + dest.replace("_", "-")
                 return CliError(
-                    f"{option} belongs to the session (its bus is {self._url}): "
-                    "give it before `shell`"
+                    f"{option} belongs to the session (its bus is {self._url}): give it to `shell`"
                 )
-        # What bus_url() gives: monitor and the rest see the session's URL.
-        args.default_url = self._url
+            setattr(args, dest, session[dest])
         return None
+
+    def _error(self, message: str) -> None:
+        print(f"sj300 shell: error: {message}", file=sys.stderr, flush=True)
 
     def _help(self, words: list[str]) -> None:
         if words:
             if words[0] in self._commands:
                 self._run([*words, "--help"])
             else:
-                print(f"sj300 shell: error: no command {words[0]!r}", file=sys.stderr, flush=True)
+                self._error(f"no command {words[0]!r} (help lists them)")
             return
         width = max(len(name) for name in self._commands) + 2
         print("commands (COMMAND --help, or help COMMAND, for its options):")
@@ -296,9 +331,9 @@ class _Completer:
             import readline
 
             before = readline.get_line_buffer()[: readline.get_begidx()]
-            try:
-                self._matches = self.candidates(before, text)
-            except Exception:
+            try:  # with the space readline does not add under Python: on to the next word
+                self._matches = [f"{word} " for word in self.candidates(before, text)]
+            except Exception:  # readline would swallow it: offer nothing
                 self._matches = []
         return self._matches[state] if state < len(self._matches) else None
 
@@ -346,13 +381,18 @@ def _history_path() -> Path | None:
     return Path(value).expanduser() if value else None
 
 
-def _unset_bus_defaults(parser: argparse.ArgumentParser) -> None:
-    """Default every bus option of *parser* and its subcommands to :data:`_UNSET`."""
+def _unset_global_defaults(parser: argparse.ArgumentParser) -> dict[str, Any]:
+    """Default *parser*'s global options to :data:`_UNSET`; return their defaults.
+
+    They are the main parser's (a subcommand's copies default to SUPPRESS:
+    the main parser's value stays unless given after the subcommand).
+    """
+    defaults: dict[str, Any] = {}
     for action in parser._actions:
-        if action.dest in _BUS_DESTS and action.default is not argparse.SUPPRESS:
+        if action.dest in (*_SESSION_DESTS, *_INHERITED_DESTS):
+            defaults[action.dest] = action.default
             action.default = _UNSET
-    for sub in _subcommands(parser).values():
-        _unset_bus_defaults(sub)
+    return defaults
 
 
 def _subcommands(parser: argparse.ArgumentParser) -> dict[str, argparse.ArgumentParser]:
