@@ -13,7 +13,8 @@ Exit status:
   restore`` verification, ``params diff`` differences, ``scan`` finding
   nobody). ``params diff`` follows diff(1): 1 means different, 2 trouble.
 - 2: bad arguments or a request the protocol does not allow (nothing was
-  sent), a bad snapshot file.
+  sent), a bad snapshot file, a command that changes drives given no bus
+  (no ``--url``, ``SJ300_URL`` or ``--sim``; nothing was opened).
 - 130: interrupted (Ctrl-C), ``monitor`` included (Ctrl-C is its usual way
   to stop; ``--count``, ``--duration`` and SIGTERM end it with 0).
 
