@@ -86,6 +86,27 @@ class Terminal:
         self.expect(re.escape(PROMPT))
         self.type(command + "\r")
 
+    def wait_until_reading(self, timeout: float = TIMEOUT) -> None:
+        """Wait until the child sleeps in select(), waiting for a key (Linux: /proc; else no-op).
+
+        CPython's readline loses a SIGINT that lands while it handles a key,
+        before it is back in select() (it checks signals only when select()
+        is interrupted): the Ctrl-C would wait for the next key. A person is
+        never that fast; a test is.
+        """
+        wchan = Path(f"/proc/{self.pid}/wchan")
+        deadline = time.monotonic() + timeout
+        while True:
+            try:
+                where = wchan.read_text()
+            except OSError:
+                return  # no /proc: the race stays possible, if unlikely
+            if "select" in where or "poll" in where:
+                return
+            if time.monotonic() > deadline:
+                raise AssertionError(f"the shell does not wait for input (in {where!r})")
+            select.select([], [], [], 0.005)
+
     def wait(self, timeout: float = TIMEOUT) -> int:
         """Read to the end and return the exit status."""
         deadline = time.monotonic() + timeout
@@ -252,6 +273,7 @@ def test_ctrl_c_clears_the_line_at_the_prompt(shell: Terminal) -> None:
     shell.expect(re.escape(PROMPT))
     shell.type("garbage")
     shell.expect("garbage")
+    shell.wait_until_reading()
     shell.type(CTRL_C)
     shell.line("read F002")  # had the line been kept, this would be "garbageread F002"
     shell.expect("acceleration time 1")
