@@ -20,10 +20,12 @@ paced at B baud 8N1, on :func:`~sj300_async.simulator.precise_event_loop`
 
 - ``sj300``: :func:`sj300_async.simulator.serve_tcp` over a
   :class:`~sj300_async.simulator.SimulatedBus` with one drive whose
-  ``processing_s`` is 0. The simulator otherwise waits 1 ms before each reply
-  to emulate a real drive's processing, which would measure the emulated
-  drive rather than the stack. The CLI (``sj300 simulate``) does not expose
-  ``processing_s``, hence this script.
+  ``processing_s`` is 0, unpaced (``pacing=LineSettings(baudrate=0)``: the
+  benchmark's client opens an instant line). The simulator otherwise waits
+  1 ms before each reply to emulate a real drive's processing, and a server
+  hands each reply over no sooner than a 19200-baud line would, which would
+  measure the emulated drive rather than the stack. The CLI (``sj300
+  simulate``) does not expose either, hence this script.
 - ``pymodbus``: pymodbus's ``ModbusTcpServer`` with one device (id 1) whose
   registers are one plain ``SimData`` block (pymodbus 3.16's datastore; the
   older ``ModbusServerContext`` is deprecated).
@@ -69,10 +71,14 @@ async def _stdin_closed() -> None:
 
 
 async def _serve_sj300() -> None:
+    from sj300_async import LineSettings
     from sj300_async.simulator import serve_tcp
     from sj300_async.simulator.sj300 import SimulatedBus
 
-    server = await serve_tcp(SimulatedBus(nodes=[1], processing_s=0.0))
+    # No line behind the socket (the client says so too): answer at once.
+    server = await serve_tcp(
+        SimulatedBus(nodes=[1], processing_s=0.0), pacing=LineSettings(baudrate=0)
+    )
     print(f"port {server.port}", flush=True)
     try:
         await _stdin_closed()

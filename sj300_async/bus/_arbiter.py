@@ -27,6 +27,26 @@ each of which has its own test:
    reply (the line then rests as the dialect says), and, once per attempt,
    a re-output request after a corrupted one, which pushes the deadline
    back by a whole response time-out so the repeated reply can arrive.
+8. Plausibility: a frame shaped like the answer that arrives sooner after
+   the write than the line could carry the request and the shortest reply
+   (:meth:`~._timing.BusTiming.answer_floor`) is not the answer — a
+   duplicate of the previous reply, or a stray — and is counted
+   (``early_frames``) and discarded; the wait goes on.
+9. Resync: after a time-out or a corrupted-only answer, the node's replies
+   may still come, later than the drain waits. The node is *unsynced*: it
+   remembers the requests that failed (for
+   :data:`~._timing.LATE_REPLY_HORIZON` time-outs). Its next transaction
+   first sends, in the same hold of the line, the dialect's sync request
+   (:meth:`~._dialect.Dialect.sync_request`: read-only, of a shape no
+   pending reply has) and waits for its positive answer; the node answers
+   in order, so whatever came before is stale and was discarded as stray.
+   Then the real request goes out. A sync that fails joins the pending
+   requests, and the attempt fails as a time-out (retried as usual). With
+   no sync request of a shape of its own, the arbiter waits until the
+   pending replies are past the horizon instead. A healthy node never syncs.
+10. A call's attempts: ``retries + 1`` at most, none started after the
+    timing's ``call_deadline_s``; a call that ends in time-outs raises one
+    :class:`ReplyTimeoutError` that states the attempts and the whole time.
 """
 
 from __future__ import annotations
@@ -36,7 +56,14 @@ import logging
 from dataclasses import dataclass
 from typing import Any, Generic
 
-from ..wire._errors import NakError, RemoteProtocolError, ReplyTimeoutError, TransportError
+from ..wire._errors import (
+    BusClosedError,
+    NakError,
+    RemoteProtocolError,
+    ReplyTimeoutError,
+    SJ300Error,
+    TransportError,
+)
 from ..wire._events import BadFrame, Discarded
 from ..wire._line import LineSettings
 from ._dialect import Dialect, ReplyT, RequestT
@@ -44,14 +71,16 @@ from ._linequeue import LineQueue
 from ._link import Link
 from ._protocol import LineProtocol
 from ._stats import BusStats, TransactionStats
-from ._timing import BusTiming
+from ._timing import LATE_REPLY_HORIZON, BusTiming
 
 __all__ = ["Arbiter"]
 
 _log = logging.getLogger("sj300_async.arbiter")
 
-#: Distinct requests whose response time-out is remembered (see _response_timeout).
+#: Distinct requests whose timing is remembered (see _request_timing).
 _TIMEOUT_CACHE_SIZE = 256
+#: Failed requests an unsynced node remembers at most (the oldest go first).
+_PENDING_MAX = 8
 
 
 @dataclass(slots=True)
@@ -65,9 +94,23 @@ class _Outstanding(Generic[RequestT, ReplyT]):
     #: The response time-out of this attempt, and the loop time it ends at.
     timeout: float
     deadline: float
+    #: The loop time before which no genuine answer can arrive (rule 8).
+    not_before: float
     bad_frame: BadFrame | None = None
     #: The scheduled re-output request (rule 7), at most one per attempt.
     reoutput: asyncio.TimerHandle | None = None
+
+
+@dataclass(frozen=True, slots=True)
+class _Pending(Generic[RequestT]):
+    """A request whose reply may still come (rule 9), until the loop time *expires*."""
+
+    request: RequestT
+    expires: float
+
+
+class _SyncMissed(ReplyTimeoutError):
+    """An attempt that failed on its sync request (only ever seen inside the arbiter)."""
 
 
 class Arbiter(Generic[RequestT, ReplyT]):
@@ -86,9 +129,15 @@ class Arbiter(Generic[RequestT, ReplyT]):
         self._line = line
         self._timing = timing
         self._guard_s = timing.guard(line)
-        # Response time-outs by (frame, wait): computed once per distinct request
-        # (see _response_timeout). A poll repeats a handful of frames.
-        self._timeouts: dict[tuple[bytes, float], float] = {}
+        self._call_deadline = timing.call_deadline_s
+        # (response time-out, plausibility floor) by (frame, wait): computed once
+        # per distinct request (see _request_timing). A poll repeats a handful
+        # of frames.
+        self._timings: dict[tuple[bytes, float], tuple[float, float]] = {}
+        # Nodes that missed an answer, with the requests whose replies may still come.
+        self._unsynced: dict[int, list[_Pending[RequestT]]] = {}
+        # The last chunk received (for the log of an early frame).
+        self._last_chunk = b""
         self.stats = stats
         self.queue = LineQueue()
         self._loop = asyncio.get_running_loop()
@@ -98,6 +147,9 @@ class Arbiter(Generic[RequestT, ReplyT]):
         # After a failure: how long the line must be quiet before the next write.
         self._drain_quiet: float | None = None
         self._failed_at = 0.0
+        # The write time of the last attempt that ended without an answer (for the
+        # time a failed call took: see transact).
+        self._failed_sent = 0.0
         self._last_rx = 0.0
         # One deadline timer for every attempt (see _arm_deadline), and the
         # loop time it is due at.
@@ -116,8 +168,9 @@ class Arbiter(Generic[RequestT, ReplyT]):
 
     # -- LineListener ------------------------------------------------------------
 
-    def bytes_received(self, now: float) -> None:
+    def bytes_received(self, data: bytes, now: float) -> None:
         self._last_rx = now
+        self._last_chunk = data
 
     def event_received(self, event: ReplyT | BadFrame | Discarded, now: float) -> None:
         out = self._outstanding
@@ -134,11 +187,28 @@ class Arbiter(Generic[RequestT, ReplyT]):
             _log.debug("unsolicited frame discarded: %s", event)
             return
         if self.dialect.answers(out.request, event):
-            out.waiter.set_result(event)
+            if now >= out.not_before:
+                out.waiter.set_result(event)
+            else:
+                self._early_frame(out, event, now)
             return
         self.stats.stray_frames += 1
         out.stats.discarded_frames += 1
         _log.debug("stray frame while waiting for node %02d: %s", out.request.node, event)
+
+    def _early_frame(self, out: _Outstanding[RequestT, ReplyT], event: ReplyT, now: float) -> None:
+        """A frame shaped like the answer, sooner than the line allows (rule 8): discard it."""
+        self.stats.early_frames += 1
+        out.stats.discarded_frames += 1
+        if _log.isEnabledFor(logging.DEBUG):
+            _log.debug(
+                "early frame from node %02d discarded, %.1f ms sooner than the line "
+                "allows an answer: %s; chunk %s",
+                out.request.node,
+                (out.not_before - now) * 1000,
+                self.dialect.describe(event),
+                self._last_chunk.hex(" "),
+            )
 
     def _request_reoutput(
         self, out: _Outstanding[RequestT, ReplyT], bad_frame: BadFrame, now: float
@@ -165,9 +235,14 @@ class Arbiter(Generic[RequestT, ReplyT]):
     def connection_lost(self, exc: BaseException | None) -> None:
         out = self._outstanding
         if out is not None and not out.waiter.done():
-            out.waiter.set_exception(
-                TransportError(f"connection lost while waiting for node {out.request.node:02d}")
-            )
+            node = out.request.node
+            if self.link.closed:  # the user closed the bus: not a failure of the line
+                error: TransportError = BusClosedError(
+                    f"bus {self.link.description} closed while waiting for node {node:02d}"
+                )
+            else:
+                error = TransportError(f"connection lost while waiting for node {node:02d}")
+            out.waiter.set_exception(error)
 
     # -- the deadline timer -------------------------------------------------------
 
@@ -217,27 +292,84 @@ class Arbiter(Generic[RequestT, ReplyT]):
 
         Raises:
             NakError: the drive refused (after retries for transmission errors).
-            ReplyTimeoutError: no answer in time, on every attempt.
+            ReplyTimeoutError: no answer in time, on every attempt (or none made
+                before the call deadline); it states the attempts and the time.
             RemoteProtocolError: only corrupted answers, on every attempt.
             TransportError: the link is down or dropped (never retried).
             BusClosedError: the bus is closed.
         """
-        attempt = 0
+        # Nothing here costs a successful call more than a few attribute reads:
+        # the call's start is taken only with a deadline, else at its first failure.
+        limit = self._call_deadline
+        start = 0.0 if limit is None else self._loop.time()
+        failed: list[SJ300Error] | None = None
         while True:
             self.link.require()  # fail promptly, before queueing, while the link is down
             await self.queue.acquire(urgent)
             try:
+                if limit is not None and self._loop.time() - start >= limit:
+                    break  # no attempt starts after the call's deadline
                 return await self._attempt(request, stats, wait_s, timeout_s)
             except (ReplyTimeoutError, RemoteProtocolError, NakError) as exc:
-                if attempt >= retries or not self.dialect.retryable(exc):
-                    raise
-                attempt += 1
+                if failed is None:
+                    failed = []
+                    if limit is None:
+                        # Without a deadline the call counts from its first write.
+                        answered = isinstance(exc, NakError)
+                        start = self._loop.time() if answered else self._failed_sent
+                failed.append(exc)
+                if (
+                    len(failed) > retries
+                    or not self.dialect.retryable(exc)
+                    or (limit is not None and self._loop.time() - start >= limit)
+                ):
+                    break
                 stats.retries += 1
                 if stats is not self.stats.transactions:
                     self.stats.transactions.retries += 1
-                _log.debug("retry %d of %s: %s", attempt, request.frame.hex(" "), exc)
+                _log.debug("retry %d of %s: %s", len(failed), request.frame.hex(" "), exc)
             finally:
                 self.queue.release()
+        elapsed = self._loop.time() - start
+        if failed and not isinstance(failed[-1], ReplyTimeoutError):
+            raise failed[-1]  # the drive's NAK, a corrupted answer: as the last attempt got it
+        raise self._call_timed_out(request, failed or [], elapsed, limit)
+
+    def _call_timed_out(
+        self, request: RequestT, failed: list[SJ300Error], elapsed: float, limit: float | None
+    ) -> ReplyTimeoutError:
+        """The error of a call whose attempts failed, the last by a time-out, or that its
+        deadline stopped before the first (*failed* empty)."""
+        who = f"{self.dialect.node_noun} {request.node:02d}"
+        attempts = len(failed)
+        if not attempts:
+            return ReplyTimeoutError(
+                f"{who}: {request.label} not sent: the line was busy for the whole "
+                f"call deadline of {limit:g} s ({elapsed:.2f} s)",
+                0,
+                elapsed,
+            )
+        timeouts = [
+            exc.timeout_s
+            for exc in failed
+            if isinstance(exc, ReplyTimeoutError) and exc.timeout_s is not None
+        ]
+        syncs = sum(isinstance(exc, _SyncMissed) for exc in failed)
+        low, high = min(timeouts), max(timeouts)
+        if attempts == 1:
+            each = f"1 attempt of {high * 1000:.0f} ms"
+        elif round(low * 1000) == round(high * 1000):
+            each = f"{attempts} attempts of {high * 1000:.0f} ms each"
+        else:
+            each = f"{attempts} attempts of {low * 1000:.0f}..{high * 1000:.0f} ms"
+        message = f"{who} did not answer {request.label}: {each}, {elapsed:.2f} s in all"
+        if syncs == 1:
+            message += " (one of them a sync request after a missed answer)"
+        elif syncs:
+            message += f" ({syncs} of them sync requests after a missed answer)"
+        if limit is not None and elapsed >= limit:
+            message += f"; call deadline {limit:g} s"
+        return ReplyTimeoutError(message, attempts, elapsed, high)
 
     async def send(
         self, request: RequestT, stats: TransactionStats, *, urgent: bool = False
@@ -261,6 +393,9 @@ class Arbiter(Generic[RequestT, ReplyT]):
         if self._drain_quiet is not None:
             await self._drain()
             protocol = self.link.require()
+        if self._unsynced and request.expects_reply and request.node in self._unsynced:
+            await self._sync(request.node, stats, wait_s, timeout_s)  # rule 9
+            protocol = self.link.require()
         now = loop.time()
         if self._rest_until > now:
             await asyncio.sleep(self._rest_until - now)
@@ -278,10 +413,12 @@ class Arbiter(Generic[RequestT, ReplyT]):
             return b""
 
         dialect = self.dialect
-        timeout = timeout_s or self._response_timeout(request, wait_s)
+        timeout, floor = self._request_timing(request, wait_s)
+        if timeout_s:
+            timeout = timeout_s
         waiter: asyncio.Future[ReplyT | None] = loop.create_future()
         sent = now
-        out = _Outstanding(request, waiter, stats, timeout, sent + timeout)
+        out = _Outstanding(request, waiter, stats, timeout, sent + timeout, sent + floor)
         self._outstanding = out  # registered before the write: no answer goes unseen
         self._arm_deadline(out.deadline)
         answered = acknowledged = False
@@ -292,6 +429,8 @@ class Arbiter(Generic[RequestT, ReplyT]):
                 totals.requests += 1
             reply = await waiter
             if reply is None:  # the deadline passed
+                self._failed_sent = sent
+                self._missed(request, timeout)  # its reply may still come: rule 9
                 if out.bad_frame is not None:
                     self._count(stats, totals, "protocol_errors")
                     raise RemoteProtocolError(
@@ -302,7 +441,10 @@ class Arbiter(Generic[RequestT, ReplyT]):
                 self._count(stats, totals, "timeouts")
                 raise ReplyTimeoutError(
                     f"node {request.node:02d} did not answer {request.label} "
-                    f"within {timeout * 1000:.0f} ms"
+                    f"within {timeout * 1000:.0f} ms",
+                    1,
+                    None,
+                    timeout,
                 )
             answered = True
             latency = self._last_rx - sent  # when the answer arrived, not when we resumed
@@ -346,27 +488,190 @@ class Arbiter(Generic[RequestT, ReplyT]):
                 self._drain_quiet = max(self._drain_quiet or 0.0, quiet)
                 self._failed_at = self._loop.time()
 
-    def _response_timeout(self, request: RequestT, wait_s: float) -> float:
-        """The computed response time-out of *request* with the device waiting *wait_s*.
+    def _request_timing(self, request: RequestT, wait_s: float) -> tuple[float, float]:
+        """The computed response time-out of *request* with the device waiting *wait_s*,
+        and its plausibility floor (rule 8), in seconds from the write.
 
-        It depends only on the request (its frame says everything about it),
-        the wait, and the arbiter's fixed line and timing, so it is cached.
+        Both depend only on the request (its frame says everything about it),
+        the wait, and the arbiter's fixed line and timing, so they are cached.
         The cache starts over when it grows large (a stream of distinct
         parameter writes), so it stays bounded.
         """
         key = (request.frame, wait_s)
-        timeout = self._timeouts.get(key)
-        if timeout is None:
-            if len(self._timeouts) >= _TIMEOUT_CACHE_SIZE:
-                self._timeouts.clear()
+        timing = self._timings.get(key)
+        if timing is None:
+            if len(self._timings) >= _TIMEOUT_CACHE_SIZE:
+                self._timings.clear()
             dialect = self.dialect
-            timeout = self._timeouts[key] = self._timing.response_timeout(
-                request,
-                self._line,
-                wait_s + dialect.processing_s(request),
-                dialect.reply_frame_length(request),
+            timing = self._timings[key] = (
+                self._timing.response_timeout(
+                    request,
+                    self._line,
+                    wait_s + dialect.processing_s(request),
+                    dialect.reply_frame_length(request),
+                ),
+                self._timing.answer_floor(
+                    request, self._line, dialect.shortest_reply_length(request)
+                ),
             )
-        return timeout
+        return timing
+
+    # -- resync (rule 9) -------------------------------------------------------------
+
+    def _missed(self, request: RequestT, timeout: float) -> None:
+        """*request* got no valid answer: its node is unsynced until a sync answers."""
+        expires = self._loop.time() + LATE_REPLY_HORIZON * timeout
+        pending = self._unsynced.setdefault(request.node, [])
+        for i, entry in enumerate(pending):
+            if entry.request.frame == request.frame:
+                pending[i] = _Pending(request, max(entry.expires, expires))
+                return
+        pending.append(_Pending(request, expires))
+        if len(pending) > _PENDING_MAX:
+            del pending[0]
+
+    async def _sync(
+        self, node: int, stats: TransactionStats, wait_s: float, timeout_s: float | None
+    ) -> None:
+        """Resynchronize *node* before its next request (rule 9), holding the line.
+
+        Raises:
+            ReplyTimeoutError: the sync got no positive answer in time (it joins
+                the pending requests; the attempt may be retried).
+            RemoteProtocolError: only a corrupted frame came.
+            TransportError: the link is down or dropped.
+        """
+        loop = self._loop
+        now = loop.time()
+        pending = [entry for entry in self._unsynced[node] if entry.expires > now]
+        if not pending:
+            del self._unsynced[node]  # every reply that might have come is past the horizon
+            return
+        self._unsynced[node] = pending
+        dialect = self.dialect
+        sync = dialect.sync_request(node, [entry.request for entry in pending])
+        if sync is None:
+            await self._wait_out(node, pending)
+            return
+        protocol = self.link.require()
+        if self._rest_until > now:
+            await asyncio.sleep(self._rest_until - now)
+            protocol = self.link.require()
+            now = loop.time()
+        if not protocol.writable:
+            await protocol.wait_writable()
+            protocol = self.link.require()
+            now = loop.time()
+        timeout, floor = self._request_timing(sync, wait_s)
+        if timeout_s:
+            timeout = timeout_s
+        totals = self.stats.transactions
+        out: _Outstanding[RequestT, ReplyT] = _Outstanding(
+            sync, loop.create_future(), stats, timeout, now + timeout, now + floor
+        )
+        self._outstanding = out
+        self._arm_deadline(out.deadline)
+        answered = acknowledged = False
+        try:
+            protocol.write(sync.frame)
+            self.stats.resyncs += 1
+            stats.requests += 1
+            if stats is not totals:
+                totals.requests += 1
+            _log.debug("node %02d missed an answer: sync with %s", node, sync.label)
+            while True:
+                reply = await out.waiter
+                if reply is None:
+                    break  # the deadline passed
+                try:
+                    dialect.accept(sync, reply)
+                except NakError:
+                    # A NAK may be the late answer to any pending request: it
+                    # proves nothing. The sync's own answer must still come.
+                    self.stats.stray_frames += 1
+                    stats.discarded_frames += 1
+                    _log.debug("NAK while syncing node %02d: not the sync's answer", node)
+                    out.waiter = loop.create_future()
+                    continue
+                answered = True
+                break
+            if not answered:
+                self._failed_sent = now
+                if out.bad_frame is not None:
+                    self._count(stats, totals, "protocol_errors")
+                    raise RemoteProtocolError(
+                        f"node {node:02d}: no valid answer to the sync request "
+                        f"({sync.label}), only a corrupted frame "
+                        f"({out.bad_frame.reason.value}: {out.bad_frame.body!r})"
+                    )
+                self._count(stats, totals, "timeouts")
+                raise _SyncMissed(
+                    f"node {node:02d} did not answer the sync request ({sync.label}) "
+                    f"within {timeout * 1000:.0f} ms",
+                    1,
+                    None,
+                    timeout,
+                )
+            del self._unsynced[node]  # in order: whatever was late is behind us
+            latency = self._last_rx - now
+            stats.replies += 1
+            stats.record_latency(latency)
+            if stats is not totals:
+                totals.replies += 1
+                totals.record_latency(latency)
+            assert reply is not None
+            ack = dialect.acknowledgement(sync, reply)
+            if ack is not None:
+                acknowledged = await self._acknowledge(protocol, ack)
+        except TransportError:
+            self._count(stats, totals, "transport_errors")
+            raise
+        except asyncio.CancelledError:
+            self._count(stats, totals, "cancelled")
+            raise
+        finally:
+            self._finish(out, answered, acknowledged)
+            if not answered:
+                self._missed(sync, timeout)
+
+    def _finish(
+        self, out: _Outstanding[RequestT, ReplyT], answered: bool, acknowledged: bool
+    ) -> None:
+        """The line after a sync (the same as after an attempt: rest, or drain next)."""
+        if out.reoutput is not None:
+            out.reoutput.cancel()
+        self._outstanding = None
+        if answered:
+            self._rest_until = self._last_rx + self._guard_s
+            if acknowledged:
+                self._rest_until = max(
+                    self._rest_until,
+                    self._loop.time() + self.dialect.rest_after_acknowledgement_s(),
+                )
+        else:
+            quiet = self._timing.drain_quiet(out.timeout, self._line)
+            self._drain_quiet = max(self._drain_quiet or 0.0, quiet)
+            self._failed_at = self._loop.time()
+
+    async def _wait_out(self, node: int, pending: list[_Pending[RequestT]]) -> None:
+        """No sync request of a shape of its own: wait until the late replies are past
+        the horizon (:data:`LATE_REPLY_HORIZON` time-outs after each failure),
+        discarding what arrives meanwhile."""
+        until = max(entry.expires for entry in pending)
+        self.stats.drains += 1
+        _log.debug(
+            "node %02d missed an answer and no sync request can tell its late replies "
+            "from an answer: waiting %.3f s",
+            node,
+            until - self._loop.time(),
+        )
+        delay = until - self._loop.time()
+        if delay > 0:
+            await asyncio.sleep(delay)
+        protocol = self.link.protocol
+        if protocol is not None:
+            protocol.reset_parser()
+        self._unsynced.pop(node, None)
 
     async def _acknowledge(self, protocol: LineProtocol[Any], ack: bytes) -> bool:
         """Send the host's acknowledgement after the answer delay; True when it went out.
@@ -394,7 +699,12 @@ class Arbiter(Generic[RequestT, ReplyT]):
             if now >= ready:
                 break
             if now >= give_up:
-                _log.warning("line did not go quiet within %.1f s; going on", quiet)
+                _log.warning(
+                    "line did not go quiet for %.3f s (the failed request's time-out) "
+                    "within %.1f s (drain_max_s); going on",
+                    quiet,
+                    self._timing.drain_max_s,
+                )
                 break
             await asyncio.sleep(min(ready, give_up) - now)
         protocol = self.link.protocol

@@ -93,6 +93,11 @@ class Link:
         return self._protocol is not None and self._protocol.connected
 
     @property
+    def closed(self) -> bool:
+        """True once the link was closed (by the bus's owner): it takes no more requests."""
+        return self._closed
+
+    @property
     def protocol(self) -> LineProtocol[Any] | None:
         """The current protocol adapter, if connected."""
         return self._protocol if self.connected else None

@@ -95,6 +95,7 @@ def open_bus(
     *,
     protocol: str | None = None,
     timeout: float | None = None,
+    deadline: float | None = None,
     retries: int = 2,
     strip_echo: bool | None = None,
     read_only: bool = False,
@@ -114,9 +115,13 @@ def open_bus(
         protocol: a registered protocol's name (``"sj300"``, the default, or
             ``"fr700"``); the URL's ``protocol=`` may say it instead (the two
             must agree).
-        timeout: a fixed response time-out in seconds for every request
-            (default: computed from the line settings, the drive's wait time
-            and a margin).
+        timeout: a fixed response time-out in seconds for every attempt of
+            every request (default: computed from the line settings, the
+            drive's wait time and a margin). A call makes up to ``retries + 1``
+            attempts, with a drain after each failed one.
+        deadline: the longest a call may take in seconds, all its attempts
+            together: no attempt starts after it (``BusTiming.call_deadline_s``;
+            default none).
         retries: attempts after the first, for time-outs and transmission errors.
         strip_echo: remove the RS-485 adapter's local echo (default: the URL's ``echo``).
         read_only: refuse every command that changes a drive.
@@ -138,6 +143,7 @@ def open_bus(
         url,
         protocol=protocol,
         timeout=timeout,
+        deadline=deadline,
         retries=retries,
         strip_echo=strip_echo,
         read_only=read_only,
@@ -157,6 +163,7 @@ async def _open_bus(
     *,
     protocol: str | None,
     timeout: float | None,  # noqa: ASYNC109 - the response time-out, not a deadline
+    deadline: float | None,
     retries: int,
     strip_echo: bool | None,
     read_only: bool,
@@ -180,6 +187,8 @@ async def _open_bus(
         timing = BusTiming(margin_s=_TCP_MARGIN_S) if address.scheme == "tcp" else BusTiming()
     if timeout is not None:
         timing = replace(timing, fixed_timeout_s=timeout)
+    if deadline is not None:
+        timing = replace(timing, call_deadline_s=deadline)
     if (faults is not None or simulator is not None) and address.scheme != "sim":
         raise LocalProtocolError("faults= and simulator= are for sim:// buses only")
     connector: Connector

@@ -31,8 +31,8 @@ class LineListener(Protocol[_ReplyT_contra]):
     def event_received(self, event: _ReplyT_contra | BadFrame | Discarded, now: float) -> None:
         """A parser event; *now* is the loop time the chunk arrived."""
 
-    def bytes_received(self, now: float) -> None:
-        """Some bytes arrived (for the line's quiet-time bookkeeping)."""
+    def bytes_received(self, data: bytes, now: float) -> None:
+        """A chunk arrived, as it arrived (for the quiet-time bookkeeping and the logs)."""
 
     def connection_lost(self, exc: BaseException | None) -> None:
         """The transport is gone; whatever waits for an answer must fail now."""
@@ -78,7 +78,7 @@ class LineProtocol(asyncio.Protocol, Generic[ReplyT]):
 
     def data_received(self, data: bytes) -> None:
         now = self._loop.time()
-        self._listener.bytes_received(now)
+        self._listener.bytes_received(data, now)
         arrived = data
         if self._echo:
             data = self._remove_echo(data)

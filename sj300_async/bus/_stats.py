@@ -52,7 +52,7 @@ class TransactionStats:
     )
 
     def __init__(self) -> None:
-        #: Requests written to the line (each attempt counts once).
+        #: Requests written to the line (each attempt counts once, a sync request too).
         self.requests = 0
         #: Valid answers received (positive or NAK).
         self.replies = 0
@@ -124,6 +124,13 @@ class BusStats:
     stray_frames: int = 0
     #: Valid frames received while no transaction was waiting (late replies, drained).
     unsolicited_frames: int = 0
+    #: Frames shaped like the answer that arrived sooner than the line allows: a
+    #: duplicate or a stray (see ``BusTiming.answer_floor``); discarded.
+    early_frames: int = 0
+    #: Sync requests sent to a node after it missed an answer (a time-out or a
+    #: corrupted answer), so that its late replies cannot be taken for the next
+    #: answer; also counted among the drive's requests.
+    resyncs: int = 0
     #: Drains performed after failed transactions.
     drains: int = 0
     #: Corrupted replies the host asked the device to send again (FR-700 format F).

@@ -26,10 +26,26 @@ Drain after a failure: when a transaction ends without its answer (time-out,
 transport error, cancellation), a reply may still be on its way. Nothing is
 sent until the line has been quiet for the failed transaction's whole
 response time-out (at least the guard interval); every byte that arrives
-meanwhile restarts the quiet period and is discarded and counted. So a late
-reply is never taken as the answer to a later request, unless a drive
-answers more than twice its time-out late — which the protocol, having no
-sequence numbers, cannot detect; ``drain_max_s`` bounds a babbling line.
+meanwhile restarts the quiet period and is discarded and counted;
+``drain_max_s`` bounds a babbling line. A reply later than that (more than
+about twice its time-out) is caught by the sync that the arbiter sends to
+a node after a time-out or a corrupted answer (see :mod:`._arbiter`), up
+to :data:`LATE_REPLY_HORIZON` time-outs after the failure.
+
+Plausibility floor: no genuine answer can arrive sooner than the request's
+own wire time plus the shortest reply's, at the fastest line the drives can
+run (``plausible_baudrate``, or the line's own speed if faster), 10 bits a
+character, less 5 % for clock tolerance. A frame shaped like the answer
+that arrives sooner (a duplicate of the previous reply, a stray) is not
+taken as the answer. The floor is 0 on an instant line.
+
+Time-outs and deadlines: ``fixed_timeout_s`` (``open_bus(timeout=...)``)
+or the computed sum is the time-out of one *attempt*; a call makes up to
+``retries + 1`` attempts, with a drain between them, so a silent drive
+fails after about ``(2 x attempts - 1) x timeout``. ``call_deadline_s``
+(``open_bus(deadline=...)``) bounds the whole call: no attempt starts once
+it has passed (an attempt already on the line runs to its own time-out),
+and the call fails with the last attempt's error.
 """
 
 from __future__ import annotations
@@ -44,7 +60,17 @@ from ..wire._line import LineSettings
 if TYPE_CHECKING:
     from ._dialect import LineRequest
 
-__all__ = ["BusTiming"]
+__all__ = ["LATE_REPLY_HORIZON", "BusTiming"]
+
+#: How late a reply may come, in response time-outs after its attempt failed,
+#: and still be recognised (the arbiter's resync remembers a failed request
+#: this long; its fallback drain lasts this long).
+LATE_REPLY_HORIZON = 5.0
+#: Bits of the shortest character any drive sends (start, 7 data, parity or
+#: a second stop bit, stop; 8N1 too), for the plausibility floor.
+_FLOOR_BITS_PER_CHAR = 10
+#: The floor allows for clocks 5 % fast.
+_FLOOR_TOLERANCE = 0.95
 
 
 def _finite_number(value: object) -> bool:
@@ -53,7 +79,16 @@ def _finite_number(value: object) -> bool:
 
 @dataclass(frozen=True, slots=True)
 class BusTiming:
-    """Timing policy of one bus. Every field is in seconds unless named otherwise."""
+    """Timing policy of one bus. Every field is in seconds unless named otherwise.
+
+    A call's time: ``fixed_timeout_s`` (or the computed sum) is the time-out
+    of one *attempt*; a call makes up to ``retries + 1`` attempts, with a
+    drain of at least one time-out of quiet before each retry, so a silent
+    drive fails after about ``(2 x attempts - 1) x timeout`` (3 attempts of
+    0.5 s: about 2.5 s). ``call_deadline_s`` bounds the whole call instead:
+    no attempt starts once it has passed. The ``ReplyTimeoutError`` states
+    the attempts, their time-out and the whole time.
+    """
 
     #: Added to the computed wire and wait times: drive processing, network, scheduling.
     margin_s: float = 0.05
@@ -68,6 +103,17 @@ class BusTiming:
     broadcast_processing_s: float = 0.01
     #: Upper bound of a drain, so a line that never goes quiet cannot stall the bus.
     drain_max_s: float = 5.0
+    #: The fastest line the drives can run, in baud (both built-in protocols
+    #: top out at 19200): the plausibility floor assumes the line runs at this
+    #: speed or the line's own, whichever is faster, so a line declared slower
+    #: than it runs cannot make a genuine answer look too early.
+    plausible_baudrate: int = 19200
+    #: If set, the longest a call may take, in seconds, all its attempts and
+    #: drains together: no attempt starts after it (one already on the line
+    #: runs to its time-out), and the call fails with the last attempt's
+    #: error (``ReplyTimeoutError`` if none was made). None: only the number
+    #: of attempts bounds a call.
+    call_deadline_s: float | None = None
 
     def __post_init__(self) -> None:
         for name in ("margin_s", "guard_chars", "broadcast_processing_s", "drain_max_s"):
@@ -78,6 +124,12 @@ class BusTiming:
         if timeout is not None and (not _finite_number(timeout) or timeout <= 0):
             # An infinite time-out is the hang a time-out exists to prevent.
             raise LocalProtocolError(f"timeout must be a finite number > 0, got {timeout!r}")
+        deadline = self.call_deadline_s
+        if deadline is not None and (not _finite_number(deadline) or deadline <= 0):
+            raise LocalProtocolError(f"deadline must be a finite number > 0, got {deadline!r}")
+        baud = self.plausible_baudrate
+        if isinstance(baud, bool) or not isinstance(baud, int) or baud <= 0:
+            raise LocalProtocolError(f"plausible_baudrate must be an int > 0, got {baud!r}")
 
     def response_timeout(
         self, request: LineRequest, line: LineSettings, wait_s: float, reply_length: int
@@ -92,6 +144,22 @@ class BusTiming:
             return self.fixed_timeout_s
         wire = line.wire_time_s(len(request.frame) + reply_length)
         return wire + wait_s + self.margin_s
+
+    def answer_floor(self, request: LineRequest, line: LineSettings, shortest_reply: int) -> float:
+        """Seconds from the write of *request* before which no genuine answer can arrive.
+
+        The request's and the shortest reply's wire time at the faster of the
+        line's speed and :attr:`plausible_baudrate`, 10 bits a character, less
+        5 %; 0 on an instant line (baud rate 0).
+
+        Args:
+            shortest_reply: characters of the shortest reply the request can get.
+        """
+        if not line.baudrate:
+            return 0.0
+        baud = max(line.baudrate, self.plausible_baudrate)
+        chars = len(request.frame) + shortest_reply
+        return chars * _FLOOR_BITS_PER_CHAR / baud * _FLOOR_TOLERANCE
 
     def guard(self, line: LineSettings) -> float:
         """Seconds the line rests after a reply."""

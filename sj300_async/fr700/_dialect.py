@@ -17,6 +17,14 @@ What the arbiter learns from it:
   and RAM frequency, up to 30 ms for parameters and EEPROM (the reference);
   seconds for the clears (decision: 5 s for HFC parameter clear, 30 ms for
   HF4 fault-history clear, an EEPROM write).
+- The shortest reply: ACK (3 characters + terminator) for a write, NAK
+  (4 + terminator) for a read or a multi-command.
+- Resync after a missed answer: a read whose data width no pending request's
+  reply has (writes are answered by ACK, reads by data of their width, a
+  multi-command by 12 characters): H7A status (2 digits), else H6F output
+  frequency (4 digits); none when both widths are pending, or a pending read
+  of an unknown instruction may answer with any width (the arbiter then
+  waits instead).
 - The host's answer to read data (optional in the protocol): with
   ``send_ack`` the host sends ACK (format C) after good data, waiting the
   reference's 10 ms "computer processing delay" before it, and the line
@@ -32,7 +40,7 @@ What the arbiter learns from it:
 
 from __future__ import annotations
 
-from collections.abc import Mapping
+from collections.abc import Mapping, Sequence
 from typing import TYPE_CHECKING, Final
 
 from ..wire import BadFrame, LocalProtocolError, NakError, SJ300Error
@@ -45,9 +53,9 @@ from ._codec import (
 )
 from ._codes import Fr700Instruction, Fr700NakCode
 from ._events import Fr700Ack, Fr700Data, Fr700Nak, Fr700Reply
-from ._parser import Fr700ReplyParser
 from ._parameters import fr700_parameter_info
-from ._requests import Fr700Request, Fr700RequestKind
+from ._parser import Fr700ReplyParser
+from ._requests import READ_WIDTHS, Fr700Request, Fr700RequestKind, read
 
 if TYPE_CHECKING:
     from ..bus import Channel
@@ -74,6 +82,10 @@ _SLOW: Final = frozenset(
     }
 )
 _CLEAR_S: Final = 5.0
+#: Reads a resync tries, in order: each answers with data of its own width.
+_SYNC_READS: Final = (I.STATUS, I.OUTPUT_FREQUENCY)
+#: Data characters of a multi-command's reply (C1).
+_MULTI_REPLY_WIDTH: Final = 12
 #: The URL's ``terminator=`` values.
 _TERMINATORS: Final = {"none": "", "": "", "cr": "\r", "crlf": "\r\n"}
 
@@ -196,6 +208,27 @@ class Fr700Dialect:
             return max(3 + term, nak)
         width = request.reply_width if request.reply_width is not None else MAX_REPLY_DATA
         return 1 + 2 + width + 1 + 2 + term
+
+    def shortest_reply_length(self, request: Fr700Request) -> int:
+        term = len(self.options.terminator)
+        if request.kind is Fr700RequestKind.WRITE:
+            return 3 + term  # ACK (a NAK is one character longer)
+        return 4 + term  # NAK: shorter than any data reply
+
+    def sync_request(self, node: int, pending: Sequence[Fr700Request]) -> Fr700Request | None:
+        widths: set[int] = set()
+        for request in pending:
+            if request.kind is Fr700RequestKind.READ:
+                if request.reply_width is None:
+                    return None  # its reply may have any width
+                widths.add(request.reply_width)
+            elif request.kind is Fr700RequestKind.MULTI:
+                widths.add(_MULTI_REPLY_WIDTH)
+            # a write's reply is an ACK, which no read's answer is
+        for instruction in _SYNC_READS:
+            if READ_WIDTHS[instruction] not in widths:
+                return read(node, instruction, options=self.options)
+        return None
 
     def processing_s(self, request: Fr700Request) -> float:
         if request.instruction == I.PARAMETER_CLEAR:

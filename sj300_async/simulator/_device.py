@@ -8,7 +8,9 @@ answer a host on a physical RS-485 line.
 The device is opened in raw mode. With *settings*, its UART is set to that
 speed and character format; without, the device keeps what it has (a
 pseudo-terminal has no speed to speak of). A real port's own UART paces the
-bytes, so *pacing* is for pseudo-terminals only.
+bytes, so *pacing* is for pseudo-terminals only; without *settings* or
+*pacing*, no reply is faster than the quickest exchange on the fastest
+line the drives run (see :class:`~._pacing.PlausibleLine`).
 
 An RS-485 adapter that echoes what it sends would hand the simulator its
 own replies: use one without local echo on the simulator's side.
@@ -24,7 +26,7 @@ import tty
 from ..wire._errors import LocalProtocolError
 from ._fd_link import FdLink, FdServer
 from ._model import BusModel
-from ._pacing import LinePacing, PacedLine
+from ._pacing import LinePacing, PacedLine, server_line
 
 __all__ = ["SerialDeviceServer", "serve_serial_device"]
 
@@ -90,7 +92,11 @@ async def serve_serial_device(
     """Serve *bus* on the terminal device at *path* (see the module docstring).
 
     Args:
-        pacing: pace the line at these settings (pseudo-terminals only).
+        pacing: pace the line at these settings (pseudo-terminals only);
+            default: none with *settings* (the UART paces), else no reply sooner
+            than the request and a short frame cross a 19200-baud line
+            (:class:`~._pacing.PlausibleLine`);
+            ``LineSettings(baudrate=0)``: answer at once.
         settings: set the device's UART to these (real serial ports).
         line: share this paced line; overrides *pacing*.
 
@@ -98,6 +104,8 @@ async def serve_serial_device(
         OSError: the device cannot be opened or configured.
         LocalProtocolError: the system offers no such speed.
     """
-    if line is None and pacing is not None:
-        line = PacedLine(pacing)
-    return SerialDeviceServer(bus, path, settings, line, asyncio.get_running_loop())
+    if line is None and pacing is None and settings is not None:
+        paced = None  # a real UART: its own clock paces every byte
+    else:
+        paced = server_line(pacing, line)
+    return SerialDeviceServer(bus, path, settings, paced, asyncio.get_running_loop())

@@ -101,14 +101,24 @@ class SimulatorEndpoint:
             self._at(arrival, functools.partial(self._arrived, arrival, piece))
 
     def close(self) -> None:
-        """Cancel every pending delivery; nothing is sent afterwards. Idempotent."""
+        """Cancel every pending delivery; nothing is sent afterwards. Idempotent.
+
+        Host bytes already on a paced line still reach the drives (at their
+        arrival time), as a device server's serial side finishes sending what
+        its client wrote: a broadcast written just before the client hung up
+        is heard. What the drives answer goes nowhere.
+        """
         self._closed = True
         for timer in self._timers:
             timer.cancel()
         self._timers.clear()
         if self._queue:
             _log.debug("endpoint closed with %d deliveries pending", len(self._queue))
-        self._queue.clear()
+        queued, self._queue = sorted(self._queue), []
+        for _when, _seq, job in queued:
+            if isinstance(job, functools.partial) and job.func == self._arrived:
+                at, piece = job.args
+                self.bus.receive(piece, at)
 
     def _get_loop(self) -> asyncio.AbstractEventLoop:
         if self._loop is None:

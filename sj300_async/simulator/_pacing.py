@@ -16,17 +16,27 @@ from typing import Final
 from ..wire._errors import LocalProtocolError
 from ..wire._line import LineSettings
 
-__all__ = ["LinePacing", "PacedLine"]
+__all__ = ["PLAUSIBLE_PACING", "LinePacing", "PacedLine", "PlausibleLine", "server_line"]
 
 #: A paced reply is handed over in groups of characters about this long, so a
 #: 446-byte trip history does not need 446 timers; no byte is ever early.
 DEFAULT_GROUP_S: Final = 0.004
+#: The shortest reply a host's plausibility floor may count on, in characters:
+#: an SJ300 NAK (9), longer than any other shortest reply (an SJ300 ACK is 7,
+#: an FR-700 NAK with CR LF 6, its ACK 4 or 5).
+MIN_REPLY_CHARS: Final = 9
 
 
 #: The line settings that pace a simulated line: the library's own LineSettings
 #: (one definition of character time for the host's time-outs and the
 #: simulator's pacing). An instant line (baud rate 0) cannot be paced.
 LinePacing = LineSettings
+
+#: The fastest line the simulated drives run (both protocols top out at 19200
+#: baud): the servers' default pacing, so that no reply reaches a host sooner
+#: than a real line could carry the request and the reply (the host's
+#: plausibility floor, ``BusTiming.answer_floor``, rejects faster ones).
+PLAUSIBLE_PACING: Final = LineSettings(19200)
 
 
 class PacedLine:
@@ -83,3 +93,48 @@ class PacedLine:
         ]
         self._free_at = begin + len(data) * char_s
         return groups
+
+
+class PlausibleLine(PacedLine):
+    """Not quite a paced line: only as slow as physics must be.
+
+    The drives hear the host's bytes at once and answer after their own
+    delays, as on an unpaced line, but no reply reaches the host sooner than
+    the request and a :data:`MIN_REPLY_CHARS`-character frame could have
+    crossed the line: the quickest any real drive answers. A host's
+    plausibility floor (``BusTiming.answer_floor``) refuses anything faster
+    as a duplicate or a stray. Each reply goes over whole, in one delivery;
+    for true wire timing, pace the line (:class:`PacedLine`).
+    """
+
+    def __init__(self, pacing: LinePacing = PLAUSIBLE_PACING) -> None:
+        super().__init__(pacing)
+        self._request_end = -math.inf
+
+    def receive(self, now: float, data: bytes) -> list[tuple[float, bytes]]:
+        """Book the host's bytes as if they crossed the line; hand them over at once."""
+        self._request_end = max(now, self._request_end) + len(data) * self.pacing.char_time_s
+        return [(now, data)]
+
+    def transmit(self, start: float, data: bytes) -> list[tuple[float, bytes]]:
+        """The whole reply, at *start* or once the shortest exchange could have ended."""
+        earliest = self._request_end + MIN_REPLY_CHARS * self.pacing.char_time_s
+        return [(max(start, earliest), data)]
+
+
+def server_line(pacing: LinePacing | None, line: PacedLine | None) -> PacedLine | None:
+    """The line a server (TCP, pty, serial device) paces on.
+
+    *line* if given; else *pacing*'s own (an instant line, baud rate 0: none,
+    replies go out as soon as the drive has answered); else a
+    :class:`PlausibleLine` at :data:`PLAUSIBLE_PACING`. A host on the other
+    end of a socket or a pty cannot tell a simulator from a drive, and a
+    reply faster than any line is one it rightly refuses; a host that knows
+    better opens its bus with an instant line (``LineSettings(baudrate=0)``)
+    and may then serve with ``pacing=LineSettings(baudrate=0)``.
+    """
+    if line is not None:
+        return line
+    if pacing is None:
+        return PlausibleLine()
+    return PacedLine(pacing) if pacing.baudrate else None

@@ -23,7 +23,7 @@ import tty
 
 from ._fd_link import FdLink, FdServer
 from ._model import BusModel
-from ._pacing import LinePacing, PacedLine
+from ._pacing import LinePacing, PacedLine, server_line
 
 __all__ = ["PtyServer", "open_pty_server"]
 
@@ -70,12 +70,13 @@ async def open_pty_server(
     """Open a pseudo-terminal and serve *bus* on it; the slave's path is ``.path``.
 
     Args:
-        pacing: pace the line at these settings.
+        pacing: pace the line at these settings; default: no reply sooner than
+            the request and a short frame cross a 19200-baud line
+            (:class:`~._pacing.PlausibleLine`);
+            ``LineSettings(baudrate=0)``: answer at once.
         line: share this paced line (e.g. with a TCP server); overrides *pacing*.
 
     Raises:
         OSError: no pseudo-terminal could be opened.
     """
-    if line is None and pacing is not None:
-        line = PacedLine(pacing)
-    return PtyServer(bus, line, asyncio.get_running_loop())
+    return PtyServer(bus, server_line(pacing, line), asyncio.get_running_loop())

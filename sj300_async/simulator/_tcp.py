@@ -2,9 +2,12 @@
 
 Like a serial-to-Ethernet gateway in raw TCP mode, it moves bytes and
 nothing else: no framing of its own, one byte stream per connection. Every
-connection gets its own :class:`SimulatorEndpoint` on the same bus, and,
-when paced, the same :class:`PacedLine`: clients share one line, as they
-would share the gateway's one serial port.
+connection gets its own :class:`SimulatorEndpoint` on the same bus, and the
+same :class:`PacedLine`: clients share one line, as they would share the
+gateway's one serial port. Unless told otherwise, no reply is faster than
+the quickest exchange on a 19200-baud line, the fastest the drives run
+(:class:`~._pacing.PlausibleLine`): a host's plausibility check would
+refuse it.
 
 It listens on loopback unless given another host: a simulator reachable
 from the network is a choice, not a default.
@@ -19,7 +22,7 @@ from typing import cast
 
 from ._endpoint import SimulatorEndpoint
 from ._model import BusModel
-from ._pacing import LinePacing, PacedLine
+from ._pacing import LinePacing, PacedLine, server_line
 
 __all__ = ["SimulatorServer", "serve_tcp"]
 
@@ -127,15 +130,16 @@ async def serve_tcp(
     Args:
         host: address to bind; loopback by default.
         port: TCP port; 0 picks a free one (read :attr:`SimulatorServer.port`).
-        pacing: pace the line at these settings.
+        pacing: pace the line at these settings; default: no reply sooner than
+            the request and a short frame cross a 19200-baud line
+            (:class:`~._pacing.PlausibleLine`);
+            ``LineSettings(baudrate=0)``: answer at once.
         line: share this paced line (e.g. with a pty server); overrides *pacing*.
 
     Raises:
         OSError: the address cannot be bound (e.g. the port is in use).
     """
-    if line is None and pacing is not None:
-        line = PacedLine(pacing)
-    server = SimulatorServer(bus, line)
+    server = SimulatorServer(bus, server_line(pacing, line))
     loop = asyncio.get_running_loop()
     listener = await loop.create_server(lambda: _Connection(server), host, port)
     server._server = listener

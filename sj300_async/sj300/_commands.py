@@ -14,6 +14,7 @@ __all__ = [
     "ReplyKind",
     "RequestData",
     "reply_frame_length",
+    "shortest_reply_frame_length",
 ]
 
 
@@ -127,13 +128,20 @@ _ACK_FRAME = 7
 _NAK_FRAME = 9
 
 
-def reply_frame_length(command: Command) -> int:
-    """Length of the longest reply (positive or NAK) the command can get, STX to CR."""
+def _positive_frame_length(command: Command) -> int:
     spec = command.spec
     if spec.reply is ReplyKind.ACK:
-        positive = _ACK_FRAME
-    elif spec.reply is ReplyKind.ACK_DATA:
-        positive = _ACK_FRAME + spec.reply_length
-    else:
-        positive = 6 + spec.reply_length
-    return max(positive, _NAK_FRAME)
+        return _ACK_FRAME
+    if spec.reply is ReplyKind.ACK_DATA:
+        return _ACK_FRAME + spec.reply_length
+    return 6 + spec.reply_length
+
+
+def reply_frame_length(command: Command) -> int:
+    """Length of the longest reply (positive or NAK) the command can get, STX to CR."""
+    return max(_positive_frame_length(command), _NAK_FRAME)
+
+
+def shortest_reply_frame_length(command: Command) -> int:
+    """Length of the shortest reply (positive or NAK) the command can get, STX to CR."""
+    return min(_positive_frame_length(command), _NAK_FRAME)

@@ -10,7 +10,12 @@ What the bus learns from it:
 - Retries: NAK 01..08 are transmission errors, worth another attempt; 11,
   13 and 16 are the drive's verdict.
 - Timing: replies are at most 449 characters; the drive states no
-  processing time beyond its C078 wait (the caller's ``wait_time_s``).
+  processing time beyond its C078 wait (the caller's ``wait_time_s``). The
+  shortest reply is an ACK (7 characters) or a NAK (9).
+- Resync after a missed answer: command 09 "can store" (ACK + 2 digits, a
+  shape no other command's answer has), else 04 status (8 data characters),
+  else 03 monitor (104), each unless a request of that command is among the
+  pending ones; with all three pending, none (the arbiter waits instead).
 - Around the line: nodes 1..32, :class:`~._drive.Drive` per node and
   :class:`~._drive.Broadcast` for node FF; the commands in
   :data:`MUTATING_COMMANDS` change a drive; no URL options; the simulator is
@@ -19,24 +24,32 @@ What the bus learns from it:
 
 from __future__ import annotations
 
-from collections.abc import Mapping
+from collections.abc import Mapping, Sequence
 from typing import TYPE_CHECKING, Final
 
 from ..wire import BadFrame, LocalProtocolError, NakError, SJ300Error
 from ._codes import NakCode
-from ._commands import Command, reply_frame_length
+from ._commands import Command, reply_frame_length, shortest_reply_frame_length
 from ._constants import MAX_NODE, MIN_NODE
 from ._drive import Broadcast, Drive
 from ._events import AckDataReply, AckReply, DataReply, NakReply, Reply
 from ._matching import answers
 from ._parameters import normalize_code
 from ._parser import ReplyParser
-from ._requests import Request
+from ._requests import Request, can_store, read_monitor, read_status
 
 if TYPE_CHECKING:
     from ..bus import Channel
 
 __all__ = ["MUTATING_COMMANDS", "SJ300_DIALECT", "SJ300Dialect"]
+
+#: Read-only commands whose positive answers have shapes of their own, in the
+#: order a resync tries them (see ``SJ300Dialect.sync_request``).
+_SYNC_COMMANDS: Final = (
+    (Command.CAN_STORE, can_store),
+    (Command.READ_STATUS, read_status),
+    (Command.READ_MONITOR, read_monitor),
+)
 
 #: Commands that change a drive; a read-only bus refuses them.
 MUTATING_COMMANDS: Final = frozenset(
@@ -96,6 +109,19 @@ class SJ300Dialect:
 
     def reply_frame_length(self, request: Request) -> int:
         return reply_frame_length(request.command)
+
+    def shortest_reply_length(self, request: Request) -> int:
+        return shortest_reply_frame_length(request.command)
+
+    def sync_request(self, node: int, pending: Sequence[Request]) -> Request | None:
+        # Each command's positive answer has a shape of its own (matching checks
+        # the kind and the data length), so a sync of a command none of the
+        # pending requests has cannot be answered by their late replies.
+        commands = {request.command for request in pending}
+        for command, build in _SYNC_COMMANDS:
+            if command not in commands:
+                return build(node)
+        return None
 
     def processing_s(self, request: Request) -> float:
         return 0.0  # the SJ300 states none beyond C078; the margin covers it

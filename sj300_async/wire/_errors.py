@@ -76,7 +76,39 @@ class NakError(SJ300Error):
 
 
 class ReplyTimeoutError(SJ300Error, TimeoutError):
-    """No valid reply arrived before the response deadline."""
+    """No valid reply arrived before the response deadline.
+
+    The bus raises it once a call has used up its attempts (or its call
+    deadline), with every figure in the message: ``node 04 did not answer
+    command 04: 3 attempts of 500 ms each, 2.62 s in all``.
+
+    Attributes:
+        attempts: attempts made (each one a whole response time-out; 0 when the
+            call deadline passed before the line was free).
+        elapsed_s: seconds the whole call took, queueing and drains included,
+            or None when not known.
+        timeout_s: the response time-out of one attempt (the longest, if they
+            differed), or None when not known.
+    """
+
+    def __init__(
+        self,
+        message: str = "",
+        attempts: int = 1,
+        elapsed_s: float | None = None,
+        timeout_s: float | None = None,
+    ) -> None:
+        # One argument for OSError (TimeoutError's base), which would read
+        # several as errno and strerror.
+        super().__init__(message)
+        self.attempts = attempts
+        self.elapsed_s = elapsed_s
+        self.timeout_s = timeout_s
+
+    def __reduce__(
+        self,
+    ) -> tuple[type[ReplyTimeoutError], tuple[str, int, float | None, float | None]]:
+        return (type(self), (str(self), self.attempts, self.elapsed_s, self.timeout_s))
 
 
 class TransportError(SJ300Error, ConnectionError):

@@ -30,14 +30,22 @@ def scripted() -> MakeRig:
         **bus_kwargs: object,
     ) -> AsyncIterator[Rig]:
         peers: list[ScriptedPeer] = []
+        bus_kwargs.setdefault("line", INSTANT_LINE)
+        bus_kwargs.setdefault("timing", sj.BusTiming(margin_s=0.05))
+        line = bus_kwargs["line"]
+        timing = bus_kwargs["timing"]
+        assert isinstance(line, sj.LineSettings)
+        assert isinstance(timing, sj.BusTiming)
+        # A drive on a line with a speed answers no sooner than the fastest line
+        # it can run carries the request and the reply (10 bits a character).
+        baud = max(line.baudrate, timing.plausible_baudrate) if line.baudrate else 0
+        char_s = 10 / baud if baud else 0.0
 
         def factory(send: Callable[[bytes], None]) -> ScriptedPeer:
-            peers.append(ScriptedPeer(respond, send))
+            peers.append(ScriptedPeer(respond, send, char_s=char_s))
             return peers[-1]
 
         trace: list[sjbus.TraceRecord] = []
-        bus_kwargs.setdefault("line", INSTANT_LINE)
-        bus_kwargs.setdefault("timing", sj.BusTiming(margin_s=0.05))
         bus = Bus(
             loopback_connector(factory, to_peer=to_peer, to_host=to_host),
             description="scripted",

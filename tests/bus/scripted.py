@@ -65,6 +65,10 @@ class ScriptedPeer:
     bad: list[object] = field(default_factory=list)
     handles: list[asyncio.TimerHandle] = field(default_factory=list)
     closed: bool = False
+    #: Seconds a character takes on the line (0: instant). A frame never goes
+    #: out sooner than the request and itself take to cross the line, as with a
+    #: real drive: the bus refuses an answer faster than that (BusTiming.answer_floor).
+    char_s: float = 0.0
 
     def __post_init__(self) -> None:
         self._parser = sj3.RequestParser()
@@ -80,7 +84,8 @@ class ScriptedPeer:
             if event.is_broadcast:
                 continue
             for delay, frame in self.respond(event):
-                self.handles.append(loop.call_later(delay, self._send, frame))
+                wire = (len(event.frame) + len(frame)) * self.char_s
+                self.handles.append(loop.call_later(max(delay, wire), self._send, frame))
 
     def _send(self, frame: bytes) -> None:
         if not self.closed:

@@ -85,7 +85,9 @@ async def test_late_reply_after_timeout_is_never_the_next_answer(scripted: MakeR
         calls += 1
         if calls == 1:
             return [(0.08, ack_value(req.node, 111))]  # after the 50 ms time-out
-        return [(0.0, ack_value(req.node, 222))]
+        if req.command is sj3.Command.READ_PARAMETER:
+            return [(0.0, ack_value(req.node, 222))]
+        return answer_all(req)  # the sync request
 
     async with scripted(respond, retries=0) as rig:
         drive = rig.bus.drive(4)
@@ -95,6 +97,7 @@ async def test_late_reply_after_timeout_is_never_the_next_answer(scripted: MakeR
         assert await drive.read_parameter_raw("F003") == 222
         assert rig.bus.stats.unsolicited_frames == 1
         assert rig.bus.stats.drains == 1
+        assert rig.bus.stats.resyncs == 1  # node 4 missed an answer: a sync went first
         tx_times = [r.timestamp for r in rig.trace if r.direction == "tx"]
         rx_late = next(r.timestamp for r in rig.trace if r.direction == "rx")
         assert tx_times[1] > rx_late  # the second request went out after the late reply

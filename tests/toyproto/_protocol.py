@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-from collections.abc import Mapping
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 
 from sj300_async.bus import Channel, TransactionStats, parse_flag
@@ -170,6 +170,17 @@ class ToyDialect:
 
     def reply_frame_length(self, request: ToyRequest) -> int:
         return _MAX_LINE
+
+    def shortest_reply_length(self, request: ToyRequest) -> int:
+        return 6  # "#01 2\n" or "!01 5\n"
+
+    def sync_request(self, node: int, pending: Sequence[ToyRequest]) -> ToyRequest | None:
+        # Every read is answered by a value, every write by OK: a read can tell
+        # the node's late OKs from its answer, but nothing tells a late value
+        # from another read's (the arbiter then waits the late replies out).
+        if any(request.value is None for request in pending):
+            return None
+        return ToyRequest(node, "status")
 
     def processing_s(self, request: ToyRequest) -> float:
         return 0.0
