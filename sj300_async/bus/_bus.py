@@ -66,7 +66,7 @@ class Bus(Generic[DriveT, BroadcastT]):
         timing: BusTiming,
         dialect: Dialect[Any, Any] | None = None,
         retries: int = 2,
-        strip_echo: bool = False,
+        strip_echo: bool | None = None,
         read_only: bool = False,
         trace: TraceHook | None = None,
         reconnect: ReconnectPolicy | None = None,

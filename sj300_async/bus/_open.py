@@ -123,7 +123,10 @@ def open_bus(
             together: no attempt starts after it (``BusTiming.call_deadline_s``;
             default none).
         retries: attempts after the first, for time-outs and transmission errors.
-        strip_echo: remove the RS-485 adapter's local echo (default: the URL's ``echo``).
+        strip_echo: the RS-485 adapter's local echo: None to detect and strip it
+            (the default, ``echo=auto``), True when the line echoes (``echo=1``:
+            a missing echo is counted), False to never look (``echo=0``);
+            default: the URL's ``echo``, else auto (see :mod:`._protocol`).
         read_only: refuse every command that changes a drive.
         line: line settings (default: the URL's, else 19200 8N1; instant for sim://).
         timing: the full timing policy (``timeout`` overrides its fixed time-out).
@@ -207,7 +210,7 @@ async def _open_bus(
         timing=timing,
         dialect=dialect,
         retries=retries,
-        strip_echo=bool(address.echo) if strip_echo is None else strip_echo,
+        strip_echo=address.echo if strip_echo is None else strip_echo,
         read_only=read_only,
         trace=trace,
         reconnect=reconnect,

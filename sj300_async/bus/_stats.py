@@ -135,10 +135,17 @@ class BusStats:
     drains: int = 0
     #: Corrupted replies the host asked the device to send again (FR-700 format F).
     reoutput_requests: int = 0
-    #: Local-echo bytes removed (when echo stripping is on).
+    #: Local-echo bytes removed: whole, exact copies of written frames (see
+    #: :mod:`._protocol`).
     echo_bytes: int = 0
-    #: Echoes that did not match what was sent (the rest went to the parser).
+    #: Written frames whose echo was removed.
+    echo_frames: int = 0
+    #: Expected echoes that did not come (their bytes went to the parser): with
+    #: ``echo=1`` every one, with ``echo=auto`` those on a line known to echo.
     echo_mismatches: int = 0
+    #: Does the line echo? True: the last written frame (of known fate) came back;
+    #: False: it did not; None: not known yet, or never looked (``echo=0``).
+    echo_detected: bool | None = None
     #: Successful (re)connections of the link.
     connects: int = 0
     #: Times the link was lost.

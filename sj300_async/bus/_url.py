@@ -10,14 +10,15 @@ Forms::
     sim://?nodes=1-8[&wait_ms=0&factory_defaults=1&pace=1&baudrate=19200...]
         the in-memory simulator (an instant line unless pace=1)
 
-Common query options: ``echo=1`` strips the RS-485 adapter's local echo;
-``protocol=NAME`` picks the protocol (``sj300``, the default, or ``fr700``;
-see :mod:`._registry`). Each protocol adds its own options (its dialect's
-``url_options``), e.g. FR-700's ``wait_field``, ``terminator`` and ``ack``.
-A ``sim://`` bus simulates the protocol's default nodes unless ``nodes=``
-says otherwise. Any other query key is refused, so a typo cannot be
-silently ignored, and one protocol's options on another's bus are refused
-too.
+Common query options: ``echo=auto|1|0`` for the RS-485 adapter's local
+echo (``auto``, the default, detects and strips it; ``1`` says the line
+echoes; ``0`` never looks: see :mod:`._protocol`); ``protocol=NAME`` picks
+the protocol (``sj300``, the default, or ``fr700``; see :mod:`._registry`).
+Each protocol adds its own options (its dialect's ``url_options``), e.g.
+FR-700's ``wait_field``, ``terminator`` and ``ack``. A ``sim://`` bus
+simulates the protocol's default nodes unless ``nodes=`` says otherwise.
+Any other query key is refused, so a typo cannot be silently ignored, and
+one protocol's options on another's bus are refused too.
 """
 
 from __future__ import annotations
@@ -53,7 +54,8 @@ class BusAddress:
     device: str = ""
     #: Line settings given in the URL (None: the transport's default).
     line: LineSettings | None = None
-    #: Strip local echo (None: not given).
+    #: Local echo: True strip it (``echo=1``), False never look (``echo=0``),
+    #: None detect it (``echo=auto``, or not given).
     echo: bool | None = None
     #: sim: the simulated nodes and options.
     nodes: tuple[int, ...] = ()
@@ -127,6 +129,16 @@ def parse_flag(key: str, value: str) -> bool:
     raise LocalProtocolError(f"{key} must be true or false, got {value!r}")
 
 
+def _parse_echo(value: str) -> bool | None:
+    """``echo=``: ``auto`` (None), or a boolean flag."""
+    if value.lower() == "auto":
+        return None
+    try:
+        return parse_flag("echo", value)
+    except LocalProtocolError:
+        raise LocalProtocolError(f"echo must be auto, 1 or 0, got {value!r}") from None
+
+
 def parse_bus_url(url: str, *, protocol: str | None = None) -> BusAddress:
     """Parse a bus URL (see the module docstring).
 
@@ -180,7 +192,7 @@ def parse_bus_url(url: str, *, protocol: str | None = None) -> BusAddress:
             query.get("parity", "N"),
             query.get("stopbits", "1"),
         )
-    echo = parse_flag("echo", query["echo"]) if "echo" in query else None
+    echo = _parse_echo(query["echo"]) if "echo" in query else None
     protocol_options = {k: v for k, v in query.items() if k in dialect.url_options}
     if scheme == "tcp":
         try:
