@@ -10,6 +10,9 @@ queues for the line.
 
 from __future__ import annotations
 
+from collections.abc import Iterator
+from contextlib import contextmanager
+from contextvars import ContextVar
 from typing import TYPE_CHECKING, Generic, Protocol
 
 from ..wire import BusClosedError, LocalProtocolError, ReadOnlyError
@@ -19,7 +22,27 @@ from ._stats import TransactionStats
 if TYPE_CHECKING:
     from ._arbiter import Arbiter
 
-__all__ = ["Channel"]
+__all__ = ["Channel", "retries_at_most"]
+
+#: The current task's cap on a call's retries (see :func:`retries_at_most`).
+_RETRIES_CAP: ContextVar[int | None] = ContextVar("sj300_async_retries_cap", default=None)
+
+
+@contextmanager
+def retries_at_most(retries: int) -> Iterator[None]:
+    """Within the block, this task's calls make at most ``retries + 1`` attempts.
+
+    For code that reaches the line through a drive's methods, which take no
+    ``retries`` (the poller caps its reads with it). A call's own ``retries=``
+    and the bus's setting still apply when they are lower.
+    """
+    if isinstance(retries, bool) or not isinstance(retries, int) or retries < 0:
+        raise LocalProtocolError(f"retries must be an int >= 0, got {retries!r}")
+    token = _RETRIES_CAP.set(retries)
+    try:
+        yield
+    finally:
+        _RETRIES_CAP.reset(token)
 
 
 class BusState(Protocol):
@@ -87,12 +110,16 @@ class Channel(Generic[RequestT]):
         *,
         wait_s: float = 0.0,
         timeout_s: float | None = None,
+        retries: int | None = None,
         urgent: bool = False,
     ) -> bytes:
         """Run a request; return the data of its positive answer.
 
         A request that expects no answer is written, and ``b""`` comes back
         (:meth:`send` says so in its type).
+
+        *retries* replaces the bus's retries for this call (None: the bus's);
+        :func:`retries_at_most` caps either for a whole block of calls.
 
         Raises:
             NakError: the drive refused the request.
@@ -106,8 +133,15 @@ class Channel(Generic[RequestT]):
         bus = self._bus
         if bus.closed or (bus.read_only and self._dialect.writes(request)):
             self.check(request)  # raises the right error
+        if retries is None:
+            retries = self._retries
+        elif isinstance(retries, bool) or not isinstance(retries, int) or retries < 0:
+            raise LocalProtocolError(f"retries must be an int >= 0, got {retries!r}")
+        cap = _RETRIES_CAP.get()
+        if cap is not None and cap < retries:
+            retries = cap
         return await self._arbiter.transact(
-            request, stats, wait_s=wait_s, timeout_s=timeout_s, retries=self._retries, urgent=urgent
+            request, stats, wait_s=wait_s, timeout_s=timeout_s, retries=retries, urgent=urgent
         )
 
     async def send(
