@@ -244,6 +244,15 @@ class Arbiter(Generic[RequestT, ReplyT]):
                 error = TransportError(f"connection lost while waiting for node {node:02d}")
             out.waiter.set_exception(error)
 
+    def close(self) -> None:
+        """Cancel the deadline timer (the bus is closing): no timer outlives the bus.
+
+        A transaction still waiting fails through ``connection_lost`` as the link closes.
+        """
+        timer, self._deadline_timer = self._deadline_timer, None
+        if timer is not None:
+            timer.cancel()
+
     # -- the deadline timer -------------------------------------------------------
 
     def _arm_deadline(self, deadline: float) -> None:

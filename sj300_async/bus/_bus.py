@@ -194,6 +194,7 @@ class Bus(Generic[DriveT, BroadcastT]):
         """Close the bus: the link closes, waiting requests fail. Idempotent."""
         self._closed = True
         self.link.close()
+        self._arbiter.close()
         if self._supervisor is not None:
             self._supervisor.cancel()
 
