@@ -77,7 +77,7 @@ import anyio
 import anyio.abc
 
 from .bus import Bus, get_dialect, protocol_names
-from .bus._channel import retries_at_most
+from .bus._channel import cap_retries, retries_at_most
 from .bus._stats import TransactionStats
 from .fr700 import Fr700Monitor, Fr700Status
 from .sj300 import InverterStatus, MonitorData
@@ -343,6 +343,9 @@ class Poller:
         # returns on asyncio (the only backend the buses run on), without
         # the backend lookup on each of the several reads per poll.
         clock = asyncio.get_running_loop().time
+        # This task's reads make at most 1 + self.retries attempts: set once for
+        # the task's life (a block per drive poll cost 2 µs of every poll).
+        cap_retries(self.retries)
         while True:
             start = clock()
             for node in list(target.nodes):
@@ -388,25 +391,24 @@ class Poller:
         if health.consecutive_failures:  # failing or offline: one cheap attempt first
             error = await self._probe(target, node, health, drive)
             answered = error is None
-        if error is None:
-            with retries_at_most(self.retries):
-                for read in self.reads + target.parameters:
-                    begin = clock()
-                    try:
-                        if read == "status":
-                            status = await drive.read_status()
-                        elif read == "monitor":
-                            monitor = await drive.read_monitor()
-                        else:
-                            parameters[read] = await drive.read_parameter(read)
-                    except SJ300Error as exc:
-                        error = f"{type(exc).__name__}: {exc}"
-                        if isinstance(exc, NakError):  # a refusal: the drive is there
-                            health.answered = True
-                        break  # a failing drive gets no more of the line this cycle
-                    spent += clock() - begin
-                    ok_reads += 1
-                    health.answered = True
+        if error is None:  # (retries capped for this task in _poll_bus)
+            for read in self.reads + target.parameters:
+                begin = clock()
+                try:
+                    if read == "status":
+                        status = await drive.read_status()
+                    elif read == "monitor":
+                        monitor = await drive.read_monitor()
+                    else:
+                        parameters[read] = await drive.read_parameter(read)
+                except SJ300Error as exc:
+                    error = f"{type(exc).__name__}: {exc}"
+                    if isinstance(exc, NakError):  # a refusal: the drive is there
+                        health.answered = True
+                    break  # a failing drive gets no more of the line this cycle
+                spent += clock() - begin
+                ok_reads += 1
+                health.answered = True
         now = clock()
         self._update_health(target, node, health, error, now)
         sample = Sample(

@@ -22,7 +22,7 @@ from ._stats import TransactionStats
 if TYPE_CHECKING:
     from ._arbiter import Arbiter
 
-__all__ = ["Channel", "retries_at_most"]
+__all__ = ["Channel", "cap_retries", "retries_at_most"]
 
 #: The current task's cap on a call's retries (see :func:`retries_at_most`).
 _RETRIES_CAP: ContextVar[int | None] = ContextVar("sj300_async_retries_cap", default=None)
@@ -43,6 +43,18 @@ def retries_at_most(retries: int) -> Iterator[None]:
         yield
     finally:
         _RETRIES_CAP.reset(token)
+
+
+def cap_retries(retries: int) -> None:
+    """From now on, the current task's calls make at most ``retries + 1`` attempts.
+
+    :func:`retries_at_most` for a task that keeps the cap for its whole life
+    (the poller's polling task): set once, it costs nothing per call. The
+    task's context goes with the task.
+    """
+    if isinstance(retries, bool) or not isinstance(retries, int) or retries < 0:
+        raise LocalProtocolError(f"retries must be an int >= 0, got {retries!r}")
+    _RETRIES_CAP.set(retries)
 
 
 class BusState(Protocol):
