@@ -480,22 +480,7 @@ class Arbiter(Generic[RequestT, ReplyT]):
             self._count(stats, totals, "cancelled")
             raise
         finally:
-            if out.reoutput is not None:
-                out.reoutput.cancel()
-            self._outstanding = None
-            if answered:
-                # The guard runs from the answer's arrival: the time this task took
-                # to resume already counts towards it.
-                self._rest_until = self._last_rx + self._guard_s
-                if acknowledged:
-                    self._rest_until = max(
-                        self._rest_until,
-                        self._loop.time() + dialect.rest_after_acknowledgement_s(),
-                    )
-            else:
-                quiet = self._timing.drain_quiet(timeout, self._line)
-                self._drain_quiet = max(self._drain_quiet or 0.0, quiet)
-                self._failed_at = self._loop.time()
+            self._finish(out, answered, acknowledged)
 
     def _request_timing(self, request: RequestT, wait_s: float) -> tuple[float, float]:
         """The computed response time-out of *request* with the device waiting *wait_s*,
@@ -646,11 +631,13 @@ class Arbiter(Generic[RequestT, ReplyT]):
     def _finish(
         self, out: _Outstanding[RequestT, ReplyT], answered: bool, acknowledged: bool
     ) -> None:
-        """The line after a sync (the same as after an attempt: rest, or drain next)."""
+        """The line after an attempt or a sync: rest after an answer, else drain next."""
         if out.reoutput is not None:
             out.reoutput.cancel()
         self._outstanding = None
         if answered:
+            # The guard runs from the answer's arrival: the time this task took
+            # to resume already counts towards it.
             self._rest_until = self._last_rx + self._guard_s
             if acknowledged:
                 self._rest_until = max(
