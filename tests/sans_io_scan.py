@@ -37,7 +37,7 @@ import importlib.util
 import json
 import subprocess
 import sys
-from collections.abc import Collection, Iterable, Iterator, Mapping
+from collections.abc import Collection, Iterable, Iterator
 from pathlib import Path
 from typing import Final, TypedDict
 
@@ -111,11 +111,6 @@ SIMULATOR_FR700: Final = (
     *(f"simulator.fr700.{m}" for m in ("_bus", "_drive", "_parameters", "_request_parser")),
 )
 
-#: Claimed sans-IO above, but the scan says otherwise: module -> why. The tests mark them
-#: strict xfail (so they fail again the day they are fixed, and the mark must go), and no other
-#: module may import them. Not dropped from the lists: they are meant to be sans-IO.
-NOT_SANS_IO_YET: Final[Mapping[str, str]] = {}
-
 #: Not sans-IO, by design. The package ``__init__`` modules re-export the async classes.
 SJ300_IO: Final = ("sj300", "sj300._dialect", "sj300._drive")
 FR700_IO: Final = ("fr700", "fr700._dialect", "fr700._drive")
@@ -169,8 +164,8 @@ SANS_IO: Final = (*CORE_MODULES, *FR700_CODEC, *SIMULATOR_MODEL, *SIMULATOR_SJ30
 
 
 def proven(*groups: Iterable[str]) -> frozenset[str]:
-    """The modules of *groups* the scan proves sans-IO: all but :data:`NOT_SANS_IO_YET`."""
-    return frozenset(m for group in groups for m in group if m not in NOT_SANS_IO_YET)
+    """The modules of *groups* (each one proved sans-IO by the scan)."""
+    return frozenset(m for group in groups for m in group)
 
 
 #: Packages whose ``__init__`` is not proved sans-IO: the probes replace them by empty ones.
@@ -329,17 +324,8 @@ def module_violations(
 
 
 def params(modules: Iterable[str]) -> list[ParameterSet]:
-    """*modules* as pytest parameters; those of :data:`NOT_SANS_IO_YET` strict xfail."""
-    return [
-        pytest.param(
-            m,
-            id=m,
-            marks=[pytest.mark.xfail(strict=True, raises=AssertionError, reason=NOT_SANS_IO_YET[m])]
-            if m in NOT_SANS_IO_YET
-            else [],
-        )
-        for m in modules
-    ]
+    """*modules* as pytest parameters, each with its name as id."""
+    return [pytest.param(m, id=m) for m in modules]
 
 
 # -- the run-time probe ----------------------------------------------------------------------

@@ -24,9 +24,7 @@ from sans_io_scan import (
     CLASSIFIED_PACKAGES,
     CORE_MODULES,
     IO_PACKAGES,
-    NOT_SANS_IO_YET,
     ROOT_MODULES,
-    SANS_IO,
     SJ300_CODEC,
     SJ300_IO,
     STUBBED_PACKAGES,
@@ -74,11 +72,6 @@ def test_every_package_is_classified() -> None:
 @pytest.mark.parametrize("module", params(CORE_MODULES))
 def test_core_module_imports_nothing_io(module: str) -> None:
     assert module_violations(module, ALLOWED) == []
-
-
-def test_the_known_exceptions_are_listed_modules() -> None:
-    # Every exception is a module claimed sans-IO, so it is scanned (and xfails), not forgotten.
-    assert set(NOT_SANS_IO_YET) <= set(SANS_IO)
 
 
 @pytest.mark.parametrize(

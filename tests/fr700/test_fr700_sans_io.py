@@ -81,7 +81,6 @@ def test_importing_the_fr700_core_and_model_loads_no_io_modules() -> None:
 
 
 def test_importing_every_listed_module_loads_no_io_modules() -> None:
-    # Any module the scan does not prove yet (NOT_SANS_IO_YET) loads no I/O on import either.
     report = probe([*FR700_CODEC, *SIMULATOR_FR700])
     assert report["before"] == []
     assert report["after"] == []
