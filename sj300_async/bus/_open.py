@@ -53,7 +53,7 @@ def _sim_connector(
     faults: tuple[LineFaults | None, LineFaults | None] | None,
     sim: Any,
 ) -> tuple[Connector, Any]:
-    from ..simulator import LinePacing, SimulatorEndpoint
+    from ..simulator import LinePacing, PacedLine, PlausibleLine, SimulatorEndpoint
 
     options = address.sim_options
     wait_ms: int | None = None
@@ -77,13 +77,22 @@ def _sim_connector(
     elif wait_ms is not None:
         for drive in sim.drives.values():
             drive.set_wait_ms(wait_ms)
-    pacing = None
-    if parse_flag("pace", options.get("pace", "0")):
-        pacing = LinePacing(line.baudrate, line.bytesize, line.parity, line.stopbits)
+    # pace=1: every character takes its wire time. Unpaced on a line with a
+    # speed: the drives answer at once but no reply arrives sooner than the
+    # request and a short reply could cross that line (PlausibleLine), or the
+    # host's plausibility floor would refuse every answer. Instant line: at once.
+    pacing = LinePacing(line.baudrate, line.bytesize, line.parity, line.stopbits)
+    paced = parse_flag("pace", options.get("pace", "0"))
+
+    def wire() -> PacedLine | None:  # one per connection: a line is booked per endpoint
+        if paced:
+            return PacedLine(pacing)
+        return PlausibleLine(pacing) if pacing.baudrate else None
+
     to_peer, to_host = faults or (None, None)
     served = sim
     connector = loopback_connector(
-        lambda send: SimulatorEndpoint(served, send=send, pacing=pacing),
+        lambda send: SimulatorEndpoint(served, send=send, line=wire()),
         to_peer=to_peer,
         to_host=to_host,
     )

@@ -8,7 +8,9 @@ Forms::
     serial:///dev/ttyUSB0?baudrate=19200&bytesize=8&parity=E&stopbits=1
     /dev/ttyUSB0, COM3                  a bare device path: serial, default settings
     sim://?nodes=1-8[&wait_ms=0&factory_defaults=1&pace=1&baudrate=19200...]
-        the in-memory simulator (an instant line unless pace=1)
+        the in-memory simulator: an instant line unless a baud rate is
+        given; with one, replies arrive no sooner than that line could carry
+        them (pace=1 also paces every character)
 
 Common query options: ``echo=auto|1|0`` for the RS-485 adapter's local
 echo (``auto``, the default, detects and strips it; ``1`` says the line

@@ -34,7 +34,7 @@ from ._endpoint import SimulatorEndpoint
 from ._faults import Faults
 from ._model import BusModel, LineCounters, Transmission
 from ._motion import RunState
-from ._pacing import LinePacing, PacedLine
+from ._pacing import LinePacing, PacedLine, PlausibleLine
 from ._precise_loop import precise_event_loop
 from ._tcp import SimulatorServer, serve_tcp
 
@@ -48,6 +48,7 @@ __all__ = [
     "LineCounters",
     "LinePacing",
     "PacedLine",
+    "PlausibleLine",
     "PtyServer",
     "RunState",
     "SerialDeviceServer",

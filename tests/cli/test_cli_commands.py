@@ -182,6 +182,16 @@ async def test_line_settings_apply_to_a_paced_simulator() -> None:
     assert result.code == 0, result.err
 
 
+async def test_an_unpaced_simulator_on_a_line_with_a_speed_answers_plausibly() -> None:
+    # Unpaced, sim:// answers at once; on a line with a speed the host's
+    # plausibility floor would refuse that, so the simulator waits for physics.
+    result = await sj300("read", "C078", "--url", "sim://?nodes=1", "--baud", "9600")
+    assert result.code == 0, result.err
+    result = await sj300("status", "--url", "sim://?nodes=1&baudrate=19200", "--json")
+    assert result.code == 0, result.err
+    assert result.json()["node"] == 1
+
+
 async def test_terminal_output_is_a_rich_table() -> None:
     result = await sj300_on_terminal("read", "F002", "A004")
     assert result.code == 0, result.out

@@ -76,8 +76,8 @@ BUS_NAMES = (
     "protocol_names", "register_protocol", "unregister_protocol",
 )  # fmt: skip
 SIMULATOR_NAMES = (
-    "BusModel", "Faults", "LineCounters", "LinePacing", "PacedLine", "PtyServer", "RunState",
-    "SerialDeviceServer", "SimulatorEndpoint", "SimulatorServer", "Transmission",
+    "BusModel", "Faults", "LineCounters", "LinePacing", "PacedLine", "PlausibleLine",
+    "PtyServer", "RunState", "SerialDeviceServer", "SimulatorEndpoint", "SimulatorServer", "Transmission",
     "open_pty_server", "precise_event_loop", "serve_serial_device", "serve_tcp",
 )  # fmt: skip
 SIMULATOR_SJ300_NAMES = (
