@@ -77,7 +77,8 @@ BUS_NAMES = (
 )  # fmt: skip
 SIMULATOR_NAMES = (
     "BusModel", "Faults", "LineCounters", "LinePacing", "PacedLine", "PlausibleLine",
-    "PtyServer", "RunState", "SerialDeviceServer", "SimulatorEndpoint", "SimulatorServer", "Transmission",
+    "PtyServer", "RunState", "SerialDeviceServer", "SimulatorEndpoint", "SimulatorServer",
+    "Transmission",
     "open_pty_server", "precise_event_loop", "serve_serial_device", "serve_tcp",
 )  # fmt: skip
 SIMULATOR_SJ300_NAMES = (
