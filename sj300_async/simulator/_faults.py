@@ -8,10 +8,18 @@ is different: it is off the line, hears nothing and executes nothing.
 One-shot faults count the node's next replies, each kind on its own: with
 ``drop_next(1)`` and ``delay_next(1, 0.5)`` pending, the next reply is
 dropped and that also uses up the delay.
+
+A drive answers in order: a reply it was made to hold back holds back every
+later reply of that node too (it goes out no sooner than the held one), as
+a drive busy with a slow answer does. Without that, a sync request sent
+after a time-out would be answered before the late reply it is there to
+flush, which no real drive does. :meth:`Faults.clear` ends the faults, not
+the replies already held: those still go out in order.
 """
 
 from __future__ import annotations
 
+import math
 from collections import deque
 from collections.abc import Callable
 from dataclasses import dataclass
@@ -80,6 +88,8 @@ class Faults:
         self._delay: dict[int, deque[float]] = {}
         self._late: dict[int, float] = {}
         self._silent: set[int] = set()
+        #: When each node's latest held-back reply goes out (see the module docstring).
+        self._held: dict[int, float] = {}
 
     def drop_next(self, node: int, count: int = 1) -> None:
         """Lose the next *count* replies of *node* (the drive still executes the requests)."""
@@ -136,18 +146,43 @@ class Faults:
         caller may skip it.
         """
         return (
-            node in self._drop or node in self._corrupt or node in self._delay or node in self._late
+            node in self._drop
+            or node in self._corrupt
+            or node in self._delay
+            or node in self._late
+            or node in self._held
         )
 
-    def apply(self, node: int, frame: bytes) -> FaultedReply | None:
-        """Consume *node*'s pending one-shot faults for one reply; None when it is dropped."""
+    def held_until(self) -> float:
+        """When the last reply held back by a delay goes out (-inf when none is held)."""
+        return max(self._held.values(), default=-math.inf)
+
+    def apply(self, node: int, frame: bytes, due: float = 0.0) -> FaultedReply | None:
+        """Consume *node*'s pending one-shot faults for one reply; None when it is dropped.
+
+        Args:
+            due: when the reply would go out without faults, on the caller's
+                clock: a reply is held behind an earlier delayed one until then.
+        """
         delays = self._delay.get(node)
-        extra = delays.popleft() if delays else 0.0
+        extra = 0.0
+        if delays is not None:
+            extra = delays.popleft()
+            if not delays:
+                del self._delay[node]  # so that pending() is False again
         delayed = bool(extra)
         extra += self._late.get(node, 0.0)
         corrupted = _take(self._corrupt, node)
         if _take(self._drop, node):
             return None
+        held = self._held.get(node)
+        if held is not None:
+            if held > due + extra:
+                extra = held - due  # behind the held reply, in order
+            elif not extra:
+                del self._held[node]  # the held reply is out: the node is in order again
+        if extra:
+            self._held[node] = due + extra
         damaged = self._corrupt_frame(frame) if corrupted else frame
         return FaultedReply(extra, damaged, corrupted, delayed)
 

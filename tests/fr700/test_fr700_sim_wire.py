@@ -261,3 +261,15 @@ def test_simulator_arguments_are_checked() -> None:
         Fr700SimulatedBus(stations=[1, 1])
     with pytest.raises(LocalProtocolError):
         Fr700SimulatedBus(terminator="\n")
+
+
+def test_a_station_answers_in_order_behind_a_held_reply(bus: Fr700SimulatedBus) -> None:
+    bus.faults.delay_next(1, 0.5)
+    [first] = bus.receive(request(1, 0x7A), 0.0)
+    [second] = bus.receive(request(1, 0x7A), 0.2)
+    [other] = bus.receive(request(2, 0x7A), 0.2)
+    assert first.delay_s == pytest.approx(0.5 + bus.drives[1].processing_s, abs=0.01)
+    assert 0.2 + second.delay_s == pytest.approx(first.delay_s)  # not before the held one
+    assert other.delay_s < 0.1
+    [later] = bus.receive(request(1, 0x7A), 1.0)
+    assert later.delay_s < 0.1

@@ -8,10 +8,13 @@ Two sources, both counted by kind:
   duplicated; the content made invalid with the BCC recomputed so that it
   still matches (letters where digits belong, an impossible node, a wrong
   length); and, towards the host, valid frames from nodes nobody addresses
-  (another segment, a misconfigured drive) slipped in before or after a reply.
+  (another segment, a misconfigured drive) slipped in before or after a reply;
+  and whole replies delivered twice, the copy in its own chunk a few
+  milliseconds after the original (a bridge that retransmits).
 - :class:`DriveChaos`, which drives the simulator's own hooks: replies
-  dropped, corrupted, delayed past the time-out, a node made late or taken
-  off the line for a while, drives tripped.
+  dropped, corrupted, delayed past the time-out (a little, or up to 5
+  time-outs: the drive answers in order, so its later replies wait behind),
+  a node made late or taken off the line for a while, drives tripped.
 
 Why at most one byte fault per frame. The SJ300's block check is an XOR:
 it catches every single corrupted, dropped, inserted or duplicated byte,
@@ -101,6 +104,20 @@ class FrameFaults(LineFaults):
     stray_nodes: tuple[int, ...] = tuple(range(20, 33))
     #: Judges whether a damaged frame is still valid: a ReplyParser or RequestParser factory.
     parser_factory: Callable[[], sj3.ReplyParser | sj3.RequestParser] = sj3.ReplyParser
+    #: Per frame (towards the host): the undamaged frame again, in its own chunk,
+    #: ``duplicate_delay_s`` after the original. Detectable only while the copy
+    #: arrives before the plausibility floor of the next request (so: on a line
+    #: with a speed; see docs/RELIABILITY.md).
+    duplicate_rate: float = 0.0
+    duplicate_delay_s: tuple[float, float] = (0.001, 0.005)
+
+    def apply(self, data: bytes) -> list[tuple[float, bytes]]:
+        pieces = super().apply(data)
+        if self.duplicate_rate and split_frame(data) and self.rng.random() < self.duplicate_rate:
+            after = pieces[-1][0] if pieces else 0.0
+            pieces.append((after + self.rng.uniform(*self.duplicate_delay_s), data))
+            self.counts["duplicated_replies"] += 1
+        return pieces
 
     def mangle(self, data: bytes) -> bytes:
         body = split_frame(data)
@@ -119,7 +136,7 @@ class FrameFaults(LineFaults):
 
     def stop(self) -> None:
         """Stop injecting (the counts stay)."""
-        self.byte_fault_rate = self.garble_rate = self.stray_rate = 0.0
+        self.byte_fault_rate = self.garble_rate = self.stray_rate = self.duplicate_rate = 0.0
         self.delay_rate = 0.0
         self.fragment_max = 0
 
@@ -179,10 +196,12 @@ class FrameFaults(LineFaults):
 class DriveChaos:
     """Applies the simulator's fault hooks at random (see the module docstring).
 
-    ``late_s`` bounds every reply delay: a reply later than twice the
-    time-out is indistinguishable from the answer to the next request (the
-    protocol has no sequence numbers; see sj300_async._timing), so delays
-    past the time-out stay below that bound with a margin for loop jitter.
+    Two kinds of delay past the time-out: a little (:meth:`late_delay`,
+    1.05..1.35 time-outs, also every reply of a late episode) and very late
+    (:meth:`very_late_delay`, 2.2..5 time-outs). The bus promises to catch a
+    reply up to 5 time-outs late from a drive that answers in order (its
+    resync; see docs/RELIABILITY.md), so no delay goes past that: a very late
+    reply is never drawn during a late episode of its node.
     """
 
     sim: SimulatedBus
@@ -190,6 +209,8 @@ class DriveChaos:
     timeout_s: float
     #: Per request: probability of one one-shot fault on a random node.
     rate: float = 0.01
+    #: The one-shot faults, drawn with equal chance (repeat a kind to weigh it more).
+    kinds: tuple[str, ...] = ("drop_next", "corrupt_next", "delay_next", "very_late_next", "trip")
     counts: dict[str, int] = field(default_factory=dict)
     _episode: tuple[str, int] | None = None
 
@@ -200,6 +221,10 @@ class DriveChaos:
         """A delay past the time-out that still ends well before twice the time-out."""
         return self.timeout_s * self.rng.uniform(1.05, 1.35)
 
+    def very_late_delay(self) -> float:
+        """A delay of 2.2..5 time-outs: the adversary's very late replies (issue 14)."""
+        return self.timeout_s * self.rng.uniform(2.2, 5.0)
+
     def maybe(self, now: float) -> None:
         """Called once per request: perhaps damage a drive's next reply, or trip it."""
         rng = self.rng
@@ -207,15 +232,17 @@ class DriveChaos:
             return
         node = rng.choice(sorted(self.sim.drives))
         faults = self.sim.faults
-        kind = rng.choice(("drop_next", "corrupt_next", "delay_next", "trip"))
-        if kind == "delay_next" and self._episode == ("late", node):
-            kind = "drop_next"  # late plus delayed would pass twice the time-out
+        kind = rng.choice(self.kinds)
+        if kind in ("delay_next", "very_late_next") and self._episode == ("late", node):
+            kind = "drop_next"  # late plus delayed could pass the 5 time-outs promised
         if kind == "drop_next":
             faults.drop_next(node)
         elif kind == "corrupt_next":
             faults.corrupt_next(node)
         elif kind == "delay_next":
             faults.delay_next(node, self.late_delay())
+        elif kind == "very_late_next":
+            faults.delay_next(node, self.very_late_delay())
         elif not self.sim.drives[node].trip(rng.choice((1, 5, 7, 9, 12, 21)), now=now):
             return  # already tripped: nothing happened
         self._count(kind)

@@ -9,6 +9,8 @@ from dataclasses import dataclass
 class Sizes:
     #: Drive API calls in the fault soak.
     transactions: int
+    #: Drive API calls in the fault soak on a 19200-baud line with duplicated and very late replies.
+    reply_transactions: int
     #: Cancelled calls in the cancellation storm.
     cancellations: int
     #: Kill / restart cycles of the TCP server.
@@ -24,6 +26,7 @@ class Sizes:
 #: The default suite (and CI): every run, small enough for the whole suite to stay fast.
 SHORT = Sizes(
     transactions=2_000,
+    reply_transactions=300,
     cancellations=300,
     reconnect_cycles=5,
     fuzz_inputs=20_000,
@@ -34,6 +37,7 @@ SHORT = Sizes(
 #: ``make soak``: the sizes docs/RELIABILITY.md publishes.
 LONG = Sizes(
     transactions=100_000,
+    reply_transactions=20_000,
     cancellations=10_000,
     reconnect_cycles=100,
     fuzz_inputs=1_000_000,

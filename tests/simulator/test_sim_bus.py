@@ -100,8 +100,32 @@ def test_delay_next_adds_to_one_reply() -> None:
     bus = SimulatedBus(nodes=[1], processing_s=0.0)
     bus.faults.delay_next(1, 0.5)
     assert bus.receive(request(b"01", b"0B"), 0.0) == [Transmission(0.5, ack(b"01"))]
-    assert bus.receive(request(b"01", b"0B"), 0.0) == [Transmission(0.0, ack(b"01"))]
+    assert bus.receive(request(b"01", b"0B"), 1.0) == [Transmission(0.0, ack(b"01"))]
     assert bus.stats.delayed_replies == 1
+
+
+def test_a_drive_answers_in_order_behind_a_held_reply() -> None:
+    bus = SimulatedBus(nodes=[1, 2], processing_s=0.0)
+    bus.faults.delay_next(1, 0.5)
+    assert bus.receive(request(b"01", b"0B"), 0.0) == [Transmission(0.5, ack(b"01"))]
+    # Asked again while its first answer is held, the drive answers after it...
+    assert bus.receive(request(b"01", b"0B"), 0.2) == [Transmission(0.3, ack(b"01"))]
+    assert bus.faults.held_until() == 0.5
+    # ...another drive is not held...
+    assert bus.receive(request(b"02", b"0B"), 0.2) == [Transmission(0.0, ack(b"02"))]
+    # ...and once the held reply is out, the node is in order again.
+    assert bus.receive(request(b"01", b"0B"), 0.6) == [Transmission(0.0, ack(b"01"))]
+    assert not bus.faults.pending(1)
+    assert bus.faults.held_until() == float("-inf")
+    assert bus.stats.delayed_replies == 1  # held is not delayed: only the one fault counts
+
+
+def test_clear_keeps_replies_already_held_in_order() -> None:
+    bus = SimulatedBus(nodes=[1], processing_s=0.0)
+    bus.faults.delay_next(1, 0.5)
+    bus.receive(request(b"01", b"0B"), 0.0)
+    bus.faults.clear()
+    assert bus.receive(request(b"01", b"0B"), 0.1) == [Transmission(0.4, ack(b"01"))]
 
 
 def test_late_node_is_late_until_cleared() -> None:
@@ -111,7 +135,7 @@ def test_late_node_is_late_until_cleared() -> None:
         assert bus.receive(request(b"02", b"0B"), 0.0) == [Transmission(0.3, ack(b"02"))]
     assert bus.receive(request(b"01", b"0B"), 0.0) == [Transmission(0.0, ack(b"01"))]
     bus.faults.late(2, 0)
-    assert bus.receive(request(b"02", b"0B"), 0.0) == [Transmission(0.0, ack(b"02"))]
+    assert bus.receive(request(b"02", b"0B"), 1.0) == [Transmission(0.0, ack(b"02"))]
 
 
 def test_corrupt_next_makes_the_bcc_fail() -> None:

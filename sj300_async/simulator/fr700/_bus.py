@@ -164,10 +164,12 @@ class Fr700SimulatedBus:
             if reply is None:
                 self.stats.resets += event.instruction == Fr700Instruction.INVERTER_RESET
                 return None
-            return self._transmit(drive, reply, drive.reply_delay_s(event))
+            return self._transmit(drive, reply, drive.reply_delay_s(event), now)
         if isinstance(event, BadRequest):
             drive.last_data_reply = None
-            return self._transmit(drive, Fr700Nak(drive.station, event.code), drive.processing_s)
+            return self._transmit(
+                drive, Fr700Nak(drive.station, event.code), drive.processing_s, now
+            )
         if not event.reoutput:
             self.stats.host_acks += 1
             drive.last_data_reply = None
@@ -176,13 +178,14 @@ class Fr700SimulatedBus:
             _log.debug("station %02d: asked to re-send, nothing to re-send", drive.station)
             return None
         self.stats.reoutputs += 1
-        return self._transmit(drive, drive.last_data_reply, drive.processing_s)
+        return self._transmit(drive, drive.last_data_reply, drive.processing_s, now)
 
     def _transmit(
-        self, drive: Fr700SimulatedDrive, reply: Fr700Reply, delay_s: float
+        self, drive: Fr700SimulatedDrive, reply: Fr700Reply, delay_s: float, now: float
     ) -> Transmission | None:
+        """The reply's transmission, *delay_s* after the request arrived (*now*), before faults."""
         frame = self._encode(reply)
-        faulted = self.faults.apply(drive.station, frame)
+        faulted = self.faults.apply(drive.station, frame, now + delay_s)
         if faulted is None:
             self.stats.dropped_replies += 1
             _log.debug("station %02d: reply dropped: %s", drive.station, frame.hex(" "))

@@ -137,7 +137,7 @@ class SimulatedBus:
                 assert isinstance(event, Discarded)  # counted and logged by the parser
                 continue
             if reply is not None:
-                sent = self._transmit(reply)
+                sent = self._transmit(reply, now)
                 if sent is not None:
                     out.append(sent)
         return out
@@ -178,12 +178,12 @@ class SimulatedBus:
             return None  # the parser has counted and logged the frame
         return drive, NakReply(drive.node, code)
 
-    def _transmit(self, answer: tuple[SimulatedDrive, Reply]) -> Transmission | None:
+    def _transmit(self, answer: tuple[SimulatedDrive, Reply], now: float) -> Transmission | None:
         drive, reply = answer
         frame = self._frame(drive.node, reply)
         extra_delay_s = 0.0
         if self.faults.pending(drive.node):
-            faulted = self.faults.apply(drive.node, frame)
+            faulted = self.faults.apply(drive.node, frame, now + drive.reply_delay_s)
             if faulted is None:
                 self.stats.dropped_replies += 1
                 _log.debug("node %02d: reply dropped: %s", drive.node, frame.hex(" "))
