@@ -175,6 +175,7 @@ class LineProtocol(asyncio.Protocol, Generic[ReplyT]):
 
     def data_received(self, data: bytes) -> None:
         now = self._loop.time()
+        self._stats.bytes_received += len(data)
         self._listener.bytes_received(data, now)
         arrived = data
         if self._echo:
@@ -218,6 +219,7 @@ class LineProtocol(asyncio.Protocol, Generic[ReplyT]):
             self.trace(TraceRecord(self._loop.time(), "tx", frame))
         if _log.isEnabledFor(logging.DEBUG):
             _log.debug("tx %s", frame.hex(" "))
+        self._stats.bytes_written += len(frame)
         self._transport.write(frame)
 
     @property
