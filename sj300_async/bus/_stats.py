@@ -97,6 +97,11 @@ class TransactionStats:
             self.latency_max_s = seconds
 
     @property
+    def latency_sum_s(self) -> float:
+        """The sum of every recorded round-trip time (a histogram's ``_sum``)."""
+        return self._latency_sum
+
+    @property
     def latency_mean_s(self) -> float | None:
         """Mean round-trip time of the answered requests, or None before the first."""
         return self._latency_sum / self.replies if self.replies else None
