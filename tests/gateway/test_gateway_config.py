@@ -1,0 +1,826 @@
+"""The gateway's configuration: what a valid file builds, and every refusal's exact message."""
+
+from __future__ import annotations
+
+import pickle
+import textwrap
+from pathlib import Path
+
+import pytest
+
+from sj300_async.gateway._config import (
+    GatewayConfigError,
+    config_from_flags,
+    load_config,
+    parse_config,
+    parse_endpoint,
+)
+from sj300_async.gateway._model import Endpoint, GatewayConfig, LineConfig, WriteGrant
+from sj300_async.wire import LocalProtocolError
+
+FULL = """\
+# The plant's gateway.
+[gateway]
+stale_after_s = 3      # seconds
+audit_log = "logs/audit.log"
+
+[modbus]
+listen = "0.0.0.0:1502"
+
+[metrics]
+listen = "[::1]:9300"
+
+[[lines]]
+name = "hall-a"
+url = "tcp://10.0.0.5:4001?baudrate=19200"
+nodes = "1-4,12"
+interval_s = 0.25
+reads = ["monitor"]
+parameters = [
+    "f001",   # set frequency
+    "A004",
+]
+trips_interval_s = 0
+unit_offset = 10
+timeout_s = 0.3
+lease_s = 2.5
+on_lapse = "broadcast_stop"
+
+  [[lines.writes]]
+  nodes = "1-2"
+  parameters = ["a004"]
+  control = true
+
+  [[lines.writes]]
+  nodes = [2, 12]
+  parameters = ["F001"]
+
+[[lines]]
+url = "serial:///dev/ttyUSB0?protocol=fr700"
+nodes = [0, 3, 1]
+parameters = ["pr.7"]
+on_lapse = "hold"
+"""
+
+
+def parse(text: str) -> GatewayConfig:
+    return parse_config(textwrap.dedent(text), "gateway.toml")
+
+
+def refusal(text: str) -> str:
+    with pytest.raises(GatewayConfigError) as caught:
+        parse(text)
+    return str(caught.value)
+
+
+# -- valid configurations ----------------------------------------------------------------------
+
+
+def test_a_full_file_reaches_every_field(tmp_path: Path) -> None:
+    path = tmp_path / "gateway.toml"
+    path.write_text(FULL, encoding="utf-8")
+
+    config = load_config(path)
+
+    assert config == GatewayConfig(
+        lines=(
+            LineConfig(
+                name="hall-a",
+                url="tcp://10.0.0.5:4001?baudrate=19200",
+                protocol="sj300",
+                nodes=(1, 2, 3, 4, 12),
+                interval_s=0.25,
+                reads=("monitor",),
+                parameters=("F001", "A004"),
+                trips_interval_s=0.0,
+                unit_offset=10,
+                timeout_s=0.3,
+                grants=(
+                    WriteGrant(
+                        nodes=frozenset({1, 2}), parameters=frozenset({"A004"}), control=True
+                    ),
+                    WriteGrant(nodes=frozenset({2, 12}), parameters=frozenset({"F001"})),
+                ),
+                lease_s=2.5,
+                on_lapse="broadcast_stop",
+            ),
+            LineConfig(
+                name="line2",
+                url="serial:///dev/ttyUSB0?protocol=fr700",
+                protocol="fr700",
+                nodes=(0, 1, 3),
+                parameters=("Pr.7",),
+                unit_offset=100,
+                on_lapse="hold",
+            ),
+        ),
+        modbus=Endpoint("0.0.0.0", 1502),
+        metrics=Endpoint("::1", 9300),
+        stale_after_s=3.0,
+        audit_log=tmp_path / "logs" / "audit.log",
+    )
+    assert config.source == str(path)
+    assert config.lines[0].writable_parameters(2) == {"A004", "F001"}
+    assert config.lines[0].control_allowed(1)
+    assert not config.lines[0].control_allowed(12)
+
+
+def test_defaults_of_a_minimal_file() -> None:
+    config = parse(
+        """\
+        [[lines]]
+        url = "tcp://10.0.0.5:4001"
+        nodes = "1-2"
+
+        [[lines]]
+        url = "tcp://10.0.0.6:4001"
+        protocol = "fr700"
+        nodes = "0-1"
+        """
+    )
+
+    assert config == GatewayConfig(
+        lines=(
+            LineConfig(name="line1", url="tcp://10.0.0.5:4001", protocol="sj300", nodes=(1, 2)),
+            LineConfig(
+                name="line2",
+                url="tcp://10.0.0.6:4001",
+                protocol="fr700",
+                nodes=(0, 1),
+                unit_offset=100,
+            ),
+        )
+    )
+    assert (config.modbus, config.metrics, config.audit_log) == (None, None, None)
+    assert config.source == "gateway.toml"
+    assert [config.lines[1].unit(node) for node in (0, 1)] == [100, 101]
+
+
+def test_audit_log_is_relative_to_the_file_unless_absolute(tmp_path: Path) -> None:
+    lines = '[[lines]]\nurl = "sim://"\nnodes = "1"\n'
+    relative = parse_config(f'[gateway]\naudit_log = "a.log"\n{lines}', str(tmp_path / "g.toml"))
+    absolute = parse_config(f'[gateway]\naudit_log = "/var/a.log"\n{lines}', "conf/g.toml")
+
+    assert relative.audit_log == tmp_path / "a.log"
+    assert absolute.audit_log == Path("/var/a.log")
+
+
+def test_a_line_can_be_an_inline_table() -> None:
+    config = parse('lines = [{ url = "sim://", nodes = [3, 1, 3], reads = [] }]\n')
+
+    assert config.lines[0].nodes == (1, 3)
+    assert config.lines[0].reads == ()
+
+
+def test_a_byte_order_mark_is_tolerated(tmp_path: Path) -> None:
+    path = tmp_path / "bom.toml"
+    path.write_bytes(b'\xef\xbb\xbf[[lines]]\nurl = "sim://"\nnodes = "1"\n')
+
+    assert load_config(path).lines[0].nodes == (1,)
+
+
+# -- refusals: every message is exact, with its line and key ----------------------------------
+
+LINE = '[[lines]]\nurl = "tcp://10.0.0.5:4001"\nnodes = "1-8"\n'
+
+REFUSALS = [
+    pytest.param(
+        '[gateway]\nstale_after_s = 5\n[modbuss]\nlisten = ":502"\n',
+        "gateway.toml:3: modbuss: unknown key 'modbuss' (did you mean 'modbus'?)",
+        id="unknown-table",
+    ),
+    pytest.param(
+        '[modbus]\n# the SCADA side\nlistn = ":502"\n',
+        "gateway.toml:3: modbus.listn: unknown key 'listn' (did you mean 'listen'?)",
+        id="unknown-key-did-you-mean",
+    ),
+    pytest.param(
+        "[metrics]\nport = 9300\n",
+        "gateway.toml:2: metrics.port: unknown key 'port' (use listen)",
+        id="unknown-key-no-close-match",
+    ),
+    pytest.param(
+        LINE + "intervl_s = 1\n",
+        "gateway.toml:4: lines[0].intervl_s: unknown key 'intervl_s' (did you mean 'interval_s'?)",
+        id="unknown-line-key",
+    ),
+    pytest.param(
+        '[gateway]\nstale_after_s = "5"\n',
+        "gateway.toml:2: gateway.stale_after_s: expected a number, got string",
+        id="string-for-number",
+    ),
+    pytest.param(
+        "[gateway]\nstale_after_s = true\n",
+        "gateway.toml:2: gateway.stale_after_s: expected a number, got boolean",
+        id="boolean-is-not-a-number",
+    ),
+    pytest.param(
+        "[gateway]\nstale_after_s = 0\n",
+        "gateway.toml:2: gateway.stale_after_s: must be > 0, got 0",
+        id="stale-after-zero",
+    ),
+    pytest.param(
+        "[gateway]\nstale_after_s = nan\n",
+        "gateway.toml:2: gateway.stale_after_s: expected a finite number, got nan",
+        id="stale-after-nan",
+    ),
+    pytest.param(
+        "[gateway]\nstale_after_s = 1" + "0" * 400 + "\n",
+        "gateway.toml:2: gateway.stale_after_s: expected a finite number, got 1" + "0" * 400,
+        id="integer-too-large",
+    ),
+    pytest.param(
+        '[gateway]\naudit_log = " "\n',
+        "gateway.toml:2: gateway.audit_log: expected a file name, got an empty string",
+        id="audit-log-empty",
+    ),
+    pytest.param(
+        "[gateway]\naudit_log = 5\n",
+        "gateway.toml:2: gateway.audit_log: expected a string, got integer",
+        id="audit-log-not-a-string",
+    ),
+    pytest.param(
+        "gateway = 5\n",
+        "gateway.toml:1: gateway: expected a table, got integer",
+        id="section-not-a-table",
+    ),
+    pytest.param(
+        "[modbus]\n",
+        "gateway.toml:1: modbus.listen: missing required key 'listen'",
+        id="listen-missing",
+    ),
+    pytest.param(
+        '[modbus]\nlisten = "localhost"\n',
+        "gateway.toml:2: modbus.listen: expected HOST:PORT, got 'localhost'",
+        id="listen-without-port",
+    ),
+    pytest.param(
+        '[metrics]\nlisten = "127.0.0.1:70000"\n',
+        "gateway.toml:2: metrics.listen: port must be 0..65535, got '70000'",
+        id="listen-port-too-large",
+    ),
+    pytest.param(
+        '[modbus]\nlisten = ":502"\n[metrics]\nlisten = "127.0.0.1:502"\n',
+        "gateway.toml:4: metrics.listen: the Modbus server already listens on 0.0.0.0:502",
+        id="metrics-on-the-modbus-port",
+    ),
+    pytest.param(
+        "[gateway]\nstale_after_s = 5\n",
+        "gateway.toml: lines: no lines: add a [[lines]] table with a url and nodes",
+        id="no-lines",
+    ),
+    pytest.param(
+        "lines = []\n",
+        "gateway.toml:1: lines: no lines: add a [[lines]] table with a url and nodes",
+        id="empty-lines",
+    ),
+    pytest.param(
+        '[lines]\nurl = "sim://"\n',
+        "gateway.toml:1: lines: expected an array of tables ([[lines]]), got table",
+        id="lines-is-a-table",
+    ),
+    pytest.param(
+        "lines = [5]\n",
+        "gateway.toml:1: lines[0]: expected a table, got integer",
+        id="line-not-a-table",
+    ),
+    pytest.param(
+        '# first line\n[[lines]]\nnodes = "1-8"\n',
+        "gateway.toml:2: lines[0].url: missing required key 'url'",
+        id="url-missing-points-at-the-header",
+    ),
+    pytest.param(
+        '[[lines]]\nurl = "ftp://x"\nnodes = "1"\n',
+        "gateway.toml:2: lines[0].url: unknown bus URL scheme 'ftp' in 'ftp://x' "
+        "(use tcp://, serial:// or sim://)",
+        id="bad-url",
+    ),
+    pytest.param(
+        '[[lines]]\nurl = "tcp://h:1?terminator=cr"\nnodes = "1"\n',
+        "gateway.toml:2: lines[0].url: terminator in 'tcp://h:1?terminator=cr' are options "
+        "of protocol fr700: add protocol=fr700",
+        id="url-option-of-another-protocol",
+    ),
+    pytest.param(
+        LINE + 'protocol = "fr7000"\n',
+        "gateway.toml:4: lines[0].protocol: unknown protocol 'fr7000' (did you mean 'fr700'?)",
+        id="unknown-protocol",
+    ),
+    pytest.param(
+        '[[lines]]\nprotocol = "sj300"\nurl = "tcp://h:1?protocol=fr700"\nnodes = "1"\n',
+        "gateway.toml:3: lines[0].url: protocol='sj300' but the URL says protocol=fr700",
+        id="protocol-differs-from-the-url",
+    ),
+    pytest.param(
+        LINE + 'name = "hall a"\n',
+        "gateway.toml:4: lines[0].name: a line name is letters, digits, '_', '.' and '-', "
+        "got 'hall a'",
+        id="bad-line-name",
+    ),
+    pytest.param(
+        LINE + '[[lines]]\nname = "line1"\nurl = "sim://"\nnodes = "1"\n',
+        "gateway.toml:5: lines[1].name: duplicate line name 'line1' (also lines[0])",
+        id="name-repeats-a-default",
+    ),
+    pytest.param(
+        LINE + 'name = "line2"\n[[lines]]\nurl = "sim://"\nnodes = "1"\n',
+        "gateway.toml:5: lines[1].name: duplicate line name 'line2' (also lines[0])",
+        id="default-name-taken",
+    ),
+    pytest.param(
+        LINE + '[[lines]]\nurl = "tcp://10.0.0.5:4001?baudrate=9600"\nnodes = "9"\n',
+        "gateway.toml:5: lines[1].url: tcp://10.0.0.5:4001 is already line line1's "
+        "(a line is one [[lines]] with all its nodes)",
+        id="two-lines-one-url",
+    ),
+    pytest.param(
+        '[[lines]]\nurl = "sim://"\n',
+        "gateway.toml:1: lines[0].nodes: missing required key 'nodes'",
+        id="nodes-missing",
+    ),
+    pytest.param(
+        '[[lines]]\nurl = "sim://"\nnodes = "1-40"\n',
+        "gateway.toml:3: lines[0].nodes: bad node list '1-40': nodes are 1..32, got '1-40'",
+        id="node-list-out-of-range",
+    ),
+    pytest.param(
+        '[[lines]]\nurl = "sim://"\nnodes = [1, 40]\n',
+        "gateway.toml:3: lines[0].nodes: node 40 is outside 1..32",
+        id="node-array-out-of-range",
+    ),
+    pytest.param(
+        '[[lines]]\nurl = "sim://"\nprotocol = "fr700"\nnodes = [0, 32]\n',
+        "gateway.toml:4: lines[0].nodes: station 32 is outside 0..31",
+        id="fr700-station-out-of-range",
+    ),
+    pytest.param(
+        '[[lines]]\nurl = "sim://"\nnodes = 5\n',
+        'gateway.toml:3: lines[0].nodes: expected a node list ("1-8,12") or an array of '
+        "integers, got integer",
+        id="nodes-wrong-type",
+    ),
+    pytest.param(
+        '[[lines]]\nurl = "sim://"\nnodes = [1, "2"]\n',
+        "gateway.toml:3: lines[0].nodes: expected an array of integers, got string '2' in it",
+        id="nodes-array-of-strings",
+    ),
+    pytest.param(
+        '[[lines]]\nurl = "sim://"\nnodes = []\n',
+        "gateway.toml:3: lines[0].nodes: no nodes",
+        id="nodes-empty",
+    ),
+    pytest.param(
+        LINE + "interval_s = 0.01\n",
+        "gateway.toml:4: lines[0].interval_s: must be >= 0.05, got 0.01",
+        id="interval-too-short",
+    ),
+    pytest.param(
+        LINE + 'reads = ["stats"]\n',
+        "gateway.toml:4: lines[0].reads: unknown read 'stats' (did you mean 'status'?)",
+        id="unknown-read",
+    ),
+    pytest.param(
+        LINE + 'reads = "status"\n',
+        "gateway.toml:4: lines[0].reads: expected an array of strings, got string",
+        id="reads-not-an-array",
+    ),
+    pytest.param(
+        LINE + 'parameters = ["A004", 7]\n',
+        "gateway.toml:4: lines[0].parameters: expected an array of strings, got integer 7 in it",
+        id="parameters-not-strings",
+    ),
+    pytest.param(
+        LINE + 'parameters = ["Pr.7"]\n',
+        "gateway.toml:4: lines[0].parameters: unknown parameter 'Pr.7' for sj300",
+        id="unknown-parameter-sj300",
+    ),
+    pytest.param(
+        '[[lines]]\nurl = "sim://?protocol=fr700"\nnodes = "1"\nparameters = ["A004"]\n',
+        "gateway.toml:4: lines[0].parameters: unknown parameter 'A004' for fr700",
+        id="unknown-parameter-fr700",
+    ),
+    pytest.param(
+        LINE + "trips_interval_s = -1\n",
+        "gateway.toml:4: lines[0].trips_interval_s: must be >= 0, got -1",
+        id="trips-interval-negative",
+    ),
+    pytest.param(
+        LINE + "unit_offset = 1.5\n",
+        "gateway.toml:4: lines[0].unit_offset: expected an integer, got float",
+        id="unit-offset-not-an-integer",
+    ),
+    pytest.param(
+        '[[lines]]\nurl = "sim://"\nnodes = "1-32"\nunit_offset = 220\n',
+        "gateway.toml:4: lines[0].unit_offset: node 28 would be Modbus unit 248, outside 1..247",
+        id="unit-above-247",
+    ),
+    pytest.param(
+        LINE + "unit_offset = -1\n",
+        "gateway.toml:4: lines[0].unit_offset: node 1 would be Modbus unit 0, outside 1..247",
+        id="unit-zero-is-broadcast",
+    ),
+    pytest.param(
+        LINE + "timeout_s = 0\n",
+        "gateway.toml:4: lines[0].timeout_s: must be > 0, got 0",
+        id="timeout-zero",
+    ),
+    pytest.param(
+        LINE + "lease_s = -1\n",
+        "gateway.toml:4: lines[0].lease_s: must be > 0, got -1",
+        id="lease-negative",
+    ),
+    pytest.param(
+        LINE + 'on_lapse = "stops"\n',
+        "gateway.toml:4: lines[0].on_lapse: unknown action 'stops' (did you mean 'stop'?)",
+        id="unknown-lapse-action",
+    ),
+    pytest.param(
+        '[[lines]]\nurl = "sim://"\nprotocol = "fr700"\nnodes = "1"\non_lapse = "broadcast_stop"\n',
+        "gateway.toml:5: lines[0].on_lapse: broadcast_stop needs a broadcast, which fr700 has not",
+        id="broadcast-stop-on-fr700",
+    ),
+    pytest.param(
+        LINE + 'writes = "all"\n',
+        "gateway.toml:4: lines[0].writes: expected an array of tables ([[lines.writes]]), "
+        "got string",
+        id="writes-not-tables",
+    ),
+    pytest.param(
+        LINE + "[[lines.writes]]\ncontroll = true\n",
+        "gateway.toml:5: lines[0].writes[0].controll: unknown key 'controll' "
+        "(did you mean 'control'?)",
+        id="unknown-grant-key",
+    ),
+    pytest.param(
+        LINE + "[[lines.writes]]\ncontrol = true\n",
+        "gateway.toml:4: lines[0].writes[0].nodes: missing required key 'nodes'",
+        id="grant-nodes-missing",
+    ),
+    pytest.param(
+        LINE + '[[lines.writes]]\nnodes = "8-9"\ncontrol = true\n',
+        "gateway.toml:5: lines[0].writes[0].nodes: node 9 is not one of line line1's nodes (1-8)",
+        id="grant-node-not-on-the-line",
+    ),
+    pytest.param(
+        LINE + 'name = "hall-a"\n[[lines.writes]]\nnodes = "1"\nparameters = ["A004"]\n',
+        "gateway.toml:7: lines[0].writes[0].parameters: A004 is not polled on line hall-a: "
+        "add it to parameters",
+        id="grant-parameter-not-polled",
+    ),
+    pytest.param(
+        LINE + '[[lines.writes]]\nnodes = "1"\nparameters = ["X1"]\n',
+        "gateway.toml:6: lines[0].writes[0].parameters: unknown parameter 'X1' for sj300",
+        id="grant-parameter-unknown",
+    ),
+    pytest.param(
+        LINE + '[[lines.writes]]\nnodes = "1"\ncontrol = "yes"\n',
+        "gateway.toml:6: lines[0].writes[0].control: expected true or false, got string",
+        id="grant-control-not-a-boolean",
+    ),
+    pytest.param(
+        LINE + '[[lines.writes]]\nnodes = "1"\n',
+        "gateway.toml:4: lines[0].writes[0]: grants nothing: give it parameters, or control = true",
+        id="grant-grants-nothing",
+    ),
+]
+
+
+@pytest.mark.parametrize(("text", "message"), REFUSALS)
+def test_refusal(text: str, message: str) -> None:
+    assert refusal(text) == message
+
+
+def test_unit_ids_collide_across_lines() -> None:
+    text = """\
+        [[lines]]
+        name = "hall-a"
+        url = "tcp://10.0.0.5:4001"
+        nodes = "1-8"
+
+        [[lines]]
+        name = "hall-b"
+        url = "tcp://10.0.0.6:4001"
+        nodes = "8-9"
+        """
+
+    assert refusal(text) == (
+        "gateway.toml:9: lines[1].nodes: Modbus unit 8 (node 8) is also line hall-a's (node 8): "
+        "set unit_offset on one of them"
+    )
+
+
+def test_unit_ids_collide_across_protocols_when_the_offset_says_so() -> None:
+    text = """\
+        [[lines]]
+        name = "sj"
+        url = "tcp://10.0.0.5:4001"
+        nodes = "1-8"
+
+        [[lines]]
+        name = "fr"
+        url = "tcp://10.0.0.6:4001"
+        protocol = "fr700"
+        nodes = "1-3"
+        unit_offset = 0
+        """
+
+    assert refusal(text) == (
+        "gateway.toml:11: lines[1].unit_offset: Modbus unit 1 (station 1) is also line sj's "
+        "(node 1): set unit_offset on one of them"
+    )
+
+
+def test_the_default_offsets_keep_sj300_and_fr700_apart() -> None:
+    config = parse(
+        """\
+        [[lines]]
+        url = "tcp://10.0.0.5:4001"
+        nodes = "1-32"
+
+        [[lines]]
+        url = "tcp://10.0.0.6:4001"
+        protocol = "fr700"
+        nodes = "0-31"
+        """
+    )
+
+    units = [line.unit(node) for line in config.lines for node in line.nodes]
+    assert len(set(units)) == 64
+
+
+# -- the locator: line numbers past comments, multi-line values and nested tables -------------
+
+
+def test_second_grant_of_the_second_line() -> None:
+    text = """\
+        [[lines]]
+        url = "tcp://10.0.0.5:4001"
+        nodes = "1-8"
+        parameters = ["A004"]
+          [[lines.writes]]
+          nodes = "1"
+          parameters = ["A004"]
+
+        [[lines]]   # hall B
+        url = "tcp://10.0.0.6:4001"
+        nodes = "1-8"
+        unit_offset = 8
+          [[lines.writes]]
+          nodes = "2"
+          control = true
+          [[lines.writes]]
+          # nodes = "1"
+          nodes = "9"
+          control = true
+        """
+
+    assert refusal(text) == (
+        "gateway.toml:18: lines[1].writes[1].nodes: node 9 is not one of line line2's nodes (1-8)"
+    )
+
+
+def test_a_multi_line_array_does_not_confuse_the_lines_after_it() -> None:
+    text = """\
+        [[lines]]
+        url = "tcp://10.0.0.5:4001"
+        parameters = [
+            "A004",   # [not a table]
+            "F001",
+        ]
+        nodes = "1-40"
+        """
+
+    assert refusal(text) == (
+        "gateway.toml:7: lines[0].nodes: bad node list '1-40': nodes are 1..32, got '1-40'"
+    )
+
+
+def test_a_key_inside_an_inline_table_points_at_its_first_line() -> None:
+    text = 'x = 1\nlines = [\n  { url = "sim://", nodes = "40" },\n]\n'
+
+    assert (
+        refusal(text) == "gateway.toml:1: x: unknown key 'x' (use gateway, modbus, metrics, lines)"
+    )
+    assert refusal(text[6:]) == (
+        "gateway.toml:1: lines[0].nodes: bad node list '40': nodes are 1..32, got '40'"
+    )
+
+
+# -- reading the file ------------------------------------------------------------------------
+
+
+def test_a_toml_syntax_error_names_its_line() -> None:
+    assert refusal('[[lines]]\nurl = "sim://"\nnodes = \n') == (
+        "gateway.toml:3: invalid TOML: Invalid value (column 9)"
+    )
+
+
+def test_a_toml_error_at_the_end_names_the_last_line() -> None:
+    assert refusal('[[lines]]\nurl = "sim://\n') == (
+        "gateway.toml:2: invalid TOML: Illegal character '\\n' (column 14)"
+    )
+    assert (
+        refusal('x = """\nopen')
+        == "gateway.toml:2: invalid TOML: Unterminated string (at end of file)"
+    )
+
+
+def test_a_missing_file_is_named(tmp_path: Path) -> None:
+    path = tmp_path / "nope.toml"
+
+    with pytest.raises(GatewayConfigError) as caught:
+        load_config(path)
+
+    assert str(caught.value) == f"{path}: No such file or directory"
+    assert (caught.value.line, caught.value.key) == (None, None)
+
+
+def test_a_directory_is_not_a_file(tmp_path: Path) -> None:
+    with pytest.raises(GatewayConfigError, match="Is a directory"):
+        load_config(str(tmp_path))
+
+
+def test_a_file_that_is_not_utf8(tmp_path: Path) -> None:
+    path = tmp_path / "latin1.toml"
+    path.write_bytes(b'[[lines]]\nname = "halle-\xe4"\n')
+
+    with pytest.raises(GatewayConfigError) as caught:
+        load_config(path)
+
+    assert str(caught.value) == f"{path}:2: not UTF-8 text: invalid continuation byte"
+
+
+def test_the_file_name_is_as_given(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    monkeypatch.chdir(tmp_path)
+    Path("gw.toml").write_text("[gateway]\nstale_after_s = -1\n", encoding="utf-8")
+
+    with pytest.raises(GatewayConfigError) as caught:
+        load_config("gw.toml")
+
+    assert str(caught.value) == "gw.toml:2: gateway.stale_after_s: must be > 0, got -1"
+
+
+# -- the error itself ------------------------------------------------------------------------
+
+
+def test_the_error_is_one_line_in_every_form() -> None:
+    assert (
+        str(GatewayConfigError("g.toml", 3, "lines[0].url", "bad")) == "g.toml:3: lines[0].url: bad"
+    )
+    assert str(GatewayConfigError("g.toml", None, "lines", "bad")) == "g.toml: lines: bad"
+    assert str(GatewayConfigError("g.toml", 3, None, "bad")) == "g.toml:3: bad"
+    assert str(GatewayConfigError("g.toml", None, None, "bad")) == "g.toml: bad"
+
+
+def test_the_error_is_a_value_error_that_pickles() -> None:
+    error = GatewayConfigError("g.toml", 3, "modbus.listen", "bad")
+    copy = pickle.loads(pickle.dumps(error))
+
+    assert isinstance(error, LocalProtocolError)
+    assert isinstance(error, ValueError)
+    assert (copy.source, copy.line, copy.key, copy.reason) == ("g.toml", 3, "modbus.listen", "bad")
+    assert str(copy) == str(error)
+
+
+# -- the command line ------------------------------------------------------------------------
+
+
+def test_flags_build_one_read_only_line() -> None:
+    config = config_from_flags(
+        url="sim://?nodes=1-4",
+        nodes="1-4",
+        protocol=None,
+        modbus=":0",
+        metrics="127.0.0.1:0",
+        stale_after_s=2.0,
+        interval_s=0.2,
+    )
+
+    assert config == GatewayConfig(
+        lines=(
+            LineConfig(
+                name="line1",
+                url="sim://?nodes=1-4",
+                protocol="sj300",
+                nodes=(1, 2, 3, 4),
+                interval_s=0.2,
+            ),
+        ),
+        modbus=Endpoint("0.0.0.0", 0),
+        metrics=Endpoint("127.0.0.1", 0),
+        stale_after_s=2.0,
+    )
+    assert config.source == "<command line>"
+    assert config.lines[0].grants == ()
+
+
+def test_flags_with_fr700() -> None:
+    config = config_from_flags(
+        url="tcp://10.0.0.5:4001", nodes="0-2", protocol="fr700", modbus=None, metrics=None
+    )
+
+    assert (config.lines[0].protocol, config.lines[0].unit_offset) == ("fr700", 100)
+    assert (config.modbus, config.metrics) == (None, None)
+
+
+FLAG_DEFAULTS: dict[str, object] = {
+    "url": "tcp://10.0.0.5:4001",
+    "nodes": "1-8",
+    "protocol": None,
+    "modbus": ":502",
+    "metrics": None,
+}
+
+
+@pytest.mark.parametrize(
+    ("flags", "message"),
+    [
+        pytest.param(
+            {"nodes": "40"},
+            "<command line>: --nodes: bad node list '40': nodes are 1..32, got '40'",
+            id="nodes",
+        ),
+        pytest.param(
+            {"url": "ftp://x"},
+            "<command line>: --url: unknown bus URL scheme 'ftp' in 'ftp://x' "
+            "(use tcp://, serial:// or sim://)",
+            id="url",
+        ),
+        pytest.param(
+            {"protocol": "modbus"},
+            "<command line>: --protocol: unknown protocol 'modbus' (use fr700, sj300)",
+            id="protocol",
+        ),
+        pytest.param(
+            {"modbus": "502"},
+            "<command line>: --modbus: expected HOST:PORT, got '502'",
+            id="modbus",
+        ),
+        pytest.param(
+            {"metrics": "0.0.0.0:502"},
+            "<command line>: --metrics: the Modbus server already listens on 0.0.0.0:502",
+            id="metrics",
+        ),
+        pytest.param(
+            {"stale_after_s": 0.0},
+            "<command line>: --stale-after: must be > 0, got 0",
+            id="stale-after",
+        ),
+        pytest.param(
+            {"interval_s": 0.001},
+            "<command line>: --interval: must be >= 0.05, got 0.001",
+            id="interval",
+        ),
+    ],
+)
+def test_flag_refusals_name_the_flag(flags: dict[str, object], message: str) -> None:
+    arguments = {**FLAG_DEFAULTS, **flags}
+
+    with pytest.raises(GatewayConfigError) as caught:
+        config_from_flags(**arguments)  # type: ignore[arg-type]
+
+    assert str(caught.value) == message
+    assert caught.value.line is None
+
+
+# -- endpoints -------------------------------------------------------------------------------
+
+
+@pytest.mark.parametrize(
+    ("text", "endpoint"),
+    [
+        ("127.0.0.1:9300", Endpoint("127.0.0.1", 9300)),
+        ("[::1]:502", Endpoint("::1", 502)),
+        (":502", Endpoint("0.0.0.0", 502)),
+        (" localhost:0 ", Endpoint("localhost", 0)),
+        ("[fe80::1%eth0]:65535", Endpoint("fe80::1%eth0", 65535)),
+    ],
+)
+def test_parse_endpoint(text: str, endpoint: Endpoint) -> None:
+    assert parse_endpoint(text) == endpoint
+    assert parse_endpoint(str(endpoint)) == endpoint
+
+
+@pytest.mark.parametrize(
+    ("text", "message"),
+    [
+        ("localhost", "expected HOST:PORT, got 'localhost'"),
+        ("::1:502", "put an IPv6 address in brackets: [::1]:502"),
+        ("[::1]", "expected [IPV6]:PORT, got '[::1]'"),
+        ("[::1]502", "expected [IPV6]:PORT, got '[::1]502'"),
+        ("[]:502", "bad host '' in '[]:502'"),
+        ("my host:502", "bad host 'my host' in 'my host:502'"),
+        ("host:", "port must be 0..65535, got ''"),
+        ("host:65536", "port must be 0..65535, got '65536'"),
+        ("host:-1", "port must be 0..65535, got '-1'"),
+        (
+            "host:\uff15\uff10\uff12",
+            "port must be 0..65535, got '\uff15\uff10\uff12'",
+        ),  # full-width
+    ],
+)
+def test_parse_endpoint_refuses(text: str, message: str) -> None:
+    with pytest.raises(LocalProtocolError) as caught:
+        parse_endpoint(text)
+
+    assert str(caught.value) == message
