@@ -59,6 +59,7 @@ _SUBCOMMANDS = (
     "._trips",
     "._params",
     "._simulate",
+    "._gateway",
     "._shell",
 )
 

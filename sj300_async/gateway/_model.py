@@ -1,8 +1,9 @@
-"""What a gateway is configured to do: frozen dataclasses, validated when built.
+"""What a gateway is configured to do: frozen dataclasses.
 
-:mod:`._config` builds a :class:`GatewayConfig` from a TOML file (errors name
-the file, line and key) or from the command line's flags; everything else in
-the gateway reads only these objects. Nothing here does I/O.
+:mod:`._config` builds and validates a :class:`GatewayConfig` from a TOML
+file (errors name the file, line and key) or from the command line's flags;
+everything else in the gateway reads only these objects. Nothing here does
+I/O.
 
 Decisions (docs/GATEWAY.md has the user's view):
 
@@ -25,7 +26,10 @@ from pathlib import Path
 from typing import Final, Literal, get_args
 
 __all__ = [
+    "DEFAULT_LEASE_S",
     "DEFAULT_STALE_AFTER_S",
+    "LAPSE_ACTIONS",
+    "UNIT_RANGE",
     "Endpoint",
     "GatewayConfig",
     "LapseAction",
@@ -89,7 +93,8 @@ class LineConfig:
     reads: tuple[str, ...] = ("status", "monitor")
     parameters: tuple[str, ...] = ()
     #: Seconds between two reads of a drive's trip history (0: never); it is
-    #: also read when the drive's status turns to tripped. SJ300 only.
+    #: also read when the drive's status turns to tripped. SJ300 only (an
+    #: FR-700 line ignores it: its drive class reads no alarm history yet).
     trips_interval_s: float = 30.0
     #: Unit id = node + unit_offset.
     unit_offset: int = 0

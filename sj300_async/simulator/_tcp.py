@@ -17,6 +17,7 @@ from __future__ import annotations
 
 import asyncio
 import logging
+from collections.abc import Callable
 from types import TracebackType
 from typing import cast
 
@@ -42,15 +43,25 @@ class _Connection(asyncio.Protocol):
         # deriving from asyncio's classes.
         transport = cast(asyncio.Transport, transport)
         self._transport = transport
+        send: Callable[[bytes], object] = transport.write
+        tap = self._server.tap
+        if tap is not None:
+
+            def send(data: bytes) -> None:
+                tap("tx", data)
+                transport.write(data)
+
         # The loop calls data_received from the socket's reader: answer at once.
         self._endpoint = SimulatorEndpoint(
-            self._server.bus, send=transport.write, line=self._server.line, defer=False
+            self._server.bus, send=send, line=self._server.line, defer=False
         )
         self._server._connections.add(self)
         _log.debug("client connected: %s", transport.get_extra_info("peername"))
 
     def data_received(self, data: bytes) -> None:
         assert self._endpoint is not None
+        if self._server.tap is not None:
+            self._server.tap("rx", data)
         self._endpoint.data_received(data)
 
     def connection_lost(self, exc: Exception | None) -> None:
@@ -72,9 +83,15 @@ class SimulatorServer:
     Use :func:`serve_tcp` to make one. Also an async context manager.
     """
 
-    def __init__(self, bus: BusModel, line: PacedLine | None) -> None:
+    def __init__(
+        self, bus: BusModel, line: PacedLine | None, tap: Callable[[str, bytes], None] | None = None
+    ) -> None:
         self.bus = bus
         self.line = line
+        #: Called with every chunk as it crosses the line: ``("rx", host bytes)``
+        #: as they arrive, ``("tx", reply bytes)`` as they are sent (a line log;
+        #: for clients connected after it is set).
+        self.tap = tap
         #: The address the listener is bound to.
         self.host = ""
         #: The bound port (the real one when 0 was asked for).
@@ -124,6 +141,7 @@ async def serve_tcp(
     pacing: LinePacing | None = None,
     *,
     line: PacedLine | None = None,
+    tap: Callable[[str, bytes], None] | None = None,
 ) -> SimulatorServer:
     """Listen for TCP clients and serve *bus* to each of them.
 
@@ -135,11 +153,12 @@ async def serve_tcp(
             (:class:`~._pacing.PlausibleLine`);
             ``LineSettings(baudrate=0)``: answer at once.
         line: share this paced line (e.g. with a pty server); overrides *pacing*.
+        tap: see :attr:`SimulatorServer.tap`.
 
     Raises:
         OSError: the address cannot be bound (e.g. the port is in use).
     """
-    server = SimulatorServer(bus, server_line(pacing, line))
+    server = SimulatorServer(bus, server_line(pacing, line), tap)
     loop = asyncio.get_running_loop()
     listener = await loop.create_server(lambda: _Connection(server), host, port)
     server._server = listener

@@ -1,0 +1,116 @@
+"""``sj300 gateway``: own the lines, poll the drives, serve Modbus TCP and metrics until stopped.
+
+``--config gateway.toml`` describes everything (several lines, write
+grants, leases; docs/GATEWAY.md); the flags cover the simple case, one
+read-only line: ``--url URL --nodes LIST [--protocol fr700] --modbus
+HOST:PORT --metrics HOST:PORT``. A bad configuration starts nothing
+(exit 2, one line naming the file, line and key).
+
+stdout carries one line per server, ``modbus on 127.0.0.1:1502`` and
+``metrics on http://127.0.0.1:9300/metrics``, flushed at once so that a
+script can read the real port when it asked for port 0. SIGINT and SIGTERM
+stop it cleanly (docs/GATEWAY.md: the order, and the one command it may
+send on the way out); exit status 0.
+"""
+
+from __future__ import annotations
+
+import argparse
+import asyncio
+import logging
+import signal
+import sys
+from typing import Any
+
+from ._errors import USAGE, CliError
+
+__all__ = ["add_parser"]
+
+
+def add_parser(subparsers: Any) -> None:
+    """Add ``gateway`` to the ``sj300`` subcommands."""
+    p = subparsers.add_parser(
+        "gateway",
+        help="own the lines and serve the drives over Modbus TCP, with Prometheus metrics",
+        description="Own one or more RS-485 lines, poll their drives and serve them: "
+        "Modbus TCP for SCADA (a unit id per drive), /metrics and /healthz over HTTP. "
+        "Read-only unless the --config file grants writes. Needs the gateway extra.",
+    )
+    p.add_argument("--config", metavar="FILE", help="the gateway's TOML configuration")
+    p.add_argument("--nodes", metavar="LIST", help="with --url: the drives to poll, e.g. 1-8")
+    p.add_argument("--modbus", metavar="HOST:PORT", help="serve Modbus TCP there (port 0: any)")
+    p.add_argument("--metrics", metavar="HOST:PORT", help="serve /metrics and /healthz there")
+    p.add_argument(
+        "--stale-after",
+        type=float,
+        default=None,
+        metavar="S",
+        help="with --url: refuse reads of data older than this (default 5 s)",
+    )
+    p.add_argument("--interval", type=float, default=None, metavar="S", help="poll interval")
+    p.add_argument("-v", "--verbose", action="count", default=0, help="log more (-vv: debug)")
+    p.set_defaults(run=run)
+
+
+def _config(args: argparse.Namespace) -> Any:
+    from ..gateway._config import config_from_flags, load_config
+    from ..gateway._model import DEFAULT_STALE_AFTER_S
+
+    if args.config is not None:
+        if args.url or args.nodes or args.modbus or args.metrics:
+            raise CliError("--config describes everything: no --url, --nodes, --modbus, --metrics")
+        return load_config(args.config)
+    if not args.url or not args.nodes:
+        raise CliError("give --config FILE, or --url URL and --nodes LIST", status=USAGE)
+    if not args.modbus and not args.metrics:
+        raise CliError("nothing to serve: give --modbus HOST:PORT and/or --metrics HOST:PORT")
+    return config_from_flags(
+        url=args.url,
+        nodes=args.nodes,
+        protocol=args.protocol,
+        modbus=args.modbus,
+        metrics=args.metrics,
+        stale_after_s=DEFAULT_STALE_AFTER_S if args.stale_after is None else args.stale_after,
+        interval_s=0.5 if args.interval is None else args.interval,
+    )
+
+
+def run(args: argparse.Namespace) -> int:
+    """Serve until SIGINT / SIGTERM; return 0."""
+    try:
+        import prometheus_client  # noqa: F401
+        import pymodbus  # noqa: F401
+    except ImportError as exc:
+        raise CliError(
+            f"the gateway needs the gateway extra ({exc.name} is missing): "
+            "pip install 'sj300-async[gateway]'"
+        ) from None
+    if args.verbose:
+        logging.basicConfig(
+            level=logging.DEBUG if args.verbose > 1 else logging.INFO,
+            format="%(asctime)s %(name)s %(levelname)s %(message)s",
+        )
+    config = _config(args)  # a bad one raises here: nothing has started
+    return asyncio.run(_serve(config))
+
+
+async def _serve(config: Any) -> int:
+    from ..gateway._gateway import Gateway
+
+    loop = asyncio.get_running_loop()
+    stop = asyncio.Event()
+    for sig in (signal.SIGINT, signal.SIGTERM):
+        loop.add_signal_handler(sig, stop.set)
+    try:
+        async with Gateway(config) as gateway:
+            if gateway.modbus is not None:
+                host = config.modbus.host
+                print(f"modbus on {host}:{gateway.modbus.port}", flush=True)
+            if gateway.http is not None:
+                port = gateway.http.sockets[0].getsockname()[1]
+                print(f"metrics on http://{config.metrics.host}:{port}/metrics", flush=True)
+            await stop.wait()
+            print("stopping", file=sys.stderr, flush=True)
+    except OSError as exc:
+        raise CliError(f"cannot serve: {exc.strerror or exc}") from None
+    return 0
