@@ -64,8 +64,9 @@ def _stops(line: SimLine) -> list[float]:
         if direction != "rx":
             continue
         for event in parser.feed(data):
-            stop = isinstance(event, sj3.Request) and event.command == sj3.Command.RUN
-            if stop and event.node == 1 and event.data == b"0":
+            if not isinstance(event, sj3.Request):
+                continue
+            if event.command == sj3.Command.RUN and event.node == 1 and event.data == b"0":
                 out.append(when)
     return out
 
