@@ -1,0 +1,40 @@
+"""docs/GATEWAY.md's register tables say what the code serves (they cannot drift apart)."""
+
+from __future__ import annotations
+
+import re
+from pathlib import Path
+
+import pytest
+
+from sj300_async.gateway._registers import PARAMETER_BASES, describe
+
+DOC = (Path(__file__).parents[2] / "docs" / "GATEWAY.md").read_text(encoding="utf-8")
+_ROW = re.compile(r"^\| ([0-9]+(?:–[0-9]+)?) \| [^|]+ \| ([^|]+) \| (R/W|R) \|$", re.M)
+SECTIONS = {"sj300": "### SJ300 only", "fr700": "### FR-700 only"}
+
+
+def _rows(heading: str) -> dict[str, tuple[str, str]]:
+    """The register rows of the table under *heading*."""
+    section = DOC.split(heading, 1)[1].split("\n### ", 1)[0]
+    return {m.group(1): (m.group(2).strip(), m.group(3)) for m in _ROW.finditer(section)}
+
+
+@pytest.mark.parametrize("protocol", ["sj300", "fr700"])
+def test_every_fixed_register_is_documented_with_its_step(protocol: str) -> None:
+    rows = _rows("### Both protocols") | _rows(SECTIONS[protocol])
+    served = set()
+    for address, width, _name, step, writable in describe(protocol):
+        if 302 <= address < 362:
+            continue  # the six trip records: documented as one pattern
+        key = str(address) if width == 1 else f"{address}–{address + width - 1}"
+        served.add(key)
+        assert key in rows, f"register {key} of {protocol} is not in docs/GATEWAY.md"
+        assert rows[key] == (step, "R/W" if writable else "R"), key
+    assert set(rows) == served, "docs/GATEWAY.md lists registers the gateway does not serve"
+
+
+def test_every_parameter_base_is_documented() -> None:
+    for bases in PARAMETER_BASES.values():
+        for base in bases.values():
+            assert f"| {base} + 2 × number" in DOC
