@@ -10,7 +10,9 @@ import pytest
 from sj300_async.gateway._registers import PARAMETER_BASES, describe
 
 DOC = (Path(__file__).parents[2] / "docs" / "GATEWAY.md").read_text(encoding="utf-8")
-_ROW = re.compile(r"^\| ([0-9]+(?:–[0-9]+)?) \| [^|]+ \| ([^|]+) \| (R/W|R) \|$", re.M)
+#: The typography of the document: an en dash in a register range, a multiplication sign.
+DASH, TIMES = "\u2013", "\u00d7"
+_ROW = re.compile(rf"^\| ([0-9]+(?:{DASH}[0-9]+)?) \| [^|]+ \| ([^|]+) \| (R/W|R) \|$", re.M)
 SECTIONS = {"sj300": "### SJ300 only", "fr700": "### FR-700 only"}
 
 
@@ -27,7 +29,7 @@ def test_every_fixed_register_is_documented_with_its_step(protocol: str) -> None
     for address, width, _name, step, writable in describe(protocol):
         if 302 <= address < 362:
             continue  # the six trip records: documented as one pattern
-        key = str(address) if width == 1 else f"{address}–{address + width - 1}"
+        key = str(address) if width == 1 else f"{address}{DASH}{address + width - 1}"
         served.add(key)
         assert key in rows, f"register {key} of {protocol} is not in docs/GATEWAY.md"
         assert rows[key] == (step, "R/W" if writable else "R"), key
@@ -37,4 +39,4 @@ def test_every_fixed_register_is_documented_with_its_step(protocol: str) -> None
 def test_every_parameter_base_is_documented() -> None:
     for bases in PARAMETER_BASES.values():
         for base in bases.values():
-            assert f"| {base} + 2 × number" in DOC
+            assert f"| {base} + 2 {TIMES} number" in DOC
