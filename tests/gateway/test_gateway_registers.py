@@ -1,0 +1,101 @@
+"""The register map, sans-IO: encodings, staleness, and what a write asks for."""
+
+from __future__ import annotations
+
+import math
+
+import pytest
+
+from sj300_async.gateway._registers import (
+    Command,
+    Exc,
+    Field,
+    Heartbeat,
+    ParameterWrite,
+    RegisterMap,
+    SetFrequency,
+    parameter_address,
+)
+from sj300_async.gateway._state import DriveState, Lease
+
+
+def _state(protocol: str = "sj300") -> DriveState:
+    return DriveState("l", 1, 1, protocol, Lease(5.0))
+
+
+@pytest.mark.parametrize(
+    ("value", "width", "signed", "words"),
+    [
+        (1234, 1, False, [1234]),
+        (70000, 1, False, [65535]),  # saturates, never wraps
+        (-5, 1, False, [0]),
+        (-5, 1, True, [65531]),  # two's complement
+        (-40000, 1, True, [32768]),  # saturates at -32768
+        (70000, 2, False, [1, 4464]),  # high word first
+        (-2, 2, True, [65535, 65534]),
+        (1 << 40, 2, True, [32767, 65535]),
+    ],
+)
+def test_values_are_encoded_high_word_first_and_saturate(
+    value: int, width: int, signed: bool, words: list[int]
+) -> None:
+    field = Field(0, "x", "1", lambda s, now: value, width=width, signed=signed)
+    assert field.words(_state(), 0.0) == words
+
+
+def test_parameter_addresses_follow_the_group_bases() -> None:
+    assert parameter_address("sj300", "F002") == 10004
+    assert parameter_address("sj300", "A004") == 12008
+    assert parameter_address("sj300", "P049") == 20098
+    assert parameter_address("fr700", "Pr.7") == 30014
+    assert parameter_address("fr700", "Pr.999") == 31998
+    assert parameter_address("sj300", "Pr.7") is None
+    assert parameter_address("toy", "A004") is None
+
+
+def test_a_read_is_whole_or_refused() -> None:
+    regs = RegisterMap("sj300", ["A004"])
+    state = _state()
+    now = 100.0
+    assert regs.read(state, 12008, 2, now, 5.0) == Exc.TARGET_FAILED  # never read
+    state.parameters["A004"], state.parameters_at["A004"] = 500, 99.0
+    assert regs.read(state, 12008, 2, now, 5.0) == [0, 500]
+    assert regs.read(state, 12009, 1, now, 5.0) == [500]  # half of it may be read
+    assert regs.read(state, 12008, 3, now, 5.0) == Exc.ILLEGAL_ADDRESS
+    assert regs.read(state, 12008, 2, 103.9, 5.0) == [0, 500]
+    assert regs.read(state, 12008, 2, 104.1, 5.0) == Exc.TARGET_FAILED  # stale
+    # The identity block is never stale.
+    assert regs.read(state, 0, 4, 1e9, 5.0) == [0, 65535, 1, 1]
+
+
+def test_fr700_units_have_no_sj300_registers() -> None:
+    regs = RegisterMap("fr700", ["Pr.7"])
+    state = _state("fr700")
+    assert regs.read(state, 104, 1, 0.0, 5.0) == Exc.ILLEGAL_ADDRESS
+    assert regs.read(state, 300, 2, 0.0, 5.0) == Exc.ILLEGAL_ADDRESS
+    assert regs.read(state, 0, 4, 0.0, 5.0) == [0, 65535, 2, 1]
+
+
+def test_what_a_write_asks_for() -> None:
+    regs = RegisterMap("sj300", ["A004"])
+    assert regs.decode_write(1000, [7]) == Heartbeat()
+    assert regs.decode_write(1002, [2]) == Command(2)
+    assert regs.decode_write(1002, [3]) == Exc.ILLEGAL_VALUE
+    assert regs.decode_write(1003, [2550]) == SetFrequency(25.5)
+    assert regs.decode_write(12008, [0, 600]) == ParameterWrite("A004", 600)
+    assert regs.decode_write(12008, [65535, 65535]) == ParameterWrite("A004", -1)
+    assert regs.decode_write(12009, [600]) == Exc.ILLEGAL_VALUE  # half a value
+    assert regs.decode_write(1002, [1, 2500]) == Exc.ILLEGAL_VALUE  # two targets
+    assert regs.decode_write(1001, [1]) == Exc.ILLEGAL_FUNCTION  # read-only
+    assert regs.decode_write(100, [1]) == Exc.ILLEGAL_FUNCTION
+    assert regs.decode_write(999, [1]) == Exc.ILLEGAL_ADDRESS
+    assert regs.decode_write(1003, [1, 1]) == Exc.ILLEGAL_ADDRESS  # 1004 does not exist
+
+
+def test_the_lease_registers_show_the_lease() -> None:
+    regs = RegisterMap("sj300")
+    state = _state()
+    state.lease.holder, state.lease.expires_at = "10.0.0.9", 12.5
+    assert regs.read(state, 1000, 2, 10.0, 5.0) == [1, 25]
+    assert regs.read(state, 1000, 2, 13.0, 5.0) == [0, 0]
+    assert math.isinf(_state().lease.expires_at)
