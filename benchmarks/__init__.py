@@ -27,6 +27,7 @@ BENCHMARKS: dict[str, str] = {
     "latency": "benchmarks.bench_latency",
     "wire": "benchmarks.bench_wire",
     "scale": "benchmarks.bench_scale",
+    "gateway": "benchmarks.bench_gateway",
 }
 
 

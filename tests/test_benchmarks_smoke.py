@@ -222,7 +222,15 @@ def test_best_time_runs_once_untimed_then_each_repeat(harness: ModuleType) -> No
 
 def test_every_registered_benchmark_has_the_module_contract(harness: ModuleType) -> None:
     benchmarks = importlib.import_module("benchmarks")
-    assert list(benchmarks.BENCHMARKS) == ["codec", "tcp", "loopback", "latency", "wire", "scale"]
+    assert list(benchmarks.BENCHMARKS) == [
+        "codec",
+        "tcp",
+        "loopback",
+        "latency",
+        "wire",
+        "scale",
+        "gateway",
+    ]
     for name in benchmarks.BENCHMARKS:
         module = benchmarks.load(name)
         assert name == module.TITLE
@@ -348,6 +356,30 @@ def test_scale_polls_every_bus(harness: ModuleType) -> None:
     ]
 
 
+def test_gateway_serves_every_read_from_its_cache(harness: ModuleType) -> None:
+    bench = importlib.import_module("benchmarks.bench_gateway")
+    config = _quick(harness)
+    result = bench.measure(config)  # raises on a failed read or poll, or a read not served
+    assert [(r.clients, r.gateway_rps > 0, r.peer_rps > 0) for r in result.rates] == [
+        (1, True, True),
+        (bench.CONCURRENT_CLIENTS, True, True),
+    ]
+    # both client set-ups: one untimed and one timed run each, all within the marks
+    assert result.reads == 2 * 2 * bench.QUICK_READS
+    polls = result.end.polls - result.start.polls
+    assert polls >= bench.DRIVES  # at least one whole cycle between the marks
+    assert result.line_requests == result.plan_requests == 2 * polls
+    assert result.extra_per_1000_reads == 0
+    section = bench.report(result, config)
+    assert [(r.unit, r.target, r.against) for r in section.results] == [
+        ("reads/s", bench.TARGET_RATIO, None),
+        ("reads/s", None, None),
+        ("requests", 1.0, "limit"),
+    ]
+    assert section.results[2].met is True
+    assert any("+0 beyond the plan" in note for note in section.notes)
+
+
 # -- the command line ----------------------------------------------------------------
 
 
@@ -365,11 +397,11 @@ def test_cli_quick_runs_every_benchmark_into_one_table() -> None:
     done = _cli()
     assert done.returncode == 0, done.stdout + done.stderr
     out = done.stdout
-    for title in ("codec", "tcp", "loopback", "latency", "wire", "scale"):
+    for title in ("codec", "tcp", "loopback", "latency", "wire", "scale", "gateway"):
         assert f"\n## {title}\n" in out
     table = out.split("\n## results\n", 1)[1]
     rows = [line for line in table.splitlines() if line.startswith("| ") and "---" not in line]
-    assert len(rows) == 1 + 3 + 4 + 3 + 2 + 2 + 3  # header + rows of each benchmark
+    assert len(rows) == 1 + 3 + 4 + 3 + 2 + 2 + 3 + 3  # header + rows of each benchmark
     assert "**failed**" not in out
 
 
