@@ -108,6 +108,10 @@ class Sample:
     latency_s: float | None  #: mean time per successful read of this poll
     #: The drive has answered at least once, this poll or before (False: never heard from).
     answered: bool = False
+    #: Event-loop time of the poll's start: its values were read between this
+    #: and ``timestamp`` (a cache that also learns values elsewhere, like the
+    #: gateway's write read-backs, keeps those learnt after this).
+    started: float = 0.0
 
 
 @dataclass(slots=True)
@@ -381,6 +385,7 @@ class Poller:
     ) -> tuple[Sample, bool]:
         """Poll one drive (probing it first if its last poll failed); (sample, answered)."""
         drive = target.bus.drive(node)
+        started = clock()
         status: InverterStatus | Fr700Status | None = None
         monitor: MonitorData | Fr700Monitor | None = None
         parameters: dict[str, float] = {}
@@ -422,6 +427,7 @@ class Poller:
             error=error,
             latency_s=spent / ok_reads if ok_reads else None,
             answered=health.answered,
+            started=started,
         )
         return sample, answered
 

@@ -37,6 +37,12 @@ def add_parser(subparsers: Any) -> None:
         "Read-only unless the --config file grants writes. Needs the gateway extra.",
     )
     p.add_argument("--config", metavar="FILE", help="the gateway's TOML configuration")
+    # Its own --url and --protocol: the bus options of other commands (--timeout,
+    # --trace...) do not apply to a process that owns several lines.
+    p.add_argument("--url", default=None, help="the one line's bus URL (without --config)")
+    p.add_argument(
+        "--protocol", default=None, help="with --url: the line's protocol (sj300, fr700)"
+    )
     p.add_argument("--nodes", metavar="LIST", help="with --url: the drives to poll, e.g. 1-8")
     p.add_argument("--modbus", metavar="HOST:PORT", help="serve Modbus TCP there (port 0: any)")
     p.add_argument("--metrics", metavar="HOST:PORT", help="serve /metrics and /healthz there")

@@ -111,9 +111,7 @@ class Gateway:
 
     def problems(self) -> list[str]:
         """Why the gateway is not healthy (empty: every line is up)."""
-        return [
-            f"line {line.config.name}: link down" for line in self.lines if not line.bus.connected
-        ]
+        return line_problems(_Source(self))
 
     # -- running -----------------------------------------------------------------
 

@@ -74,19 +74,24 @@ class DriveState:
     trips_at: float = -math.inf
 
     def update(self, sample: Sample, raw_parameters: dict[str, int]) -> None:
-        """Take a poll's results: what it read replaces what was known, with its time."""
-        now = sample.timestamp
+        """Take a poll's results: what it read replaces what was known, with its time.
+
+        Except a value learnt after the poll began (a write's read-back): the
+        poll may have read it before the write, and the newer one stays.
+        """
+        now, began = sample.timestamp, sample.started
         self.online = sample.online
         if sample.error is None:
             self.last_ok = now
-        if sample.status is not None:
+        if sample.status is not None and self.status_at <= began:
             self.status, self.status_at = sample.status, now
-        if sample.monitor is not None:
+        if sample.monitor is not None and self.monitor_at <= began:
             self.monitor, self.monitor_at = sample.monitor, now
         for code, raw in raw_parameters.items():
-            self.parameters[code] = raw
-            self.parameters_at[code] = now
-        if "F001" in raw_parameters and self.protocol == "sj300":
+            if self.parameters_at.get(code, -math.inf) <= began:
+                self.parameters[code] = raw
+                self.parameters_at[code] = now
+        if "F001" in raw_parameters and self.protocol == "sj300" and self.set_frequency_at <= began:
             self.set_frequency_hz = raw_parameters["F001"] / 100
             self.set_frequency_at = now
 
