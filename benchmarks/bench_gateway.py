@@ -59,8 +59,9 @@ Decisions:
   far and the Modbus requests served so far. Between two marks the plan made
   exactly ``2 x polls`` requests (status and monitor per poll; a failed
   poll, and the probes and resyncs after it, would break that, so a window
-  with a failed poll fails the benchmark). The window spans every read of the gateway's side, warm-up
-  included, and its Modbus request count must equal what this process sent.
+  with a failed poll fails the benchmark). The window spans every read of
+  the gateway's side, warm-up included, and its Modbus request count must
+  equal what this process sent.
 """
 
 from __future__ import annotations
