@@ -143,6 +143,8 @@ class Field:
         value = self.value(state, now)
         if value is None:
             return None
+        if self.width == 1 and not self.signed:  # most fields: one unsigned register
+            return [0 if value < 0 else 0xFFFF if value > 0xFFFF else value]
         bits = 16 * self.width
         if self.signed:
             low, high = -(1 << (bits - 1)), (1 << (bits - 1)) - 1
@@ -380,20 +382,31 @@ class RegisterMap:
     ) -> list[int] | Exc:
         """*count* registers from *address*, or the exception that refuses the whole read."""
         out: list[int] = []
-        cache: dict[int, list[int] | None] = {}
-        for a in range(address, address + count):
-            found = self._at.get(a)
+        at, end = address, address + count
+        while at < end:  # field by field (a two-register field is read once)
+            found = self._at.get(at)
             if found is None:
                 return Exc.ILLEGAL_ADDRESS
             f, word = found
-            if f.stamp is not None and now - f.stamp(state) > stale_after_s:
-                return Exc.TARGET_FAILED
-            if f.address not in cache:
-                cache[f.address] = f.words(state, now)
-            words = cache[f.address]
+            stamp = f.stamp
+            if stamp is None:  # live: computed every time
+                words = f.words(state, now)
+            else:
+                read_at = stamp(state)
+                if now - read_at > stale_after_s:
+                    return Exc.TARGET_FAILED
+                # Encoded once per sample: a SCADA reads far more often than the line polls.
+                cached = state.encoded.get(f.address)
+                if cached is not None and cached[0] == read_at:
+                    words = cached[1]
+                else:
+                    words = f.words(state, now)
+                    state.encoded[f.address] = (read_at, words)
             if words is None:
                 return Exc.TARGET_FAILED
-            out.append(words[word])
+            taken = words[word : word + end - at]
+            out += taken
+            at += len(taken)
         return out
 
     def decode_write(self, address: int, values: list[int]) -> WriteRequest | Exc:

@@ -72,6 +72,10 @@ class DriveState:
     set_frequency_at: float = -math.inf
     trips: TripHistory | None = None
     trips_at: float = -math.inf
+    #: The register map's encoding of each field, with the read time it was
+    #: encoded for (see :meth:`~._registers.RegisterMap.read`): every change of
+    #: a value above comes with a new time, which invalidates it.
+    encoded: dict[int, tuple[float, list[int] | None]] = field(default_factory=dict)
 
     def update(self, sample: Sample, raw_parameters: dict[str, int]) -> None:
         """Take a poll's results: what it read replaces what was known, with its time.
