@@ -148,13 +148,21 @@ class ServerProcess:
     """
 
     def __init__(
-        self, kind: ServerKind, *, uvloop: bool = False, baudrate: int = 0, drives: int = 1
+        self,
+        kind: str,
+        *,
+        uvloop: bool = False,
+        baudrate: int = 0,
+        drives: int = 1,
+        module: str = "benchmarks._servers",
+        args: Sequence[str] = (),
     ) -> None:
+        """Run ``python -m MODULE KIND [ARGS...]``: this module's servers by default."""
         self.kind = kind
         #: What the server reported: a TCP port, or a pty's path (``sj300-pty``).
         self.port = 0
         self.path = ""
-        self._args = [sys.executable, "-m", "benchmarks._servers", kind]
+        self._args = [sys.executable, "-m", module, kind, *args]
         if uvloop:
             self._args.append("--uvloop")
         if kind == "sj300-pty":
@@ -195,15 +203,23 @@ class ServerProcess:
         Raises:
             RuntimeError: the server is not running, or did not answer.
         """
+        return float(self.ask("cpu")[0])
+
+    def ask(self, command: str) -> list[str]:
+        """Send *command* on the child's stdin; the words of its answer after the echoed command.
+
+        Raises:
+            RuntimeError: the server is not running, or did not answer.
+        """
         process = self._process
         if process is None or process.stdin is None or process.stdout is None:
             raise RuntimeError(f"{self.kind} server is not running")
-        process.stdin.write("cpu\n")
+        process.stdin.write(f"{command}\n")
         process.stdin.flush()
-        answer = process.stdout.readline()
-        if not answer.startswith("cpu "):
-            raise RuntimeError(f"{self.kind} server answered {answer!r} to cpu")
-        return float(answer.split()[1])
+        answer = process.stdout.readline().split()
+        if not answer or answer[0] != command:
+            raise RuntimeError(f"{self.kind} server answered {answer!r} to {command}")
+        return answer[1:]
 
     def __exit__(
         self,

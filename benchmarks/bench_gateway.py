@@ -71,21 +71,18 @@ import asyncio
 import contextlib
 import gc
 import json
-import os
-import subprocess
 import sys
 import textwrap
 import time
 from collections.abc import Callable, Coroutine, Sequence
 from dataclasses import dataclass
 from importlib.metadata import version
-from pathlib import Path
-from types import TracebackType
 from typing import Any, Literal
 
 from pymodbus.client import AsyncModbusTcpClient
 
 from ._harness import Config, Result, Section, new_runner
+from ._servers import ServerProcess
 
 __all__ = [
     "CONCURRENT_CLIENTS",
@@ -124,7 +121,6 @@ REQUESTS_PER_POLL = 2
 
 ServerKind = Literal["gateway", "pymodbus"]
 # The folder that holds the benchmarks package, as this process found it.
-_ROOT = Path(__file__).parent.parent
 
 
 # -- the servers' side (their processes) ------------------------------------------------
@@ -252,81 +248,9 @@ def main(argv: Sequence[str] | None = None) -> int:
 # -- the parent's side ---------------------------------------------------------------------
 
 
-class _Server:
-    """A server of this module in a child process; a context manager, ready once entered.
-
-    Raises (on enter):
-        RuntimeError: the server did not report a port (its stderr is quoted).
-    """
-
-    def __init__(self, kind: ServerKind, args: Sequence[str], *, uvloop: bool) -> None:
-        self.kind = kind
-        self.port = 0
-        self._args = [sys.executable, "-m", "benchmarks.bench_gateway", kind, *args]
-        if uvloop:
-            self._args.append("--uvloop")
-        self._process: subprocess.Popen[str] | None = None
-
-    def __enter__(self) -> _Server:
-        env = dict(os.environ)
-        env["PYTHONPATH"] = os.pathsep.join(p for p in (str(_ROOT), env.get("PYTHONPATH", "")) if p)
-        process = subprocess.Popen(
-            self._args,
-            cwd=_ROOT,
-            env=env,
-            stdin=subprocess.PIPE,
-            stdout=subprocess.PIPE,
-            stderr=subprocess.PIPE,
-            text=True,
-        )
-        self._process = process
-        assert process.stdout is not None
-        line = process.stdout.readline()  # the readiness signal
-        if not line.startswith("port "):
-            assert process.stdin is not None
-            assert process.stderr is not None
-            process.stdin.close()
-            error = process.stderr.read()
-            self.__exit__(None, None, None)
-            raise RuntimeError(f"{self.kind} server did not start: {line}{error}")
-        self.port = int(line.split()[1])
-        return self
-
-    def ask(self, command: str) -> list[str]:
-        """Send *command*; return the words of its answer after the echoed command."""
-        process = self._process
-        if process is None or process.stdin is None or process.stdout is None:
-            raise RuntimeError(f"{self.kind} server is not running")
-        process.stdin.write(f"{command}\n")
-        process.stdin.flush()
-        answer = process.stdout.readline().split()
-        if not answer or answer[0] != command:
-            raise RuntimeError(f"{self.kind} server answered {answer!r} to {command}")
-        return answer[1:]
-
-    def cpu_seconds(self) -> float:
-        """The server process's CPU time so far, in seconds."""
-        return float(self.ask("cpu")[0])
-
-    def __exit__(
-        self,
-        exc_type: type[BaseException] | None,
-        exc: BaseException | None,
-        tb: TracebackType | None,
-    ) -> None:
-        process, self._process = self._process, None
-        if process is None:
-            return
-        assert process.stdin is not None
-        process.stdin.close()
-        try:
-            process.wait(timeout=5)
-        except subprocess.TimeoutExpired:
-            process.kill()
-            process.wait()
-        for stream in (process.stdout, process.stderr):
-            if stream is not None:
-                stream.close()
+def _server(kind: ServerKind, args: Sequence[str], *, uvloop: bool) -> ServerProcess:
+    """A server of this module in a child process (``_servers.ServerProcess`` runs it)."""
+    return ServerProcess(kind, uvloop=uvloop, module="benchmarks.bench_gateway", args=args)
 
 
 @dataclass(frozen=True, slots=True)
@@ -342,7 +266,7 @@ class Mark:
     modbus_requests: int
 
     @classmethod
-    def take(cls, gateway: _Server) -> Mark:
+    def take(cls, gateway: ServerProcess) -> Mark:
         line_requests, polls, failed, served = (int(word) for word in gateway.ask("mark"))
         return cls(line_requests, polls, failed, served)
 
@@ -473,11 +397,11 @@ def measure(config: Config) -> GatewayRun:
     # Closed in this order: the clients (on the loop), the loop, the server processes.
     with processes, new_runner(config.loop) as runner:
         try:
-            gateway = processes.enter_context(_Server("gateway", gateway_args, uvloop=uvloop))
+            gateway = processes.enter_context(_server("gateway", gateway_args, uvloop=uvloop))
             ours = runner.run(_connect(clients, gateway.port, CONCURRENT_CLIENTS))
             expected = runner.run(_gateway_registers(ours[0]))
             peer_args = ["--registers", json.dumps(expected)]
-            peer_server = processes.enter_context(_Server("pymodbus", peer_args, uvloop=uvloop))
+            peer_server = processes.enter_context(_server("pymodbus", peer_args, uvloop=uvloop))
             peers = runner.run(_connect(clients, peer_server.port, CONCURRENT_CLIENTS))
             start = Mark.take(gateway)
             sent = 0
