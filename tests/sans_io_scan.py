@@ -144,8 +144,11 @@ SIMULATOR_IO: Final = (
 )
 #: The root: the user's API (open_bus, the poller), ``python -m`` and the version.
 ROOT_MODULES: Final = ("", "__main__", "_open", "_poller", "_version")
-#: Whole packages that are I/O by nature, not scanned module by module.
-IO_PACKAGES: Final = ("cli", "transports")
+#: Whole packages that are I/O by nature, not scanned module by module. The
+#: gateway is a process (servers, pollers, leases); its register map does no
+#: I/O itself but works on the drives' payload types, which come with the
+#: protocol packages and so with the async stack.
+IO_PACKAGES: Final = ("cli", "gateway", "transports")
 
 #: Every package whose modules are classified one by one above.
 CLASSIFIED_PACKAGES: Final = (
