@@ -3,12 +3,15 @@
 ``--config gateway.toml`` describes everything (several lines, write
 grants, leases; docs/GATEWAY.md); the flags cover the simple case, one
 read-only line: ``--url URL --nodes LIST [--protocol fr700] --modbus
-HOST:PORT --metrics HOST:PORT``. A bad configuration starts nothing
-(exit 2, one line naming the file, line and key).
+HOST:PORT --metrics HOST:PORT --mqtt mqtt://HOST:PORT --id NAME``. A bad
+configuration starts nothing (exit 2, one line naming the file, line and
+key).
 
-stdout carries one line per server, ``modbus on 127.0.0.1:1502`` and
-``metrics on http://127.0.0.1:9300/metrics``, flushed at once so that a
-script can read the real port when it asked for port 0. SIGINT and SIGTERM
+stdout carries one line per server, ``modbus on 127.0.0.1:1502``,
+``metrics on http://127.0.0.1:9300/metrics`` and ``mqtt to
+mqtt://127.0.0.1:1883 as gw1`` (the broker is connected to in the
+background: the line says where, not that it answered), flushed at once so
+that a script can read the real port when it asked for port 0. SIGINT and SIGTERM
 stop it cleanly (docs/GATEWAY.md: the order, and the one command it may
 send on the way out); exit status 0.
 """
@@ -47,6 +50,15 @@ def add_parser(subparsers: Any) -> None:
     p.add_argument("--modbus", metavar="HOST:PORT", help="serve Modbus TCP there (port 0: any)")
     p.add_argument("--metrics", metavar="HOST:PORT", help="serve /metrics and /healthz there")
     p.add_argument(
+        "--mqtt",
+        metavar="URL",
+        help="publish to this MQTT broker (mqtt://HOST[:PORT] or mqtts://): state, "
+        "availability, Home Assistant discovery",
+    )
+    p.add_argument(
+        "--id", metavar="NAME", help="the gateway's name on MQTT (default: the host name)"
+    )
+    p.add_argument(
         "--stale-after",
         type=float,
         default=None,
@@ -63,13 +75,18 @@ def _config(args: argparse.Namespace) -> Any:
     from ..gateway._model import DEFAULT_STALE_AFTER_S
 
     if args.config is not None:
-        if args.url or args.nodes or args.modbus or args.metrics:
-            raise CliError("--config describes everything: no --url, --nodes, --modbus, --metrics")
+        if args.url or args.nodes or args.modbus or args.metrics or args.mqtt or args.id:
+            raise CliError(
+                "--config describes everything: "
+                "no --url, --nodes, --modbus, --metrics, --mqtt, --id"
+            )
         return load_config(args.config)
     if not args.url or not args.nodes:
         raise CliError("give --config FILE, or --url URL and --nodes LIST", status=USAGE)
-    if not args.modbus and not args.metrics:
-        raise CliError("nothing to serve: give --modbus HOST:PORT and/or --metrics HOST:PORT")
+    if not args.modbus and not args.metrics and not args.mqtt:
+        raise CliError(
+            "nothing to serve: give --modbus HOST:PORT, --metrics HOST:PORT and/or --mqtt URL"
+        )
     return config_from_flags(
         url=args.url,
         nodes=args.nodes,
@@ -78,12 +95,15 @@ def _config(args: argparse.Namespace) -> Any:
         metrics=args.metrics,
         stale_after_s=DEFAULT_STALE_AFTER_S if args.stale_after is None else args.stale_after,
         interval_s=0.5 if args.interval is None else args.interval,
+        mqtt=args.mqtt,
+        gateway_id=args.id,
     )
 
 
 def run(args: argparse.Namespace) -> int:
     """Serve until SIGINT / SIGTERM; return 0."""
     try:
+        import aiomqtt  # noqa: F401
         import prometheus_client  # noqa: F401
         import pymodbus  # noqa: F401
     except ImportError as exc:
@@ -115,6 +135,8 @@ async def _serve(config: Any) -> int:
             if gateway.http is not None:
                 port = gateway.http.sockets[0].getsockname()[1]
                 print(f"metrics on http://{config.metrics.host}:{port}/metrics", flush=True)
+            if config.mqtt is not None:
+                print(f"mqtt to {config.mqtt.url} as {config.gateway_id}", flush=True)
             await stop.wait()
             print("stopping", file=sys.stderr, flush=True)
     except OSError as exc:

@@ -27,6 +27,12 @@ Decisions:
 - Writes are confirmed against the poll cache, so a write grant may only
   name parameters the line polls; Modbus unit ids must be unique across
   all lines, since one Modbus server serves them all.
+- The gateway id and the line names are MQTT topic levels
+  (:func:`._mqtt_topics.valid_name`), whether or not ``[mqtt]`` is
+  configured: adding a broker later never means renaming a line. The
+  ``[mqtt]`` URL is ``mqtt://HOST[:PORT]`` or ``mqtts://``; credentials have
+  their own keys (a URL ends up in logs). A ``tls_ca`` must exist now: a
+  missing file found at connect time would be a retry loop, not an error.
 """
 
 from __future__ import annotations
@@ -37,6 +43,7 @@ import math
 import os
 import re
 import tomllib
+import urllib.parse
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 from datetime import date, datetime, time
@@ -54,9 +61,12 @@ from ._model import (
     GatewayConfig,
     LapseAction,
     LineConfig,
+    MqttConfig,
     WriteGrant,
+    default_gateway_id,
     default_unit_offset,
 )
+from ._mqtt_topics import DEFAULT_PREFIX, DISCOVERY_PREFIX, valid_name
 
 __all__ = [
     "GatewayConfigError",
@@ -79,10 +89,18 @@ _FLAGS: Final = {
     "modbus.listen": "--modbus",
     "metrics.listen": "--metrics",
     "gateway.stale_after_s": "--stale-after",
+    "gateway.id": "--id",
+    "mqtt.url": "--mqtt",
 }
 
-_ROOT_KEYS: Final = ("gateway", "modbus", "metrics", "lines")
-_GATEWAY_KEYS: Final = ("stale_after_s", "audit_log")
+_ROOT_KEYS: Final = ("gateway", "modbus", "metrics", "mqtt", "lines")
+_GATEWAY_KEYS: Final = ("id", "stale_after_s", "audit_log")
+_MQTT_KEYS: Final = (
+    *("url", "client_id", "username", "password", "tls_ca", "prefix", "qos"),
+    *("discovery", "discovery_prefix", "keepalive_s"),
+)
+_MQTT_PORTS: Final = {"mqtt": 1883, "mqtts": 8883}
+_DEFAULT_MQTT: Final = MqttConfig(host="localhost", port=1883)
 _LINE_KEYS: Final = (
     *("name", "url", "protocol", "nodes", "interval_s", "reads", "parameters"),
     *("trips_interval_s", "unit_offset", "timeout_s", "lease_s", "on_lapse", "writes"),
@@ -95,7 +113,6 @@ _BROADCAST_STOP: Final = frozenset({"sj300"})
 #: The shortest poll interval: a floor against a typo (milliseconds written
 #: as seconds) that would leave the line no time for anything but polls.
 _MIN_INTERVAL_S: Final = 0.05
-_LINE_NAME: Final = re.compile(r"[A-Za-z0-9_.-]+\Z")
 _BARE_KEY: Final = re.compile(r"[A-Za-z0-9_-]+\Z")
 _HOST: Final = re.compile(r"[A-Za-z0-9_.%:-]+\Z")
 _WILDCARD_HOSTS: Final = frozenset({"0.0.0.0", "::"})
@@ -174,6 +191,8 @@ def config_from_flags(
     metrics: str | None,
     stale_after_s: float = DEFAULT_STALE_AFTER_S,
     interval_s: float = 0.5,
+    mqtt: str | None = None,
+    gateway_id: str | None = None,
 ) -> GatewayConfig:
     """The command line's simple case: one read-only line, checked like a file.
 
@@ -183,7 +202,12 @@ def config_from_flags(
     line: dict[str, object] = {"url": url, "nodes": nodes, "interval_s": interval_s}
     if protocol is not None:
         line["protocol"] = protocol
-    data: dict[str, object] = {"gateway": {"stale_after_s": stale_after_s}, "lines": [line]}
+    gateway: dict[str, object] = {"stale_after_s": stale_after_s}
+    if gateway_id is not None:
+        gateway["id"] = gateway_id
+    data: dict[str, object] = {"gateway": gateway, "lines": [line]}
+    if mqtt is not None:
+        data["mqtt"] = {"url": mqtt}
     if modbus is not None:
         data["modbus"] = {"listen": modbus}
     if metrics is not None:
@@ -465,6 +489,8 @@ def _build(ctx: _Context, data: object, *, base_dir: Path) -> GatewayConfig:
     metrics = _listen(ctx, root, "metrics")
     if modbus and metrics and _same_socket(modbus, metrics):
         raise ctx.error("metrics.listen", f"the Modbus server already listens on {modbus}")
+    gateway_id = _gateway_id(gateway)
+    mqtt = _mqtt(ctx, root, gateway_id, base_dir)
     return GatewayConfig(
         lines=_lines(ctx, root),
         modbus=modbus,
@@ -472,6 +498,8 @@ def _build(ctx: _Context, data: object, *, base_dir: Path) -> GatewayConfig:
         stale_after_s=_or(stale_after_s, DEFAULT_STALE_AFTER_S),
         audit_log=audit_log,
         source=ctx.source,
+        mqtt=mqtt,
+        gateway_id=gateway_id,
     )
 
 
@@ -494,6 +522,92 @@ def _listen(ctx: _Context, root: _Table, section: str) -> Endpoint | None:
         return parse_endpoint(text)
     except LocalProtocolError as exc:
         raise table.error("listen", str(exc)) from None
+
+
+def _gateway_id(gateway: _Table) -> str:
+    name = gateway.string("id")
+    if name is None:
+        return default_gateway_id()
+    if not valid_name(name):
+        raise gateway.error(
+            "id", f"a gateway id is letters, digits, '_', '.' and '-', got {name!r}"
+        )
+    return name
+
+
+def _mqtt(ctx: _Context, root: _Table, gateway_id: str, base_dir: Path) -> MqttConfig | None:
+    """``[mqtt]``: absent means no MQTT."""
+    if not root.has("mqtt"):
+        return None
+    table = _Table(ctx, "mqtt", root.data["mqtt"], _MQTT_KEYS)
+    host, port, tls = _mqtt_url(table)
+    client_id = table.string("client_id")
+    if client_id is not None and not client_id.strip():
+        raise table.error("client_id", "expected a client id, got an empty string")
+    username, password = table.string("username"), table.string("password")
+    if password is not None and username is None:
+        raise table.error("password", "a password needs a username")
+    tls_ca = None
+    if (ca := table.string("tls_ca")) is not None:
+        tls_ca = base_dir / ca
+        if not ca.strip() or not tls_ca.is_file():
+            raise table.error("tls_ca", f"no such file: {str(tls_ca)!r}")
+    qos = table.integer("qos")
+    if qos is not None and qos not in (0, 1):
+        raise table.error("qos", f"must be 0 or 1, got {qos}")
+    keepalive_s = table.integer("keepalive_s")
+    if keepalive_s is not None and not 1 <= keepalive_s <= 65535:
+        raise table.error("keepalive_s", f"must be 1..65535 seconds, got {keepalive_s}")
+    tls = tls or tls_ca is not None  # a CA to verify the broker with means TLS
+    return MqttConfig(
+        host=host,
+        port=_or(port, _MQTT_PORTS["mqtts" if tls else "mqtt"]),
+        tls=tls,
+        client_id=_or(client_id, f"sj300-{gateway_id}"),
+        username=username,
+        password=password,
+        tls_ca=tls_ca,
+        prefix=_topic_prefix(table, "prefix", DEFAULT_PREFIX),
+        qos=_or(qos, _DEFAULT_MQTT.qos),
+        discovery=_or(table.boolean("discovery"), _DEFAULT_MQTT.discovery),
+        discovery_prefix=_topic_prefix(table, "discovery_prefix", DISCOVERY_PREFIX),
+        keepalive_s=_or(keepalive_s, _DEFAULT_MQTT.keepalive_s),
+    )
+
+
+def _mqtt_url(table: _Table) -> tuple[str, int | None, bool]:
+    """``mqtt://HOST[:PORT]`` or ``mqtts://``: (host, port or None, TLS)."""
+    text = table.required_string("url")
+    expected = f"expected mqtt://HOST[:PORT] or mqtts://HOST[:PORT], got {text!r}"
+    try:
+        parts = urllib.parse.urlsplit(text.strip())
+        port = parts.port
+    except ValueError:  # a port that is not a number or out of 0..65535, a bad IPv6 literal
+        raise table.error("url", expected) from None
+    scheme = parts.scheme.lower()
+    if scheme not in _MQTT_PORTS or not parts.hostname:
+        raise table.error("url", expected)
+    if parts.username is not None or parts.password is not None:
+        raise table.error("url", "give the credentials as username and password, not in the URL")
+    if parts.path not in ("", "/") or parts.query or parts.fragment:
+        raise table.error("url", expected)
+    if port == 0:
+        raise table.error("url", f"port must be 1..65535, got 0 in {text!r}")
+    return parts.hostname, port, scheme == "mqtts"
+
+
+def _topic_prefix(table: _Table, name: str, default: str) -> str:
+    """Topic levels (``sj300``, ``plant/sj300``): each a valid name, no wildcards."""
+    prefix = table.string(name)
+    if prefix is None:
+        return default
+    if not all(valid_name(level) for level in prefix.split("/")):
+        raise table.error(
+            name,
+            "expected topic levels of letters, digits, '_', '.' and '-' separated by '/', "
+            f"got {prefix!r}",
+        )
+    return prefix
 
 
 def _same_socket(a: Endpoint, b: Endpoint) -> bool:
@@ -562,7 +676,7 @@ def _line(ctx: _Context, index: int, data: object, claims: _Claims) -> LineConfi
 
 def _line_name(table: _Table, index: int, claims: _Claims) -> str:
     name = _or(table.string("name"), f"line{index + 1}")
-    if not _LINE_NAME.match(name):
+    if not valid_name(name):  # a topic level on MQTT (see the module docstring)
         raise table.error("name", f"a line name is letters, digits, '_', '.' and '-', got {name!r}")
     if name in claims.names:
         raise table.error("name", f"duplicate line name {name!r} (also {claims.names[name]})")

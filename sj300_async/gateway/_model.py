@@ -17,10 +17,15 @@ Decisions (docs/GATEWAY.md has the user's view):
 - Modbus unit ids: SJ300 node n is unit n; FR-700 station s is unit 100 + s
   (station 0 exists, unit 0 is Modbus's broadcast, and the two protocols'
   defaults never collide). ``unit_offset`` overrides: unit = node + offset.
+- MQTT (:class:`MqttConfig`, optional): the gateway is known on the broker
+  by its id, the host name unless configured (its first label, cut to the
+  characters a topic level may hold: :func:`default_gateway_id`).
 """
 
 from __future__ import annotations
 
+import re
+import socket
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Final, Literal, get_args
@@ -34,7 +39,9 @@ __all__ = [
     "GatewayConfig",
     "LapseAction",
     "LineConfig",
+    "MqttConfig",
     "WriteGrant",
+    "default_gateway_id",
     "default_unit_offset",
 ]
 
@@ -46,6 +53,16 @@ DEFAULT_STALE_AFTER_S: Final = 5.0
 DEFAULT_LEASE_S: Final = 5.0
 #: The Modbus unit ids a drive may have (0 is broadcast; 248..255 reserved).
 UNIT_RANGE: Final = range(1, 248)
+
+
+#: What a gateway id may not hold (MQTT wildcards and separators, among others).
+_NOT_IN_ID: Final = re.compile(r"[^A-Za-z0-9_.-]+")
+
+
+def default_gateway_id() -> str:
+    """The host name's first label, cut to a topic level (``"gateway"`` if nothing is left)."""
+    label = socket.gethostname().split(".", 1)[0]
+    return _NOT_IN_ID.sub("-", label).strip("-") or "gateway"
 
 
 def default_unit_offset(protocol: str) -> int:
@@ -122,6 +139,37 @@ class LineConfig:
 
 
 @dataclass(frozen=True, slots=True)
+class MqttConfig:
+    """The MQTT broker the gateway publishes to (docs/GATEWAY.md, "MQTT")."""
+
+    host: str
+    port: int
+    #: TLS: an ``mqtts://`` URL, or a ``tls_ca`` given.
+    tls: bool = False
+    #: The MQTT client id (the configuration's default: ``sj300-<gateway id>``).
+    client_id: str = "sj300"
+    username: str | None = None
+    password: str | None = field(default=None, repr=False)
+    #: The CA certificates that verify the broker (None: the system's).
+    tls_ca: Path | None = None
+    #: The first topic level(s): ``<prefix>/<gateway id>/...``.
+    prefix: str = "sj300"
+    #: The QoS of everything published and subscribed (0 or 1).
+    qos: int = 1
+    #: Home Assistant's MQTT discovery: configs published, and republished on its birth.
+    discovery: bool = True
+    discovery_prefix: str = "homeassistant"
+    #: The MQTT keepalive: the broker publishes the last will ("offline") about
+    #: 1.5 keepalives after the gateway last spoke.
+    keepalive_s: int = 30
+
+    @property
+    def url(self) -> str:
+        host = f"[{self.host}]" if ":" in self.host else self.host
+        return f"{'mqtts' if self.tls else 'mqtt'}://{host}:{self.port}"
+
+
+@dataclass(frozen=True, slots=True)
 class GatewayConfig:
     """A whole gateway: its lines and what it serves."""
 
@@ -135,3 +183,7 @@ class GatewayConfig:
     audit_log: Path | None = None
     #: Where the configuration came from (a file name, or ``"<command line>"``).
     source: str = field(default="<command line>", compare=False)
+    #: The MQTT broker (None: no MQTT).
+    mqtt: MqttConfig | None = None
+    #: The gateway's name on MQTT (a topic level; see the module docstring).
+    gateway_id: str = field(default_factory=default_gateway_id)

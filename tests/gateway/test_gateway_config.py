@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import pickle
+import socket
 import textwrap
 from pathlib import Path
 
@@ -15,7 +16,14 @@ from sj300_async.gateway._config import (
     parse_config,
     parse_endpoint,
 )
-from sj300_async.gateway._model import Endpoint, GatewayConfig, LineConfig, WriteGrant
+from sj300_async.gateway._model import (
+    Endpoint,
+    GatewayConfig,
+    LineConfig,
+    MqttConfig,
+    WriteGrant,
+    default_gateway_id,
+)
 from sj300_async.wire import LocalProtocolError
 
 FULL = """\
@@ -170,6 +178,71 @@ def test_a_line_can_be_an_inline_table() -> None:
 
     assert config.lines[0].nodes == (1, 3)
     assert config.lines[0].reads == ()
+
+
+def test_mqtt_defaults_follow_the_gateway_id_and_the_scheme() -> None:
+    config = parse('[gateway]\nid = "gw1"\n[mqtt]\nurl = "mqtt://10.0.0.9"\n' + LINE)
+
+    assert config.gateway_id == "gw1"
+    assert config.mqtt == MqttConfig(host="10.0.0.9", port=1883, client_id="sj300-gw1")
+    assert config.mqtt.url == "mqtt://10.0.0.9:1883"
+    assert parse('[mqtt]\nurl = "mqtts://[::1]"\n' + LINE).mqtt == MqttConfig(
+        host="::1", port=8883, tls=True, client_id=f"sj300-{default_gateway_id()}"
+    )
+
+
+def test_mqtt_every_key(tmp_path: Path) -> None:
+    (tmp_path / "ca.pem").write_text("not checked until connect\n", encoding="utf-8")
+    text = f"""\
+        [gateway]
+        id = "hall-a.gw"
+        [mqtt]
+        url = "mqtt://broker.plant:1884"
+        client_id = "gateway-7"
+        username = "sj300"
+        password = "secret"
+        tls_ca = "ca.pem"
+        prefix = "plant/drives"
+        qos = 0
+        discovery = false
+        discovery_prefix = "ha"
+        keepalive_s = 5
+        {LINE}"""
+    config = parse_config(textwrap.dedent(text), str(tmp_path / "g.toml"))
+
+    assert config.gateway_id == "hall-a.gw"
+    assert config.mqtt == MqttConfig(
+        host="broker.plant",
+        port=1884,
+        tls=True,  # a CA means TLS, whatever the scheme
+        client_id="gateway-7",
+        username="sj300",
+        password="secret",
+        tls_ca=tmp_path / "ca.pem",
+        prefix="plant/drives",
+        qos=0,
+        discovery=False,
+        discovery_prefix="ha",
+        keepalive_s=5,
+    )
+    assert "secret" not in repr(config.mqtt)
+    assert parse('[mqtt]\nurl = "mqtt://b"\ntls_ca = "/etc/hostname"\n' + LINE).mqtt == (
+        MqttConfig(
+            host="b",
+            port=8883,  # the TLS port: a CA implies TLS
+            tls=True,
+            client_id=f"sj300-{default_gateway_id()}",
+            tls_ca=Path("/etc/hostname"),
+        )
+    )
+
+
+def test_the_default_gateway_id_is_a_topic_level(monkeypatch: pytest.MonkeyPatch) -> None:
+    monkeypatch.setattr(socket, "gethostname", lambda: "plc+7.plant.example")
+    assert default_gateway_id() == "plc-7"
+    monkeypatch.setattr(socket, "gethostname", lambda: "#")
+    assert default_gateway_id() == "gateway"
+    assert parse(LINE).gateway_id == "gateway"
 
 
 def test_a_byte_order_mark_is_tolerated(tmp_path: Path) -> None:
@@ -482,6 +555,115 @@ REFUSALS = [
         "gateway.toml:4: lines[0].writes[0]: grants nothing: give it parameters, or control = true",
         id="grant-grants-nothing",
     ),
+    # MQTT: the gateway id and line names are topic levels; the broker's URL and options.
+    pytest.param(
+        '[gateway]\nid = "plant/gw1"\n',
+        "gateway.toml:2: gateway.id: a gateway id is letters, digits, '_', '.' and '-', "
+        "got 'plant/gw1'",
+        id="gateway-id-with-a-separator",
+    ),
+    pytest.param(
+        '[gateway]\nid = "gw+"\n',
+        "gateway.toml:2: gateway.id: a gateway id is letters, digits, '_', '.' and '-', got 'gw+'",
+        id="gateway-id-with-a-wildcard",
+    ),
+    pytest.param(
+        '[mqtt]\nurl = "mqtt://broker"\n' + LINE + 'name = "hall/a"\n',
+        "gateway.toml:6: lines[0].name: a line name is letters, digits, '_', '.' and '-', "
+        "got 'hall/a'",
+        id="line-name-not-a-topic-level",
+    ),
+    pytest.param(
+        '[mqtt]\nurl = "mqtt://broker"\n' + LINE + 'name = "#"\n',
+        "gateway.toml:6: lines[0].name: a line name is letters, digits, '_', '.' and '-', got '#'",
+        id="line-name-a-wildcard",
+    ),
+    pytest.param(
+        "[mqtt]\nqos = 1\n",
+        "gateway.toml:1: mqtt.url: missing required key 'url'",
+        id="mqtt-url-missing",
+    ),
+    pytest.param(
+        '[mqtt]\nurl = "tcp://broker:1883"\n',
+        "gateway.toml:2: mqtt.url: expected mqtt://HOST[:PORT] or mqtts://HOST[:PORT], "
+        "got 'tcp://broker:1883'",
+        id="mqtt-url-scheme",
+    ),
+    pytest.param(
+        '[mqtt]\nurl = "broker:1883"\n',
+        "gateway.toml:2: mqtt.url: expected mqtt://HOST[:PORT] or mqtts://HOST[:PORT], "
+        "got 'broker:1883'",
+        id="mqtt-url-without-scheme",
+    ),
+    pytest.param(
+        '[mqtt]\nurl = "mqtt://broker:18830000"\n',
+        "gateway.toml:2: mqtt.url: expected mqtt://HOST[:PORT] or mqtts://HOST[:PORT], "
+        "got 'mqtt://broker:18830000'",
+        id="mqtt-url-port-too-large",
+    ),
+    pytest.param(
+        '[mqtt]\nurl = "mqtt://broker:0"\n',
+        "gateway.toml:2: mqtt.url: port must be 1..65535, got 0 in 'mqtt://broker:0'",
+        id="mqtt-url-port-zero",
+    ),
+    pytest.param(
+        '[mqtt]\nurl = "mqtt://broker/sj300"\n',
+        "gateway.toml:2: mqtt.url: expected mqtt://HOST[:PORT] or mqtts://HOST[:PORT], "
+        "got 'mqtt://broker/sj300'",
+        id="mqtt-url-with-a-path",
+    ),
+    pytest.param(
+        '[mqtt]\nurl = "mqtt://me:secret@broker"\n',
+        "gateway.toml:2: mqtt.url: give the credentials as username and password, not in the URL",
+        id="mqtt-url-with-credentials",
+    ),
+    pytest.param(
+        '[mqtt]\nurl = "mqtt://broker"\nqos = 2\n',
+        "gateway.toml:3: mqtt.qos: must be 0 or 1, got 2",
+        id="mqtt-qos-2",
+    ),
+    pytest.param(
+        '[mqtt]\nurl = "mqtt://broker"\nqos = "1"\n',
+        "gateway.toml:3: mqtt.qos: expected an integer, got string",
+        id="mqtt-qos-not-an-integer",
+    ),
+    pytest.param(
+        '[mqtt]\nurl = "mqtt://broker"\nprefix = "plant/+"\n',
+        "gateway.toml:3: mqtt.prefix: expected topic levels of letters, digits, '_', '.' and '-' "
+        "separated by '/', got 'plant/+'",
+        id="mqtt-prefix-wildcard",
+    ),
+    pytest.param(
+        '[mqtt]\nurl = "mqtt://broker"\ndiscovery_prefix = "homeassistant/"\n',
+        "gateway.toml:3: mqtt.discovery_prefix: expected topic levels of letters, digits, '_', "
+        "'.' and '-' separated by '/', got 'homeassistant/'",
+        id="mqtt-discovery-prefix-empty-level",
+    ),
+    pytest.param(
+        '[mqtt]\nurl = "mqtt://broker"\npassword = "secret"\n',
+        "gateway.toml:3: mqtt.password: a password needs a username",
+        id="mqtt-password-without-username",
+    ),
+    pytest.param(
+        '[mqtt]\nurl = "mqtt://broker"\ntls_ca = "/nonexistent/ca.pem"\n',
+        "gateway.toml:3: mqtt.tls_ca: no such file: '/nonexistent/ca.pem'",
+        id="mqtt-tls-ca-missing",
+    ),
+    pytest.param(
+        '[mqtt]\nurl = "mqtt://broker"\nkeepalive_s = 0\n',
+        "gateway.toml:3: mqtt.keepalive_s: must be 1..65535 seconds, got 0",
+        id="mqtt-keepalive-zero",
+    ),
+    pytest.param(
+        '[mqtt]\nurl = "mqtt://broker"\ndiscovery = "on"\n',
+        "gateway.toml:3: mqtt.discovery: expected true or false, got string",
+        id="mqtt-discovery-not-a-boolean",
+    ),
+    pytest.param(
+        '[mqtt]\nurl = "mqtt://broker"\nqoss = 1\n',
+        "gateway.toml:3: mqtt.qoss: unknown key 'qoss' (did you mean 'qos'?)",
+        id="mqtt-unknown-key",
+    ),
 ]
 
 
@@ -599,7 +781,8 @@ def test_a_key_inside_an_inline_table_points_at_its_first_line() -> None:
     text = 'x = 1\nlines = [\n  { url = "sim://", nodes = "40" },\n]\n'
 
     assert (
-        refusal(text) == "gateway.toml:1: x: unknown key 'x' (use gateway, modbus, metrics, lines)"
+        refusal(text)
+        == "gateway.toml:1: x: unknown key 'x' (use gateway, modbus, metrics, mqtt, lines)"
     )
     assert refusal(text[6:]) == (
         "gateway.toml:1: lines[0].nodes: bad node list '40': nodes are 1..32, got '40'"
@@ -714,6 +897,21 @@ def test_flags_build_one_read_only_line() -> None:
     assert config.lines[0].grants == ()
 
 
+def test_flags_with_mqtt_and_an_id() -> None:
+    config = config_from_flags(
+        url="sim://",
+        nodes="1",
+        protocol=None,
+        modbus=None,
+        metrics=None,
+        mqtt="mqtt://127.0.0.1:1884",
+        gateway_id="gw1",
+    )
+
+    assert config.mqtt == MqttConfig(host="127.0.0.1", port=1884, client_id="sj300-gw1")
+    assert config.gateway_id == "gw1"
+
+
 def test_flags_with_fr700() -> None:
     config = config_from_flags(
         url="tcp://10.0.0.5:4001", nodes="0-2", protocol="fr700", modbus=None, metrics=None
@@ -770,6 +968,17 @@ FLAG_DEFAULTS: dict[str, object] = {
             {"interval_s": 0.001},
             "<command line>: --interval: must be >= 0.05, got 0.001",
             id="interval",
+        ),
+        pytest.param(
+            {"mqtt": "http://broker"},
+            "<command line>: --mqtt: expected mqtt://HOST[:PORT] or mqtts://HOST[:PORT], "
+            "got 'http://broker'",
+            id="mqtt",
+        ),
+        pytest.param(
+            {"gateway_id": "a b"},
+            "<command line>: --id: a gateway id is letters, digits, '_', '.' and '-', got 'a b'",
+            id="id",
         ),
     ],
 )
