@@ -35,6 +35,10 @@ stops answering turns offline and is probed every few seconds instead of
 being polled; the monitor itself never stops for a failing drive or a
 dropped link.
 
+With ``--url mqtt://HOST:PORT[/prefix]`` (or ``mqtts://``) it opens no bus
+and shows the fleet instead: every drive of every gateway on the broker
+(:mod:`._fleet`).
+
 It runs until Ctrl-C (exit 130, as for any command), SIGTERM (exit 0),
 ``--count`` cycles (a cycle is one sample of every node; a node set aside
 as offline between its probes is not waited for) or ``--duration``
@@ -64,6 +68,7 @@ from ._args import format_nodes, parse_any_nodes
 from ._common import add_bus_options, add_json_option, bus_url, open_cli_bus, positive_float
 from ._demo import run_demo
 from ._errors import FAILURE, CliError
+from ._fleet import is_fleet_url, watch_fleet
 from ._output import Justify, drive_state, is_terminal, jsonable, print_json
 from ._progress import progress
 from ._scan import probe
@@ -162,7 +167,8 @@ def add_parser(subparsers: Any) -> None:
         help="live view of the drives (a demo of 8 simulated drives without --url)",
         description="Poll drives and show their state live. Without --url or $SJ300_URL: "
         "a demo of eight simulated drives. On a real bus without --nodes, the nodes a scan "
-        "finds. Ctrl-C stops it (exit 130).",
+        "finds. With --url mqtt://HOST:PORT[/prefix]: every drive of every gateway publishing "
+        "on that broker (read-only). Ctrl-C stops it (exit 130).",
     )
     p.add_argument(
         "--nodes",
@@ -182,7 +188,7 @@ def add_parser(subparsers: Any) -> None:
         "--count",
         type=_positive_int,
         metavar="N",
-        help="stop after N cycles (a cycle: one sample of every node)",
+        help="stop after N cycles (a cycle: one sample of every node; mqtt://: N states)",
     )
     p.add_argument("--duration", type=positive_float, metavar="SECONDS", help="stop after this")
     add_json_option(p)
@@ -200,6 +206,9 @@ def run(args: argparse.Namespace) -> int:
 
 async def _monitor(args: argparse.Namespace) -> int:
     url = bus_url(args)
+    if url is not None and is_fleet_url(url):  # a broker, not a bus: the fleet view (._fleet)
+        await _until_terminated(watch_fleet(args, url))
+        return 0
     nodes: list[int] | None = args.nodes
     if nodes is None and url is not None and _real_bus(args, url):
         nodes = await _scan_first(args, url)

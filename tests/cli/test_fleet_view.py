@@ -1,0 +1,406 @@
+"""``sj300 monitor --url mqtt://...``: the fleet view, against a real broker (mosquitto).
+
+The states are published by an independent client (``mosquitto_pub``), as
+a gateway's bridge would publish them, and the monitor runs as a user runs
+it: a subprocess, on a pipe or a terminal. Nothing waits a fixed time for a
+state: the broker is polled until it accepts connections, and a running
+monitor is read line by line.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import contextlib
+import dataclasses
+import json
+import os
+import re
+import shutil
+import subprocess
+import sys
+import time
+from collections.abc import AsyncIterator, Iterable
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import pytest
+
+from sj300_async.cli._errors import CliError
+from sj300_async.cli._fleet import Fleet, FleetUrl, parse_fleet_url
+from sj300_async.gateway._mqtt_topics import StateMessage, Topics
+
+from .clirun import TIMEOUT, Result, cli_env, closed_port, sj300, sj300_on_terminal
+
+#: Where Debian puts the broker (not on every user's PATH).
+_SBIN = "/usr/sbin:/usr/local/sbin"
+_FIELDS = {f.name for f in dataclasses.fields(StateMessage)}
+
+
+def _tool(name: str) -> str:
+    path = shutil.which(name, path=f"{os.environ.get('PATH', '')}:{_SBIN}")
+    if path is None:
+        raise RuntimeError(f"{name} is not installed (Debian: apt-get install mosquitto)")
+    return path
+
+
+@dataclass
+class Broker:
+    """A mosquitto on a loopback port, restartable on the same port."""
+
+    port: int
+    config: Path
+    log: Path
+    proc: subprocess.Popen[bytes] | None = None
+
+    @property
+    def url(self) -> str:
+        return f"mqtt://127.0.0.1:{self.port}"
+
+    async def start(self) -> None:
+        with self.log.open("ab") as log:
+            self.proc = subprocess.Popen(
+                [_tool("mosquitto"), "-c", str(self.config)], stdout=log, stderr=log
+            )
+        async with asyncio.timeout(5):  # poll until it accepts a connection
+            while True:
+                if self.proc.poll() is not None:
+                    raise RuntimeError(f"mosquitto exited: {self.log.read_text()}")
+                try:
+                    _, writer = await asyncio.open_connection("127.0.0.1", self.port)
+                except OSError:
+                    await asyncio.sleep(0.01)
+                    continue
+                writer.close()
+                await writer.wait_closed()
+                return
+
+    def stop(self) -> None:
+        if self.proc is None:
+            return
+        self.proc.terminate()
+        try:
+            self.proc.wait(5)
+        except subprocess.TimeoutExpired:
+            self.proc.kill()
+            self.proc.wait()
+        self.proc = None
+
+    async def publish(
+        self, topic: str, payload: bytes | str | None, *, retain: bool = True
+    ) -> None:
+        """Publish with ``mosquitto_pub`` at QoS 1: the broker has it when this returns."""
+        args = [_tool("mosquitto_pub"), "-h", "127.0.0.1", "-p", str(self.port), "-q", "1"]
+        args += ["-t", topic, *(["-r"] if retain else [])]
+        text = payload.decode() if isinstance(payload, bytes) else payload
+        args += ["-n"] if text is None else ["-m", text]
+        proc = await asyncio.create_subprocess_exec(*args, stderr=asyncio.subprocess.PIPE)
+        _, err = await asyncio.wait_for(proc.communicate(), TIMEOUT)
+        assert proc.returncode == 0, err
+
+    async def publish_states(self, messages: Iterable[StateMessage], prefix: str = "sj300") -> None:
+        """Every message, retained on its state topic (16 publishers at a time)."""
+        room = asyncio.Semaphore(16)
+
+        async def one(m: StateMessage) -> None:
+            async with room:
+                await self.publish(Topics(m.gateway, prefix).state(m.line, m.node), m.to_json())
+
+        async with asyncio.TaskGroup() as group:
+            for message in messages:
+                group.create_task(one(message))
+
+
+@pytest.fixture
+async def broker(tmp_path: Path) -> AsyncIterator[Broker]:
+    port = closed_port()
+    config = tmp_path / "mosquitto.conf"
+    config.write_text(f"listener {port} 127.0.0.1\nallow_anonymous true\npersistence false\n")
+    broker = Broker(port, config, tmp_path / "mosquitto.log")
+    await broker.start()
+    try:
+        yield broker
+    finally:
+        broker.stop()
+
+
+def _state(gateway: str, node: int, *, line: str = "hall", **values: Any) -> StateMessage:
+    """A running SJ300's state, polled a minute ago, whose values tell the drive apart."""
+    fields: dict[str, Any] = {
+        "output_frequency_hz": 10.0 * (ord(gateway[-1]) - ord("a") + 1) + node,
+        "output_current_a": 1.5 + node,
+        "output_voltage_v": 380.0 + node,
+        "direction": "forward",
+        "running": True,
+        "tripped": False,
+        "status": {"a": "RUNNING", "b": "RUNNING", "c": "CONSTANT_SPEED"},
+        "parameters": {"F001": 50.0},
+        **values,
+    }
+    return StateMessage(gateway, line, node, "sj300", time.time() - 60 + node, True, **fields)
+
+
+def _fleet() -> list[StateMessage]:
+    """Two gateways: gw-a 3 SJ300s (node 2 tripped), gw-b 2 SJ300s and an FR-700 on line 2."""
+    tripped: dict[str, Any] = {
+        "tripped": True,
+        "running": False,
+        "trip": "E07",
+        "direction": "stop",
+        "status": {"a": "TRIP", "b": "TRIPPED", "c": "STOP"},
+    }
+    fr700 = StateMessage(
+        "gw-b", "line2", 0, "fr700", time.time() - 1, True, 25.0, 2.0, 200.0, "reverse",
+        True, False, status={"bits": 5},
+    )  # fmt: skip
+    return [
+        _state("gw-a", 1),
+        _state("gw-a", 2, **tripped),
+        _state("gw-a", 3),
+        _state("gw-b", 1),
+        _state("gw-b", 4),
+        fr700,
+    ]
+
+
+def _by_drive(result: Result) -> dict[tuple[str, str, int], dict[str, object]]:
+    assert result.code == 0, result.err
+    lines = result.json_lines()
+    drives = {(s["gateway"], s["line"], s["node"]): s for s in lines}
+    assert len(drives) == len(lines), "a drive printed twice"
+    return drives
+
+
+def _assert_shown(
+    drives: dict[tuple[str, str, int], dict[str, object]], sent: list[StateMessage]
+) -> None:
+    assert set(drives) == {(m.gateway, m.line, m.node) for m in sent}
+    for message in sent:
+        shown = dict(drives[message.gateway, message.line, message.node])
+        assert set(shown) == _FIELDS | {"age_s"}
+        age = shown.pop("age_s")
+        assert isinstance(age, float)
+        assert 0 < age < 120  # polled a minute ago
+        assert shown == json.loads(message.to_json())
+
+
+async def test_every_drive_of_both_gateways_as_json_lines(broker: Broker) -> None:
+    sent = _fleet()
+    await broker.publish_states(sent)
+    result = await sj300("monitor", "--url", broker.url, "--json", "--count", str(len(sent)))
+    _assert_shown(_by_drive(result), sent)
+    assert result.err == ""
+
+    # $SJ300_URL names a broker as well; --duration ends the view (exit 0).
+    result = await sj300("monitor", "--json", "--duration", "0.5", env_url=broker.url)
+    _assert_shown(_by_drive(result), sent)
+
+
+async def test_a_prefix_of_two_levels(broker: Broker) -> None:
+    north = [_state("gw-a", 1), _state("gw-b", 2)]
+    await broker.publish_states(north, prefix="plant/north")
+    await broker.publish_states([_state("gw-c", 3)])  # under sj300/: not this view's
+    url = f"{broker.url}/plant/north/"
+    result = await sj300("monitor", "--url", url, "--json", "--count", "2")
+    _assert_shown(_by_drive(result), north)
+
+
+async def _start_monitor(*args: str) -> asyncio.subprocess.Process:
+    return await asyncio.create_subprocess_exec(
+        sys.executable,
+        "-m",
+        "sj300_async",
+        "monitor",
+        *args,
+        stdout=asyncio.subprocess.PIPE,
+        stderr=asyncio.subprocess.PIPE,
+        env=cli_env(),
+    )
+
+
+async def _lines(proc: asyncio.subprocess.Process, n: int) -> list[dict[str, object]]:
+    assert proc.stdout is not None
+    lines = []
+    for _ in range(n):
+        line = await asyncio.wait_for(proc.stdout.readline(), TIMEOUT)
+        assert line, "the monitor ended early"
+        lines.append(json.loads(line))
+    return lines
+
+
+@contextlib.asynccontextmanager
+async def _monitor(*args: str) -> AsyncIterator[asyncio.subprocess.Process]:
+    proc = await _start_monitor(*args)
+    try:
+        yield proc
+    finally:
+        if proc.returncode is None:
+            proc.kill()
+            await proc.wait()
+
+
+async def test_malformed_messages_are_counted_and_skipped(broker: Broker) -> None:
+    good = _state("gw-a", 1)
+    await broker.publish_states([good])
+    topic = Topics("gw-a").state("hall", 1)
+    async with _monitor("--url", broker.url, "--json", "--count", "2") as proc:
+        assert (await _lines(proc, 1))[0]["node"] == 1  # subscribed: the retained state came
+        # Live (QoS 1, one after the other): they reach the monitor in this order.
+        await broker.publish(topic, "{not json", retain=False)
+        wrong_type = json.loads(good.to_json()) | {"output_frequency_hz": "fast"}
+        await broker.publish(topic, json.dumps(wrong_type), retain=False)
+        await broker.publish(topic, _state("gw-a", 9).to_json(), retain=False)  # misrouted
+        await broker.publish("sj300/gw-a/hall/x/state", good.to_json(), retain=False)
+        await broker.publish("sj300/gw-a/availability", "maybe", retain=False)
+        await broker.publish(topic, good.to_json(), retain=False)  # the 2nd state: the end
+        out, err = await asyncio.wait_for(proc.communicate(), TIMEOUT)
+    assert proc.returncode == 0, err
+    assert [json.loads(line)["node"] for line in out.decode().splitlines()] == [1]
+    assert err.decode().splitlines() == [
+        "sj300 monitor: note: 5 malformed messages skipped "
+        f"(first: {topic}: not JSON: Expecting property name enclosed in double quotes: "
+        "line 1 column 2 (char 1))"
+    ]
+
+
+async def test_a_lost_broker_is_reconnected(broker: Broker) -> None:
+    first = [_state("gw-a", 1), _state("gw-a", 2)]
+    await broker.publish_states(first)
+    async with _monitor("--url", broker.url, "--json", "--count", "4") as proc:
+        assert len(await _lines(proc, 2)) == 2
+        broker.stop()
+        await broker.start()  # same port; no persistence: its retained states are gone
+        again = [_state("gw-a", 1, output_frequency_hz=42.0), _state("gw-a", 2)]
+        await broker.publish_states(again)
+        out, err = await asyncio.wait_for(proc.communicate(), TIMEOUT)
+    assert proc.returncode == 0, err
+    lines = [json.loads(line) for line in out.decode().splitlines()]
+    assert sorted(s["node"] for s in lines) == [1, 2]  # the 2 after the reconnect
+    assert {s["output_frequency_hz"] for s in lines if s["node"] == 1} == {42.0}
+    notes = err.decode().splitlines()
+    assert notes[0].startswith(f"sj300 monitor: note: connection to {broker.url} lost (")
+    assert notes[0].endswith("): reconnecting in 0.5 s")
+    assert notes[-1] == f"sj300 monitor: note: reconnected to {broker.url}"
+
+
+async def test_on_a_terminal_a_table_of_every_drive(broker: Broker) -> None:
+    sent = _fleet()
+    await broker.publish("sj300/gw-a/availability", "online")
+    await broker.publish("sj300/gw-b/availability", "offline")  # its last will: died
+    await broker.publish_states(sent)
+    result = await sj300_on_terminal("monitor", "--url", broker.url, "--count", str(len(sent)))
+    assert result.code == 0, result.out
+    screen = result.out
+    assert f"sj300 monitor — fleet on {broker.url} (sj300/…)" in screen
+    assert "6 drives on 2 gateways (1 offline)" in screen
+    table = screen[screen.rindex("sj300 monitor — fleet") :]  # the last frame
+    rows = [line.split() for line in table.splitlines()]
+    header = next(row for row in rows if row[:3] == ["gateway", "line", "node"])
+    assert header == [
+        "gateway", "line", "node", "online", "out", "Hz", "current", "A", "voltage", "V",
+        "direction", "state", "age",
+    ]  # fmt: skip
+    drives = [" ".join(row) for row in rows if row[:1] in (["gw-a"], ["gw-b"])]
+    assert [row.split()[:4] for row in drives] == [
+        ["gw-a", "hall", "01", "online"],
+        ["gw-a", "hall", "02", "online"],
+        ["gw-a", "hall", "03", "online"],
+        ["gw-b", "hall", "01", "offline"],
+        ["gw-b", "hall", "04", "offline"],
+        ["gw-b", "line2", "00", "offline"],
+    ]
+    assert drives[0].startswith("gw-a hall 01 online 11.00 2.5 381.0 forward running ")
+    assert drives[1].startswith("gw-a hall 02 online 12.00 3.5 382.0 stop tripped E07 over-volt")
+    # Its gateway is gone: nobody refreshes these states.
+    assert drives[3].startswith("gw-b hall 01 offline (stale) 21.00 2.5 381.0 forward running ")
+    assert drives[5].startswith("gw-b line2 00 offline (stale) 25.00 2.0 200.0 reverse running rev")
+    assert all(re.search(r" \d+(\.\d)? (d|h|min|s)$", row) for row in drives)  # the age
+
+    # 80 columns: the compact layout (no direction; "stale"), the numbers whole.
+    narrow = await sj300_on_terminal("monitor", "--url", broker.url, "--count", "6", columns=80)
+    last = narrow.out[narrow.out.rindex("sj300 monitor — fleet") :].splitlines()
+    assert max(len(line.rstrip()) for line in last) <= 80
+    assert any(
+        line.split() == ["gateway", "line", "node", "online", "Hz", "A", "V", "state", "age"]
+        for line in last
+    )
+    assert any(
+        line.split()[:8] == ["gw-b", "hall", "01", "stale", "21.00", "2.5", "381.0", "running"]
+        for line in last
+    )
+    assert "Traceback" not in screen
+
+
+async def test_64_drives_retained_are_all_listed(broker: Broker) -> None:
+    sent = [_state(gateway, node) for gateway in ("gw-a", "gw-b") for node in range(1, 33)]
+    await broker.publish_states(sent)
+    result = await sj300("monitor", "--url", broker.url, "--json", "--count", "64")
+    _assert_shown(_by_drive(result), sent)
+
+
+async def test_an_unreachable_broker_is_one_line() -> None:
+    port = closed_port()
+    result = await sj300("monitor", "--url", f"mqtt://127.0.0.1:{port}", "--count", "1")
+    result.assert_one_line_error(
+        1, f"sj300 monitor: error: cannot connect to mqtt://127.0.0.1:{port}: "
+    )
+
+
+async def test_without_aiomqtt_one_line_naming_the_extra() -> None:
+    code = (
+        "import sys; sys.modules['aiomqtt'] = None; from sj300_async.cli import main; "
+        "sys.exit(main(['monitor', '--url', 'mqtt://127.0.0.1:1']))"
+    )
+    proc = await asyncio.create_subprocess_exec(
+        sys.executable, "-c", code, stdout=asyncio.subprocess.PIPE, stderr=asyncio.subprocess.PIPE
+    )
+    out, err = await asyncio.wait_for(proc.communicate(), TIMEOUT)
+    assert proc.returncode is not None
+    Result(proc.returncode, out.decode(), err.decode()).assert_one_line_error(
+        2, "the gateway extra", "pip install 'sj300-async[gateway]'"
+    )
+
+
+@pytest.mark.parametrize(
+    ("args", "fragment"),
+    [
+        (("--url", "mqtt://127.0.0.1:1", "--nodes", "1-3"), "--nodes does not apply to a broker"),
+        (("--url", "mqtt://127.0.0.1:1/a/+"), "bad topic prefix 'a/+'"),
+        (("--url", "mqtt://127.0.0.1:1", "--sim"), "give --url or --sim"),
+    ],
+)
+async def test_usage_errors_are_one_line(args: tuple[str, ...], fragment: str) -> None:
+    result = await sj300("monitor", *args)
+    result.assert_one_line_error(2, fragment)
+
+
+# --- in process: the URL and the bookkeeping ---------------------------------------------------
+
+
+def test_the_url_is_taken_apart() -> None:
+    assert parse_fleet_url("mqtt://broker") == FleetUrl("mqtt", "broker", 1883)
+    tls = parse_fleet_url("MQTTS://me:p%40ss@[::1]/plant/north")
+    assert tls == FleetUrl("mqtts", "::1", 8883, "plant/north", "me", "p@ss")
+    assert tls.broker == "mqtts://[::1]:8883"  # never the password
+    assert tls.state_filter == "plant/north/+/+/+/state"
+    for bad in ("mqtt://:1883", "mqtt://h:99999", "mqtt://h/a//b", "mqtt://h?x=1"):
+        with pytest.raises(CliError):
+            parse_fleet_url(bad)
+
+
+def test_the_fleet_keeps_the_latest_state_and_clears_what_is_cleared() -> None:
+    fleet = Fleet(FleetUrl("mqtt", "h", 1883))
+    topic = Topics("gw-a").state("hall", 3)
+    old, new = _state("gw-a", 3), _state("gw-a", 3, output_frequency_hz=1.0)
+    assert fleet.receive(topic, old.to_json()) == old
+    assert fleet.receive(topic, new.to_json()) == new
+    assert fleet.drives == [new]
+    assert fleet.gateway_online("gw-a")  # not heard yet: trusted
+    assert fleet.receive("sj300/gw-a/availability", b"offline") is None
+    assert not fleet.gateway_online("gw-a")
+    assert fleet.receive("sj300/gw-a/availability", b"") is None  # cleared: forgotten
+    assert fleet.gateway_online("gw-a")
+    assert fleet.receive(topic, b"") is None  # a retained state cleared: the drive is gone
+    assert fleet.drives == []
+    assert fleet.malformed == 0
+    assert fleet.summary() is None
