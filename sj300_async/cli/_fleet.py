@@ -603,7 +603,8 @@ async def follow(
     """Subscribe and feed *fleet* until *on_state* answers False; reconnect when lost.
 
     *on_state* gets each state received and says whether to go on. *on_link*
-    hears of every change of :attr:`Fleet.link_problem` (None: connected).
+    hears when the link is up (None: connected and subscribed) and when it
+    is down (what happened, and when the next attempt comes).
 
     Raises:
         CliError: the broker cannot be reached or refuses the subscription
@@ -620,6 +621,7 @@ async def follow(
             on_link(problem)
 
     while True:
+        subscribed = False
         client: aiomqtt.Client = mqtt.Client(
             url.host,
             url.port,
@@ -637,13 +639,15 @@ async def follow(
                     [(url.availability_filter, 1), (url.state_filter, 1)]
                 )
                 _check_granted(url, granted)
-                connected_once = True
+                connected_once = subscribed = True
                 attempt = 0
                 link(None)
                 async for message in client.messages:
-                    payload = message.payload
-                    data = payload if isinstance(payload, bytes) else str(payload or "").encode()
-                    state = fleet.receive(message.topic.value, data)
+                    payload = message.payload  # bytes from paho; typed wider by aiomqtt
+                    data = b"" if payload is None else payload
+                    if not isinstance(data, bytes | bytearray):
+                        data = str(data).encode()
+                    state = fleet.receive(message.topic.value, bytes(data))
                     if state is not None and not on_state(state):
                         return
         except mqtt.MqttError as exc:
@@ -654,10 +658,11 @@ async def follow(
                 ) from None
             delay = backoff(attempt)
             attempt += 1
-            link(f"connection to {url.broker} lost ({reason}): reconnecting in {delay:g} s")
-            _log.info("connection to %s lost: %s; reconnecting in %g s", url.broker, reason, delay)
+            what = "connection to {} lost" if subscribed else "cannot reconnect to {}"
+            link(f"{what.format(url.broker)} ({reason}): next attempt in {delay:g} s")
+            _log.info("%s: %s; next attempt in %g s", what.format(url.broker), reason, delay)
             await asyncio.sleep(delay)
-            link(f"reconnecting to {url.broker} (attempt {attempt})")
+            fleet.link_problem = f"reconnecting to {url.broker} (attempt {attempt})"
 
 
 def _check_granted(url: FleetUrl, granted: Any) -> None:
@@ -692,6 +697,7 @@ async def watch_fleet(args: argparse.Namespace, url_text: str) -> None:
     live = is_terminal() and not args.json
     count: int | None = args.count
     received = 0
+    connected_before = False
 
     def on_state(message: StateMessage) -> bool:
         nonlocal received
@@ -702,23 +708,31 @@ async def watch_fleet(args: argparse.Namespace, url_text: str) -> None:
             print(plain_line(fleet, message), flush=True)
         return count is None or received < count
 
-    def on_link(problem: str | None) -> None:
-        if live:
-            return  # the table's caption says it
-        if problem is None and received:
-            _note(f"reconnected to {url.broker}")
-        elif problem is not None and not problem.startswith("reconnecting"):
-            _note(problem)
+    with contextlib.ExitStack() as stack:
 
-    timeout_s = args.timeout or DEFAULT_TIMEOUT_S
-    try:
-        with _live(fleet, enabled=live), contextlib.suppress(TimeoutError):  # --duration is up
-            async with asyncio.timeout(args.duration):
-                await follow(fleet, on_state, timeout_s=timeout_s, on_link=on_link)
-    finally:
-        summary = fleet.summary()
-        if summary is not None:
-            _note(summary)
+        def on_link(problem: str | None) -> None:
+            nonlocal connected_before
+            if problem is None and not connected_before:
+                connected_before = True
+                if live:  # only now: a broker that cannot be reached is one line, no table
+                    stack.enter_context(_live(fleet))
+            elif live:
+                return  # the table's caption says it
+            elif problem is None:
+                _note(f"reconnected to {url.broker}")
+            else:
+                _note(problem)
+
+        timeout_s = args.timeout or DEFAULT_TIMEOUT_S
+        try:
+            with contextlib.suppress(TimeoutError):  # --duration is up
+                async with asyncio.timeout(args.duration):
+                    await follow(fleet, on_state, timeout_s=timeout_s, on_link=on_link)
+        finally:
+            stack.close()  # the table's last frame, then the summary under it
+            summary = fleet.summary()
+            if summary is not None:
+                _note(summary)
 
 
 def _note(text: str) -> None:
@@ -726,10 +740,7 @@ def _note(text: str) -> None:
 
 
 @contextlib.contextmanager
-def _live(fleet: Fleet, *, enabled: bool) -> Iterator[None]:
-    if not enabled:
-        yield
-        return
+def _live(fleet: Fleet) -> Iterator[None]:
     from rich.console import Console
     from rich.live import Live
 
