@@ -106,7 +106,7 @@ _log = logging.getLogger("sj300_async.cli.fleet")
 
 #: URL schemes of a broker (the fleet view) rather than a bus.
 SCHEMES: Final = {"mqtt": 1883, "mqtts": 8883}
-#: The reconnection back-off: first delay, factor, ceiling (seconds).
+#: The reconnection back-off (seconds): the first wait, doubled at each failure up to the ceiling.
 BACKOFF_FIRST_S: Final = 0.5
 BACKOFF_MAX_S: Final = 10.0
 #: The broker connection's keep-alive: a silently dropped link is noticed within 1.5x this.

@@ -68,7 +68,6 @@ from ._args import format_nodes, parse_any_nodes
 from ._common import add_bus_options, add_json_option, bus_url, open_cli_bus, positive_float
 from ._demo import run_demo
 from ._errors import FAILURE, CliError
-from ._fleet import is_fleet_url, watch_fleet
 from ._output import Justify, drive_state, is_terminal, jsonable, print_json
 from ._progress import progress
 from ._scan import probe
@@ -206,7 +205,9 @@ def run(args: argparse.Namespace) -> int:
 
 async def _monitor(args: argparse.Namespace) -> int:
     url = bus_url(args)
-    if url is not None and is_fleet_url(url):  # a broker, not a bus: the fleet view (._fleet)
+    from ._fleet import is_fleet_url, watch_fleet  # here: every sj300 command imports this module
+
+    if url is not None and is_fleet_url(url):  # a broker, not a bus: the fleet view
         await _until_terminated(watch_fleet(args, url))
         return 0
     nodes: list[int] | None = args.nodes
