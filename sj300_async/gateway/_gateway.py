@@ -4,12 +4,15 @@
 (one :class:`~sj300_async.Bus` each, the only master on its wire), starts a
 :class:`~sj300_async.Poller` per line with the line's poll plan, feeds each
 sample into the drive's :class:`~._state.DriveState`, and serves: Modbus
-TCP (:mod:`._modbus`) and /metrics + /healthz (:mod:`._http`). Nothing is
-written to a drive on start-up: the poller only reads, and writes come only
-from clients.
+TCP (:mod:`._modbus`), /metrics + /healthz (:mod:`._http`) and MQTT
+(:mod:`._mqtt`: each sample is handed to the bridge after the state took
+it). Nothing is written to a drive on start-up: the poller only reads, and
+writes come only from clients.
 
-Leaving it (SIGTERM in ``sj300 gateway``) stops in this order: the Modbus
-server (so no client write starts any more), the leases still held (their
+Leaving it (SIGTERM in ``sj300 gateway``) stops in this order: the MQTT
+bridge (no MQTT command starts any more; it says "offline" and
+disconnects), the Modbus server (so no client write starts any more), the
+leases still held (their
 lapse action runs and is waited for: the one case a command is sent on
 the way out), the trip-history readers and pollers, the HTTP server, the
 lines, the audit log.
@@ -38,6 +41,7 @@ from ._http import serve_http
 from ._metrics import ClientCounters, DriveView, LineView, line_problems, make_registry
 from ._modbus import ModbusGatewayServer, Unit, serve_modbus
 from ._model import GatewayConfig, LineConfig
+from ._mqtt import MqttBridge
 from ._registers import RegisterMap
 from ._state import DriveState, Lease
 
@@ -68,6 +72,7 @@ class Gateway:
         self.audit = AuditLog(config.audit_log)
         self.modbus: ModbusGatewayServer | None = None
         self.http: asyncio.Server | None = None
+        self.mqtt: MqttBridge | None = None
         self._stack = contextlib.AsyncExitStack()
         self._tasks: list[asyncio.Task[None]] = []
 
@@ -119,6 +124,11 @@ class Gateway:
         try:
             for config in self.config.lines:
                 self.lines.append(await self._open_line(config))
+            if self.config.mqtt is not None:  # before the pollers: it gets the first samples
+                self.mqtt = MqttBridge(
+                    self.config.mqtt, self.config.gateway_id, self.lines, self.config.stale_after_s
+                )
+                self.mqtt.start()
             for line in self.lines:
                 await self._stack.enter_async_context(line.poller)
                 if line.config.protocol == "sj300" and line.config.trips_interval_s > 0:
@@ -172,7 +182,10 @@ class Gateway:
     def _on_sample(self, line: GatewayLine, sample: Sample) -> None:
         protocol = line.config.protocol
         raw = {code: raw_of(protocol, code, value) for code, value in sample.parameters.items()}
-        line.states[sample.node].update(sample, raw)
+        state = line.states[sample.node]
+        state.update(sample, raw)
+        if self.mqtt is not None:
+            self.mqtt.on_sample(state, sample)
 
     async def _read_trips(self, line: GatewayLine) -> None:
         loop = asyncio.get_running_loop()
@@ -196,6 +209,9 @@ class Gateway:
                 seen_trip[state.node] = tripped
 
     async def _shutdown(self) -> None:
+        if self.mqtt is not None:
+            await self.mqtt.close()
+            self.mqtt = None
         if self.modbus is not None:
             await self.modbus.shutdown()  # type: ignore[no-untyped-call]
             self.modbus = None

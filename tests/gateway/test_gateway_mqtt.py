@@ -1,0 +1,642 @@
+"""The gateway on MQTT, with a real broker (mosquitto) and an independent client (mosquitto_sub).
+
+Every check reads what the broker delivers to ``mosquitto_sub``, not what the
+bridge says it sent: discovery configs retained and complete, a state message
+per drive per poll, the last will when a gateway process is killed, a broker
+restart survived, commands carried out and refusals answered. Nothing waits
+a guessed time: the broker's own log says when it runs, a retained marker
+when a subscriber is subscribed, and a non-retained marker (a barrier) when
+everything published before it has been delivered.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import contextlib
+import itertools
+import json
+import logging
+import signal
+import socket
+import sys
+from collections.abc import AsyncIterator, Callable
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import pytest
+from cli.clirun import cli_env
+from waiting import wait_for
+
+from sj300_async.gateway._gateway import Gateway
+from sj300_async.gateway._model import LineConfig, MqttConfig
+from sj300_async.gateway._mqtt import _request, discovery, state_message
+from sj300_async.gateway._mqtt_topics import StateMessage, Topics
+from sj300_async.gateway._registers import Command, Exc, Heartbeat, ParameterWrite, SetFrequency
+from sj300_async.gateway._state import DriveState, Lease
+from sj300_async.sj300 import InverterStatus, MonitorData, StatusA, StatusB, StatusC
+
+from .conftest import SimLine, gateway_toml, modbus_client, running_gateway
+
+#: Retained by every broker this file starts: a subscriber that received it is subscribed.
+READY = "sjtest/ready"
+GRANTS = """
+    [[lines.writes]]
+    nodes = "1-2"
+    parameters = ["A004"]
+    control = true
+    """
+#: Discovery configs of gateway_toml's line with GRANTS: the gateway's connectivity
+#: sensor; 7 sensors per SJ300 drive; a number and 4 buttons per drive with control.
+CONFIGS = 1 + 4 * 7 + 2 * 5
+_RUNNING = "mosquitto version [0-9.]+ running"
+
+
+# -- the broker ---------------------------------------------------------------------------------
+
+
+def _free_port() -> int:
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        port: int = s.getsockname()[1]
+    return port
+
+
+@dataclass
+class Broker:
+    """A mosquitto of this test's own: stopped and started again on the same port at will."""
+
+    directory: Path
+    port: int = 0
+    proc: asyncio.subprocess.Process | None = None
+    starts: int = 0
+
+    @property
+    def url(self) -> str:
+        return f"mqtt://127.0.0.1:{self.port}"
+
+    async def start(self) -> None:
+        """Start it; return once the log says it runs and its port accepts connections."""
+        for _ in range(5):  # another process may take a free port before mosquitto binds it
+            if self.starts == 0 or self.port == 0:
+                self.port = _free_port()
+            if await self._start_once():
+                await self._publish(READY, "1", retain=True)
+                return
+            if self.starts > 0:
+                break
+        raise AssertionError(f"mosquitto did not start: {self._log().read_text()}")
+
+    async def _start_once(self) -> bool:
+        conf = self.directory / "mosquitto.conf"
+        conf.write_text(
+            f"listener {self.port} 127.0.0.1\nallow_anonymous true\npersistence false\n"
+            "log_dest stderr\nlog_type error\nlog_type warning\nlog_type notice\n"
+            "log_type information\n",
+            encoding="utf-8",
+        )
+        log = self._log()
+        with log.open("w") as err:
+            self.proc = await asyncio.create_subprocess_exec(
+                "mosquitto", "-c", str(conf), stdin=asyncio.subprocess.DEVNULL, stderr=err
+            )
+        proc = self.proc
+        try:
+            await wait_for(
+                lambda: proc.returncode is not None or "running" in log.read_text(),
+                "mosquitto to say it runs",
+            )
+        except AssertionError:
+            await self.stop()
+            raise
+        if proc.returncode is not None:
+            self.proc = None
+            return False  # the port was taken: the log says so
+        await _wait_for_port(self.port)
+        self.starts += 1
+        return True
+
+    def _log(self) -> Path:
+        return self.directory / "mosquitto.log"
+
+    async def stop(self) -> None:
+        if self.proc is not None and self.proc.returncode is None:
+            self.proc.terminate()
+            await self.proc.wait()
+        self.proc = None
+
+    async def _publish(self, topic: str, payload: str | None, *, retain: bool = False) -> None:
+        await publish(self, topic, payload, retain=retain)
+
+
+async def _wait_for_port(port: int, timeout: float = 5.0) -> None:
+    loop = asyncio.get_running_loop()
+    deadline = loop.time() + timeout
+    while True:
+        try:
+            _, writer = await asyncio.open_connection("127.0.0.1", port)
+        except OSError:
+            if loop.time() > deadline:
+                raise AssertionError(f"port {port} never accepted a connection") from None
+            await asyncio.sleep(0.01)
+            continue
+        writer.close()
+        await writer.wait_closed()
+        return
+
+
+@pytest.fixture
+async def broker(tmp_path: Path) -> AsyncIterator[Broker]:
+    b = Broker(tmp_path)
+    await b.start()
+    try:
+        yield b
+    finally:
+        await b.stop()
+
+
+async def publish(broker: Broker, topic: str, payload: str | None, *, retain: bool = False) -> None:
+    """``mosquitto_pub``: one message, QoS 1 (None: empty, which clears a retained one)."""
+    args = ["-p", str(broker.port), "-q", "1", "-t", topic]
+    args += ["-n"] if payload is None else ["-m", payload]
+    proc = await asyncio.create_subprocess_exec("mosquitto_pub", *args, *(["-r"] if retain else []))
+    assert await asyncio.wait_for(proc.wait(), 5) == 0
+
+
+# -- the independent subscriber --------------------------------------------------------------
+
+
+@dataclass(frozen=True)
+class Message:
+    retained: bool
+    topic: str
+    payload: str
+
+    def json(self) -> Any:
+        return json.loads(self.payload)
+
+
+@dataclass
+class Sub:
+    """``mosquitto_sub -t '#'``: every message the broker delivers, with its retain flag."""
+
+    broker: Broker
+    messages: list[Message] = field(default_factory=list)
+    _barriers: Callable[[], int] = field(default_factory=lambda: itertools.count().__next__)
+
+    def where(self, predicate: Callable[[Message], bool]) -> list[Message]:
+        return [m for m in self.messages if predicate(m)]
+
+    def topic(self, topic: str) -> list[Message]:
+        return self.where(lambda m: m.topic == topic)
+
+    async def until(
+        self, predicate: Callable[[Message], bool], what: str, count: int = 1, timeout: float = 5
+    ) -> list[Message]:
+        """The messages matching *predicate*, once there are at least *count* of them."""
+        await wait_for(lambda: len(self.where(predicate)) >= count, what, timeout=timeout)
+        return self.where(predicate)
+
+    async def barrier(self) -> None:
+        """Return once everything the broker got before now has been delivered here."""
+        topic = f"sjtest/barrier/{self._barriers()}"
+        await publish(self.broker, topic, "1")
+        await self.until(lambda m: m.topic == topic, "the barrier")
+
+
+@contextlib.asynccontextmanager
+async def subscriber(broker: Broker) -> AsyncIterator[Sub]:
+    """A subscriber to every topic; subscribed when this enters (it got the READY marker)."""
+    proc = await asyncio.create_subprocess_exec(
+        "mosquitto_sub", "-p", str(broker.port), "-q", "1", "-t", "#", "-F", "%r %t %p",
+        stdout=asyncio.subprocess.PIPE,
+    )  # fmt: skip
+    sub = Sub(broker)
+
+    async def read() -> None:
+        assert proc.stdout is not None
+        while line := await proc.stdout.readline():
+            retained, topic, payload = line.decode().rstrip("\n").split(" ", 2)
+            sub.messages.append(Message(retained == "1", topic, payload))
+
+    reader = asyncio.create_task(read())
+    try:
+        await sub.until(lambda m: m.topic == READY, "the subscriber to be subscribed")
+        yield sub
+    finally:
+        if proc.returncode is None:
+            proc.terminate()
+        await proc.wait()
+        await reader
+
+
+# -- helpers --------------------------------------------------------------------------------
+
+
+def mqtt_toml(url: str, broker: Broker, *, gateway: str = "gw1", keepalive_s: int = 30) -> str:
+    extra = (
+        f'[gateway]\nid = "{gateway}"\nstale_after_s = 0.5\n'
+        f'[mqtt]\nurl = "{broker.url}"\nkeepalive_s = {keepalive_s}\n'
+    )
+    return gateway_toml(url, extra=extra, line_extra=GRANTS)
+
+
+def states(sub: Sub, node: int, gateway: str = "gw1") -> list[StateMessage]:
+    topic = Topics(gateway).state("hall", node)
+    return [StateMessage.from_json(m.payload) for m in sub.topic(topic)]
+
+
+def state_of(node: int, *, live: bool = False) -> Callable[[Message], bool]:
+    """A predicate: a state message of *node* (*live*: delivered as sent, not as retained)."""
+    topic = Topics("gw1").state("hall", node)
+    return lambda m: m.topic == topic and not (live and m.retained)
+
+
+def configs(sub: Sub, *, retained: bool) -> list[Message]:
+    """The discovery configs *sub* received (``homeassistant/status`` is not one)."""
+    return sub.where(lambda m: m.topic.endswith("/config") and m.retained == retained)
+
+
+def errors(sub: Sub, node: int) -> list[dict[str, Any]]:
+    return [m.json() for m in sub.topic(Topics("gw1").error("hall", node))]
+
+
+def bridge(gateway: Gateway) -> Any:
+    assert gateway.mqtt is not None
+    return gateway.mqtt
+
+
+# -- discovery --------------------------------------------------------------------------------
+
+
+async def test_discovery_configs_are_retained_json_with_every_required_key(
+    sim_line: SimLine, broker: Broker
+) -> None:
+    async with running_gateway(mqtt_toml(sim_line.url, broker)) as gateway:
+        await wait_for(lambda: bridge(gateway).stats.published >= CONFIGS, "the configs sent")
+        async with subscriber(broker) as sub:  # after they were published: retained ones only
+            await sub.barrier()
+    found = {m.topic: m.json() for m in configs(sub, retained=True)}
+    assert len(configs(sub, retained=True)) == len(found) == CONFIGS
+    assert configs(sub, retained=False) == []
+    topics = Topics("gw1")
+    gateway_device = found["homeassistant/binary_sensor/sj300_gw1/connectivity/config"]
+    assert gateway_device["state_topic"] == topics.availability
+    assert gateway_device["device"]["identifiers"] == ["sj300_gw1"]
+    unique_ids = [body["unique_id"] for body in found.values()]
+    assert len(set(unique_ids)) == len(unique_ids)
+    for topic, body in found.items():
+        component, node_id, object_id = topic.split("/")[1:4]
+        assert topic.endswith("/config")
+        assert body["unique_id"] == f"{node_id}_{object_id}"
+        assert body["default_entity_id"] == f"{component}.{node_id}_{object_id}".lower()
+        if node_id == "sj300_gw1":
+            continue
+        node = int(node_id.rsplit("_", 1)[1])
+        assert body["device"] == {
+            "identifiers": [f"sj300_gw1_hall_{node}"],
+            "name": f"hall node {node}",
+            "model": "SJ300",
+            "manufacturer": "Hitachi",
+            "via_device": "sj300_gw1",
+        }
+        assert body["availability"] == [
+            {"topic": topics.availability},
+            {"topic": topics.drive_availability("hall", node)},
+        ]
+        assert body["availability_mode"] == "all"
+        assert body["state_topic" if component != "button" else "command_topic"].startswith(
+            topics.drive("hall", node)
+        )
+    frequency = found["homeassistant/sensor/sj300_gw1_hall_3/output_frequency/config"]
+    assert frequency["state_topic"] == topics.state("hall", 3)
+    assert frequency["value_template"] == "{{ value_json.output_frequency_hz }}"
+    assert (frequency["unit_of_measurement"], frequency["device_class"]) == ("Hz", "frequency")
+    assert frequency["state_class"] == "measurement"
+    # Control only where the configuration grants it: nodes 1 and 2.
+    controls = {(t.split("/")[2], t.split("/")[3]) for t in found if t.split("/")[1] != "sensor"}
+    assert controls == {("sj300_gw1", "connectivity")} | {
+        (f"sj300_gw1_hall_{node}", what)
+        for node in (1, 2)
+        for what in ("set_frequency", "run_forward", "run_reverse", "stop", "lease")
+    }
+    number = found["homeassistant/number/sj300_gw1_hall_1/set_frequency/config"]
+    assert number["command_topic"] == topics.command("hall", 1, "frequency_hz")
+    assert (number["min"], number["max"], number["step"]) == (0, 400.0, 0.01)
+    lease = found["homeassistant/button/sj300_gw1_hall_2/lease/config"]
+    assert lease["command_topic"] == topics.command("hall", 2, "lease")
+    run = found["homeassistant/button/sj300_gw1_hall_2/run_reverse/config"]
+    assert (run["command_topic"], run["payload_press"]) == (
+        topics.command("hall", 2, "command"),
+        "run_reverse",
+    )
+
+
+async def test_home_assistant_birth_republishes_every_config(
+    sim_line: SimLine, broker: Broker
+) -> None:
+    # A retained birth is one Home Assistant sent before the gateway connected: the
+    # gateway's connect publishes everything anyway, the birth adds nothing.
+    await publish(broker, "homeassistant/status", "online", retain=True)
+    async with (
+        subscriber(broker) as sub,
+        running_gateway(mqtt_toml(sim_line.url, broker)),
+    ):
+        availability = Topics("gw1").drive_availability("hall", 4)
+        await sub.until(lambda m: m.topic == availability, "node 4 polled")
+        await sub.barrier()
+        assert len(configs(sub, retained=False)) == CONFIGS
+        assert [m.payload for m in sub.topic(availability)] == ["online"]
+        # Home Assistant starts again: everything it needs, again, live.
+        await publish(broker, "homeassistant/status", "online")
+        await sub.until(lambda m: m.topic.endswith("/config") and not m.retained,
+                        "the configs again", count=2 * CONFIGS)  # fmt: skip
+        await sub.until(lambda m: m.topic == availability, "the availability again", count=2)
+        await sub.barrier()
+        assert len(configs(sub, retained=False)) == 2 * CONFIGS
+    await publish(broker, "homeassistant/status", None, retain=True)  # cleared
+
+
+# -- state and availability -----------------------------------------------------------------------
+
+
+async def test_a_state_message_per_drive_per_poll(sim_line: SimLine, broker: Broker) -> None:
+    async with subscriber(broker) as sub:
+        async with running_gateway(mqtt_toml(sim_line.url, broker)) as gateway:
+            for node in range(1, 5):
+                await sub.until(state_of(node), f"six states of node {node}", count=6)
+            stats = bridge(gateway).stats
+        await sub.barrier()  # the clean stop flushed what was waiting
+    for node in range(1, 5):
+        received = states(sub, node)
+        key = ("hall", node)
+        # Each poll is one message, or it was replaced before it was sent (counted).
+        assert len(received) == stats.states[key]
+        assert len(received) + stats.replaced[key] == stats.samples[key]
+        assert sum(stats.replaced.values()) <= 4, stats.replaced  # only before the first connect
+        times = [m.time for m in received]
+        assert times == sorted(set(times))  # one per poll: each its own time
+        for message in received:
+            assert (message.gateway, message.line, message.node) == ("gw1", "hall", node)
+            assert message.online
+            assert message.output_frequency_hz == 0.0
+            assert message.status is not None
+            assert message.status["b"] == "STOPPED"
+            assert message.parameters["A004"] == 50.0
+        assert [m.payload for m in sub.topic(Topics("gw1").drive_availability("hall", node))] == [
+            "online"
+        ]
+    availability = [m.payload for m in sub.topic(Topics("gw1").availability)]
+    assert availability == ["online", "offline"]  # a clean stop says so itself
+    async with subscriber(broker) as late:  # every drive's last state stays retained
+        await late.barrier()
+    assert all(
+        [m.retained for m in late.topic(Topics("gw1").state("hall", n))] == [True]
+        for n in range(1, 5)
+    )
+
+
+async def test_stale_values_are_null_and_a_trip_names_its_code(
+    sim_line: SimLine, broker: Broker
+) -> None:
+    async with (
+        subscriber(broker) as sub,
+        running_gateway(mqtt_toml(sim_line.url, broker)) as gateway,
+    ):
+        await sub.until(lambda m: m.topic == Topics("gw1").state("hall", 4), "a state")
+        loop = asyncio.get_running_loop()
+        assert sim_line.sim.drives[4].trip(7, now=loop.time())
+        await wait_for(lambda: any(m.trip == "E07" for m in states(sub, 4)), "trip E07")
+        first = next(m for m in states(sub, 4) if m.tripped)
+        assert first.trip in (None, "E07")  # before the history is read after it: not guessed
+        sim_line.sim.faults.silence(3)
+        offline = Topics("gw1").drive_availability("hall", 3)
+        await sub.until(lambda m: m.topic == offline and m.payload == "offline", "node 3 offline")
+        await wait_for(lambda: states(sub, 3)[-1].output_frequency_hz is None, "stale: null")
+        last = states(sub, 3)[-1]
+        assert not last.online
+        assert (last.status, last.running, last.set_frequency_hz, last.parameters) == (
+            None, None, None, {},
+        )  # fmt: skip
+        assert bridge(gateway).stats.refused == 0
+
+
+# -- losing the gateway, losing the broker --------------------------------------------------------
+
+
+async def test_a_killed_gateway_process_turns_offline_by_its_will(
+    sim_line: SimLine, broker: Broker, tmp_path: Path
+) -> None:
+    config = tmp_path / "gateway.toml"
+    config.write_text(mqtt_toml(sim_line.url, broker, gateway="gwk", keepalive_s=1))
+    availability = Topics("gwk").availability
+    async with subscriber(broker) as sub:
+        proc = await asyncio.create_subprocess_exec(
+            sys.executable, "-m", "sj300_async", "gateway", "--config", str(config),
+            stdin=asyncio.subprocess.DEVNULL, stdout=asyncio.subprocess.DEVNULL,
+            stderr=asyncio.subprocess.DEVNULL, env=cli_env(),
+        )  # fmt: skip
+        try:
+            await sub.until(lambda m: m.topic == availability and m.payload == "online",
+                            "the gateway online", timeout=20)  # fmt: skip
+            await sub.until(lambda m: m.topic == Topics("gwk").state("hall", 1), "a state")
+        finally:
+            proc.send_signal(signal.SIGKILL)
+            await proc.wait()
+        loop = asyncio.get_running_loop()
+        killed_at = loop.time()
+        await sub.until(lambda m: m.topic == availability and m.payload == "offline",
+                        "the last will", timeout=5)  # fmt: skip
+        assert loop.time() - killed_at < 3  # the broker saw the socket close (or 1.5 keepalives)
+    assert [m.payload for m in sub.topic(availability)] == ["online", "offline"]
+
+
+async def test_a_broker_restart_is_survived(
+    sim_line: SimLine, broker: Broker, caplog: pytest.LogCaptureFixture
+) -> None:
+    caplog.set_level(logging.DEBUG, logger="sj300_async.gateway.mqtt")
+    async with running_gateway(mqtt_toml(sim_line.url, broker, keepalive_s=2)) as gateway:
+        mqtt = bridge(gateway)
+        await wait_for(lambda: mqtt.connected and mqtt.stats.published > CONFIGS, "connected")
+        await broker.stop()
+        await wait_for(lambda: not mqtt.connected, "the loss noticed")
+        samples = sum(mqtt.stats.samples.values())
+        await wait_for(lambda: sum(mqtt.stats.samples.values()) > samples + 4, "polls go on")
+        await broker.start()  # the same port, nothing retained (no persistence)
+        async with subscriber(broker) as sub:
+            await wait_for(lambda: mqtt.connected, "reconnected", timeout=10)
+            await sub.until(lambda m: m.topic == Topics("gw1").availability
+                            and m.payload == "online", "online again")  # fmt: skip
+            for node in range(1, 5):
+                await sub.until(state_of(node, live=True), f"node {node}'s states flowing")
+            await sub.barrier()
+            discovered = sub.where(lambda m: m.topic.startswith("homeassistant/"))
+            assert len({m.topic for m in discovered}) == CONFIGS
+            assert (mqtt.stats.connects, mqtt.stats.losses) == (2, 1)
+    warnings = [
+        r.getMessage()
+        for r in caplog.records
+        if r.name == "sj300_async.gateway.mqtt" and r.levelno >= logging.WARNING
+    ]
+    assert [w.split(" (")[0] for w in warnings] == [f"MQTT: lost {broker.url}"], warnings
+
+
+async def test_no_broker_at_start_keeps_the_latest_state_per_drive(
+    sim_line: SimLine, broker: Broker, caplog: pytest.LogCaptureFixture
+) -> None:
+    caplog.set_level(logging.DEBUG, logger="sj300_async.gateway.mqtt")
+    await broker.stop()
+    async with running_gateway(mqtt_toml(sim_line.url, broker)) as gateway:
+        mqtt = bridge(gateway)
+        await wait_for(lambda: any("still unreachable" in r.getMessage() for r in caplog.records),
+                       "a second attempt")  # fmt: skip
+        await wait_for(lambda: all(mqtt.stats.samples["hall", n] >= 3 for n in range(1, 5)),
+                       "three polls of each drive")  # fmt: skip
+        assert all(mqtt.stats.replaced["hall", n] >= 2 for n in range(1, 5)), mqtt.stats.replaced
+        await broker.start()
+        async with subscriber(broker) as sub:
+            await wait_for(lambda: all(states(sub, n) for n in range(1, 5)), "the states")
+    cannot = [r for r in caplog.records if "cannot connect" in r.getMessage()]
+    assert [r.levelno for r in cannot] == [logging.WARNING]
+
+
+# -- commands ------------------------------------------------------------------------------------
+
+
+async def test_commands_reach_the_drive_and_refusals_are_answered(
+    sim_line: SimLine, broker: Broker, caplog: pytest.LogCaptureFixture
+) -> None:
+    caplog.set_level(logging.INFO, logger="sj300_async.gateway.audit")
+    topics = Topics("gw1")
+    drive = sim_line.sim.drives[1]
+    async with (
+        subscriber(broker) as sub,
+        running_gateway(mqtt_toml(sim_line.url, broker)) as gateway,
+    ):
+        await wait_for(lambda: bridge(gateway).connected, "connected")
+
+        async def refused(node: int, what: str, payload: str, error: str) -> None:
+            count = len(errors(sub, node))
+            await publish(broker, topics.command("hall", node, what), payload)
+            await sub.until(lambda m: m.topic == topics.error("hall", node), error, count + 1)
+            reply = errors(sub, node)[count]
+            assert reply["topic"] == topics.command("hall", node, what)
+            assert reply["payload"] == payload
+            assert reply["error"].startswith(error), reply
+
+        await refused(1, "frequency_hz", "25.5", "ILLEGAL_FUNCTION: take the control lease first")
+        await publish(broker, topics.command("hall", 1, "lease"), "")
+        await publish(broker, topics.command("hall", 1, "frequency_hz"), "25.5")
+        await wait_for(lambda: drive.parameters["F001"] == 2550, "F001 = 25.50 Hz")
+        read_back = await sub.until(
+            lambda m: m.topic == topics.state("hall", 1) and m.json()["set_frequency_hz"] == 25.5,
+            "the read-back on the state topic",
+        )
+        assert read_back[0].retained is False  # live, and retained for later subscribers
+        await publish(broker, topics.command("hall", 1, "command"), "run_forward")
+        await wait_for(lambda: drive.state(asyncio.get_running_loop().time()).outputting, "run")
+        await publish(broker, topics.command("hall", 1, "A004"), "55")
+        await wait_for(lambda: drive.parameters["A004"] == 550, "A004 = 55.0 Hz")
+        await refused(1, "A004", "55.05", "ILLEGAL_VALUE: 55.05 is finer than A004's")
+        await refused(1, "frequency_hz", "fast", "ILLEGAL_VALUE: expected a number of Hz")
+        await refused(1, "frequency_hz", "500", "ILLEGAL_VALUE: 500 Hz is outside")
+        await refused(1, "command", "jog", "ILLEGAL_VALUE: expected run_forward, run_reverse")
+        await refused(1, "speed", "1", "ILLEGAL_ADDRESS: no such command or parameter")
+        await refused(1, "F002", "1", "ILLEGAL_FUNCTION: the configuration does not allow")
+        await refused(3, "lease", "", "ILLEGAL_FUNCTION: the configuration does not allow control")
+        async with modbus_client(gateway) as scada:  # one lease per drive, whatever the protocol
+            assert not (await scada.write_register(1000, 1, device_id=2)).isError()
+            await refused(2, "lease", "", "DEVICE_BUSY: another client (127.0.0.1)")
+            assert (await scada.write_register(1000, 1, device_id=1)).exception_code == 0x06
+        await publish(broker, topics.command("hall", 1, "command"), "stop")
+        await sub.until(lambda m: m.topic == topics.state("hall", 1)
+                        and m.json()["running"] is False, "stopped")  # fmt: skip
+        await sub.barrier()
+    assert all(m.retained is False for m in sub.where(lambda m: m.topic.endswith("/error")))
+    audit = [r.getMessage() for r in caplog.records if r.name == "sj300_async.gateway.audit"]
+    assert "client mqtt line hall node 1 (unit 1): set frequency (Hz) 0.0 -> 25.5: ok" in audit
+    assert any("client mqtt line hall node 1" in a and "frequency_hz" in a and "fast" in a
+               for a in audit)  # fmt: skip
+    assert sim_line.log.interleaved() == []
+
+
+async def test_a_retained_command_is_never_carried_out(sim_line: SimLine, broker: Broker) -> None:
+    topics = Topics("gw1")
+    await publish(broker, topics.command("hall", 1, "lease"), "1", retain=True)  # "" would clear
+    await publish(broker, topics.command("hall", 1, "command"), "run_forward", retain=True)
+    try:
+        async with (
+            subscriber(broker) as sub,
+            running_gateway(mqtt_toml(sim_line.url, broker)) as gateway,
+        ):
+            replies = await sub.until(lambda m: m.topic == topics.error("hall", 1), "refusals", 2)
+            assert {r.json()["topic"].rsplit("/", 1)[1] for r in replies} == {"lease", "command"}
+            assert all("ILLEGAL_FUNCTION: a retained command" in r.json()["error"] for r in replies)
+            assert bridge(gateway).stats.refused == 2
+            assert gateway.state("hall", 1).lease.holder is None
+    finally:
+        await publish(broker, topics.command("hall", 1, "lease"), None, retain=True)
+        await publish(broker, topics.command("hall", 1, "command"), None, retain=True)
+    assert not sim_line.sim.drives[1].state(asyncio.get_running_loop().time()).outputting
+
+
+# -- the messages, without a broker ---------------------------------------------------------------
+
+
+def _drive_state() -> DriveState:
+    state = DriveState("hall", 2, 2, "sj300", Lease(5.0), online=True, last_ok=10.0)
+    state.status = InverterStatus(StatusA.RUNNING, StatusB.TRIPPED, StatusC.STOP)
+    state.status_at = 10.0
+    state.monitor = MonitorData(12.5, 3.2, 1, 0, 0, 0, 12.5, 40, 200.0, 1.5, 7, 9)  # type: ignore[arg-type]
+    state.monitor_at = 8.0
+    state.parameters, state.parameters_at = {"A004": 500}, {"A004": 10.0}
+    return state
+
+
+def test_a_state_message_leaves_stale_values_null() -> None:
+    state = _drive_state()
+    message = state_message("gw1", state, now=10.0, wall=1e9, stale_after_s=1.0)
+
+    assert message.time == 1e9
+    assert (message.online, message.tripped, message.running) == (True, True, False)
+    assert message.status == {"a": "RUNNING", "b": "TRIPPED", "c": "STOP"}
+    assert message.output_frequency_hz is None  # read at 8.0: 2 s old, 1 s allowed
+    assert message.parameters == {"A004": 50.0}
+    assert message.trip is None  # tripped, but no history read after the trip was seen
+    fresh = state_message("gw1", state, now=8.5, wall=1e9, stale_after_s=1.0)
+    assert (fresh.output_frequency_hz, fresh.power_kw, fresh.direction) == (12.5, 1.5, "forward")
+    assert json.loads(fresh.to_json())["output_torque_percent"] == 40
+
+
+def test_fr700_discovery_has_no_sj300_sensors() -> None:
+    line = LineConfig("hall-b", "sim://", "fr700", (0, 3), unit_offset=100)
+    found = dict(discovery(MqttConfig("b", 1883, qos=0), Topics("gw1", "plant/sj300"), [line]))
+
+    station = [b for t, b in found.items() if "sj300_gw1_hall-b_3" in t]
+    assert {b["name"] for b in station} == {
+        "Output frequency", "Output current", "Output voltage", "Status",
+    }  # fmt: skip
+    assert station[0]["device"]["name"] == "hall-b station 3"
+    assert station[0]["device"]["manufacturer"] == "Mitsubishi Electric"
+    assert station[0]["state_topic"] == "plant/sj300/gw1/hall-b/3/state"
+    assert all(b["qos"] == 0 for b in found.values())
+
+
+@pytest.mark.parametrize(
+    ("what", "payload", "request_or_refusal"),
+    [
+        ("lease", b"\xff anything", Heartbeat()),
+        ("command", b" run_reverse\n", Command(2)),
+        ("command", b"stop", Command(0)),
+        ("frequency_hz", b"12.34", SetFrequency(12.34)),
+        ("frequency_hz", b"nan", Exc.ILLEGAL_VALUE),
+        ("frequency_hz", b"\xff", Exc.ILLEGAL_VALUE),
+        ("a004", b"60", ParameterWrite("A004", 600)),
+        ("A004", b"1e400", Exc.ILLEGAL_VALUE),
+        ("A004", b"60.01", Exc.ILLEGAL_VALUE),
+        ("Pr.7", b"5", Exc.ILLEGAL_ADDRESS),  # an FR-700 code on an SJ300 line
+    ],
+)
+def test_command_payloads(what: str, payload: bytes, request_or_refusal: object) -> None:
+    result = _request("sj300", what, payload)
+    assert (result[0] if isinstance(result, tuple) else result) == request_or_refusal
