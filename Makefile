@@ -10,7 +10,7 @@ RUN_STAMP := $(VENV)/.installed-run
 
 # Debian packages the tests need; each provides a command of the same name
 # (socat + ser2net: the real serial-device-server bridge test in tests/transports).
-SYSTEM_PACKAGES := socat ser2net mbpoll
+SYSTEM_PACKAGES := socat ser2net mbpoll mosquitto mosquitto-clients
 
 .PHONY: demo examples test lint typecheck lint-imports docs system-packages pytest bench \
 	bench-compare soak clean venv
