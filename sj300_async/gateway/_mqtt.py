@@ -104,12 +104,15 @@ MAX_ERRORS: Final = 100
 MAX_COMMANDS: Final = 16
 #: Publishes in flight at once (paho queues the rest; aiomqtt warns past its threshold).
 MAX_IN_FLIGHT: Final = 32
+#: Messages paho may hold for a socket that does not take them.
+MAX_QUEUED: Final = 1000
 #: How long a clean stop waits for a write under way, and for its last publishes.
 CLOSE_TIMEOUT_S: Final = 3.0
 #: The payloads of ``…/set/command`` → the Modbus register's code (0 stop, 1 forward, 2 reverse).
 _COMMANDS: Final = {"stop": 0, "run_forward": 1, "run_reverse": 2}
 _MODELS: Final = {"sj300": ("SJ300", "Hitachi"), "fr700": ("FR-700", "Mitsubishi Electric")}
 _NOT_IN_NODE_ID: Final = re.compile(r"[^A-Za-z0-9_-]")
+_NOT_IN_ENTITY_ID: Final = re.compile(r"[^a-z0-9_]")
 
 Key = tuple[str, int]
 
@@ -308,7 +311,7 @@ def discovery(
         {
             "name": "Connectivity",
             "unique_id": f"{gateway_device}_connectivity",
-            "default_entity_id": f"binary_sensor.{gateway_device}_connectivity".lower(),
+            "default_entity_id": _entity_id("binary_sensor", f"{gateway_device}_connectivity"),
             "device": {
                 "identifiers": [gateway_device],
                 "name": f"sj300 gateway {gateway}",
@@ -418,11 +421,16 @@ def _entity(
     body = {
         "name": name,
         "unique_id": unique,
-        "default_entity_id": f"{component}.{unique}".lower(),
+        "default_entity_id": _entity_id(component, unique),
         **common,
         **keys,
     }
     return f"{prefix}/{component}/{drive}/{object_id}/config", body
+
+
+def _entity_id(component: str, unique_id: str) -> str:
+    """``sensor.sj300_gw1_hall_a_3_power``: an entity id holds only ``[a-z0-9_]``."""
+    return f"{component}.{_NOT_IN_ENTITY_ID.sub('_', unique_id.lower())}"
 
 
 def _number(text: str) -> float | None:
@@ -670,6 +678,9 @@ class MqttBridge:
             will=aiomqtt.Will(self.topics.availability, UNAVAILABLE, config.qos, retain=True),
             clean_session=True,  # nothing the broker kept for us: no stale command
             keepalive=config.keepalive_s,
+            # A broker that stops reading: paho's queue (QoS 0 publishes return at
+            # once) is bounded too; past it, publish fails and the bridge reconnects.
+            max_queued_outgoing_messages=MAX_QUEUED,
         )
         client.pending_calls_threshold = 2 * MAX_IN_FLIGHT
         return client

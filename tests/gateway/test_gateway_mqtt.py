@@ -16,6 +16,7 @@ import contextlib
 import itertools
 import json
 import logging
+import re
 import signal
 import socket
 import sys
@@ -290,6 +291,7 @@ async def test_discovery_configs_are_retained_json_with_every_required_key(
         assert topic.endswith("/config")
         assert body["unique_id"] == f"{node_id}_{object_id}"
         assert body["default_entity_id"] == f"{component}.{node_id}_{object_id}".lower()
+        assert re.fullmatch(r"[a-z_]+\.[a-z0-9_]+", body["default_entity_id"])
         if node_id == "sj300_gw1":
             continue
         node = int(node_id.rsplit("_", 1)[1])
@@ -609,16 +611,17 @@ def test_a_state_message_leaves_stale_values_null() -> None:
 
 
 def test_fr700_discovery_has_no_sj300_sensors() -> None:
-    line = LineConfig("hall-b", "sim://", "fr700", (0, 3), unit_offset=100)
+    line = LineConfig("Hall-B.2", "sim://", "fr700", (0, 3), unit_offset=100)
     found = dict(discovery(MqttConfig("b", 1883, qos=0), Topics("gw1", "plant/sj300"), [line]))
 
-    station = [b for t, b in found.items() if "sj300_gw1_hall-b_3" in t]
+    station = [b for t, b in found.items() if "/sj300_gw1_Hall-B_2_3/" in t]
     assert {b["name"] for b in station} == {
         "Output frequency", "Output current", "Output voltage", "Status",
     }  # fmt: skip
-    assert station[0]["device"]["name"] == "hall-b station 3"
+    assert station[0]["device"]["name"] == "Hall-B.2 station 3"
+    assert station[0]["default_entity_id"].startswith("sensor.sj300_gw1_hall_b_2_3_")
     assert station[0]["device"]["manufacturer"] == "Mitsubishi Electric"
-    assert station[0]["state_topic"] == "plant/sj300/gw1/hall-b/3/state"
+    assert station[0]["state_topic"] == "plant/sj300/gw1/Hall-B.2/3/state"
     assert all(b["qos"] == 0 for b in found.values())
 
 
