@@ -54,9 +54,12 @@ Decisions:
   answer delays only its own commands, never another drive's heartbeat.
 - Discovery uses ``default_entity_id``, not ``object_id``: Home Assistant
   deprecated ``object_id`` in 2025.10 and stopped honouring it in 2026.4.
-  Line names that differ only by ``.`` against ``_`` share their discovery
-  node id (Home Assistant allows neither ``.`` nor ``-`` to differ there…
-  ``.`` becomes ``_``): name lines apart.
+  A discovery node id holds only ``[A-Za-z0-9_-]``, so a line name's ``.``
+  becomes ``_`` there: two lines named ``a.b`` and ``a_b`` would share
+  their drives' node ids (name lines apart).
+- The bridge publishes with the configured QoS and waits for each batch's
+  acknowledgements (at most ``MAX_IN_FLIGHT`` at once) before the next: a
+  slow broker makes the outbox coalesce, never grow.
 
 Nothing is dropped silently: every replaced, lost or discarded message and
 every refused command is counted in :attr:`MqttBridge.stats` and logged at
@@ -458,6 +461,8 @@ def _request(protocol: str, what: str, payload: bytes) -> WriteRequest | tuple[E
         hz = _number(text)
         if hz is None:
             return Exc.ILLEGAL_VALUE, f"expected a number of Hz, got {text!r}"
+        if abs(round(hz * 100) - hz * 100) > 1e-6:  # the set frequency's step, on both protocols
+            return Exc.ILLEGAL_VALUE, f"{text} Hz is finer than 0.01 Hz"
         return SetFrequency(hz)
     code = get_dialect(protocol).parameter_code(what)
     if code is None:
@@ -544,6 +549,8 @@ class MqttBridge:
         self._busy: set[Key] = set()
         self._task: asyncio.Task[None] | None = None
         self._closing = False
+        #: Loop time by which a closing connection stops flushing and says "offline".
+        self._close_by = math.inf
 
     @property
     def connected(self) -> bool:
@@ -692,16 +699,20 @@ class MqttBridge:
             good = False
             try:
                 async with self._make_client() as client:
-                    await self._setup(client)
-                    good = True
-                    if failing:
-                        _log.info("MQTT: connected again to %s", self.config.url)
-                    else:
-                        _log.info(
-                            "MQTT: connected to %s as %s", self.config.url, self.topics.gateway
-                        )
-                    failing = False
-                    await self._session(client)
+                    try:
+                        await self._setup(client)
+                        good = True
+                        if failing:
+                            _log.info("MQTT: connected again to %s", self.config.url)
+                        else:
+                            _log.info("MQTT: connected to %s as %s",
+                                      self.config.url, self.topics.gateway)  # fmt: skip
+                        failing = False
+                        await self._session(client)
+                    except asyncio.CancelledError:
+                        if self._closing:
+                            await self._say_offline(client)
+                        raise  # and the clean disconnect: the broker drops the will
             except aiomqtt.MqttError as exc:
                 reason = str(exc) or type(exc).__name__
             except Exception as exc:  # a bug of ours must not end MQTT for good
@@ -722,6 +733,20 @@ class MqttBridge:
                 _log.debug("MQTT: %s still unreachable (%s)", self.config.url, reason)
             await asyncio.sleep(delay)
             delay = min(delay * 2, BACKOFF_MAX_S)
+
+    async def _say_offline(self, client: aiomqtt.Client) -> None:
+        """A clean stop: what is waiting, then "offline" (a clean disconnect has no will)."""
+        loop = asyncio.get_running_loop()
+        try:
+            async with asyncio.timeout(max(0.1, self._close_by - loop.time())):
+                await self._send(client)
+                await client.publish(
+                    self.topics.availability, UNAVAILABLE, qos=self.config.qos, retain=True
+                )
+        except (aiomqtt.MqttError, TimeoutError) as exc:
+            # The disconnect that follows is clean, so the broker drops the will:
+            # "online" stays until the gateway connects again. Said loudly.
+            _log.warning("MQTT: could not say offline before stopping: %s", exc or "time-out")
 
     async def _setup(self, client: aiomqtt.Client) -> None:
         """Subscribe, say online, and queue everything retained again."""
@@ -875,7 +900,6 @@ class MqttBridge:
         self._closing = True
         self._epoch += 1  # commands waiting are not carried out any more
         loop = asyncio.get_running_loop()
-        deadline = loop.time() + CLOSE_TIMEOUT_S
         # A write under way finishes (a write and its read-back stay together; its
         # worker then sees _closing and ends); the idle workers end now.
         busy = [task for key, task in self._workers.items() if key in self._busy]
@@ -891,18 +915,9 @@ class MqttBridge:
         if waiting:
             self.stats.discarded += waiting
             _log.debug("MQTT: %d commands discarded: the gateway is stopping", waiting)
-        client = self._client
-        if client is not None:
-            try:
-                async with asyncio.timeout(max(0.1, deadline - loop.time())):
-                    await self._send(client)
-                    await client.publish(
-                        self.topics.availability, UNAVAILABLE, qos=self.config.qos, retain=True
-                    )
-            except (aiomqtt.MqttError, TimeoutError) as exc:
-                # The broker publishes the will when it notices, unless the
-                # disconnect below is clean: then "online" stays until the next start.
-                _log.warning("MQTT: could not say offline before stopping: %s", exc or "time-out")
+        # The connection's own task says "offline" as it ends (see _run), after
+        # anything it was publishing: never before an "online" still on its way.
+        self._close_by = loop.time() + CLOSE_TIMEOUT_S
         self._task.cancel()
         await asyncio.gather(self._task, return_exceptions=True)
         self._task = None

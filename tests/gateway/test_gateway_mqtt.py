@@ -633,6 +633,7 @@ def test_fr700_discovery_has_no_sj300_sensors() -> None:
         ("command", b"stop", Command(0)),
         ("frequency_hz", b"12.34", SetFrequency(12.34)),
         ("frequency_hz", b"nan", Exc.ILLEGAL_VALUE),
+        ("frequency_hz", b"12.345", Exc.ILLEGAL_VALUE),
         ("frequency_hz", b"\xff", Exc.ILLEGAL_VALUE),
         ("a004", b"60", ParameterWrite("A004", 600)),
         ("A004", b"1e400", Exc.ILLEGAL_VALUE),
