@@ -582,6 +582,31 @@ async def test_a_retained_command_is_never_carried_out(sim_line: SimLine, broker
     assert not sim_line.sim.drives[1].state(asyncio.get_running_loop().time()).outputting
 
 
+async def test_a_command_waiting_when_the_connection_breaks_is_never_carried_out(
+    sim_line: SimLine, broker: Broker
+) -> None:
+    topics = Topics("gw1")
+    async with running_gateway(mqtt_toml(sim_line.url, broker)) as gateway:
+        mqtt = bridge(gateway)
+        await wait_for(lambda: mqtt.connected, "connected")
+        await publish(broker, topics.command("hall", 1, "lease"), "1")
+        await wait_for(lambda: gateway.state("hall", 1).lease.holder == "mqtt", "the lease")
+        # Another write to node 1 under way (its lock held): MQTT's first command waits
+        # for it, the second waits in the drive's queue.
+        lock = gateway.lines[0].controller._locks.setdefault(1, asyncio.Lock())
+        async with lock:
+            await publish(broker, topics.command("hall", 1, "frequency_hz"), "10")
+            await publish(broker, topics.command("hall", 1, "frequency_hz"), "20")
+            await wait_for(lambda: mqtt.stats.commands == 3, "both received")
+            await wait_for(lambda: ("hall", 1) in mqtt._busy, "the first started")
+            await broker.stop()
+            await wait_for(lambda: not mqtt.connected, "the loss noticed")
+        await wait_for(lambda: mqtt.stats.discarded == 1, "the waiting one discarded")
+        assert sim_line.sim.drives[1].parameters["F001"] == 1000  # the one under way: done
+    sent = b"".join(data for _, direction, data in sim_line.log.chunks if direction == "rx")
+    assert b"\x020101002000" not in sent  # 20 Hz: received, never sent to the drive
+
+
 # -- the messages, without a broker ---------------------------------------------------------------
 
 
