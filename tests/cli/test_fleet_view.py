@@ -342,6 +342,32 @@ async def test_64_drives_retained_are_all_listed(broker: Broker) -> None:
     _assert_shown(_by_drive(result), sent)
 
 
+async def test_what_a_real_gateway_publishes(broker: Broker) -> None:
+    """The other side of the contract: ``sj300 gateway --mqtt`` polling simulated drives."""
+    gateway = await asyncio.create_subprocess_exec(
+        sys.executable, "-m", "sj300_async", "gateway", "--url", "sim://?nodes=1-3",
+        "--nodes", "1-3", "--mqtt", broker.url, "--id", "gw-x",
+        stdout=asyncio.subprocess.PIPE, stderr=asyncio.subprocess.PIPE, env=cli_env(),
+    )  # fmt: skip
+    try:
+        result = await sj300("monitor", "--url", broker.url, "--json", "--count", "3")
+        drives = _by_drive(result)
+        assert set(drives) == {("gw-x", "line1", node) for node in (1, 2, 3)}
+        assert all(s["online"] is True and s["protocol"] == "sj300" for s in drives.values())
+        gateway.terminate()  # a clean stop: it says offline before it goes
+        await asyncio.wait_for(gateway.communicate(), TIMEOUT)
+    finally:
+        if gateway.returncode is None:
+            gateway.kill()
+            await gateway.wait()
+    result = await sj300("monitor", "--url", broker.url, "--count", "3")
+    assert result.code == 0, result.err
+    lines = result.out.splitlines()
+    assert sorted(line.split()[1:4] for line in lines) == [
+        [f"gw-x/line1/0{node}", "offline", "(stale)"] for node in (1, 2, 3)
+    ]
+
+
 async def test_an_unreachable_broker_is_one_line() -> None:
     port = closed_port()
     result = await sj300("monitor", "--url", f"mqtt://127.0.0.1:{port}", "--count", "1")
