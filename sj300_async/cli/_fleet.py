@@ -46,7 +46,9 @@ Decisions:
   (gateway, line, node) than its topic is malformed (a misrouted or
   hand-made message), as is one whose shown fields have the wrong type
   (``StateMessage.from_json`` checks only the gateway and the node: a text
-  where a number belongs would otherwise break the table).
+  where a number belongs would otherwise break the table), a gateway or
+  line that breaks the contract's naming rule, or text that is not
+  printable (an escape sequence would reach the terminal as it is).
 - Malformed messages (a payload that is no state, an availability that is
   neither ``online`` nor ``offline``, a topic the contract does not name)
   are skipped, counted and logged at DEBUG with their payload. The count
@@ -294,7 +296,10 @@ class Fleet:
 
 
 def _check_shown_fields(message: StateMessage) -> None:
-    """Refuse a state whose fields the view shows have the wrong type.
+    """Refuse a state whose fields the view shows have the wrong type, or unprintable text.
+
+    Text goes to a terminal as it is (the plain lines): an escape sequence in
+    a payload must not reach it.
 
     Raises:
         ValueError: the first such field.
@@ -303,8 +308,9 @@ def _check_shown_fields(message: StateMessage) -> None:
     def number(value: Any) -> bool:
         return isinstance(value, int | float) and not isinstance(value, bool)
 
-    if not isinstance(message.line, str):
-        raise ValueError("line is not text")
+    for name in ("gateway", "line"):
+        if not isinstance(getattr(message, name), str) or not valid_name(getattr(message, name)):
+            raise ValueError(f"{name} is not a name (letters, digits, '_', '.', '-')")
     if not number(message.time) or not math.isfinite(message.time):
         raise ValueError("time is not a finite number")
     if not isinstance(message.online, bool):
@@ -315,8 +321,8 @@ def _check_shown_fields(message: StateMessage) -> None:
             raise ValueError(f"{name} is not a number")
     for name in ("direction", "trip", "protocol"):
         value = getattr(message, name)
-        if value is not None and not isinstance(value, str):
-            raise ValueError(f"{name} is not text")
+        if value is not None and not (isinstance(value, str) and value.isprintable()):
+            raise ValueError(f"{name} is not printable text")
     if message.status is not None and not isinstance(message.status, dict):
         raise ValueError("status is not an object")
 

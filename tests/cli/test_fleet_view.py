@@ -434,3 +434,12 @@ def test_the_fleet_keeps_the_latest_state_and_clears_what_is_cleared() -> None:
     assert fleet.drives == []
     assert fleet.malformed == 0
     assert fleet.summary() is None
+
+    # Text reaches a terminal as it is: an escape sequence in a payload is malformed.
+    hostile = dataclasses.replace(old, direction="\x1b[2Jforward")
+    assert fleet.receive(topic, hostile.to_json()) is None
+    assert fleet.drives == []
+    assert (
+        fleet.summary()
+        == f"1 malformed message skipped (first: {topic}: direction is not printable text)"
+    )
