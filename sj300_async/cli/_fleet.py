@@ -277,8 +277,8 @@ class Fleet:
 
     def _malformed(self, topic: str, payload: bytes, reason: str) -> None:
         self.malformed += 1
-        if self.first_malformed is None:
-            self.first_malformed = Malformed(topic, " ".join(reason.split()))
+        if self.first_malformed is None:  # shown on stderr: no control character gets there
+            self.first_malformed = Malformed(_escaped(topic), _escaped(" ".join(reason.split())))
         shown = payload[:_LOGGED_PAYLOAD]
         more = f" (+{len(payload) - len(shown)} bytes)" if len(payload) > len(shown) else ""
         _log.debug("skipped a malformed message on %s: %s: %r%s", topic, reason, shown, more)
@@ -293,6 +293,11 @@ class Fleet:
             f"{self.malformed} malformed message{plural} skipped "
             f"(first: {first.topic}: {first.reason})"
         )
+
+
+def _escaped(text: str) -> str:
+    """*text* with each unprintable character written as Python escapes it (``\\x1b``)."""
+    return "".join(c if c.isprintable() else repr(c)[1:-1] for c in text)
 
 
 def _check_shown_fields(message: StateMessage) -> None:

@@ -443,3 +443,12 @@ def test_the_fleet_keeps_the_latest_state_and_clears_what_is_cleared() -> None:
         fleet.summary()
         == f"1 malformed message skipped (first: {topic}: direction is not printable text)"
     )
+
+
+def test_what_stderr_shows_of_a_malformed_message_is_printable() -> None:
+    fleet = Fleet(FleetUrl("mqtt", "h", 1883))
+    assert fleet.receive("sj300/\x1b[2J/availability", b"maybe") is None
+    assert fleet.summary() == (
+        "1 malformed message skipped (first: sj300/\\x1b[2J/availability: "
+        "availability is 'online' or 'offline')"
+    )
