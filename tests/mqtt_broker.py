@@ -1,0 +1,179 @@
+"""A mosquitto broker of a test's own, shared by the MQTT tests (gateway bridge, fleet view).
+
+Each test gets a broker on a free loopback port, in its ``tmp_path``, with
+no persistence (a restart forgets every retained message), started from
+the test's event loop and stopped (terminated and reaped) when the test
+ends. Nothing waits a guessed time: :meth:`Broker.start` returns once the
+broker's log says it runs *and* its port accepts connections, and it
+leaves a retained marker (:data:`READY`) that a subscriber to ``#`` can
+wait for to know it is subscribed.
+
+Each test module declares its own two-line ``broker`` fixture around
+:func:`running_broker` (importing a fixture by name would shadow it in
+every test's signature, which linters flag).
+"""
+
+from __future__ import annotations
+
+import asyncio
+import contextlib
+import os
+import shutil
+import socket
+from collections.abc import AsyncIterator
+from dataclasses import dataclass
+from pathlib import Path
+
+from waiting import wait_for
+
+__all__ = ["READY", "Broker", "free_port", "publish", "running_broker", "tool"]
+
+#: Retained by every broker started here: a subscriber that received it is subscribed.
+READY = "sjtest/ready"
+#: Where Debian puts the broker (not on every user's PATH).
+_SBIN = "/usr/sbin:/usr/local/sbin"
+#: How long a mosquitto_pub or a stop may take (a cold start on a loaded machine).
+TIMEOUT_S = 10.0
+
+
+def tool(name: str) -> str:
+    """The path of *name* (``mosquitto``, ``mosquitto_pub``...), looking in sbin too.
+
+    Raises:
+        RuntimeError: not installed.
+    """
+    path = shutil.which(name, path=f"{os.environ.get('PATH', '')}:{_SBIN}")
+    if path is None:
+        raise RuntimeError(f"{name} is not installed (Debian: apt-get install mosquitto)")
+    return path
+
+
+def free_port() -> int:
+    """A loopback TCP port nobody listens on now (bound, then released)."""
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        port: int = s.getsockname()[1]
+    return port
+
+
+@dataclass
+class Broker:
+    """A mosquitto of this test's own: stopped and started again on the same port at will."""
+
+    directory: Path
+    port: int = 0
+    proc: asyncio.subprocess.Process | None = None
+    starts: int = 0
+
+    @property
+    def url(self) -> str:
+        return f"mqtt://127.0.0.1:{self.port}"
+
+    async def start(self) -> None:
+        """Start it; return once the log says it runs and its port accepts connections."""
+        for _ in range(5):  # another process may take a free port before mosquitto binds it
+            if self.starts == 0 or self.port == 0:
+                self.port = free_port()
+            if await self._start_once():
+                await self.publish(READY, "1", retain=True)
+                return
+            if self.starts > 0:
+                break
+        raise AssertionError(f"mosquitto did not start: {self._log().read_text()}")
+
+    async def _start_once(self) -> bool:
+        conf = self.directory / "mosquitto.conf"
+        conf.write_text(
+            f"listener {self.port} 127.0.0.1\nallow_anonymous true\npersistence false\n"
+            "log_dest stderr\nlog_type error\nlog_type warning\nlog_type notice\n"
+            "log_type information\n",
+            encoding="utf-8",
+        )
+        log = self._log()
+        with log.open("w") as err:
+            self.proc = await asyncio.create_subprocess_exec(
+                tool("mosquitto"), "-c", str(conf), stdin=asyncio.subprocess.DEVNULL, stderr=err
+            )
+        proc = self.proc
+        try:
+            await wait_for(
+                lambda: proc.returncode is not None or "running" in log.read_text(),
+                "mosquitto to say it runs",
+            )
+        except AssertionError:
+            await self.stop()
+            raise
+        if proc.returncode is not None:
+            self.proc = None
+            return False  # the port was taken: the log says so
+        await _wait_for_port(self.port)
+        self.starts += 1
+        return True
+
+    def _log(self) -> Path:
+        return self.directory / "mosquitto.log"
+
+    async def stop(self) -> None:
+        """Terminate it (killed if it lingers) and reap it."""
+        proc, self.proc = self.proc, None
+        if proc is None:
+            return
+        if proc.returncode is None:
+            proc.terminate()
+            try:
+                await asyncio.wait_for(proc.wait(), TIMEOUT_S)
+            except TimeoutError:
+                proc.kill()
+        await proc.wait()
+
+    async def publish(
+        self, topic: str, payload: bytes | str | None, *, retain: bool = False
+    ) -> None:
+        """``mosquitto_pub`` at QoS 1 (None: empty, which clears a retained message)."""
+        await publish(self, topic, payload, retain=retain)
+
+
+async def publish(
+    broker: Broker, topic: str, payload: bytes | str | None, *, retain: bool = False
+) -> None:
+    """``mosquitto_pub``: one message, QoS 1; the broker has it when this returns."""
+    text = payload.decode() if isinstance(payload, bytes) else payload
+    args = ["-h", "127.0.0.1", "-p", str(broker.port), "-q", "1", "-t", topic]
+    args += ["-n"] if text is None else ["-m", text]
+    proc = await asyncio.create_subprocess_exec(
+        tool("mosquitto_pub"), *args, *(["-r"] if retain else []), stderr=asyncio.subprocess.PIPE
+    )
+    try:
+        _, err = await asyncio.wait_for(proc.communicate(), TIMEOUT_S)
+    finally:
+        if proc.returncode is None:
+            proc.kill()
+            await proc.wait()
+    assert proc.returncode == 0, err.decode()
+
+
+async def _wait_for_port(port: int, timeout: float = 5.0) -> None:
+    loop = asyncio.get_running_loop()
+    deadline = loop.time() + timeout
+    while True:
+        try:
+            _, writer = await asyncio.open_connection("127.0.0.1", port)
+        except OSError:
+            if loop.time() > deadline:
+                raise AssertionError(f"port {port} never accepted a connection") from None
+            await asyncio.sleep(0.01)
+            continue
+        writer.close()
+        await writer.wait_closed()
+        return
+
+
+@contextlib.asynccontextmanager
+async def running_broker(directory: Path) -> AsyncIterator[Broker]:
+    """A started broker whose files live in *directory*; stopped and reaped on the way out."""
+    broker = Broker(directory)
+    await broker.start()
+    try:
+        yield broker
+    finally:
+        await broker.stop()
