@@ -160,7 +160,7 @@ class MqttConfig:
     discovery: bool = True
     discovery_prefix: str = "homeassistant"
     #: The MQTT keepalive: the broker publishes the last will ("offline") about
-    #: 1.5 keepalives after the gateway last spoke.
+    #: 1.5 keepalives after the gateway last spoke (plus its own check interval).
     keepalive_s: int = 30
 
     @property

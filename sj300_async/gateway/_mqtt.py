@@ -5,8 +5,9 @@ configuration has ``[mqtt]``. It publishes what :mod:`._mqtt_topics` (the
 contract, shared with the fleet view) lays out:
 
 - ``<prefix>/<gw>/availability``: ``online`` (retained) once connected; the
-  last will says ``offline`` when the broker loses the gateway (a crash, a
-  cut cable: about 1.5 ``keepalive_s`` later); a clean stop says
+  last will says ``offline`` when the broker loses the gateway (a crash: at
+  once; a frozen process, a cut cable: 1.5 ``keepalive_s`` later, plus the
+  broker's own check interval); a clean stop says
   ``offline`` itself before disconnecting: the drives are no longer served.
 - ``…/<line>/<node>/state``: one retained :class:`~._mqtt_topics.StateMessage`
   per drive per poll, from the drive's :class:`~._state.DriveState`.

@@ -375,7 +375,7 @@ async def test_a_state_message_per_drive_per_poll(sim_line: SimLine, broker: Bro
         # Each poll is one message, or it was replaced before it was sent (counted).
         assert len(received) == stats.states[key]
         assert len(received) + stats.replaced[key] == stats.samples[key]
-        assert sum(stats.replaced.values()) <= 4, stats.replaced  # only before the first connect
+        assert stats.replaced[key] <= 2, stats.replaced  # polls before the first connect only
         times = [m.time for m in received]
         assert times == sorted(set(times))  # one per poll: each its own time
         for message in received:
@@ -426,12 +426,28 @@ async def test_stale_values_are_null_and_a_trip_names_its_code(
 # -- losing the gateway, losing the broker --------------------------------------------------------
 
 
-async def test_a_killed_gateway_process_turns_offline_by_its_will(
-    sim_line: SimLine, broker: Broker, tmp_path: Path
+@pytest.mark.parametrize(
+    ("how", "within_s"),
+    [
+        # kill -9: the kernel closes the socket, the broker publishes the will at once.
+        pytest.param(signal.SIGKILL, (0.0, 1.0), id="kill-9"),
+        # A frozen process (or a cut cable): the socket stays open and silent, the
+        # broker gives up after 1.5 keepalives (keepalive_s = 1 here) by the MQTT
+        # spec; mosquitto 2.0 takes 4-5.5 s for that (its own check interval on top).
+        pytest.param(signal.SIGSTOP, (1.0, 9.0), id="frozen"),
+    ],
+)
+async def test_a_lost_gateway_process_turns_offline_by_its_will(
+    sim_line: SimLine,
+    broker: Broker,
+    tmp_path: Path,
+    how: signal.Signals,
+    within_s: tuple[float, float],
 ) -> None:
     config = tmp_path / "gateway.toml"
     config.write_text(mqtt_toml(sim_line.url, broker, gateway="gwk", keepalive_s=1))
     availability = Topics("gwk").availability
+    loop = asyncio.get_running_loop()
     async with subscriber(broker) as sub:
         proc = await asyncio.create_subprocess_exec(
             sys.executable, "-m", "sj300_async", "gateway", "--config", str(config),
@@ -442,14 +458,16 @@ async def test_a_killed_gateway_process_turns_offline_by_its_will(
             await sub.until(lambda m: m.topic == availability and m.payload == "online",
                             "the gateway online", timeout=20)  # fmt: skip
             await sub.until(lambda m: m.topic == Topics("gwk").state("hall", 1), "a state")
+            proc.send_signal(how)
+            signalled_at = loop.time()
+            await sub.until(lambda m: m.topic == availability and m.payload == "offline",
+                            "the last will", timeout=10)  # fmt: skip
+            took = loop.time() - signalled_at
         finally:
-            proc.send_signal(signal.SIGKILL)
+            with contextlib.suppress(ProcessLookupError):  # killed and reaped already
+                proc.kill()  # a stopped process too
             await proc.wait()
-        loop = asyncio.get_running_loop()
-        killed_at = loop.time()
-        await sub.until(lambda m: m.topic == availability and m.payload == "offline",
-                        "the last will", timeout=5)  # fmt: skip
-        assert loop.time() - killed_at < 3  # the broker saw the socket close (or 1.5 keepalives)
+    assert within_s[0] <= took <= within_s[1]
     assert [m.payload for m in sub.topic(availability)] == ["online", "offline"]
 
 
@@ -556,7 +574,8 @@ async def test_commands_reach_the_drive_and_refusals_are_answered(
         await sub.barrier()
     assert all(m.retained is False for m in sub.where(lambda m: m.topic.endswith("/error")))
     audit = [r.getMessage() for r in caplog.records if r.name == "sj300_async.gateway.audit"]
-    assert "client mqtt line hall node 1 (unit 1): set frequency (Hz) 0.0 -> 25.5: ok" in audit
+    written = "client mqtt line hall node 1 (unit 1): set frequency (Hz)"
+    assert any(a.startswith(written) and a.endswith(" -> 25.5: ok") for a in audit), audit
     assert any("client mqtt line hall node 1" in a and "frequency_hz" in a and "fast" in a
                for a in audit)  # fmt: skip
     assert sim_line.log.interleaved() == []
