@@ -8,9 +8,11 @@ DEV_STAMP := $(VENV)/.installed-dev
 # The package alone, without extras: what the demo runs on.
 RUN_STAMP := $(VENV)/.installed-run
 
-# Debian packages the tests need; each provides a command of the same name
-# (socat + ser2net: the real serial-device-server bridge test in tests/transports).
-SYSTEM_PACKAGES := socat ser2net mbpoll mosquitto mosquitto-clients
+# Debian packages the tests need, as package:command (the command tells whether it is
+# installed): socat + ser2net for the serial-device-server bridge test, mbpoll as an
+# independent Modbus client, mosquitto + its clients for the MQTT tests.
+SYSTEM_PACKAGES := socat:socat ser2net:ser2net mbpoll:mbpoll mosquitto:mosquitto \
+	mosquitto-clients:mosquitto_sub
 
 .PHONY: demo examples test lint typecheck lint-imports docs system-packages pytest bench \
 	bench-compare soak clean venv
@@ -62,8 +64,9 @@ docs: $(DEV_STAMP)
 # Installs the missing ones as root; otherwise names them and fails (exit 2).
 system-packages:
 	@missing=; \
-	for package in $(SYSTEM_PACKAGES); do \
-		command -v $$package >/dev/null 2>&1 || missing="$$missing $$package"; \
+	for entry in $(SYSTEM_PACKAGES); do \
+		PATH="$$PATH:/usr/sbin:/sbin" command -v $${entry#*:} >/dev/null 2>&1 \
+			|| missing="$$missing $${entry%%:*}"; \
 	done; \
 	if [ -z "$$missing" ]; then exit 0; fi; \
 	if [ "$$(id -u)" != 0 ]; then \
