@@ -138,7 +138,11 @@ class Gateway:
                     self.units, self.config.modbus, self.config.stale_after_s, self.clients
                 )
             if self.config.metrics is not None:
-                registry = make_registry(_Source(self), self.clients)
+                registry = make_registry(
+                    _Source(self),
+                    self.clients,
+                    lambda: None if self.mqtt is None else self.mqtt.stats,
+                )
                 self.http = await serve_http(self.config.metrics, registry, self.problems)
         except BaseException:
             await self._shutdown()

@@ -40,9 +40,9 @@ Decisions:
 from __future__ import annotations
 
 import logging
-from collections.abc import Iterable, Iterator
+from collections.abc import Callable, Iterable, Iterator
 from dataclasses import dataclass
-from typing import Any, Final, Protocol
+from typing import TYPE_CHECKING, Any, Final, Protocol
 
 from prometheus_client import CollectorRegistry
 from prometheus_client.core import (
@@ -54,6 +54,9 @@ from prometheus_client.core import (
 
 from ..bus import Bus
 from ..bus._stats import LATENCY_BUCKETS_S, BusStats
+
+if TYPE_CHECKING:  # the bridge imports aiomqtt: not needed to read its counters
+    from ._mqtt import BridgeStats
 
 __all__ = [
     "MAX_CLIENTS",
@@ -193,22 +196,74 @@ def line_problems(source: MetricsSource) -> list[str]:
 class GatewayCollector:
     """A prometheus_client collector reading *source* and *clients* at each scrape."""
 
-    def __init__(self, source: MetricsSource, clients: ClientCounters) -> None:
+    def __init__(
+        self,
+        source: MetricsSource,
+        clients: ClientCounters,
+        mqtt: Callable[[], BridgeStats | None] = lambda: None,
+    ) -> None:
         self._source = source
         self._clients = clients
+        self._mqtt = mqtt
 
     def collect(self) -> Iterator[Metric]:
         """Yield every metric family, built now (see the module docstring)."""
         yield from _line_metrics(list(self._source.lines()))
         yield from _drive_metrics(list(self._source.drives()))
         yield from _client_metrics(self._clients)
+        stats = self._mqtt()
+        if stats is not None:
+            yield from _mqtt_metrics(stats)
 
 
-def make_registry(source: MetricsSource, clients: ClientCounters) -> CollectorRegistry:
+def make_registry(
+    source: MetricsSource,
+    clients: ClientCounters,
+    mqtt: Callable[[], BridgeStats | None] = lambda: None,
+) -> CollectorRegistry:
     """A new registry holding only the gateway's collector (not the global default one)."""
     registry = CollectorRegistry()
-    registry.register(GatewayCollector(source, clients))
+    registry.register(GatewayCollector(source, clients, mqtt))
     return registry
+
+
+#: The MQTT bridge's counters: (name, HELP, BridgeStats attribute).
+_MQTT_COUNTERS: Final = (
+    ("sj300_mqtt_connects", "Connections to the broker made.", "connects"),
+    ("sj300_mqtt_losses", "Connections to the broker lost.", "losses"),
+    ("sj300_mqtt_published", "Messages the broker took.", "published"),
+    ("sj300_mqtt_lost", "Messages being sent when the connection broke.", "lost"),
+    ("sj300_mqtt_errors_dropped", "Error replies dropped (too many waiting).", "errors_dropped"),
+)
+#: Command messages by what became of them: (label, BridgeStats attribute).
+_MQTT_COMMANDS: Final = (
+    ("received", "commands"),
+    ("refused", "refused"),
+    ("discarded", "discarded"),
+    ("ignored", "ignored"),
+)
+
+
+def _mqtt_metrics(stats: BridgeStats) -> Iterator[Metric]:
+    for name, help_text, attribute in _MQTT_COUNTERS:
+        family = CounterMetricFamily(name, help_text)
+        family.add_metric([], getattr(stats, attribute))
+        yield family
+    commands = CounterMetricFamily(
+        "sj300_mqtt_commands",
+        "Command messages: received, refused (answered on the error topic), discarded "
+        "(the connection was lost first), ignored (no drive of this gateway).",
+        labels=["result"],
+    )
+    for label, attribute in _MQTT_COMMANDS:
+        commands.add_metric([label], getattr(stats, attribute))
+    yield commands
+    replaced = CounterMetricFamily(
+        "sj300_mqtt_states_replaced",
+        "State messages replaced by a newer one before the broker took them (coalesced).",
+    )
+    replaced.add_metric([], sum(stats.replaced.values()))
+    yield replaced
 
 
 # -- lines ---------------------------------------------------------------------------------

@@ -688,3 +688,21 @@ def test_fr700_discovery_has_no_sj300_sensors() -> None:
 def test_command_payloads(what: str, payload: bytes, request_or_refusal: object) -> None:
     result = _request("sj300", what, payload)
     assert (result[0] if isinstance(result, tuple) else result) == request_or_refusal
+
+
+async def test_the_bridge_counters_are_in_the_metrics(sim_line: SimLine, broker: Broker) -> None:
+    from .test_gateway_metrics import scrape
+
+    text = mqtt_toml(sim_line.url, broker).replace(
+        "[mqtt]", '[metrics]\nlisten = "127.0.0.1:0"\n[mqtt]', 1
+    )
+    async with subscriber(broker) as sub, running_gateway(text) as gateway:
+        await sub.until(state_of(1), "two states of node 1", count=2)
+        assert gateway.http is not None
+        samples = await scrape(int(gateway.http.sockets[0].getsockname()[1]))
+        stats = bridge(gateway).stats
+        values = {(s.name, tuple(sorted(s.labels.items()))): s.value for s in samples}
+    assert values[("sj300_mqtt_connects_total", ())] == 1
+    assert values[("sj300_mqtt_published_total", ())] >= 2
+    assert values[("sj300_mqtt_published_total", ())] <= stats.published
+    assert values[("sj300_mqtt_commands_total", (("result", "refused"),))] == 0
