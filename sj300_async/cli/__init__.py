@@ -72,7 +72,9 @@ the others run on that simulator and say so: a note on stderr, and
 "simulated": true in JSON objects. `sj300 simulate` serves simulated drives
 over TCP, whose state does persist. URLs: tcp://HOST:PORT, /dev/ttyUSB0,
 serial:///dev/ttyUSB0?baudrate=9600&parity=E, sim://?nodes=1-8.
-`sj300 monitor` without a URL is a live demo of eight busy drives.
+`sj300 monitor` without a URL is a live demo of eight busy drives;
+`sj300 monitor --url mqtt://HOST:PORT` shows every drive of every gateway
+publishing on that broker (`sj300 gateway --mqtt`), read-only.
 `sj300 --sim shell` holds one bus open for a session of commands typed as
 here (`freq 30 -n 1`, `run forward -n 1`, `status -n 1`; help, exit): on
 sim:// the drives keep their state from one command to the next. History
