@@ -28,6 +28,7 @@ BENCHMARKS: dict[str, str] = {
     "wire": "benchmarks.bench_wire",
     "scale": "benchmarks.bench_scale",
     "gateway": "benchmarks.bench_gateway",
+    "mqtt": "benchmarks.bench_mqtt",
 }
 
 

@@ -230,6 +230,7 @@ def test_every_registered_benchmark_has_the_module_contract(harness: ModuleType)
         "wire",
         "scale",
         "gateway",
+        "mqtt",
     ]
     for name in benchmarks.BENCHMARKS:
         module = benchmarks.load(name)
@@ -380,6 +381,36 @@ def test_gateway_serves_every_read_from_its_cache(harness: ModuleType) -> None:
     assert any("+0 beyond the plan" in note for note in section.notes)
 
 
+def test_mqtt_counts_every_state_and_times_every_change(harness: ModuleType) -> None:
+    bench = importlib.import_module("benchmarks.bench_mqtt")
+    config = _quick(harness)
+    result = bench.measure(config)  # raises on a failed poll or a state that went missing
+    cpu, latency = result.cpu, result.latency
+    assert len(cpu.windows) == 1  # one timed window after the untimed one
+    for window in cpu.windows:
+        assert window.on_polls > 0
+        assert window.off_polls > 0
+        assert window.messages > 0
+    # The fleet view got every state the gateway counted, and at most the batch in
+    # flight when it stopped besides; every floor message.
+    assert cpu.final.states <= cpu.received <= cpu.final.states + bench.MAX_IN_FLIGHT
+    assert cpu.final.lost == 0
+    assert len(cpu.floors) == 1
+    assert cpu.floor_messages == bench.QUICK_FLOOR_MESSAGES
+    sent = bench.FLOOR_WARM_UP + 2 * bench.QUICK_FLOOR_MESSAGES  # untimed, each way timed
+    assert cpu.floor_received == cpu.floor_sent == sent
+    assert len(latency.delays_s) == len(latency.after_poll_s) == bench.QUICK_CHANGES
+    assert list(latency.delays_s) == sorted(latency.delays_s)
+    assert latency.stats.cycles > 0
+    assert latency.stats.failed == 0
+    section = bench.report(result, config)
+    assert [(r.unit, r.target, r.against, r.percent) for r in section.results] == [
+        ("µs", bench.TARGET_CPU_RATIO, "aiomqtt loop", False),
+        ("ms", None, None, False),
+        ("ms", bench.TARGET_LATENCY_RATIO, "polling's floor", True),
+    ]
+
+
 # -- the command line ----------------------------------------------------------------
 
 
@@ -397,11 +428,11 @@ def test_cli_quick_runs_every_benchmark_into_one_table() -> None:
     done = _cli()
     assert done.returncode == 0, done.stdout + done.stderr
     out = done.stdout
-    for title in ("codec", "tcp", "loopback", "latency", "wire", "scale", "gateway"):
+    for title in ("codec", "tcp", "loopback", "latency", "wire", "scale", "gateway", "mqtt"):
         assert f"\n## {title}\n" in out
     table = out.split("\n## results\n", 1)[1]
     rows = [line for line in table.splitlines() if line.startswith("| ") and "---" not in line]
-    assert len(rows) == 1 + 3 + 4 + 3 + 2 + 2 + 3 + 3  # header + rows of each benchmark
+    assert len(rows) == 1 + 3 + 4 + 3 + 2 + 2 + 3 + 3 + 3  # header + rows of each benchmark
     assert "**failed**" not in out
 
 
