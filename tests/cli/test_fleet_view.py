@@ -13,18 +13,15 @@ import asyncio
 import contextlib
 import dataclasses
 import json
-import os
 import re
-import shutil
-import subprocess
 import sys
 import time
 from collections.abc import AsyncIterator, Iterable
-from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
 import pytest
+from mqtt_broker import Broker, running_broker
 
 from sj300_async.cli._errors import CliError
 from sj300_async.cli._fleet import Fleet, FleetUrl, parse_fleet_url
@@ -32,96 +29,29 @@ from sj300_async.gateway._mqtt_topics import StateMessage, Topics
 
 from .clirun import TIMEOUT, Result, cli_env, closed_port, sj300, sj300_on_terminal
 
-#: Where Debian puts the broker (not on every user's PATH).
-_SBIN = "/usr/sbin:/usr/local/sbin"
 _FIELDS = {f.name for f in dataclasses.fields(StateMessage)}
-
-
-def _tool(name: str) -> str:
-    path = shutil.which(name, path=f"{os.environ.get('PATH', '')}:{_SBIN}")
-    if path is None:
-        raise RuntimeError(f"{name} is not installed (Debian: apt-get install mosquitto)")
-    return path
-
-
-@dataclass
-class Broker:
-    """A mosquitto on a loopback port, restartable on the same port."""
-
-    port: int
-    config: Path
-    log: Path
-    proc: subprocess.Popen[bytes] | None = None
-
-    @property
-    def url(self) -> str:
-        return f"mqtt://127.0.0.1:{self.port}"
-
-    async def start(self) -> None:
-        with self.log.open("ab") as log:
-            self.proc = subprocess.Popen(
-                [_tool("mosquitto"), "-c", str(self.config)], stdout=log, stderr=log
-            )
-        async with asyncio.timeout(5):  # poll until it accepts a connection
-            while True:
-                if self.proc.poll() is not None:
-                    raise RuntimeError(f"mosquitto exited: {self.log.read_text()}")
-                try:
-                    _, writer = await asyncio.open_connection("127.0.0.1", self.port)
-                except OSError:
-                    await asyncio.sleep(0.01)
-                    continue
-                writer.close()
-                await writer.wait_closed()
-                return
-
-    def stop(self) -> None:
-        if self.proc is None:
-            return
-        self.proc.terminate()
-        try:
-            self.proc.wait(5)
-        except subprocess.TimeoutExpired:
-            self.proc.kill()
-            self.proc.wait()
-        self.proc = None
-
-    async def publish(
-        self, topic: str, payload: bytes | str | None, *, retain: bool = True
-    ) -> None:
-        """Publish with ``mosquitto_pub`` at QoS 1: the broker has it when this returns."""
-        args = [_tool("mosquitto_pub"), "-h", "127.0.0.1", "-p", str(self.port), "-q", "1"]
-        args += ["-t", topic, *(["-r"] if retain else [])]
-        text = payload.decode() if isinstance(payload, bytes) else payload
-        args += ["-n"] if text is None else ["-m", text]
-        proc = await asyncio.create_subprocess_exec(*args, stderr=asyncio.subprocess.PIPE)
-        _, err = await asyncio.wait_for(proc.communicate(), TIMEOUT)
-        assert proc.returncode == 0, err
-
-    async def publish_states(self, messages: Iterable[StateMessage], prefix: str = "sj300") -> None:
-        """Every message, retained on its state topic (16 publishers at a time)."""
-        room = asyncio.Semaphore(16)
-
-        async def one(m: StateMessage) -> None:
-            async with room:
-                await self.publish(Topics(m.gateway, prefix).state(m.line, m.node), m.to_json())
-
-        async with asyncio.TaskGroup() as group:
-            for message in messages:
-                group.create_task(one(message))
 
 
 @pytest.fixture
 async def broker(tmp_path: Path) -> AsyncIterator[Broker]:
-    port = closed_port()
-    config = tmp_path / "mosquitto.conf"
-    config.write_text(f"listener {port} 127.0.0.1\nallow_anonymous true\npersistence false\n")
-    broker = Broker(port, config, tmp_path / "mosquitto.log")
-    await broker.start()
-    try:
-        yield broker
-    finally:
-        broker.stop()
+    async with running_broker(tmp_path) as b:
+        yield b
+
+
+async def publish_states(
+    broker: Broker, messages: Iterable[StateMessage], prefix: str = "sj300"
+) -> None:
+    """Every message, retained on its state topic (16 publishers at a time)."""
+    room = asyncio.Semaphore(16)
+
+    async def one(m: StateMessage) -> None:
+        async with room:
+            topic = Topics(m.gateway, prefix).state(m.line, m.node)
+            await broker.publish(topic, m.to_json(), retain=True)
+
+    async with asyncio.TaskGroup() as group:
+        for message in messages:
+            group.create_task(one(message))
 
 
 def _state(gateway: str, node: int, *, line: str = "hall", **values: Any) -> StateMessage:
@@ -186,7 +116,7 @@ def _assert_shown(
 
 async def test_every_drive_of_both_gateways_as_json_lines(broker: Broker) -> None:
     sent = _fleet()
-    await broker.publish_states(sent)
+    await publish_states(broker, sent)
     result = await sj300("monitor", "--url", broker.url, "--json", "--count", str(len(sent)))
     _assert_shown(_by_drive(result), sent)
     assert result.err == ""
@@ -198,8 +128,8 @@ async def test_every_drive_of_both_gateways_as_json_lines(broker: Broker) -> Non
 
 async def test_a_prefix_of_two_levels(broker: Broker) -> None:
     north = [_state("gw-a", 1), _state("gw-b", 2)]
-    await broker.publish_states(north, prefix="plant/north")
-    await broker.publish_states([_state("gw-c", 3)])  # under sj300/: not this view's
+    await publish_states(broker, north, prefix="plant/north")
+    await publish_states(broker, [_state("gw-c", 3)])  # under sj300/: not this view's
     url = f"{broker.url}/plant/north/"
     result = await sj300("monitor", "--url", url, "--json", "--count", "2")
     _assert_shown(_by_drive(result), north)
@@ -241,7 +171,7 @@ async def _monitor(*args: str) -> AsyncIterator[asyncio.subprocess.Process]:
 
 async def test_malformed_messages_are_counted_and_skipped(broker: Broker) -> None:
     good = _state("gw-a", 1)
-    await broker.publish_states([good])
+    await publish_states(broker, [good])
     topic = Topics("gw-a").state("hall", 1)
     async with _monitor("--url", broker.url, "--json", "--count", "2") as proc:
         assert (await _lines(proc, 1))[0]["node"] == 1  # subscribed: the retained state came
@@ -265,13 +195,13 @@ async def test_malformed_messages_are_counted_and_skipped(broker: Broker) -> Non
 
 async def test_a_lost_broker_is_reconnected(broker: Broker) -> None:
     first = [_state("gw-a", 1), _state("gw-a", 2)]
-    await broker.publish_states(first)
+    await publish_states(broker, first)
     async with _monitor("--url", broker.url, "--json", "--count", "4") as proc:
         assert len(await _lines(proc, 2)) == 2
-        broker.stop()
+        await broker.stop()
         await broker.start()  # same port; no persistence: its retained states are gone
         again = [_state("gw-a", 1, output_frequency_hz=42.0), _state("gw-a", 2)]
-        await broker.publish_states(again)
+        await publish_states(broker, again)
         out, err = await asyncio.wait_for(proc.communicate(), TIMEOUT)
     assert proc.returncode == 0, err
     lines = [json.loads(line) for line in out.decode().splitlines()]
@@ -289,9 +219,9 @@ async def test_a_lost_broker_is_reconnected(broker: Broker) -> None:
 
 async def test_on_a_terminal_a_table_of_every_drive(broker: Broker) -> None:
     sent = _fleet()
-    await broker.publish("sj300/gw-a/availability", "online")
-    await broker.publish("sj300/gw-b/availability", "offline")  # its last will: died
-    await broker.publish_states(sent)
+    await broker.publish("sj300/gw-a/availability", "online", retain=True)
+    await broker.publish("sj300/gw-b/availability", "offline", retain=True)  # its last will: died
+    await publish_states(broker, sent)
     result = await sj300_on_terminal("monitor", "--url", broker.url, "--count", str(len(sent)))
     assert result.code == 0, result.out
     screen = result.out
@@ -337,7 +267,7 @@ async def test_on_a_terminal_a_table_of_every_drive(broker: Broker) -> None:
 
 async def test_64_drives_retained_are_all_listed(broker: Broker) -> None:
     sent = [_state(gateway, node) for gateway in ("gw-a", "gw-b") for node in range(1, 33)]
-    await broker.publish_states(sent)
+    await publish_states(broker, sent)
     result = await sj300("monitor", "--url", broker.url, "--json", "--count", "64")
     _assert_shown(_by_drive(result), sent)
 

@@ -18,7 +18,6 @@ import json
 import logging
 import re
 import signal
-import socket
 import sys
 from collections.abc import AsyncIterator, Callable
 from dataclasses import dataclass, field
@@ -27,6 +26,7 @@ from typing import Any
 
 import pytest
 from cli.clirun import cli_env
+from mqtt_broker import READY, Broker, publish, running_broker
 from waiting import wait_for
 
 from sj300_async.gateway._gateway import Gateway
@@ -39,8 +39,6 @@ from sj300_async.sj300 import InverterStatus, MonitorData, StatusA, StatusB, Sta
 
 from .conftest import SimLine, gateway_toml, modbus_client, running_gateway
 
-#: Retained by every broker this file starts: a subscriber that received it is subscribed.
-READY = "sjtest/ready"
 GRANTS = """
     [[lines.writes]]
     nodes = "1-2"
@@ -53,115 +51,13 @@ CONFIGS = 1 + 4 * 7 + 2 * 5
 _RUNNING = "mosquitto version [0-9.]+ running"
 
 
-# -- the broker ---------------------------------------------------------------------------------
-
-
-def _free_port() -> int:
-    with socket.socket() as s:
-        s.bind(("127.0.0.1", 0))
-        port: int = s.getsockname()[1]
-    return port
-
-
-@dataclass
-class Broker:
-    """A mosquitto of this test's own: stopped and started again on the same port at will."""
-
-    directory: Path
-    port: int = 0
-    proc: asyncio.subprocess.Process | None = None
-    starts: int = 0
-
-    @property
-    def url(self) -> str:
-        return f"mqtt://127.0.0.1:{self.port}"
-
-    async def start(self) -> None:
-        """Start it; return once the log says it runs and its port accepts connections."""
-        for _ in range(5):  # another process may take a free port before mosquitto binds it
-            if self.starts == 0 or self.port == 0:
-                self.port = _free_port()
-            if await self._start_once():
-                await self._publish(READY, "1", retain=True)
-                return
-            if self.starts > 0:
-                break
-        raise AssertionError(f"mosquitto did not start: {self._log().read_text()}")
-
-    async def _start_once(self) -> bool:
-        conf = self.directory / "mosquitto.conf"
-        conf.write_text(
-            f"listener {self.port} 127.0.0.1\nallow_anonymous true\npersistence false\n"
-            "log_dest stderr\nlog_type error\nlog_type warning\nlog_type notice\n"
-            "log_type information\n",
-            encoding="utf-8",
-        )
-        log = self._log()
-        with log.open("w") as err:
-            self.proc = await asyncio.create_subprocess_exec(
-                "mosquitto", "-c", str(conf), stdin=asyncio.subprocess.DEVNULL, stderr=err
-            )
-        proc = self.proc
-        try:
-            await wait_for(
-                lambda: proc.returncode is not None or "running" in log.read_text(),
-                "mosquitto to say it runs",
-            )
-        except AssertionError:
-            await self.stop()
-            raise
-        if proc.returncode is not None:
-            self.proc = None
-            return False  # the port was taken: the log says so
-        await _wait_for_port(self.port)
-        self.starts += 1
-        return True
-
-    def _log(self) -> Path:
-        return self.directory / "mosquitto.log"
-
-    async def stop(self) -> None:
-        if self.proc is not None and self.proc.returncode is None:
-            self.proc.terminate()
-            await self.proc.wait()
-        self.proc = None
-
-    async def _publish(self, topic: str, payload: str | None, *, retain: bool = False) -> None:
-        await publish(self, topic, payload, retain=retain)
-
-
-async def _wait_for_port(port: int, timeout: float = 5.0) -> None:
-    loop = asyncio.get_running_loop()
-    deadline = loop.time() + timeout
-    while True:
-        try:
-            _, writer = await asyncio.open_connection("127.0.0.1", port)
-        except OSError:
-            if loop.time() > deadline:
-                raise AssertionError(f"port {port} never accepted a connection") from None
-            await asyncio.sleep(0.01)
-            continue
-        writer.close()
-        await writer.wait_closed()
-        return
+# -- the broker (tests/mqtt_broker.py) ---------------------------------------------------------
 
 
 @pytest.fixture
 async def broker(tmp_path: Path) -> AsyncIterator[Broker]:
-    b = Broker(tmp_path)
-    await b.start()
-    try:
+    async with running_broker(tmp_path) as b:
         yield b
-    finally:
-        await b.stop()
-
-
-async def publish(broker: Broker, topic: str, payload: str | None, *, retain: bool = False) -> None:
-    """``mosquitto_pub``: one message, QoS 1 (None: empty, which clears a retained one)."""
-    args = ["-p", str(broker.port), "-q", "1", "-t", topic]
-    args += ["-n"] if payload is None else ["-m", payload]
-    proc = await asyncio.create_subprocess_exec("mosquitto_pub", *args, *(["-r"] if retain else []))
-    assert await asyncio.wait_for(proc.wait(), 5) == 0
 
 
 # -- the independent subscriber --------------------------------------------------------------
