@@ -276,6 +276,8 @@ async def _publish_floor(broker_port: int, payloads: Path, count: int) -> None:
     client = aiomqtt.Client(
         "127.0.0.1", broker_port, identifier=f"bench-{FLOOR_ID}", clean_session=True, keepalive=30
     )
+    # As the bridge: no warning (a log record each) for the batches in flight.
+    client.pending_calls_threshold = 2 * BATCH
     async with client:
         for i in range(FLOOR_WARM_UP):  # untimed
             await client.publish(*items[i % len(items)], qos=1, retain=True)
