@@ -53,7 +53,9 @@ Decisions:
   less. The subscriber is the fleet view's own loop: it gets every
   message (the broker is told to queue without limit), and its count is
   checked against the gateway's count of acknowledged states once the
-  gateway stopped: they must be equal.
+  gateway stopped (its "offline" arrived: everything before it did): equal,
+  or more by at most the batch in flight at the stop, which the bridge
+  counts neither published nor lost (docs/BENCHMARKS.md, "mqtt").
 - **The floor** publishes the payloads the gateway published, re-encoded
   from what the fleet view parsed (``StateMessage.to_json``, the bridge's
   own encoding: the same bytes) but naming a gateway id of its own, as long
