@@ -141,8 +141,10 @@ class BridgeStats:
     losses: int = 0
     #: Messages the broker took (QoS 1: acknowledged).
     published: int = 0
-    #: Messages being sent when the connection broke (states and availability
-    #: are republished on reconnect; error replies are not).
+    #: Messages not confirmed: being sent when the connection broke or the
+    #: bridge stopped (some may have reached the broker), or still waiting at
+    #: the stop. States and availability are republished on reconnect; error
+    #: replies are not.
     lost: int = 0
     #: Samples handed to the bridge, per drive.
     samples: collections.Counter[Key] = field(default_factory=collections.Counter)
@@ -640,13 +642,21 @@ class MqttBridge:
             self._errors.clear()
             for start in range(0, len(batch), MAX_IN_FLIGHT):
                 chunk = batch[start : start + MAX_IN_FLIGHT]
-                results = await asyncio.gather(
-                    *(
-                        client.publish(o.topic, o.payload, qos=self.config.qos, retain=o.retain)
-                        for o in chunk
-                    ),
-                    return_exceptions=True,
-                )
+                try:
+                    results = await asyncio.gather(
+                        *(
+                            client.publish(o.topic, o.payload, qos=self.config.qos, retain=o.retain)
+                            for o in chunk
+                        ),
+                        return_exceptions=True,
+                    )
+                except asyncio.CancelledError:
+                    # Stopped mid-batch: this chunk's fate is unknown (it may have
+                    # reached the broker), the rest was never sent. Counted as lost,
+                    # since none is confirmed; never silently.
+                    self.stats.lost += len(batch) - start
+                    _log.debug("MQTT: stopped with %d messages unconfirmed", len(batch) - start)
+                    raise
                 failure: BaseException | None = None
                 for out, result in zip(chunk, results, strict=True):
                     if isinstance(result, BaseException):

@@ -602,3 +602,24 @@ async def test_the_bridge_counters_are_in_the_metrics(sim_line: SimLine, broker:
     assert values[("sj300_mqtt_published_total", ())] >= 2
     assert values[("sj300_mqtt_published_total", ())] <= stats.published
     assert values[("sj300_mqtt_commands_total", (("result", "refused"),))] == 0
+
+
+async def test_a_stop_mid_batch_counts_what_it_could_not_confirm() -> None:
+    from sj300_async.gateway._model import MqttConfig
+    from sj300_async.gateway._mqtt import MqttBridge, _Out
+
+    class Stuck:
+        """A client whose publishes never complete (a broker that stopped answering)."""
+
+        async def publish(self, *args: object, **kwargs: object) -> None:
+            await asyncio.Event().wait()
+
+    bridge = MqttBridge(MqttConfig("b", 1883), "gw1", [], 5.0)
+    for n in range(100):
+        bridge._put(_Out(f"t/{n}", b"x", retain=True))
+    sending = asyncio.create_task(bridge._send(Stuck()))  # type: ignore[arg-type]
+    await wait_for(lambda: not bridge._pending, "the batch taken from the outbox")
+    sending.cancel()
+    with pytest.raises(asyncio.CancelledError):
+        await sending
+    assert (bridge.stats.published, bridge.stats.lost) == (0, 100)
