@@ -26,7 +26,8 @@ Output, as the bus monitor's:
 - ``--json``: one object per state message received, flushed: the
   message's fields (:class:`~sj300_async.gateway._mqtt_topics.StateMessage`)
   plus ``age_s``, the wall-clock seconds since the gateway polled the drive
-  (negative when the two clocks disagree: not hidden);
+  (negative when the two clocks disagree: not hidden), and
+  ``gateway_online`` (False once the gateway's last will said offline);
 - anything else: one plain line per state message.
 
 ``--count N`` ends it after N state messages (the retained ones the broker
@@ -566,10 +567,18 @@ def plain_line(fleet: Fleet, message: StateMessage, now: float | None = None) ->
     )
 
 
-def state_json(message: StateMessage, now: float | None = None) -> dict[str, Any]:
-    """The ``--json`` object: the message's fields plus ``age_s``."""
+def state_json(
+    message: StateMessage, now: float | None = None, *, gateway_online: bool = True
+) -> dict[str, Any]:
+    """The ``--json`` object: the message's fields plus ``age_s`` and ``gateway_online``.
+
+    ``gateway_online`` is False once the gateway's availability says
+    ``offline`` (its last will: it died or lost the broker): the message's
+    own ``online`` is then the last word of a gateway that is gone.
+    """
     body: dict[str, Any] = jsonable(message)
     body["age_s"] = round(age_s(message, now), 3)
+    body["gateway_online"] = gateway_online
     return body
 
 
@@ -714,7 +723,7 @@ async def watch_fleet(args: argparse.Namespace, url_text: str) -> None:
         nonlocal received
         received += 1
         if args.json:
-            print_json(state_json(message))
+            print_json(state_json(message, gateway_online=fleet.gateway_online(message.gateway)))
         elif not live:
             print(plain_line(fleet, message), flush=True)
         return count is None or received < count

@@ -102,12 +102,16 @@ def _by_drive(result: Result) -> dict[tuple[str, str, int], dict[str, object]]:
 
 
 def _assert_shown(
-    drives: dict[tuple[str, str, int], dict[str, object]], sent: list[StateMessage]
+    drives: dict[tuple[str, str, int], dict[str, object]],
+    sent: list[StateMessage],
+    gone: frozenset[str] = frozenset(),
 ) -> None:
+    """Every message of *sent* shown as itself; the drives of *gone* gateways so marked."""
     assert set(drives) == {(m.gateway, m.line, m.node) for m in sent}
     for message in sent:
         shown = dict(drives[message.gateway, message.line, message.node])
-        assert set(shown) == _FIELDS | {"age_s"}
+        assert set(shown) == _FIELDS | {"age_s", "gateway_online"}
+        assert shown.pop("gateway_online") is (message.gateway not in gone)
         age = shown.pop("age_s")
         assert isinstance(age, float)
         assert 0 < age < 120  # polled a minute ago
@@ -382,3 +386,11 @@ def test_what_stderr_shows_of_a_malformed_message_is_printable() -> None:
         "1 malformed message skipped (first: sj300/\\x1b[2J/availability: "
         "availability is 'online' or 'offline')"
     )
+
+
+async def test_json_says_when_a_gateway_is_gone(broker: Broker) -> None:
+    sent = _fleet()
+    await broker.publish(Topics("gw-b").availability, "offline", retain=True)  # its last will
+    await publish_states(broker, sent)
+    result = await sj300("monitor", "--url", broker.url, "--json", "--count", str(len(sent)))
+    _assert_shown(_by_drive(result), sent, gone=frozenset({"gw-b"}))
