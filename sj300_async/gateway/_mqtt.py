@@ -643,13 +643,7 @@ class MqttBridge:
             for start in range(0, len(batch), MAX_IN_FLIGHT):
                 chunk = batch[start : start + MAX_IN_FLIGHT]
                 try:
-                    results = await asyncio.gather(
-                        *(
-                            client.publish(o.topic, o.payload, qos=self.config.qos, retain=o.retain)
-                            for o in chunk
-                        ),
-                        return_exceptions=True,
-                    )
+                    results = await self._publish(client, chunk)
                 except asyncio.CancelledError:
                     # Stopped mid-batch: this chunk's fate is unknown (it may have
                     # reached the broker), the rest was never sent. Counted as lost,
@@ -670,6 +664,24 @@ class MqttBridge:
                 if failure is not None:
                     self.stats.lost += len(batch) - start - len(chunk)
                     raise failure
+
+    async def _publish(
+        self, client: aiomqtt.Client, chunk: list[_Out]
+    ) -> list[BaseException | None]:
+        """Publish *chunk* at once; each message's error, or None."""
+        qos = self.config.qos
+        if len(chunk) == 1:  # the usual case on a real line, one poll at a time: no task
+            out = chunk[0]
+            try:
+                await client.publish(out.topic, out.payload, qos=qos, retain=out.retain)
+            except Exception as exc:  # as gather(return_exceptions=True) would have it
+                return [exc]
+            return [None]
+        results = await asyncio.gather(
+            *(client.publish(o.topic, o.payload, qos=qos, retain=o.retain) for o in chunk),
+            return_exceptions=True,
+        )
+        return [r if isinstance(r, BaseException) else None for r in results]
 
     async def _publisher(self, client: aiomqtt.Client) -> None:
         while True:
