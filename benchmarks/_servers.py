@@ -37,6 +37,7 @@ import argparse
 import asyncio
 import functools
 import os
+import signal
 import subprocess
 import sys
 import time
@@ -204,6 +205,19 @@ class ServerProcess:
             RuntimeError: the server is not running, or did not answer.
         """
         return float(self.ask("cpu")[0])
+
+    def dump_and_kill(self) -> str:
+        """Abort the child (SIGABRT: a child with faulthandler prints its stacks); its stderr."""
+        process = self._process
+        if process is None:
+            return ""
+        process.send_signal(signal.SIGABRT)
+        try:
+            process.wait(timeout=5)
+        except subprocess.TimeoutExpired:
+            process.kill()
+            process.wait()
+        return process.stderr.read() if process.stderr is not None else ""
 
     def ask(self, command: str) -> list[str]:
         """Send *command* on the child's stdin; the words of its answer after the echoed command.

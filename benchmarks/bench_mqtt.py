@@ -103,6 +103,7 @@ import asyncio
 import collections
 import contextlib
 import dataclasses
+import faulthandler
 import gc
 import json
 import math
@@ -315,6 +316,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     parser.add_argument("--payloads", type=Path, help="floor: JSON [[topic, payload], ...]")
     parser.add_argument("--count", type=int, default=FLOOR_MESSAGES, help="floor: messages")
     args = parser.parse_args(argv)
+    faulthandler.enable()  # SIGABRT from the parent (a hang) dumps every thread's stack
     serve: Coroutine[Any, Any, None]
     if args.kind == "gateway":
         serve = _serve_gateway(args.id, args.url, args.interval, args.broker)
@@ -595,8 +597,23 @@ def _gateway(
     return stack.enter_context(process)
 
 
+#: The longest a gateway child may take to answer a command (a stop flushes and disconnects).
+ASK_TIMEOUT_S = 60.0
+
+
 async def _ask(gateway: ServerProcess, command: str) -> list[str]:
-    return await asyncio.to_thread(gateway.ask, command)
+    """*command*'s answer; a child that does not answer in time dumps its threads and fails.
+
+    A full clean-clone `make test` once saw a child not answer (not reproduced
+    since): this turns such a hang into an error that shows where it was.
+    """
+    try:
+        return await asyncio.wait_for(asyncio.to_thread(gateway.ask, command), ASK_TIMEOUT_S)
+    except TimeoutError:
+        dump = gateway.dump_and_kill()
+        raise RuntimeError(
+            f"{gateway.kind} child did not answer {command!r} in {ASK_TIMEOUT_S:g} s:\n{dump}"
+        ) from None
 
 
 async def _sample(gateway: ServerProcess) -> tuple[float, Stats]:
