@@ -440,20 +440,8 @@ class Arbiter(Generic[RequestT, ReplyT]):
             if reply is None:  # the deadline passed
                 self._failed_sent = sent
                 self._missed(request, timeout)  # its reply may still come: rule 9
-                if out.bad_frame is not None:
-                    self._count(stats, totals, "protocol_errors")
-                    raise RemoteProtocolError(
-                        f"node {request.node:02d}: no valid answer to {request.label}, "
-                        f"only a corrupted frame "
-                        f"({out.bad_frame.reason.value}: {out.bad_frame.body!r})"
-                    )
-                self._count(stats, totals, "timeouts")
-                raise ReplyTimeoutError(
-                    f"node {request.node:02d} did not answer {request.label} "
-                    f"within {timeout * 1000:.0f} ms",
-                    1,
-                    None,
-                    timeout,
+                raise self._no_answer(
+                    out, stats, totals, request.node, request.label, timeout, ReplyTimeoutError
                 )
             answered = True
             latency = self._last_rx - sent  # when the answer arrived, not when we resumed
@@ -591,21 +579,10 @@ class Arbiter(Generic[RequestT, ReplyT]):
                 break
             if not answered:
                 self._failed_sent = now
-                if out.bad_frame is not None:
-                    self._count(stats, totals, "protocol_errors")
-                    raise RemoteProtocolError(
-                        f"node {node:02d}: no valid answer to the sync request "
-                        f"({sync.label}), only a corrupted frame "
-                        f"({out.bad_frame.reason.value}: {out.bad_frame.body!r})"
-                    )
-                self._count(stats, totals, "timeouts")
-                raise _SyncMissed(
-                    f"node {node:02d} did not answer the sync request ({sync.label}) "
-                    f"within {timeout * 1000:.0f} ms",
-                    1,
-                    None,
-                    timeout,
-                )
+                raise self._no_answer(
+                    out, stats, totals, node, f"the sync request ({sync.label})", timeout,
+                    _SyncMissed,
+                )  # fmt: skip
             del self._unsynced[node]  # in order: whatever was late is behind us
             latency = self._last_rx - now
             stats.replies += 1
@@ -707,6 +684,31 @@ class Arbiter(Generic[RequestT, ReplyT]):
         if protocol is not None:
             protocol.reset_parser()
         self._drain_quiet = None
+
+    def _no_answer(
+        self,
+        out: _Outstanding[RequestT, ReplyT],
+        stats: TransactionStats,
+        totals: TransactionStats,
+        node: int,
+        what: str,
+        timeout: float,
+        timed_out: type[ReplyTimeoutError],
+    ) -> SJ300Error:
+        """An attempt that got no valid answer, counted: corrupted frames only, or nothing."""
+        if out.bad_frame is not None:
+            self._count(stats, totals, "protocol_errors")
+            return RemoteProtocolError(
+                f"node {node:02d}: no valid answer to {what}, only a corrupted frame "
+                f"({out.bad_frame.reason.value}: {out.bad_frame.body!r})"
+            )
+        self._count(stats, totals, "timeouts")
+        return timed_out(
+            f"node {node:02d} did not answer {what} within {timeout * 1000:.0f} ms",
+            1,
+            None,
+            timeout,
+        )
 
     @staticmethod
     def _count(stats: TransactionStats, totals: TransactionStats, name: str) -> None:
