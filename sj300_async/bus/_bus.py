@@ -24,6 +24,7 @@ from typing_extensions import TypeVar
 
 from ..wire import LineSettings, LocalProtocolError
 from ._arbiter import Arbiter
+from ._capture import combine
 from ._channel import Channel
 from ._dialect import Dialect
 from ._link import Connector, Link, ReconnectPolicy
@@ -55,6 +56,10 @@ class Bus(Generic[DriveT, BroadcastT]):
         dialect: the protocol spoken on this bus.
         simulator: the simulated line behind a ``sim://`` bus (None otherwise):
             tests use its fault hooks, demos trip its drives.
+
+    ``capture`` is a trace hook of its own (a line of a
+    :class:`~._capture.CaptureFile`): it sees every frame whatever
+    :attr:`trace` is set to later.
     """
 
     def __init__(
@@ -70,6 +75,7 @@ class Bus(Generic[DriveT, BroadcastT]):
         read_only: bool = False,
         trace: TraceHook | None = None,
         reconnect: ReconnectPolicy | None = None,
+        capture: TraceHook | None = None,
     ) -> None:
         if isinstance(retries, bool) or not isinstance(retries, int) or retries < 0:
             raise LocalProtocolError(f"retries must be an int >= 0, got {retries!r}")
@@ -83,6 +89,8 @@ class Bus(Generic[DriveT, BroadcastT]):
             dialect = get_dialect(DEFAULT_PROTOCOL)
         self.dialect = dialect
         self._trace = trace
+        # The capture sees every frame whatever the trace hook is set to later.
+        self._capture = capture
         self._strip_echo = strip_echo
         self._parser = dialect.new_parser()
         self.link = Link(
@@ -104,7 +112,7 @@ class Bus(Generic[DriveT, BroadcastT]):
             self._arbiter,
             self.stats,
             strip_echo=self._strip_echo,
-            trace=self._trace,
+            trace=combine(self._trace, self._capture),
         )
 
     @property
@@ -117,7 +125,7 @@ class Bus(Generic[DriveT, BroadcastT]):
         self._trace = hook
         protocol = self.link.protocol
         if protocol is not None:
-            protocol.trace = hook
+            protocol.trace = combine(hook, self._capture)
 
     @property
     def connected(self) -> bool:

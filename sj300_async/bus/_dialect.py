@@ -26,11 +26,20 @@ from collections.abc import Mapping, Sequence
 from typing import TYPE_CHECKING, Protocol, TypeVar, runtime_checkable
 
 from ..wire import BadFrame, Discarded, SJ300Error
+from ..wire._frames import LineFrame
 
 if TYPE_CHECKING:
     from ._channel import Channel
 
-__all__ = ["Dialect", "LineParser", "LineRequest", "ReplyT", "RequestT", "SimulatorFactory"]
+__all__ = [
+    "Dialect",
+    "LineFramer",
+    "LineParser",
+    "LineRequest",
+    "ReplyT",
+    "RequestT",
+    "SimulatorFactory",
+]
 
 
 @runtime_checkable
@@ -70,6 +79,36 @@ class LineParser(Protocol[ReplyT]):
         """Forget a partial frame; return it as events (``Discarded``, in practice)."""
 
 
+class LineFramer(Protocol):
+    """A sans-IO splitter of a whole line, both directions (captures, the sniffer).
+
+    Unlike the reply parser it keeps every byte: each piece it returns is a
+    frame or a run of bytes outside any frame, exactly as received, and the
+    pieces of a stream joined together are the stream (less what is still
+    pending).
+    """
+
+    def feed(self, data: bytes) -> list[bytes]:
+        """Consume a chunk; return the pieces it completed, in order."""
+
+    def flush(self) -> list[bytes]:
+        """Return what is pending (an incomplete frame) as a piece, and forget it."""
+
+    def classify(
+        self, piece: bytes, *, outbound: bool | None, pending: object | None = None
+    ) -> LineFrame:
+        """What *piece* is.
+
+        Args:
+            outbound: True when the host wrote it, False when it reached the
+                host, None when unknown (a tap on the line: decided by content).
+            pending: the request (the protocol's object, ``LineFrame.message``)
+                still waiting for its answer, if any; it settles a piece that
+                reads as either a request or an answer (an SJ300 status reply
+                is as long as a set-frequency request).
+        """
+
+
 class SimulatorFactory(Protocol):
     """Builds the simulated line that serves a dialect on ``sim://`` (``Dialect.simulator``).
 
@@ -103,6 +142,9 @@ class Dialect(Protocol[RequestT, ReplyT]):
     #: Where its simulator lives, ``"package.module:callable"`` (a
     #: :class:`SimulatorFactory`), imported only when a ``sim://`` bus needs it.
     simulator: str
+    #: The pcapng link type of its captures: one of the user link types 147..162
+    #: (docs/CAPTURE.md lists who has which).
+    capture_linktype: int
 
     def configure(self, options: Mapping[str, str]) -> Dialect[RequestT, ReplyT]:
         """The dialect with the URL's protocol *options* applied (keys from :attr:`url_options`).
@@ -175,6 +217,9 @@ class Dialect(Protocol[RequestT, ReplyT]):
         The arbiter sends them at most once per attempt, :meth:`answer_delay_s`
         after the damaged frame, and waits a full response time-out more.
         """
+
+    def line_framer(self) -> LineFramer:
+        """A fresh splitter of the whole line, both directions (captures, the sniffer)."""
 
     def describe(self, reply: ReplyT) -> str:
         """The reply's meaning in a few words, for traces and logs."""

@@ -11,15 +11,19 @@ from __future__ import annotations
 from collections.abc import AsyncIterator
 from contextlib import AbstractAsyncContextManager, asynccontextmanager
 from dataclasses import replace
+from os import PathLike, fspath
 from typing import Any, Final
 
 from ..transports import LineFaults, loopback_connector, serial_connector, tcp_connector
+from ..transports._replay import replay_connector
 from ..wire import LineSettings, LocalProtocolError
 from ..wire._line import INSTANT_LINE
 from ._bus import Bus
+from ._capture import CaptureFile
 from ._dialect import Dialect, SimulatorFactory
 from ._link import Connector, ReconnectPolicy
 from ._registry import DEFAULT_PROTOCOL, get_dialect, load_object
+from ._replay_open import open_replay
 from ._timing import BusTiming
 from ._trace import TraceHook
 from ._url import BusAddress, parse_bus_url, parse_flag
@@ -115,6 +119,7 @@ def open_bus(
     faults: tuple[LineFaults | None, LineFaults | None] | None = None,
     simulator: Any = None,
     dialect: Dialect[Any, Any] | None = None,
+    capture: str | PathLike[str] | CaptureFile | None = None,
 ) -> AbstractAsyncContextManager[Bus[Any, Any]]:
     """Open a bus, connect, and close everything on exit (also on error and cancellation).
 
@@ -146,6 +151,9 @@ def open_bus(
             nodes replace the URL's).
         dialect: the protocol fully configured (e.g. ``Fr700Dialect(send_ack=True)``),
             instead of the one *protocol* and the URL's options make.
+        capture: write every frame that crosses the line to this pcapng file
+            (a path: created, and closed with the bus), or into this open
+            :class:`~._capture.CaptureFile` as one more line (left open).
 
     Raises:
         LocalProtocolError: a bad URL or setting (nothing is opened).
@@ -166,6 +174,7 @@ def open_bus(
         faults=faults,
         simulator=simulator,
         dialect=dialect,
+        capture=capture,
     )
 
 
@@ -186,8 +195,14 @@ async def _open_bus(
     faults: tuple[LineFaults | None, LineFaults | None] | None,
     simulator: Any,
     dialect: Dialect[Any, Any] | None,
+    capture: str | PathLike[str] | CaptureFile | None,
 ) -> AsyncIterator[Bus[Any, Any]]:
     address = parse_bus_url(url, protocol=protocol)
+    replay = None
+    if address.scheme == "replay":  # the capture names the protocol and the line
+        replay = open_replay(address, protocol)
+        protocol = replay.protocol
+        address = replace(address, line=address.line or replay.line)
     made = make_dialect(address, protocol)
     if dialect is None:
         dialect = made
@@ -196,7 +211,10 @@ async def _open_bus(
     if line is None:
         line = address.line or (INSTANT_LINE if address.scheme == "sim" else LineSettings())
     if timing is None:
-        timing = BusTiming(margin_s=_TCP_MARGIN_S) if address.scheme == "tcp" else BusTiming()
+        # A replay answers as the captured line did: time it as a bridge (the
+        # margin most captures need; --timeout says otherwise).
+        bridged = address.scheme in ("tcp", "replay")
+        timing = BusTiming(margin_s=_TCP_MARGIN_S) if bridged else BusTiming()
     if timeout is not None:
         timing = replace(timing, fixed_timeout_s=timeout)
     if deadline is not None:
@@ -210,8 +228,18 @@ async def _open_bus(
         if line.baudrate == 0:
             raise LocalProtocolError(f"a serial line needs a baud rate: {url!r}")
         connector = serial_connector(address.device, line)
+    elif replay is not None:
+        connector = replay_connector(replay.script)
     else:
         connector, simulator = _sim_connector(address, line, dialect, faults, simulator)
+    capture_file = None
+    if isinstance(capture, CaptureFile):
+        capture_file = capture
+    elif capture is not None:
+        capture_file = CaptureFile(fspath(capture))
+    line_capture = None
+    if capture_file is not None:
+        line_capture = capture_file.line(dialect, address.description, line)
     bus: Bus[Any, Any] = Bus(
         connector,
         description=address.description,
@@ -223,6 +251,7 @@ async def _open_bus(
         read_only=read_only,
         trace=trace,
         reconnect=reconnect,
+        capture=line_capture,
     )
     bus.simulator = simulator
     try:
@@ -230,3 +259,5 @@ async def _open_bus(
         yield bus
     finally:
         await bus.aclose()
+        if capture_file is not None and capture_file is not capture:
+            capture_file.close()

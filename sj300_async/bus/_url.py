@@ -7,6 +7,10 @@ Forms::
         behind it (used for wire-time arithmetic only)
     serial:///dev/ttyUSB0?baudrate=19200&bytesize=8&parity=E&stopbits=1
     /dev/ttyUSB0, COM3                  a bare device path: serial, default settings
+    replay://PATH.pcapng[?interface=N]
+        a capture played back: each request the host writes is answered with
+        what the capture recorded after it (the protocol and line settings
+        come from the capture; see :mod:`sj300_async.transports._replay`)
     sim://?nodes=1-8[&wait_ms=0&factory_defaults=1&pace=1&baudrate=19200...]
         the in-memory simulator: an instant line unless a baud rate is
         given; with one, replies arrive no sooner than that line could carry
@@ -34,12 +38,14 @@ from ._registry import DEFAULT_PROTOCOL, get_dialect, protocol_names
 
 __all__ = ["BusAddress", "parse_bus_url", "parse_node_list"]
 
-Scheme = Literal["tcp", "serial", "sim"]
+Scheme = Literal["tcp", "serial", "sim", "replay"]
 
 _LINE_KEYS: Final = ("baudrate", "bytesize", "parity", "stopbits")
 _COMMON_KEYS: Final = frozenset((*_LINE_KEYS, "echo", "protocol"))
 _SIM_KEYS: Final = frozenset(("nodes", "wait_ms", "factory_defaults", "pace"))
-_SCHEMES: Final = ("tcp", "serial", "sim")
+_REPLAY_KEYS: Final = frozenset(("interface",))
+_SCHEMES: Final = ("tcp", "serial", "sim", "replay")
+_SCHEME_KEYS: Final = {"sim": _SIM_KEYS, "replay": _REPLAY_KEYS}
 _TRUE: Final = frozenset(("1", "true", "yes", "on"))
 _FALSE: Final = frozenset(("0", "false", "no", "off", ""))
 
@@ -52,7 +58,7 @@ class BusAddress:
     #: tcp: host and port.
     host: str = ""
     port: int = 0
-    #: serial: device path or pyserial URL.
+    #: serial: device path or pyserial URL; replay: the capture's path.
     device: str = ""
     #: Line settings given in the URL (None: the transport's default).
     line: LineSettings | None = None
@@ -74,6 +80,8 @@ class BusAddress:
             return f"tcp://{self.host}:{self.port}"
         if self.scheme == "serial":
             return f"serial://{self.device}"
+        if self.scheme == "replay":
+            return f"replay://{self.device}"
         noun = get_dialect(self.protocol or DEFAULT_PROTOCOL).node_noun
         return f"sim://({noun}s {format_node_list(self.nodes)})"
 
@@ -168,7 +176,8 @@ def parse_bus_url(url: str, *, protocol: str | None = None) -> BusAddress:
     scheme = parts.scheme.lower()
     if scheme not in _SCHEMES:
         raise LocalProtocolError(
-            f"unknown bus URL scheme {parts.scheme!r} in {url!r} (use tcp://, serial:// or sim://)"
+            f"unknown bus URL scheme {parts.scheme!r} in {url!r} "
+            f"(use {', '.join(name + '://' for name in _SCHEMES)})"
         )
     query = dict(parse_qsl(parts.query, keep_blank_values=True))
     named = query.pop("protocol", None)
@@ -182,7 +191,7 @@ def parse_bus_url(url: str, *, protocol: str | None = None) -> BusAddress:
             raise LocalProtocolError(f"protocol={protocol!r} but the URL says protocol={named}")
     protocol = named or protocol
     dialect = get_dialect(protocol or DEFAULT_PROTOCOL)
-    allowed = _COMMON_KEYS | dialect.url_options | (_SIM_KEYS if scheme == "sim" else frozenset())
+    allowed = _COMMON_KEYS | dialect.url_options | _SCHEME_KEYS.get(scheme, frozenset())
     unknown = set(query) - allowed
     if unknown:
         raise LocalProtocolError(_unknown_options(url, unknown, allowed))
@@ -213,6 +222,19 @@ def parse_bus_url(url: str, *, protocol: str | None = None) -> BusAddress:
             echo=echo,
             protocol=protocol,
             protocol_options=protocol_options,
+        )
+    if scheme == "replay":
+        path = parts.netloc + parts.path
+        if not path:
+            raise LocalProtocolError(f"replay URL needs a capture file: {url!r}")
+        return BusAddress(
+            "replay",
+            device=path,
+            line=line,
+            echo=echo,
+            protocol=protocol,
+            protocol_options=protocol_options,
+            sim_options={k: v for k, v in query.items() if k in _REPLAY_KEYS},
         )
     if scheme == "serial":
         device = parts.netloc + parts.path

@@ -33,6 +33,7 @@ from ._commands import Command, reply_frame_length, shortest_reply_frame_length
 from ._constants import MAX_NODE, MIN_NODE
 from ._drive import Broadcast, Drive
 from ._events import AckDataReply, AckReply, DataReply, NakReply, Reply
+from ._line_frames import SJ300LineFramer
 from ._matching import answers
 from ._parameters import normalize_code
 from ._parser import ReplyParser
@@ -74,6 +75,7 @@ class SJ300Dialect:
     default_sim_nodes = "1-8"
     url_options: frozenset[str] = frozenset()
     simulator = "sj300_async.simulator.sj300:simulate"
+    capture_linktype = 147  # LINKTYPE_USER0 (docs/CAPTURE.md)
 
     def __repr__(self) -> str:
         return "SJ300Dialect()"
@@ -137,6 +139,9 @@ class SJ300Dialect:
 
     def reoutput_request(self, request: Request, bad_frame: BadFrame) -> bytes | None:
         return None  # an SJ300 cannot be asked to repeat a reply: the host retries
+
+    def line_framer(self) -> SJ300LineFramer:
+        return SJ300LineFramer()
 
     def describe(self, reply: Reply) -> str:
         if isinstance(reply, NakReply):
