@@ -10,9 +10,11 @@ RUN_STAMP := $(VENV)/.installed-run
 
 # Debian packages the tests need, as package:command (the command tells whether it is
 # installed): socat + ser2net for the serial-device-server bridge test, mbpoll as an
-# independent Modbus client, mosquitto + its clients for the MQTT tests.
+# independent Modbus client, mosquitto + its clients for the MQTT tests, tshark for the
+# Wireshark dissector's test (its debconf question, whether non-root users may capture,
+# takes its default "no" under DEBIAN_FRONTEND=noninteractive).
 SYSTEM_PACKAGES := socat:socat ser2net:ser2net mbpoll:mbpoll mosquitto:mosquitto \
-	mosquitto-clients:mosquitto_sub
+	mosquitto-clients:mosquitto_sub tshark:tshark
 
 .PHONY: demo examples test lint typecheck lint-imports docs system-packages pytest bench \
 	bench-compare soak clean venv
