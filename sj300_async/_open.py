@@ -11,9 +11,10 @@ types passes it (the two must agree).
 from __future__ import annotations
 
 from contextlib import AbstractAsyncContextManager
+from os import PathLike
 from typing import Any, Literal, overload
 
-from .bus import Bus, BusTiming, Dialect, ReconnectPolicy, TraceHook
+from .bus import Bus, BusTiming, CaptureFile, Dialect, ReconnectPolicy, TraceHook
 from .bus import open_bus as _open_bus
 from .fr700 import Fr700Drive
 from .sj300 import Broadcast, Drive
@@ -40,6 +41,7 @@ def open_bus(
     faults: tuple[LineFaults | None, LineFaults | None] | None = None,
     simulator: Any = None,
     dialect: Dialect[Any, Any] | None = None,
+    capture: str | PathLike[str] | CaptureFile | None = None,
 ) -> AbstractAsyncContextManager[Bus[Fr700Drive, None]]: ...
 
 
@@ -60,6 +62,7 @@ def open_bus(
     faults: tuple[LineFaults | None, LineFaults | None] | None = None,
     simulator: Any = None,
     dialect: Dialect[Any, Any] | None = None,
+    capture: str | PathLike[str] | CaptureFile | None = None,
 ) -> AbstractAsyncContextManager[Bus[Drive, Broadcast]]: ...
 
 
@@ -80,6 +83,7 @@ def open_bus(
     faults: tuple[LineFaults | None, LineFaults | None] | None = None,
     simulator: Any = None,
     dialect: Dialect[Any, Any] | None = None,
+    capture: str | PathLike[str] | CaptureFile | None = None,
 ) -> AbstractAsyncContextManager[Bus[Any, Any]]: ...
 
 

@@ -8,8 +8,9 @@ dialect tells it everything protocol-specific (see :class:`Dialect`).
 from __future__ import annotations
 
 from ._bus import Bus
+from ._capture import CaptureFile
 from ._channel import Channel
-from ._dialect import Dialect, LineParser, LineRequest, SimulatorFactory
+from ._dialect import Dialect, LineFramer, LineParser, LineRequest, SimulatorFactory
 from ._link import ReconnectPolicy
 from ._open import make_dialect, open_bus
 from ._registry import (
@@ -30,8 +31,10 @@ __all__ = [
     "BusAddress",
     "BusStats",
     "BusTiming",
+    "CaptureFile",
     "Channel",
     "Dialect",
+    "LineFramer",
     "LineParser",
     "LineRequest",
     "ReconnectPolicy",

@@ -148,20 +148,21 @@ class LineCapture:
     def __call__(self, record: TraceRecord) -> None:
         if record.direction == "tx":
             frame = self._framer.classify(record.data, outbound=True)
-            self._write(record.timestamp, frame, PacketDirection.OUTBOUND)
+            self.write_frame(record.timestamp, frame, PacketDirection.OUTBOUND)
             return
         self._last_rx = record.timestamp
         for piece in self._framer.feed(record.data):
             frame = self._framer.classify(piece, outbound=False)
-            self._write(record.timestamp, frame, PacketDirection.INBOUND)
+            self.write_frame(record.timestamp, frame, PacketDirection.INBOUND)
 
     def flush(self) -> None:
         """Capture an incomplete received frame as noise (the capture is closing)."""
         for piece in self._framer.flush():
             frame = self._framer.classify(piece, outbound=False)
-            self._write(self._last_rx, frame, PacketDirection.INBOUND)
+            self.write_frame(self._last_rx, frame, PacketDirection.INBOUND)
 
-    def _write(self, timestamp: float, frame: LineFrame, direction: PacketDirection) -> None:
+    def write_frame(self, timestamp: float, frame: LineFrame, direction: PacketDirection) -> None:
+        """Write one frame judged elsewhere (the sniffer's); *timestamp* is loop time."""
         bits, comment = packet_marks(frame)
         stamp = round((timestamp + self._epoch_offset) * 1_000_000)
         self._file.write(

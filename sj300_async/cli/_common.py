@@ -56,6 +56,8 @@ and terminals refuse it, ``monitor`` shows either.
 
 ``--trace`` prints every frame on stderr as it crosses the line (see
 :mod:`._trace`), for every command: :func:`open_cli_bus` sets the hook.
+``--capture PATH`` writes them to a pcapng file (docs/CAPTURE.md); in
+``sj300 shell`` the file covers the whole session.
 """
 
 from __future__ import annotations
@@ -253,6 +255,13 @@ def _add_shared_options(
         "--trace",
         help="print every frame on stderr: seconds since the start, → tx / ← rx, hex, meaning",
     )
+    add.value(
+        bus,
+        "--capture",
+        metavar="PATH",
+        help="write every frame that crosses the line to PATH, a pcapng file "
+        "Wireshark opens (docs/CAPTURE.md)",
+    )
     about_line = (
         "a serial port's UART; for tcp:// the line behind the bridge (time-outs); "
         "the URL's query otherwise, else 19200 8N1"
@@ -419,6 +428,7 @@ async def open_cli_bus(
         retries=getattr(args, "default_retries", 2) if retries is None else retries,
         line=line_settings(args, url),
         protocol=protocol,
+        capture=getattr(args, "capture", None),
     ) as bus:
         if implicit:
             note = f"no --url given: these are simulated drives ({url})"

@@ -66,6 +66,11 @@ def add_parser(subparsers: Any) -> None:
         help="with --url: refuse reads of data older than this (default 5 s)",
     )
     p.add_argument("--interval", type=float, default=None, metavar="S", help="poll interval")
+    p.add_argument(
+        "--capture",
+        metavar="PATH",
+        help="write every line's frames to PATH, a pcapng file (one interface per line)",
+    )
     p.add_argument("-v", "--verbose", action="count", default=0, help="log more (-vv: debug)")
     p.set_defaults(run=run)
 
@@ -117,10 +122,10 @@ def run(args: argparse.Namespace) -> int:
             format="%(asctime)s %(name)s %(levelname)s %(message)s",
         )
     config = _config(args)  # a bad one raises here: nothing has started
-    return asyncio.run(_serve(config))
+    return asyncio.run(_serve(config, args.capture))
 
 
-async def _serve(config: Any) -> int:
+async def _serve(config: Any, capture: str | None) -> int:
     from ..gateway._gateway import Gateway
 
     loop = asyncio.get_running_loop()
@@ -128,7 +133,7 @@ async def _serve(config: Any) -> int:
     for sig in (signal.SIGINT, signal.SIGTERM):
         loop.add_signal_handler(sig, stop.set)
     try:
-        async with Gateway(config) as gateway:
+        async with Gateway(config, capture=capture) as gateway:
             if gateway.modbus is not None:
                 host = config.modbus.host
                 print(f"modbus on {host}:{gateway.modbus.port}", flush=True)

@@ -1,5 +1,9 @@
 """``sj300 simulate``: serve simulated drives over TCP, a pty or a serial port until interrupted.
 
+``--tap tcp://HOST:PORT`` mirrors the TCP listeners' line to each client
+of the tap (``tap on tcp://...`` on stdout), for ``sj300 sniff``: see
+:mod:`sj300_async.simulator._tap`. A pty or device line is not mirrored.
+
 stdout carries one line per listener, ``listening on tcp://127.0.0.1:4001``
 or ``listening on /dev/pts/5`` (``--pty``, or ``--device`` for a port that
 exists already), flushed at once so a script can read the
@@ -34,6 +38,7 @@ from ..simulator import (
     precise_event_loop,
     serve_tcp,
 )
+from ..simulator._tap import TapServer, serve_tap
 from ..simulator.fr700 import Fr700SimulatedBus, Fr700SimulatedDrive
 from ..simulator.sj300 import Country, SimulatedBus
 from ..wire._errors import LocalProtocolError
@@ -79,6 +84,14 @@ def add_parser(subparsers: Any) -> None:
         f"default tcp://{LOOPBACK}:{DEFAULT_PORT} unless --pty is given",
     )
     p.add_argument("--pty", action="store_true", help="serve on a pseudo-terminal, print its path")
+    p.add_argument(
+        "--tap",
+        type=parse_listen,
+        metavar="URL",
+        help="mirror every byte of the TCP listeners' line, both directions, to each client "
+        "of tcp://HOST:PORT, like a listen-only transceiver (for `sj300 sniff`); "
+        "what a client sends is ignored",
+    )
     p.add_argument(
         "--device",
         action="append",
@@ -215,12 +228,25 @@ async def _serve(
     for sig in (signal.SIGINT, signal.SIGTERM):
         loop.add_signal_handler(sig, stop.set)
     servers: list[SimulatorServer] = []
+    tap: TapServer | None = None
     ttys: list[PtyServer | SerialDeviceServer] = []
     tripper: asyncio.Task[None] | None = None
     try:
+        if args.tap is not None:
+            try:
+                tap = await serve_tap(args.tap.host, args.tap.port)
+            except OSError as exc:
+                raise CliError(f"cannot listen on {args.tap}: {exc.strerror or exc}") from None
+            print(f"tap on {ListenAddress(tap.host, tap.port)}", flush=True)
         for address in listen:
             try:
-                server = await serve_tcp(bus, address.host, address.port, line=line)
+                server = await serve_tcp(
+                    bus,
+                    address.host,
+                    address.port,
+                    line=line,
+                    tap=None if tap is None else tap.mirror,
+                )
             except OSError as exc:
                 raise CliError(f"cannot listen on {address}: {exc.strerror or exc}") from None
             servers.append(server)
@@ -268,6 +294,9 @@ async def _serve(
             server.close()
         for server in servers:
             await server.wait_closed()
+        if tap is not None:
+            tap.close()
+            await tap.wait_closed()
         for tty in ttys:
             tty.close()
         for sig in (signal.SIGINT, signal.SIGTERM):

@@ -35,6 +35,7 @@ from typing import Any
 from .._open import open_bus
 from .._poller import Poller, Read, Sample
 from ..bus import Bus
+from ..bus._capture import CaptureFile
 from ..wire import SJ300Error
 from ._control import AuditLog, Controller, raw_of
 from ._http import serve_http
@@ -65,8 +66,12 @@ class GatewayLine:
 class Gateway:
     """The whole gateway (see the module docstring)."""
 
-    def __init__(self, config: GatewayConfig) -> None:
+    def __init__(self, config: GatewayConfig, *, capture: str | None = None) -> None:
         self.config = config
+        #: Where every line's frames go (``--capture``: one pcapng, one interface
+        #: per line in the configuration's order), or None.
+        self.capture_path = capture
+        self._capture: CaptureFile | None = None
         self.lines: list[GatewayLine] = []
         self.clients = ClientCounters()
         self.audit = AuditLog(config.audit_log)
@@ -122,6 +127,9 @@ class Gateway:
 
     async def __aenter__(self) -> Gateway:
         try:
+            if self.capture_path is not None:
+                self._capture = CaptureFile(self.capture_path)
+                self._stack.callback(self._capture.close)
             for config in self.config.lines:
                 self.lines.append(await self._open_line(config))
             if self.config.mqtt is not None:  # before the pollers: it gets the first samples
@@ -159,7 +167,12 @@ class Gateway:
 
     async def _open_line(self, config: LineConfig) -> GatewayLine:
         bus: Bus[Any, Any] = await self._stack.enter_async_context(
-            open_bus(config.url, protocol=config.protocol, timeout=config.timeout_s)
+            open_bus(
+                config.url,
+                protocol=config.protocol,
+                timeout=config.timeout_s,
+                capture=self._capture,
+            )
         )
         reads: tuple[Read, ...] = tuple(r for r in config.reads if r in ("status", "monitor"))  # type: ignore[misc]
         poller = Poller(interval_s=config.interval_s, reads=reads, parameters=config.parameters)

@@ -84,7 +84,10 @@ class SJ300LineFramer:
         self, piece: bytes, *, outbound: bool | None, pending: object | None = None
     ) -> LineFrame:
         if len(piece) < 2 or piece[0] != STX_BYTE[0] or piece[-1] != CR_BYTE[0]:
-            return LineFrame(piece, FrameRole.NOISE, None, "bytes outside a frame", problem="noise")
+            # What the splitter discards: a frame cut short (by a new STX, or the
+            # end of the capture), one too long, or bytes before any STX.
+            why = "frame cut short" if piece[:1] == STX_BYTE else "bytes outside a frame"
+            return LineFrame(piece, FrameRole.NOISE, None, f"noise: {why}", problem=why)
         body = piece[1:-1]
         if outbound is True:
             return _as_request(piece, _decode(body))
