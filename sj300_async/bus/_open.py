@@ -14,7 +14,13 @@ from dataclasses import replace
 from os import PathLike, fspath
 from typing import Any, Final
 
-from ..transports import LineFaults, loopback_connector, serial_connector, tcp_connector
+from ..transports import (
+    LineFaults,
+    loopback_connector,
+    rfc2217_connector,
+    serial_connector,
+    tcp_connector,
+)
 from ..transports._replay import replay_connector
 from ..wire import LineSettings, LocalProtocolError
 from ..wire._line import INSTANT_LINE
@@ -124,8 +130,9 @@ def open_bus(
     """Open a bus, connect, and close everything on exit (also on error and cancellation).
 
     Args:
-        url: ``tcp://host:port``, ``serial:///dev/ttyUSB0?baudrate=19200&parity=E``,
-            a bare device path, or ``sim://?nodes=1-8`` (see :mod:`._url`).
+        url: ``tcp://host:port``, ``rfc2217://host:port?baudrate=9600``,
+            ``serial:///dev/ttyUSB0?baudrate=19200&parity=E``, a bare device
+            path, or ``sim://?nodes=1-8`` (see :mod:`._url`).
         protocol: a registered protocol's name (``"sj300"``, the default, or
             ``"fr700"``); the URL's ``protocol=`` may say it instead (the two
             must agree).
@@ -213,7 +220,7 @@ async def _open_bus(
     if timing is None:
         # A replay answers as the captured line did: time it as a bridge (the
         # margin most captures need; --timeout says otherwise).
-        bridged = address.scheme in ("tcp", "replay")
+        bridged = address.scheme in ("tcp", "rfc2217", "replay")
         timing = BusTiming(margin_s=_TCP_MARGIN_S) if bridged else BusTiming()
     if timeout is not None:
         timing = replace(timing, fixed_timeout_s=timeout)
@@ -224,6 +231,10 @@ async def _open_bus(
     connector: Connector
     if address.scheme == "tcp":
         connector = tcp_connector(address.host, address.port)
+    elif address.scheme == "rfc2217":
+        if line.baudrate == 0:
+            raise LocalProtocolError(f"an RFC 2217 port needs a baud rate: {url!r}")
+        connector = rfc2217_connector(address.host, address.port, line)
     elif address.scheme == "serial":
         if line.baudrate == 0:
             raise LocalProtocolError(f"a serial line needs a baud rate: {url!r}")

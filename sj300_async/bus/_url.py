@@ -5,6 +5,10 @@ Forms::
     tcp://HOST:PORT[?baudrate=19200&bytesize=8&parity=N&stopbits=1]
         raw TCP to a serial device server; the query describes the RS-485 line
         behind it (used for wire-time arithmetic only)
+    rfc2217://HOST:PORT[?baudrate=19200&bytesize=8&parity=N&stopbits=1]
+        a serial port on an RFC 2217 server (ser2net's telnet(rfc2217), a
+        Moxa NPort...): the query's settings are set on the server's port
+        when the bus connects (19200 8N1 when none are given)
     serial:///dev/ttyUSB0?baudrate=19200&bytesize=8&parity=E&stopbits=1
     /dev/ttyUSB0, COM3                  a bare device path: serial, default settings
     replay://PATH.pcapng[?interface=N]
@@ -38,13 +42,13 @@ from ._registry import DEFAULT_PROTOCOL, get_dialect, protocol_names
 
 __all__ = ["BusAddress", "parse_bus_url", "parse_node_list"]
 
-Scheme = Literal["tcp", "serial", "sim", "replay"]
+Scheme = Literal["tcp", "rfc2217", "serial", "sim", "replay"]
 
 _LINE_KEYS: Final = ("baudrate", "bytesize", "parity", "stopbits")
 _COMMON_KEYS: Final = frozenset((*_LINE_KEYS, "echo", "protocol"))
 _SIM_KEYS: Final = frozenset(("nodes", "wait_ms", "factory_defaults", "pace"))
 _REPLAY_KEYS: Final = frozenset(("interface",))
-_SCHEMES: Final = ("tcp", "serial", "sim", "replay")
+_SCHEMES: Final = ("tcp", "rfc2217", "serial", "sim", "replay")
 _SCHEME_KEYS: Final = {"sim": _SIM_KEYS, "replay": _REPLAY_KEYS}
 _TRUE: Final = frozenset(("1", "true", "yes", "on"))
 _FALSE: Final = frozenset(("0", "false", "no", "off", ""))
@@ -55,7 +59,7 @@ class BusAddress:
     """A parsed bus URL."""
 
     scheme: Scheme
-    #: tcp: host and port.
+    #: tcp, rfc2217: host and port.
     host: str = ""
     port: int = 0
     #: serial: device path or pyserial URL; replay: the capture's path.
@@ -76,8 +80,8 @@ class BusAddress:
     @property
     def description(self) -> str:
         """Short human-readable form for messages."""
-        if self.scheme == "tcp":
-            return f"tcp://{self.host}:{self.port}"
+        if self.scheme in ("tcp", "rfc2217"):
+            return f"{self.scheme}://{self.host}:{self.port}"
         if self.scheme == "serial":
             return f"serial://{self.device}"
         if self.scheme == "replay":
@@ -205,20 +209,21 @@ def parse_bus_url(url: str, *, protocol: str | None = None) -> BusAddress:
         )
     echo = _parse_echo(query["echo"]) if "echo" in query else None
     protocol_options = {k: v for k, v in query.items() if k in dialect.url_options}
-    if scheme == "tcp":
+    if scheme in ("tcp", "rfc2217"):
         try:
             host, port = parts.hostname, parts.port
         except ValueError as exc:
             raise LocalProtocolError(f"bad port in {url!r}: {exc}") from None
         if port == 0:
-            raise LocalProtocolError(f"tcp URL needs a port 1..65535, got 0: {url!r}")
+            raise LocalProtocolError(f"{scheme} URL needs a port 1..65535, got 0: {url!r}")
         if not host or port is None:
-            raise LocalProtocolError(f"tcp URL needs a host and a port: {url!r}")
+            raise LocalProtocolError(f"{scheme} URL needs a host and a port: {url!r}")
         return BusAddress(
-            "tcp",
+            "rfc2217" if scheme == "rfc2217" else "tcp",
             host=host,
             port=port,
-            line=line,
+            # RFC 2217 sets the line on the server, so it always has settings to send.
+            line=(line or LineSettings()) if scheme == "rfc2217" else line,
             echo=echo,
             protocol=protocol,
             protocol_options=protocol_options,
