@@ -10,6 +10,8 @@ drives the test can inspect (``line.sim``). Transports:
             served by the simulator (a Linux pty refuses parity: 8N1)
 - ser2net:  a socat pty pair, the simulator on one end, ser2net exposing the
             other end on loopback TCP, the library's TCP transport in front
+- rfc2217:  the same pair, ser2net's accepter speaking telnet with RFC 2217,
+            the library's RFC 2217 transport in front (it sets the line remotely)
 """
 
 from __future__ import annotations
@@ -47,15 +49,15 @@ class Line:
 
 
 @contextlib.asynccontextmanager
-async def _ser2net_bridge(sim: SimulatedBus) -> AsyncIterator[str]:
+async def _ser2net_bridge(sim: SimulatedBus, *, rfc2217: bool = False) -> AsyncIterator[str]:
     """The simulator on end A of :func:`socat_ser2net`; yields the bus URL."""
     from sj300_async.simulator import serve_serial_device
 
-    async with socat_ser2net() as (a, port), await serve_serial_device(sim, a):
-        yield f"tcp://127.0.0.1:{port}?baudrate=19200"
+    async with socat_ser2net(rfc2217=rfc2217) as (a, port), await serve_serial_device(sim, a):
+        yield f"{'rfc2217' if rfc2217 else 'tcp'}://127.0.0.1:{port}?baudrate=19200"
 
 
-@pytest.fixture(params=["loopback", "tcp", "pty", "ser2net"])
+@pytest.fixture(params=["loopback", "tcp", "pty", "ser2net", "rfc2217"])
 async def line(request: pytest.FixtureRequest) -> AsyncIterator[Line]:
     kind = request.param
     async with contextlib.AsyncExitStack() as stack:
@@ -69,7 +71,8 @@ async def line(request: pytest.FixtureRequest) -> AsyncIterator[Line]:
             pty = await stack.enter_async_context(await open_pty_server(sim))
             url = f"serial://{pty.path}?baudrate=19200"
         else:
-            url = await stack.enter_async_context(_ser2net_bridge(sim))
+            bridge = _ser2net_bridge(sim, rfc2217=kind == "rfc2217")
+            url = await stack.enter_async_context(bridge)
 
         def open_line(
             *, timeout: float | None = None, retries: int = 2

@@ -8,6 +8,7 @@ test asks, and can stop reading (so the host's writes back up):
 - tcp:      an asyncio server behind ``tcp_connector``
 - pty:      the master side of a pseudo-terminal behind ``serial_connector``
 - ser2net:  end A of a socat pty pair, ser2net serving end B, ``tcp_connector``
+- rfc2217:  the same, ser2net's accepter speaking RFC 2217, ``rfc2217_connector``
 """
 
 from __future__ import annotations
@@ -23,11 +24,16 @@ from typing import Any
 from waiting import wait_for
 
 from sj300_async import LineSettings
-from sj300_async.transports import loopback_connector, serial_connector, tcp_connector
+from sj300_async.transports import (
+    loopback_connector,
+    rfc2217_connector,
+    serial_connector,
+    tcp_connector,
+)
 
 from .bridges import socat_ser2net
 
-KINDS = ("loopback", "tcp", "pty", "ser2net")
+KINDS = ("loopback", "tcp", "pty", "ser2net", "rfc2217")
 
 Connector = Callable[[Callable[[], asyncio.Protocol]], Awaitable[asyncio.BaseTransport]]
 
@@ -243,13 +249,18 @@ async def open_raw_line(kind: str) -> AsyncIterator[RawLine]:
             os.close(slave)
             os.close(master)
     else:
-        async with socat_ser2net() as (a, port):
+        rfc2217 = kind == "rfc2217"
+        async with socat_ser2net(rfc2217=rfc2217) as (a, port):
             fd = os.open(a, os.O_RDWR | os.O_NOCTTY)
             tty.setraw(fd)
+            if rfc2217:
+                # Connected once the server has confirmed the line: ser2net has the
+                # device open by then, so no byte needs to cross first (see open()).
+                connect = rfc2217_connector("127.0.0.1", port, LineSettings(19200))
+            else:
+                connect = tcp_connector("127.0.0.1", port)
             try:
-                yield RawLine(
-                    kind, tcp_connector("127.0.0.1", port), FdFar(fd), extra={"port": port}
-                )
+                yield RawLine(kind, connect, FdFar(fd), extra={"port": port})
             finally:
                 asyncio.get_running_loop().remove_reader(fd)
                 os.close(fd)

@@ -18,11 +18,16 @@ from collections.abc import AsyncIterator
 import pytest
 from waiting import wait_for
 
+from sj300_async import LineSettings
+from sj300_async.transports._telnet import ModemState
+
 from .rawline import KINDS, Far, LoopbackFar, RawLine, Recorder, open_raw_line
 
 HIGH, LOW = 16 * 1024, 4 * 1024
 CHUNK = 64 * 1024
 CAP = 256 * 1024 * 1024  # a transport that has not backed up by then never will
+#: pyserial's transport has no is_reading().
+_HAS_IS_READING = ("loopback", "tcp", "rfc2217")
 
 
 def _payload(size: int, seed: int = 0) -> bytes:
@@ -63,7 +68,7 @@ async def test_pause_reading_holds_data_and_resume_delivers_all_of_it(
     transport, recorder = await raw.open()
     try:
         transport.pause_reading()
-        if raw.kind in ("loopback", "tcp"):  # pyserial's transport has no is_reading()
+        if raw.kind in _HAS_IS_READING:
             assert not transport.is_reading()
         payload = _payload(3000)
         raw.far.send(payload)
@@ -71,7 +76,7 @@ async def test_pause_reading_holds_data_and_resume_delivers_all_of_it(
         await asyncio.sleep(0.1)
         assert recorder.received == b""
         transport.resume_reading()
-        if raw.kind in ("loopback", "tcp"):
+        if raw.kind in _HAS_IS_READING:
             assert transport.is_reading()
         await wait_for(lambda: len(recorder.received) >= len(payload), "the held bytes")
         assert recorder.received == payload
@@ -120,8 +125,8 @@ async def test_close_flushes_the_buffer_then_reports_none(raw: RawLine) -> None:
     transport.close()
     assert transport.is_closing()
     transport.close()  # a second close is harmless
-    if raw.kind in ("loopback", "pty"):
-        # Both document that a write after close() is ignored. asyncio's socket
+    if raw.kind in ("loopback", "pty", "rfc2217"):
+        # These document that a write after close() is ignored. asyncio's socket
         # transport does not promise it (it appends to a non-empty buffer).
         transport.write(b"after close")
     assert "lost" not in recorder.events  # never inside close()
@@ -177,7 +182,11 @@ async def test_is_closing_and_get_extra_info(raw: RawLine) -> None:
         assert port.baudrate == 19200
         assert (port.bytesize, port.parity, port.stopbits) == (8, "N", 1)
         assert port.is_open
-    else:
+    if raw.kind == "rfc2217":
+        # What the server confirmed and told, on top of the TCP connection's own.
+        assert transport.get_extra_info("line_settings") == LineSettings(19200)
+        assert isinstance(transport.get_extra_info("modem_state"), ModemState)
+    if raw.kind not in ("loopback", "pty"):
         sock = transport.get_extra_info("socket")
         assert sock is not None
         assert transport.get_extra_info("peername") == ("127.0.0.1", raw.extra["port"])
