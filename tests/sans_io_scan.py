@@ -53,6 +53,7 @@ WIRE: Final = (
     "wire._errors",
     "wire._events",
     "wire._fast_construct",
+    "wire._frames",
     "wire._line",
     "wire._parser_stats",
 )
@@ -90,7 +91,17 @@ CORE_MODULES: Final = (*WIRE, *SJ300_CODEC, *BUS_SANS_IO)
 #: :class:`~sj300_async.fr700.Fr700Drive` (asyncio) and ``configure`` imports sj300_async.bus.
 FR700_CODEC: Final = tuple(
     f"fr700.{m}"
-    for m in ("_codec", "_codes", "_events", "_parameters", "_parser", "_payloads", "_requests")
+    for m in (
+        "_codec",
+        "_codes",
+        "_events",
+        "_line_frames",
+        "_parameters",
+        "_parser",
+        "_payloads",
+        "_request_parser",
+        "_requests",
+    )
 )
 
 #: The simulator's shared model: line model interface, faults, motion, electrical, pacing.
@@ -108,7 +119,7 @@ SIMULATOR_SJ300: Final = (
 #: The simulated FR-700 drives and line.
 SIMULATOR_FR700: Final = (
     "simulator.fr700",
-    *(f"simulator.fr700.{m}" for m in ("_bus", "_drive", "_parameters", "_request_parser")),
+    *(f"simulator.fr700.{m}" for m in ("_bus", "_drive", "_parameters")),
 )
 
 #: Not sans-IO, by design. The package ``__init__`` modules re-export the async classes.

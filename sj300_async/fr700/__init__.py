@@ -8,7 +8,8 @@ host's ACK) are :class:`Fr700Dialect`'s arguments, or the URL's
 
 The sans-IO core (:mod:`._codec`, :mod:`._parser`, :mod:`._requests`,
 :mod:`._payloads`, :mod:`._dialect`, the parameter catalogue
-:mod:`._parameters`) imports no asyncio; only
+:mod:`._parameters`, the drives' request parser :mod:`._request_parser`
+and the whole line's framer :mod:`._line_frames`) imports no asyncio; only
 :class:`Fr700Drive` is async. Every decision the reference leaves open is
 recorded in the docstring of the module that makes it.
 """

@@ -53,6 +53,7 @@ from ._codec import (
 )
 from ._codes import Fr700Instruction, Fr700NakCode
 from ._events import Fr700Ack, Fr700Data, Fr700Nak, Fr700Reply
+from ._line_frames import Fr700LineFramer
 from ._parameters import fr700_parameter_info
 from ._parser import Fr700ReplyParser
 from ._requests import READ_WIDTHS, Fr700Request, Fr700RequestKind, read
@@ -119,6 +120,7 @@ class Fr700Dialect:
     default_sim_nodes = "0-7"
     url_options = frozenset(("wait_field", "terminator", "ack"))
     simulator = "sj300_async.simulator.fr700:simulate"
+    capture_linktype = 148  # LINKTYPE_USER1 (docs/CAPTURE.md)
 
     def __init__(
         self,
@@ -263,6 +265,10 @@ class Fr700Dialect:
         if bad_frame.node is not None and bad_frame.node != request.station:
             return None
         return encode_reoutput_request(request.station, self.options.terminator)
+
+    def line_framer(self) -> Fr700LineFramer:
+        """A splitter of the whole line that ends frames as this dialect's line options do."""
+        return Fr700LineFramer(self.options)
 
     def describe(self, reply: Fr700Reply) -> str:
         if isinstance(reply, Fr700Nak):

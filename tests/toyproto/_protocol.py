@@ -17,6 +17,7 @@ from sj300_async.wire import (
     ParserStats,
     SJ300Error,
 )
+from sj300_async.wire._frames import FrameRole, LineFrame
 
 _MAX_LINE = 64
 
@@ -99,6 +100,58 @@ class ToyParser:
         return ToyOk(node) if rest == b"OK" else ToyValue(node, rest)
 
 
+class ToyLineFramer:
+    """The whole toy line: a piece per LF-ended line, a request starting ``?``, a reply ``!``/``#``.
+
+    A line longer than the longest one is noise, in pieces of that length.
+    """
+
+    def __init__(self) -> None:
+        self._buffer = b""
+
+    def feed(self, data: bytes) -> list[bytes]:
+        self._buffer += data
+        pieces: list[bytes] = []
+        while True:
+            end = self._buffer.find(b"\n", 0, _MAX_LINE + 1)
+            if end < 0 and len(self._buffer) <= _MAX_LINE:
+                return pieces
+            cut = end + 1 if end >= 0 else _MAX_LINE + 1
+            pieces.append(self._buffer[:cut])
+            self._buffer = self._buffer[cut:]
+
+    def flush(self) -> list[bytes]:
+        partial, self._buffer = self._buffer, b""
+        return [partial] if partial else []
+
+    def classify(
+        self, piece: bytes, *, outbound: bool | None, pending: object | None = None
+    ) -> LineFrame:
+        line = piece[:-1]
+        if not piece.endswith(b"\n") or len(line) > _MAX_LINE:
+            return LineFrame(piece, FrameRole.NOISE, None, "not a line", problem="garbage")
+        if line.startswith(b"?"):
+            parts = line[1:].decode("ascii", "replace").split()
+            if len(parts) in (3, 4) and parts[0].isdigit() and parts[1] in ("R", "W"):
+                value = int(parts[3]) if len(parts) == 4 and parts[3].isdigit() else None
+                request = ToyRequest(int(parts[0]), parts[2], value)
+                return LineFrame(
+                    piece,
+                    FrameRole.REQUEST,
+                    request.node,
+                    f"unit {request.node}: {request.label}",
+                    message=request,
+                    expects_reply=True,
+                )
+            return LineFrame(piece, FrameRole.BROKEN, None, "bad request", problem="bad request")
+        reply = ToyParser._decode(line)
+        if isinstance(reply, BadFrame):
+            return LineFrame(
+                piece, FrameRole.BROKEN, reply.node, "bad reply", problem=reply.reason.value
+            )
+        return LineFrame(piece, FrameRole.REPLY, reply.node, repr(reply), message=reply)
+
+
 class ToyDrive:
     """A toy device: registers by key."""
 
@@ -138,6 +191,7 @@ class ToyDialect:
     default_sim_nodes = "1-3"
     url_options = frozenset(("upper",))
     simulator = "toyproto._protocol:simulate"
+    capture_linktype = 149  # LINKTYPE_USER2 (docs/CAPTURE.md: free for a third protocol)
 
     def __init__(self, *, upper: bool = False) -> None:
         self.upper = upper
@@ -196,6 +250,9 @@ class ToyDialect:
 
     def reoutput_request(self, request: ToyRequest, bad_frame: BadFrame) -> bytes | None:
         return None
+
+    def line_framer(self) -> ToyLineFramer:
+        return ToyLineFramer()
 
     def describe(self, reply: ToyReply) -> str:
         return repr(reply)

@@ -14,10 +14,10 @@ servers, baud pacing) serves it as it is::
 
 from __future__ import annotations
 
+from ...fr700._request_parser import BadRequest, HostAnswer, HostRequest, RequestParser
 from ._bus import Fr700SimulatedBus, Fr700SimulatorStats, corrupt, simulate
 from ._drive import DEFAULT_PROCESSING_S, FaultCode, Fr700SimulatedDrive
 from ._parameters import PARAMETERS, ParameterSpec
-from ._request_parser import BadRequest, HostAnswer, HostRequest, RequestParser
 
 __all__ = [
     "DEFAULT_PROCESSING_S",

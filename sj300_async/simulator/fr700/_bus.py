@@ -12,7 +12,8 @@ Routing, as on a real line where every drive hears every frame:
   a reset) is executed and answered after the request's waiting time (or
   the drive's Pr.123) plus the drive's processing time, plus any fault delay;
 - a frame the drives reject (sum, grammar, characters: see
-  :mod:`._request_parser`) is answered with its NAK by the station it names;
+  :mod:`sj300_async.fr700._request_parser`) is answered with its NAK by the
+  station it names;
 - the host's ACK after read data is taken and not answered; the host's NAK
   (format F) makes the station send its last data reply again;
 - a frame for an absent or silenced station gets no answer (counted).
@@ -37,13 +38,13 @@ from ...fr700._codec import (
 )
 from ...fr700._codes import ETX, STX, Fr700Instruction
 from ...fr700._events import Fr700Ack, Fr700Data, Fr700Nak, Fr700Reply
+from ...fr700._request_parser import BadRequest, HostAnswer, HostRequest, RequestParser
 from ...wire._errors import LocalProtocolError
 from ...wire._events import Discarded
 from ...wire._parser_stats import ParserStats
 from .._faults import Faults
 from .._model import LineCounters, Transmission
 from ._drive import DEFAULT_PROCESSING_S, Fr700SimulatedDrive
-from ._request_parser import BadRequest, HostAnswer, HostRequest, RequestParser
 
 __all__ = ["Fr700SimulatedBus", "Fr700SimulatorStats", "corrupt"]
 

@@ -64,12 +64,12 @@ from ...fr700._codes import (
     Fr700StatusBits,
 )
 from ...fr700._events import Fr700Ack, Fr700Data, Fr700Nak, Fr700Reply
+from ...fr700._request_parser import HostRequest
 from ...wire._enums import Direction
 from ...wire._errors import LocalProtocolError
 from .._electrical import MotorRating, electrical
 from .._motion import Output, Ramp, RunState, advance, classify
 from ._parameters import COMMUNICATION, NOT_USED, PARAMETERS, factory_values
-from ._request_parser import HostRequest
 
 __all__ = ["DEFAULT_PROCESSING_S", "FaultCode", "Fr700SimulatedDrive"]
 

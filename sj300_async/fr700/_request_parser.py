@@ -1,5 +1,11 @@
 """The drive's side of the FR-700 line: the host's frames in, requests and answers out.
 
+Sans-IO, in the codec because more than the simulator reads requests: the
+simulated drives (:mod:`sj300_async.simulator.fr700`, which re-exports it)
+and the line framer (:mod:`._line_frames`, captures and the sniffer) split
+and judge the host's frames alike (:func:`request_frame_length`,
+:func:`decode_host_frame`).
+
 What the host sends::
 
     ENQ station(2) instruction(2) [wait(1)] data(0/2/4/10) sum(2)   A, A1, A2, B
@@ -38,10 +44,10 @@ import re
 from dataclasses import dataclass
 from typing import Final
 
-from ...fr700._codec import parse_station, sum_check
-from ...fr700._codes import A1_INSTRUCTIONS, ACK, CR, ENQ, LF, NAK, Fr700Instruction, Fr700NakCode
-from ...wire._events import Discarded, DiscardReason
-from ...wire._parser_stats import ParserStats
+from ..wire._events import Discarded, DiscardReason
+from ..wire._parser_stats import ParserStats
+from ._codec import parse_station, sum_check
+from ._codes import A1_INSTRUCTIONS, ACK, CR, ENQ, LF, NAK, Fr700Instruction, Fr700NakCode
 
 __all__ = [
     "MAX_REQUEST",
@@ -51,8 +57,11 @@ __all__ = [
     "RequestEvent",
     "RequestParser",
     "data_length",
+    "decode_host_frame",
+    "request_frame_length",
 ]
 
+# The simulated drives log under this name, as when this module was theirs.
 _log = logging.getLogger("sj300_async.simulator.fr700")
 
 #: The longest request without its terminator: an A2 with the waiting-time field.
@@ -101,6 +110,46 @@ def data_length(instruction: int) -> int:
     if instruction == Fr700Instruction.MULTI_COMMAND:
         return 10
     return 2 if instruction in A1_INSTRUCTIONS else 4
+
+
+def request_frame_length(head: bytes | bytearray, *, wait_field: bool) -> int | None:
+    """The length of the host's frame starting *head*, without a terminator, once known.
+
+    An ACK or NAK (C, F) is 3 characters; a request is known from its
+    instruction code (5 characters in), and one whose code is not hex ends
+    there (a character error).
+    """
+    if head[0] != ENQ:
+        return 3
+    if len(head) < 5:
+        return None
+    try:
+        instruction = int(head[3:5], 16)
+    except ValueError:
+        return 5  # unreadable: end it here, it is a character error
+    return 5 + wait_field + data_length(instruction) + 2
+
+
+def decode_host_frame(frame: bytes, *, wait_field: bool) -> HostRequest | HostAnswer | BadRequest:
+    """One whole frame of the host (start byte through sum, no terminator), as a drive reads it."""
+    station = parse_station(frame[1:3]) if _HEX_UPPER.fullmatch(frame[1:3]) else None
+    if frame[0] != ENQ:
+        if len(frame) != 3 or station is None:
+            return BadRequest(None, Fr700NakCode.PROTOCOL, frame)
+        return HostAnswer(station, reoutput=frame[0] == NAK)
+    if station is None:
+        return BadRequest(None, Fr700NakCode.CHARACTER, frame)
+    if not _HEX_UPPER.fullmatch(frame, 1):
+        return BadRequest(station, Fr700NakCode.CHARACTER, frame)
+    if len(frame) < 7:
+        return BadRequest(station, Fr700NakCode.PROTOCOL, frame)
+    instruction = int(frame[3:5], 16)
+    if len(frame) != 5 + wait_field + data_length(instruction) + 2:
+        return BadRequest(station, Fr700NakCode.PROTOCOL, frame)
+    if sum_check(frame[1:-2]) != frame[-2:]:
+        return BadRequest(station, Fr700NakCode.SUM_CHECK, frame)
+    wait = int(frame[5:6], 16) if wait_field else None
+    return HostRequest(station, instruction, wait, frame[5 + wait_field : -2])
 
 
 class _State(enum.Enum):
@@ -170,16 +219,7 @@ class RequestParser:
 
     def _expected_length(self) -> int | None:
         """The whole frame's length without a terminator, once it can be known."""
-        partial = self._partial
-        if partial[0] != ENQ:
-            return 3
-        if len(partial) < 5:
-            return None
-        try:
-            instruction = int(partial[3:5], 16)
-        except ValueError:
-            return 5  # unreadable: end it here, it is a character error
-        return 5 + self.wait_field + data_length(instruction) + 2
+        return request_frame_length(self._partial, wait_field=self.wait_field)
 
     def _finish(self, events: list[RequestEvent]) -> None:
         frame = bytes(self._partial)
@@ -194,24 +234,7 @@ class RequestParser:
         events.append(event)
 
     def _decode(self, frame: bytes) -> HostRequest | HostAnswer | BadRequest:
-        station = parse_station(frame[1:3]) if _HEX_UPPER.fullmatch(frame[1:3]) else None
-        if frame[0] != ENQ:
-            if len(frame) != 3 or station is None:
-                return BadRequest(None, Fr700NakCode.PROTOCOL, frame)
-            return HostAnswer(station, reoutput=frame[0] == NAK)
-        if station is None:
-            return BadRequest(None, Fr700NakCode.CHARACTER, frame)
-        if not _HEX_UPPER.fullmatch(frame, 1):
-            return BadRequest(station, Fr700NakCode.CHARACTER, frame)
-        if len(frame) < 7:
-            return BadRequest(station, Fr700NakCode.PROTOCOL, frame)
-        instruction = int(frame[3:5], 16)
-        if len(frame) != 5 + self.wait_field + data_length(instruction) + 2:
-            return BadRequest(station, Fr700NakCode.PROTOCOL, frame)
-        if sum_check(frame[1:-2]) != frame[-2:]:
-            return BadRequest(station, Fr700NakCode.SUM_CHECK, frame)
-        wait = int(frame[5:6], 16) if self.wait_field else None
-        return HostRequest(station, instruction, wait, frame[5 + self.wait_field : -2])
+        return decode_host_frame(frame, wait_field=self.wait_field)
 
     def _restart(self, events: list[RequestEvent]) -> None:
         frame = bytes(self._partial)
