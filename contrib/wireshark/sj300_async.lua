@@ -87,14 +87,21 @@ end
 local function register_linktype(proto, default)
     proto.prefs.linktype = Pref.uint("Link type",
         default, "pcapng link type of its captures: 147..162 (LINKTYPE_USER0..15), 0 for none")
-    local table, current = DissectorTable.get("wtap_encap"), nil
+    local encaps = DissectorTable.get("wtap_encap")
+    local current, replaced = nil, nil -- our encapsulation, and who had it before (DLT_USER)
     local function apply()
         local lt = proto.prefs.linktype
         local encap = nil
         if lt >= 147 and lt <= 162 then encap = wtap["USER" .. (lt - 147)] end
         if encap == current then return end
-        if current ~= nil then table:remove(current, proto) end
-        if encap ~= nil then table:add(encap, proto) end
+        if current ~= nil then
+            encaps:remove(current, proto)
+            if replaced ~= nil then encaps:add(current, replaced) end
+        end
+        if encap ~= nil then
+            replaced = encaps:get_dissector(encap)
+            encaps:add(encap, proto)
+        end
         current = encap
     end
     proto.prefs_changed = apply

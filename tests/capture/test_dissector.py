@@ -18,6 +18,7 @@ fail the test.
 from __future__ import annotations
 
 import os
+import random
 import shutil
 import subprocess
 from collections.abc import Sequence
@@ -315,3 +316,64 @@ def test_fr700_direction_from_content(tmp_path: Path) -> None:
         ("noise", "", "", "", "", "", "", "", "", "", ""),
     ]
     assert rows[8]["fr700.frequency"] == "60"
+
+
+_MARKS = b"\x02\x03\x05\x06\x0a\x0d\x150123456789ABCDEFaf"
+
+
+def _damage(frame: bytes, rng: random.Random) -> bytes:
+    """One to three edits: a byte replaced, dropped or inserted, or the frame cut."""
+    data = bytearray(frame)
+    for _ in range(rng.randint(1, 3)):
+        at = rng.randrange(len(data) + 1)
+        edit = rng.randrange(4)
+        byte = rng.choice(_MARKS) if rng.random() < 0.8 else rng.randrange(256)
+        if edit == 0 and at < len(data):
+            data[at] = byte
+        elif edit == 1 and at < len(data) and len(data) > 1:
+            del data[at]
+        elif edit == 2:
+            data.insert(at, byte)
+        elif at:
+            del data[at:]
+    return bytes(data)
+
+
+@pytest.mark.parametrize("linktype", [147, 148])
+def test_damaged_frames_decode_without_lua_errors(tmp_path: Path, linktype: int) -> None:
+    """Frames edited at random, in every direction: each packet decodes, no Lua error."""
+    if linktype == 147:
+        good = [
+            sj300_request(1, 0x04),
+            sj300_request(0xFF, 0x01, b"005000"),
+            sj300_request(2, 0x07, b"A00400000500"),
+            encode_reply(DataReply(1, b"02000100")),
+            encode_reply(AckDataReply(2, b"00000300")),
+            encode_reply(NakReply(3, NakCode.ABNORMAL_PARAMETER)),
+            encode_reply(AckReply(4)),
+        ]
+    else:
+        options = Fr700LineOptions(wait_field=False, terminator=b"\r\n")
+        good = [
+            fr700_request(1, 0x7A),
+            fr700_request(2, 0xED, b"1770", options=options),
+            fr700_request(3, 0xF0, b"0000020000"),
+            encode_data_reply(1, b"02"),
+            encode_data_reply(3, b"00FF17700000"),
+            encode_ack(2),
+            encode_nak(3, 0xB),
+            encode_reoutput_request(1),
+        ]
+    rng = random.Random(linktype)
+    packets = [
+        (_damage(rng.choice(good), rng) or b"\r", rng.choice(list(PacketDirection)))
+        for _ in range(400)
+    ]
+    _tap_capture(tmp_path / "damaged.pcapng", linktype, packets)
+    prefix = "sj300" if linktype == 147 else "fr700"
+    rows = decode(tmp_path / "damaged.pcapng", [f"{prefix}.type"], tmp_path / "home")
+    assert len(rows) == len(packets)
+    assert {row[f"{prefix}.type"] for row in rows} <= {
+        "request", "reply", "echo", "noise", "host_answer"
+    }  # fmt: skip
+    assert all(row[f"{prefix}.type"] for row in rows)
