@@ -39,7 +39,7 @@ traffic set it to 0 and pick "sj300" / "fr700" in the DLT_USER table instead.
 
 local P2P_SENT, P2P_RECV = 0, 1 -- pinfo.p2p_dir: outbound, inbound (-1 unknown)
 
-local STX, ETX, ENQ, ACK, LF, CR, NAK = 0x02, 0x03, 0x05, 0x06, 0x0A, 0x0D, 0x15
+local STX, ETX, ENQ, ACK, CR, NAK = 0x02, 0x03, 0x05, 0x06, 0x0D, 0x15
 
 local f_packet_flags = Field.new("frame.packet_flags")
 

@@ -28,7 +28,7 @@ import pytest
 
 import sj300_async
 from sj300_async import Direction, NakError
-from sj300_async.bus._capture import CaptureFile
+from sj300_async.bus import CaptureFile
 from sj300_async.fr700 import (
     Fr700LineOptions,
     encode_ack,
@@ -38,9 +38,8 @@ from sj300_async.fr700 import (
     encode_reoutput_request,
 )
 from sj300_async.fr700 import encode_request as fr700_request
-from sj300_async.sj300 import AckDataReply, AckReply, DataReply, NakCode, NakReply
+from sj300_async.sj300 import AckDataReply, AckReply, DataReply, NakCode, NakReply, encode_reply
 from sj300_async.sj300 import encode_request as sj300_request
-from sj300_async.sj300._reply_encoding import encode_reply
 from sj300_async.wire._pcapng import (
     FLAG_NOISE,
     CapturedPacket,
