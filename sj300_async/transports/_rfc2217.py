@@ -81,6 +81,8 @@ _log = logging.getLogger(__name__)
 #: is reported as what it is rather than as a connection that timed out.
 DEFAULT_CONFIRM_TIMEOUT_S: Final = 2.0
 
+_TCP_QUICKACK: Final[int | None] = getattr(socket, "TCP_QUICKACK", None)
+
 _LOCAL: Final = frozenset({BINARY, SGA, COM_PORT})
 # The server's WILL COM-PORT-OPTION is accepted too: RFC 2217 has the client
 # offer it, but some servers (pyserial's) offer it themselves as well.
@@ -371,6 +373,8 @@ class Rfc2217Transport(asyncio.Transport):
     # -- from the TCP connection ---------------------------------------------------------
 
     def _tcp_data(self, data: bytes) -> None:
+        if self._waiters or not self._negotiated_done():
+            self._ack_now()
         try:
             events = self._codec.feed(data)
         except TelnetError as exc:
@@ -383,6 +387,23 @@ class Rfc2217Transport(asyncio.Transport):
             self._tcp.write(answer)
         for event in events:
             self._handle(event)
+
+    def _negotiated_done(self) -> bool:
+        return self._negotiated is not None and self._negotiated.done()
+
+    def _ack_now(self) -> None:
+        """Acknowledge what just arrived at once, while answers are awaited (Linux only).
+
+        ser2net (gensio) writes its answers without TCP_NODELAY unless its accepter
+        says ``tcp(nodelay)``, and it answers PURGE-DATA at once but the settings a
+        moment later: Nagle then holds those until the purge's answer is
+        acknowledged, which the kernel delays by 40 ms when the client has nothing
+        to send. Measured: 44 ms to connect, 2 ms with an immediate
+        acknowledgement. Quick-ack mode lapses by itself, hence once per chunk.
+        """
+        sock = self._tcp.get_extra_info("socket") if self._tcp is not None else None
+        if sock is not None and _TCP_QUICKACK is not None:
+            sock.setsockopt(socket.IPPROTO_TCP, _TCP_QUICKACK, 1)
 
     def _handle(self, event: TelnetEvent) -> None:
         if isinstance(event, Payload):
