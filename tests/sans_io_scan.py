@@ -56,6 +56,7 @@ WIRE: Final = (
     "wire._frames",
     "wire._line",
     "wire._parser_stats",
+    "wire._pcapng",
 )
 
 #: The SJ300 codec. Its ``_dialect`` is *not* here any more: it imports the drive classes
@@ -69,6 +70,7 @@ SJ300_CODEC: Final = tuple(
         "_constants",
         "_events",
         "_framing",
+        "_line_frames",
         "_matching",
         "_parameters",
         "_parser",
@@ -81,7 +83,7 @@ SJ300_CODEC: Final = tuple(
 )
 
 #: The bus's interfaces and arithmetic.
-BUS_SANS_IO: Final = ("bus._dialect", "bus._timing", "bus._trace")
+BUS_SANS_IO: Final = ("bus._dialect", "bus._sniffer", "bus._timing", "bus._trace")
 
 #: The protocol core (tests/core/test_sans_io.py): the wire, the SJ300 codec, the bus's arithmetic.
 CORE_MODULES: Final = (*WIRE, *SJ300_CODEC, *BUS_SANS_IO)
@@ -131,11 +133,15 @@ BUS_IO: Final = (
     "bus",
     "bus._arbiter",
     "bus._bus",
+    "bus._capture",  # writes files
     "bus._channel",
+    "bus._line_connector",
     "bus._linequeue",
     "bus._link",
+    "bus._listen",
     "bus._open",
     "bus._protocol",
+    "bus._replay_open",  # reads files
     # The registry imports a protocol's dialect by name when asked for one (and with it
     # the protocol's drive and the async stack); the URL parser asks it for node ranges
     # and options. Neither imports I/O at import time (see the probe), but neither is
@@ -151,6 +157,7 @@ SIMULATOR_IO: Final = (
     "simulator._fd_link",
     "simulator._precise_loop",
     "simulator._pty",
+    "simulator._tap",
     "simulator._tcp",
 )
 #: The root: the user's API (open_bus, the poller), ``python -m`` and the version.

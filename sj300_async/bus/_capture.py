@@ -24,6 +24,7 @@ from __future__ import annotations
 
 import asyncio
 import time
+from os import PathLike, fspath
 from pathlib import Path
 from typing import Any, BinaryIO, Final
 
@@ -41,7 +42,7 @@ from ..wire._pcapng import (
 from ._dialect import Dialect
 from ._trace import TraceHook, TraceRecord
 
-__all__ = ["CaptureFile", "LineCapture", "describe_line", "packet_marks"]
+__all__ = ["CaptureFile", "LineCapture", "combine", "describe_line", "open_capture", "packet_marks"]
 
 #: The longest a written packet stays in the file's buffer.
 FLUSH_EVERY_S: Final = 0.5
@@ -168,6 +169,19 @@ class LineCapture:
         self._file.write(
             CapturedPacket(self._interface, stamp, frame.data, direction, bits, comment)
         )
+
+
+def open_capture(capture: str | PathLike[str] | CaptureFile | None) -> CaptureFile | None:
+    """The capture an ``open_bus``-like call was given: an open one as it is, a path opened.
+
+    The caller closes what this opened (``result is not capture``).
+
+    Raises:
+        LocalProtocolError: the file cannot be created.
+    """
+    if capture is None or isinstance(capture, CaptureFile):
+        return capture
+    return CaptureFile(fspath(capture))
 
 
 def combine(*hooks: TraceHook | None) -> TraceHook | None:

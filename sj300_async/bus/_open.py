@@ -11,22 +11,17 @@ from __future__ import annotations
 from collections.abc import AsyncIterator
 from contextlib import AbstractAsyncContextManager, asynccontextmanager
 from dataclasses import replace
-from os import PathLike, fspath
+from os import PathLike
 from typing import Any, Final
 
-from ..transports import (
-    LineFaults,
-    loopback_connector,
-    rfc2217_connector,
-    serial_connector,
-    tcp_connector,
-)
+from ..transports import LineFaults, loopback_connector
 from ..transports._replay import replay_connector
 from ..wire import LineSettings, LocalProtocolError
 from ..wire._line import INSTANT_LINE
 from ._bus import Bus
-from ._capture import CaptureFile
+from ._capture import CaptureFile, open_capture
 from ._dialect import Dialect, SimulatorFactory
+from ._line_connector import line_connector
 from ._link import Connector, ReconnectPolicy
 from ._registry import DEFAULT_PROTOCOL, get_dialect, load_object
 from ._replay_open import open_replay
@@ -229,25 +224,13 @@ async def _open_bus(
     if (faults is not None or simulator is not None) and address.scheme != "sim":
         raise LocalProtocolError("faults= and simulator= are for sim:// buses only")
     connector: Connector
-    if address.scheme == "tcp":
-        connector = tcp_connector(address.host, address.port)
-    elif address.scheme == "rfc2217":
-        if line.baudrate == 0:
-            raise LocalProtocolError(f"an RFC 2217 port needs a baud rate: {url!r}")
-        connector = rfc2217_connector(address.host, address.port, line)
-    elif address.scheme == "serial":
-        if line.baudrate == 0:
-            raise LocalProtocolError(f"a serial line needs a baud rate: {url!r}")
-        connector = serial_connector(address.device, line)
-    elif replay is not None:
+    if replay is not None:
         connector = replay_connector(replay.script)
-    else:
+    elif address.scheme == "sim":
         connector, simulator = _sim_connector(address, line, dialect, faults, simulator)
-    capture_file = None
-    if isinstance(capture, CaptureFile):
-        capture_file = capture
-    elif capture is not None:
-        capture_file = CaptureFile(fspath(capture))
+    else:
+        connector = line_connector(address, line)
+    capture_file = open_capture(capture)
     line_capture = None
     if capture_file is not None:
         line_capture = capture_file.line(dialect, address.description, line)

@@ -59,6 +59,7 @@ _SUBCOMMANDS = (
     "._trips",
     "._params",
     "._simulate",
+    "._sniff",
     "._gateway",
     "._shell",
 )
@@ -75,6 +76,10 @@ serial:///dev/ttyUSB0?baudrate=9600&parity=E, sim://?nodes=1-8.
 `sj300 monitor` without a URL is a live demo of eight busy drives;
 `sj300 monitor --url mqtt://HOST:PORT` shows every drive of every gateway
 publishing on that broker (`sj300 gateway --mqtt`), read-only.
+`sj300 sniff URL` listens to a line through a tap without transmitting
+(`sj300 simulate --tap tcp://HOST:PORT` makes one); --capture PATH on any
+command writes the frames to a pcapng file (docs/CAPTURE.md);
+--url replay://PATH.pcapng answers from such a capture.
 `sj300 --sim shell` holds one bus open for a session of commands typed as
 here (`freq 30 -n 1`, `run forward -n 1`, `status -n 1`; help, exit): on
 sim:// the drives keep their state from one command to the next. History
