@@ -365,7 +365,7 @@ REFUSALS = [
     pytest.param(
         '[[lines]]\nurl = "ftp://x"\nnodes = "1"\n',
         "gateway.toml:2: lines[0].url: unknown bus URL scheme 'ftp' in 'ftp://x' "
-        "(use tcp://, serial:// or sim://)",
+        "(use tcp://, rfc2217://, serial://, sim://, replay://)",
         id="bad-url",
     ),
     pytest.param(
@@ -941,7 +941,7 @@ FLAG_DEFAULTS: dict[str, object] = {
         pytest.param(
             {"url": "ftp://x"},
             "<command line>: --url: unknown bus URL scheme 'ftp' in 'ftp://x' "
-            "(use tcp://, serial:// or sim://)",
+            "(use tcp://, rfc2217://, serial://, sim://, replay://)",
             id="url",
         ),
         pytest.param(
