@@ -143,7 +143,7 @@ def _row(report: SniffedFrame | Unanswered, epoch: float) -> dict[str, Any]:
     return {
         "kind": "frame",
         "n": report.number,
-        "t": round(report.time, 6),
+        "t": round(report.time + epoch, 6),
         "role": frame.role.value,
         "node": frame.node,
         "summary": frame.summary,

@@ -4,7 +4,9 @@ Every SJ300 frame, request or reply, runs from STX to CR, so the splitter
 of the reply and request parsers splits the line too; only here nothing is
 decoded on the way and nothing is thrown away: a piece is a whole frame or
 the bytes the splitter would have discarded (garbage, a frame cut short by a
-new STX, an overlong one), byte for byte.
+new STX, an overlong one), byte for byte. A run of garbage is one piece
+whatever the chunking: it ends at the next STX (or at :meth:`SJ300LineFramer.flush`),
+and a run longer than the longest frame is cut every that many bytes.
 
 Telling a request from a reply. With the direction known (a capture) the
 frame is decoded as what it must be. On a tap the content decides: a third
@@ -20,7 +22,7 @@ from __future__ import annotations
 
 from typing import Final
 
-from ..wire._events import BadFrame, Discarded
+from ..wire._events import BadFrame, Discarded, DiscardReason
 from ..wire._frames import FrameRole, LineFrame
 from ._commands import Command
 from ._constants import BROADCAST, CR_BYTE, MAX_REPLY_BODY, MAX_REQUEST_BODY, STX_BYTE
@@ -36,6 +38,8 @@ __all__ = ["SJ300LineFramer", "describe_reply", "describe_request"]
 _ACK: Final = 0x06
 _NAK: Final = 0x15
 _COMMAND_NAMES: Final = {c: c.name.lower().replace("_", " ") for c in Command}
+#: The longest run of garbage kept as one piece: the longest frame, STX and CR included.
+_MAX_NOISE: Final = max(MAX_REPLY_BODY, MAX_REQUEST_BODY) + 2
 
 
 class _Pieces(FrameSplitter[bytes]):
@@ -46,6 +50,11 @@ class _Pieces(FrameSplitter[bytes]):
 
     def _decode_body(self, body: bytes) -> bytes:
         return STX_BYTE + body + CR_BYTE
+
+    @property
+    def in_frame(self) -> bool:
+        """An STX has come and its frame has not ended."""
+        return self._partial is not None
 
 
 def describe_request(request: Request) -> str:
@@ -73,12 +82,32 @@ class SJ300LineFramer:
 
     def __init__(self) -> None:
         self._splitter = _Pieces()
+        #: A run of garbage not yet ended (the splitter reports it chunk by chunk).
+        self._noise = b""
 
     def feed(self, data: bytes) -> list[bytes]:
-        return [_piece(event) for event in self._splitter.feed(data)]
+        return self._pieces(self._splitter.feed(data), final=False)
 
     def flush(self) -> list[bytes]:
-        return [_piece(event) for event in self._splitter.reset()]
+        return self._pieces(self._splitter.reset(), final=True)
+
+    def _pieces(self, events: list[bytes | BadFrame | Discarded], *, final: bool) -> list[bytes]:
+        pieces: list[bytes] = []
+        for event in events:
+            if type(event) is Discarded and event.reason is DiscardReason.GARBAGE:
+                noise = self._noise + event.data
+                cut = len(noise) - len(noise) % _MAX_NOISE
+                pieces += [noise[at : at + _MAX_NOISE] for at in range(0, cut, _MAX_NOISE)]
+                self._noise = noise[cut:]
+                continue
+            if self._noise:  # an STX ended the run
+                pieces.append(self._noise)
+                self._noise = b""
+            pieces.append(_piece(event))
+        if self._noise and (final or self._splitter.in_frame):
+            pieces.append(self._noise)
+            self._noise = b""
+        return pieces
 
     def classify(
         self, piece: bytes, *, outbound: bool | None, pending: object | None = None
