@@ -12,6 +12,7 @@ from ._capture import CaptureFile
 from ._channel import Channel
 from ._dialect import Dialect, LineFramer, LineParser, LineRequest, SimulatorFactory
 from ._link import ReconnectPolicy
+from ._listen import Sniffing, sniff
 from ._open import make_dialect, open_bus
 from ._registry import (
     DEFAULT_PROTOCOL,
@@ -20,6 +21,7 @@ from ._registry import (
     register_protocol,
     unregister_protocol,
 )
+from ._sniffer import Anomaly, LineSniffer, SniffedFrame, Unanswered
 from ._stats import BusStats, StatsSnapshot, TransactionStats
 from ._timing import BusTiming
 from ._trace import TraceHook, TraceRecord
@@ -27,6 +29,7 @@ from ._url import BusAddress, format_node_list, parse_bus_url, parse_flag, parse
 
 __all__ = [
     "DEFAULT_PROTOCOL",
+    "Anomaly",
     "Bus",
     "BusAddress",
     "BusStats",
@@ -37,12 +40,16 @@ __all__ = [
     "LineFramer",
     "LineParser",
     "LineRequest",
+    "LineSniffer",
     "ReconnectPolicy",
     "SimulatorFactory",
+    "SniffedFrame",
+    "Sniffing",
     "StatsSnapshot",
     "TraceHook",
     "TraceRecord",
     "TransactionStats",
+    "Unanswered",
     "format_node_list",
     "get_dialect",
     "make_dialect",
@@ -52,5 +59,6 @@ __all__ = [
     "parse_node_list",
     "protocol_names",
     "register_protocol",
+    "sniff",
     "unregister_protocol",
 ]

@@ -74,6 +74,9 @@ BUS_NAMES = (
     "TraceHook", "TraceRecord", "TransactionStats", "format_node_list", "get_dialect",
     "make_dialect", "open_bus", "parse_bus_url", "parse_flag", "parse_node_list",
     "protocol_names", "register_protocol", "unregister_protocol",
+    # captures and the passive sniffer
+    "CaptureFile", "LineFramer", "Anomaly", "LineSniffer", "SniffedFrame", "Sniffing",
+    "Unanswered", "sniff",
 )  # fmt: skip
 SIMULATOR_NAMES = (
     "BusModel", "Faults", "LineCounters", "LinePacing", "PacedLine", "PlausibleLine",
