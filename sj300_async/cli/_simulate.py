@@ -34,6 +34,7 @@ from ..bus import get_dialect, parse_node_list
 from ..simulator import (
     LinePacing,
     PacedLine,
+    PlausibleLine,
     SimulatorServer,
     precise_event_loop,
     serve_tcp,
@@ -140,7 +141,13 @@ def add_parser(subparsers: Any) -> None:
         help="B085 factory values: eu 50 Hz, us/jp 60 Hz (default eu)",
     )
     line = p.add_argument_group("serial line")
-    line.add_argument("--baud", type=int, metavar="BPS", help="line speed (default 19200)")
+    line.add_argument(
+        "--baud",
+        type=int,
+        metavar="BPS",
+        help="line speed (default 19200): TCP listeners answer as soon as a line at this "
+        "speed could carry the frames (--pace: every character at its wire time)",
+    )
     line.add_argument("--bytesize", type=int, choices=(7, 8), default=8)
     line.add_argument("--parity", type=str.upper, choices=("N", "E", "O"), default="N")
     line.add_argument("--stopbits", type=int, choices=(1, 2), default=1)
@@ -244,7 +251,9 @@ async def _serve(
                     bus,
                     address.host,
                     address.port,
-                    line=line,
+                    # --baud without --pace: answer as soon as that line allows
+                    # (the default is a 19200-baud line's plausibility).
+                    line=line or (PlausibleLine(settings) if settings else None),
                     tap=None if tap is None else tap.mirror,
                 )
             except OSError as exc:

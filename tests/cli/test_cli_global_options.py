@@ -8,6 +8,8 @@ import re
 import pytest
 
 from sj300_async.cli import build_parser, main
+from sj300_async.simulator import serve_tcp
+from sj300_async.simulator.sj300 import SimulatedBus
 
 from .clirun import TcpSim, closed_port, sj300
 
@@ -36,11 +38,16 @@ async def test_given_on_both_sides_the_one_after_the_subcommand_wins(tcp_sim: Tc
     fails.assert_one_line_error(1, f"could not connect to {dead}")
 
 
-async def test_line_settings_and_the_protocol_before_the_subcommand(tcp_sim: TcpSim) -> None:
-    fine = await sj300("--baud", "9600", "--parity", "e", "status", "--url", tcp_sim.url)
-    assert fine.code == 0, fine.err
-    wrong = await sj300("--protocol", "fr700", "read", "F002", "--url", tcp_sim.url)
-    wrong.assert_one_line_error(2, "SJ300 drives only, not fr700")
+async def test_line_settings_and_the_protocol_before_the_subcommand() -> None:
+    # A simulator answering as a 19200-baud line would (the default): a client told
+    # the line is slower (9600) still takes its answers (its floor assumes the
+    # line may run at 19200); tcp_sim's faster line would be refused as too early.
+    async with await serve_tcp(SimulatedBus((1,)), "127.0.0.1", 0) as server:
+        url = f"tcp://127.0.0.1:{server.port}"
+        fine = await sj300("--baud", "9600", "--parity", "e", "status", "--url", url)
+        assert fine.code == 0, fine.err
+        wrong = await sj300("--protocol", "fr700", "read", "F002", "--url", url)
+        wrong.assert_one_line_error(2, "SJ300 drives only, not fr700")
     bad = await sj300("--parity", "X", "status")
     bad.assert_one_line_error(2, "sj300: error: argument --parity: invalid choice")
 

@@ -24,6 +24,7 @@ from sj300_async import __version__
 from sj300_async.sj300 import PARAMETERS
 
 from .clirun import TIMEOUT, TcpSim, sj300, sj300_on_terminal
+from .conftest import FAST_BAUD
 
 #: The in-memory simulator, named: a command without a URL notes that its drives are simulated.
 SIM = "sim://?nodes=1-8"
@@ -62,6 +63,8 @@ async def simulate() -> AsyncIterator[str]:
         "tcp://127.0.0.1:0",
         "--nodes",
         "1-3",
+        "--baud",  # answers as fast as 115200 baud allows (the URL says so): see conftest.py
+        str(FAST_BAUD),
         stdout=asyncio.subprocess.PIPE,
         stderr=asyncio.subprocess.PIPE,
     )
@@ -70,7 +73,7 @@ async def simulate() -> AsyncIterator[str]:
         line = (await asyncio.wait_for(proc.stdout.readline(), TIMEOUT)).decode()
         match = re.fullmatch(r"listening on (tcp://127\.0\.0\.1:\d+)\n", line)
         assert match, line
-        yield match[1]
+        yield f"{match[1]}?baudrate={FAST_BAUD}"
         proc.send_signal(signal.SIGINT)
         await asyncio.wait_for(proc.communicate(), TIMEOUT)
         assert proc.returncode == 0
