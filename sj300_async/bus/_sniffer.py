@@ -17,7 +17,10 @@ each reply with the request it answers (``Dialect.answers``), and flags:
 - ``unsolicited``: a reply that answers no request on the line (a
   duplicate, a drive answering nobody, or the other master's);
 - ``two masters``: a request while another one still waits for its
-  answer, within its time-out: no single master does that.
+  answer, within its time-out: no single master does that. The request it
+  interrupted keeps waiting (up to :data:`MAX_INTERRUPTED` of them), so its
+  answer is still paired, and it is still reported unanswered when its
+  time-out passes without one.
 
 The time-out is the one the host computes (:meth:`BusTiming.response_timeout`
 with the request's longest reply and processing time), counted from the
@@ -32,14 +35,18 @@ from __future__ import annotations
 import enum
 from collections import Counter
 from dataclasses import dataclass, field
-from typing import Any
+from typing import Any, Final
 
 from ..wire import LineSettings
 from ..wire._frames import FrameRole, LineFrame
 from ._dialect import Dialect, LineRequest
 from ._timing import BusTiming
 
-__all__ = ["Anomaly", "LineSniffer", "SniffedFrame", "Unanswered"]
+__all__ = ["MAX_INTERRUPTED", "Anomaly", "LineSniffer", "SniffedFrame", "Unanswered"]
+
+#: Requests interrupted by another master's that keep waiting for their answers; the
+#: oldest is forgotten beyond this (a line of many masters needs no more to be judged).
+MAX_INTERRUPTED: Final = 8
 
 
 class Anomaly(enum.Enum):
@@ -116,11 +123,16 @@ class LineSniffer:
         self._count = 0
         self._waiting: _Waiting | None = None
         self._expired: _Waiting | None = None
+        # Requests another master's request interrupted, still in their time-out.
+        self._interrupted: list[_Waiting] = []
 
     @property
     def next_deadline(self) -> float | None:
-        """When the pending request times out (call :meth:`tick` then), or None."""
-        return None if self._waiting is None else self._waiting.deadline
+        """When the next pending request times out (call :meth:`tick` then), or None."""
+        deadlines = [w.deadline for w in self._interrupted]
+        if self._waiting is not None:
+            deadlines.append(self._waiting.deadline)
+        return min(deadlines, default=None)
 
     def feed(self, data: bytes, now: float) -> list[SniffedFrame | Unanswered]:
         """A chunk heard at *now*; return what it completed, and time-outs passed before it."""
@@ -131,24 +143,31 @@ class LineSniffer:
         return reports
 
     def tick(self, now: float) -> list[SniffedFrame | Unanswered]:
-        """Report the pending request if its time-out has passed by *now*."""
+        """Report the pending requests whose time-outs have passed by *now*."""
+        timed_out = [w for w in self._interrupted if now > w.deadline]
+        if timed_out:
+            self._interrupted = [w for w in self._interrupted if now <= w.deadline]
         waiting = self._waiting
-        if waiting is None or now <= waiting.deadline:
-            return []
-        self._waiting = None
-        self._expired = waiting
-        if waiting.broken_answer:
-            return []  # its broken answer was flagged already
-        self.stats.anomalies[Anomaly.UNANSWERED.value] += 1
-        return [Unanswered(waiting.sniffed, now)]
+        if waiting is not None and now > waiting.deadline:
+            self._waiting = None
+            self._expired = waiting
+            timed_out.append(waiting)
+        reports: list[SniffedFrame | Unanswered] = []
+        for request in timed_out:
+            if not request.broken_answer:  # else its broken answer was flagged already
+                self.stats.anomalies[Anomaly.UNANSWERED.value] += 1
+                reports.append(Unanswered(request.sniffed, now))
+        return reports
 
     def flush(self, now: float) -> list[SniffedFrame | Unanswered]:
         """The line is gone: report an incomplete frame (as noise) and what was pending."""
         reports: list[SniffedFrame | Unanswered] = [
             self._judge(piece, now) for piece in self._framer.flush()
         ]
-        if self._waiting is not None:
-            reports += self.tick(self._waiting.deadline + 1e-9)
+        last = max((w.deadline for w in [*self._interrupted, *filter(None, [self._waiting])]),
+                   default=None)  # fmt: skip
+        if last is not None:
+            reports += self.tick(last + 1e-9)
         return reports
 
     def _judge(self, piece: bytes, now: float) -> SniffedFrame:
@@ -165,6 +184,7 @@ class LineSniffer:
         if role is FrameRole.REQUEST:
             if waiting is not None and not waiting.broken_answer:
                 anomalies.append(Anomaly.TWO_MASTERS)
+                self._interrupted = [*self._interrupted, waiting][-MAX_INTERRUPTED:]
             self._expired = None
             self._waiting = None
         elif role is FrameRole.REPLY:
@@ -175,8 +195,10 @@ class LineSniffer:
                 if matched is self._expired:
                     anomalies.append(Anomaly.LATE)
                     self._expired = None
-                else:
+                elif matched is self._waiting:
                     self._waiting = None
+                else:
+                    self._interrupted.remove(matched)
                 answers = matched.sniffed.number
                 latency = now - matched.sniffed.time
                 self.stats.paired += 1
@@ -195,7 +217,7 @@ class LineSniffer:
         return sniffed
 
     def _match(self, reply: LineFrame) -> _Waiting | None:
-        for candidate in (self._waiting, self._expired):
+        for candidate in (self._waiting, *self._interrupted, self._expired):
             if candidate is not None and self.dialect.answers(
                 candidate.sniffed.frame.message, reply.message
             ):

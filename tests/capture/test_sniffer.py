@@ -328,10 +328,23 @@ def test_a_request_while_another_waits_is_two_masters() -> None:
     tape.one(rq.read_status(1).frame, 0.0)
     second = tape.one(rq.read_monitor(2).frame, 0.005)
     assert second.anomalies == (Anomaly.TWO_MASTERS,)
-    # The second master's request now waits; the first one's answer answers no request.
-    assert tape.one(monitor_reply(2), 0.03).answers == 2
-    assert tape.one(status_reply(1), 0.04).anomalies == (Anomaly.UNSOLICITED,)
-    assert tape.flagged() == Counter({Anomaly.TWO_MASTERS: 1, Anomaly.UNSOLICITED: 1})
+    # Both requests wait: each answer is paired with its own, unflagged.
+    monitor = tape.one(monitor_reply(2), 0.03)
+    assert (monitor.answers, monitor.anomalies) == (2, ())
+    status = tape.one(status_reply(1), 0.04)
+    assert (status.answers, status.anomalies) == (1, ())
+    assert tape.flagged() == Counter({Anomaly.TWO_MASTERS: 1})
+
+
+def test_a_request_another_master_interrupted_is_still_reported_unanswered() -> None:
+    tape = Tape()
+    tape.one(rq.read_status(1).frame, 0.0)
+    tape.one(rq.read_monitor(2).frame, 0.005)  # two masters
+    tape.one(monitor_reply(2), 0.03)
+    [late] = tape.tick(5.0)
+    assert isinstance(late, Unanswered)
+    assert late.request.number == 1
+    assert tape.flagged() == Counter({Anomaly.TWO_MASTERS: 1, Anomaly.UNANSWERED: 1})
 
 
 def test_a_broadcast_while_a_request_waits_is_two_masters() -> None:
@@ -431,8 +444,9 @@ def test_every_anomaly_kind_on_one_line() -> None:
     at(b"\xffgarbage", 1.0)
     at(rq.read_status(3).frame)  # ends the noise
     at(rq.read_status(1).frame)  # two masters (3 still waits)
-    at(status_reply(3))  # answers nobody now: unsolicited
+    at(status_reply(3))  # paired with the interrupted request
     at(status_reply(1))
+    at(ack(7))  # nobody asked node 7: unsolicited
     at(rq.read_monitor(2).frame, 1.0)
     tape.tick(t + 1.0)  # unanswered
     at(monitor_reply(2), 1.1)  # late
@@ -450,7 +464,7 @@ def test_every_anomaly_kind_on_one_line() -> None:
     assert set(tape.flagged()) == set(Anomaly)
     stats = tape.sniffer.stats
     assert stats.anomalies == Counter({a.value: 1 for a in Anomaly})
-    assert stats.paired == 2
+    assert stats.paired == 3  # node 3's (interrupted), node 1's, node 2's late answer
 
 
 # -- FR-700 ------------------------------------------------------------------------------
@@ -514,8 +528,9 @@ def test_fr700_unanswered_late_two_masters_unsolicited_and_noise() -> None:
     assert tape.one(fr_status(1), deadline + 0.05).anomalies == (Anomaly.LATE,)
     tape.one(frq.read(1, 0x6F).frame, 1.0)
     assert tape.one(frq.read(2, 0x6F).frame, 1.001).anomalies == (Anomaly.TWO_MASTERS,)
-    assert tape.one(fr.encode_data_reply(1, b"0000"), 1.02).anomalies == (Anomaly.UNSOLICITED,)
+    assert tape.one(fr.encode_data_reply(1, b"0000"), 1.02).answers == 3  # interrupted, paired
     assert tape.one(fr.encode_data_reply(2, b"0000"), 1.03).answers == 4
+    assert tape.one(fr.encode_data_reply(2, b"0000"), 1.04).anomalies == (Anomaly.UNSOLICITED,)
     assert tape.feed(b"zz", 1.1) == []
     noise, _ = tape.feed(frq.read(2, 0x7A).frame, 1.2)
     assert isinstance(noise, SniffedFrame)
