@@ -49,8 +49,17 @@ def _parse_args(argv: Sequence[str] | None) -> argparse.Namespace:
     )
     parser.add_argument("--repeats", type=int, help="timed runs per side (default 5, quick 2)")
     parser.add_argument("--seed", type=int, default=DEFAULT_SEED, help="seed of every random input")
+    parser.add_argument(
+        "--wire-runs",
+        type=int,
+        default=1,
+        metavar="N",
+        help="run the wire benchmark N times and report how many runs met the target",
+    )
     parser.add_argument("--json", metavar="PATH", help="also write the rows to PATH as JSON")
     args = parser.parse_args(argv)
+    if args.wire_runs < 1:
+        parser.error("--wire-runs must be at least 1")
     if args.uvloop and importlib.util.find_spec("uvloop") is None:
         parser.error("--uvloop needs uvloop: pip install uvloop")
     return args
@@ -94,7 +103,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     """Run the chosen benchmarks; return the exit status (1 if one of them failed)."""
     args = _parse_args(argv)
     repeats = args.repeats if args.repeats is not None else (2 if args.quick else 5)
-    config = Config(quick=args.quick, repeats=repeats, seed=args.seed)
+    config = Config(quick=args.quick, repeats=repeats, seed=args.seed, wire_runs=args.wire_runs)
     names = list(dict.fromkeys(args.only)) if args.only else list(BENCHMARKS)
     peer = f"pymodbus {version('pymodbus')}"
 
@@ -114,7 +123,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     uv_results: list[Result] = []
     if args.uvloop:
         on_loop = [name for name in names if load(name).USES_EVENT_LOOP]
-        uv_config = Config(quick=config.quick, repeats=repeats, seed=args.seed, loop="uvloop")
+        uv_config = dataclasses.replace(config, loop="uvloop")
         uv_results, uv_ok = _run_all(on_loop, uv_config, " (uvloop)")
         ok = ok and uv_ok
         print()

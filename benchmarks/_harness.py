@@ -27,9 +27,11 @@ __all__ = [
     "EventLoop",
     "Result",
     "Section",
+    "Timing",
     "best_time",
     "compare",
     "format_number",
+    "interleave",
     "markdown_table",
     "new_runner",
 ]
@@ -54,6 +56,9 @@ class Config:
     seed: int = DEFAULT_SEED
     #: The event loop of the benchmarks that use one (the targets hold for "asyncio").
     loop: EventLoop = "asyncio"
+    #: Whole runs of the wire benchmark, each with fresh simulator processes; with more
+    #: than one it also reports how many of them met the target ("k of N runs").
+    wire_runs: int = 1
 
 
 @dataclass(frozen=True, slots=True)
@@ -77,6 +82,9 @@ class Result:
     against: str | None = None
     #: Show the ratio and its target as percentages (an efficiency against a limit).
     percent: bool = False
+    #: For a cost (``higher_is_better=False``): show ours ÷ reference and the target as its
+    #: upper bound ("0.69x", "<= 0.7x") rather than how many times better.
+    as_multiple: bool = False
 
     @property
     def ratio(self) -> float | None:
@@ -137,6 +145,53 @@ def compare(
     return best_ours, best_peer
 
 
+@dataclass(frozen=True, slots=True)
+class Timing:
+    """The timed runs of one side (see :func:`interleave`): wall and CPU seconds of each."""
+
+    wall_s: tuple[float, ...]
+    #: ``time.process_time()`` of this process over each run (user + system, all threads).
+    cpu_s: tuple[float, ...]
+
+    @property
+    def best_wall_s(self) -> float:
+        """The fastest run's wall time: the estimate least disturbed by the machine."""
+        return min(self.wall_s)
+
+    @property
+    def best_cpu_s(self) -> float:
+        """The least CPU time a run took, by the same reasoning."""
+        return min(self.cpu_s)
+
+
+def interleave(sides: Sequence[Callable[[], object]], repeats: int) -> list[Timing]:
+    """Time every side *repeats* times, interleaved; return each side's wall and CPU times.
+
+    As :func:`compare` for any number of sides, with the process's CPU time of
+    each run besides its wall time: each side runs once untimed, then each
+    repeat runs every side once, starting one side further on each time, so
+    that no side always follows the same one (or the collection before it).
+
+    Raises:
+        ValueError: *repeats* is less than 1.
+    """
+    if repeats < 1:
+        raise ValueError(f"repeats must be at least 1, got {repeats}")
+    for side in sides:
+        side()
+    walls: list[list[float]] = [[] for _ in sides]
+    cpus: list[list[float]] = [[] for _ in sides]
+    for repeat in range(repeats):
+        for step in range(len(sides)):
+            index = (repeat + step) % len(sides)
+            gc.collect()
+            cpu, start = time.process_time(), time.perf_counter()
+            sides[index]()
+            walls[index].append(time.perf_counter() - start)
+            cpus[index].append(time.process_time() - cpu)
+    return [Timing(tuple(w), tuple(c)) for w, c in zip(walls, cpus, strict=True)]
+
+
 def best_time(fn: Callable[[], object], repeats: int) -> float:
     """Time *fn* once untimed, then *repeats* times; return the best wall time in seconds.
 
@@ -175,14 +230,17 @@ def _format_ratio(r: Result) -> tuple[str, str]:
     ratio = r.ratio
     if r.percent:
         shown = "—" if ratio is None else f"{ratio * 100:.1f} %"
-        return shown, "—" if r.target is None else f">= {r.target * 100:g} %"
+        return shown, "—" if r.target is None else f">= {r.target * 100:.3g} %"
+    if r.as_multiple:
+        shown = "—" if ratio is None else f"{1 / ratio:.2f}x" if ratio else "∞"
+        return shown, "—" if r.target is None else f"<= {1 / r.target:.3g}x"
     if ratio is None:
         shown = "—"
     elif ratio == float("inf"):
         shown = "∞"
     else:
         shown = f"{ratio:.2f}x"
-    return shown, "—" if r.target is None else f">= {r.target:g}x"
+    return shown, "—" if r.target is None else f">= {r.target:.3g}x"
 
 
 def markdown_table(results: Sequence[Result], peer_name: str) -> str:

@@ -12,6 +12,19 @@ parent's side.
 bare protocol that answers each request with a fixed reply of a status's or
 a monitor's size (:data:`ECHO_REPLIES`), no parsing, no checks.
 
+``python -m benchmarks._servers sj300-minimal`` and ``modbus-minimal`` are the
+*same minimal responder* for each protocol (the tcp benchmark's headline): a
+bare protocol like ``echo`` that answers each request with one fixed, valid
+reply of the protocol, so that the clients' stacks are all that differs:
+
+- ``sj300-minimal``: :data:`SJ300_STATUS_REPLY` (node 1's 14-byte status
+  reply, built with the library's reply encoding) once per request, a
+  request being anything up to its CR;
+- ``modbus-minimal``: :data:`MODBUS_REPLY` (a read of 4 holding registers
+  from device 1, 17 bytes) once per request, the request's transaction id
+  copied in, which is the least a valid Modbus TCP answer needs (a request
+  being an MBAP header and the length it gives).
+
 ``python -m benchmarks._servers sj300-pty --baudrate B --drives N`` serves
 drives 1..N (C078 = 0, the default 1 ms processing) on a pseudo-terminal
 paced at B baud 8N1, on :func:`~sj300_async.simulator.precise_event_loop`
@@ -41,17 +54,61 @@ import signal
 import subprocess
 import sys
 import time
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from pathlib import Path
 from types import TracebackType
 from typing import Any, Literal, cast
 
-__all__ = ["ServerKind", "ServerProcess", "main"]
+__all__ = [
+    "ECHO_REPLIES",
+    "KINDS",
+    "MODBUS_REGISTERS",
+    "MODBUS_REPLY",
+    "SJ300_STATUS_REPLY",
+    "ServerKind",
+    "ServerProcess",
+    "main",
+]
 
-ServerKind = Literal["sj300", "pymodbus", "sj300-pty", "echo"]
+ServerKind = Literal["sj300", "pymodbus", "sj300-pty", "echo", "sj300-minimal", "modbus-minimal"]
+#: Every kind, as the command line takes it.
+KINDS: tuple[str, ...] = (
+    "sj300",
+    "pymodbus",
+    "sj300-pty",
+    "echo",
+    "sj300-minimal",
+    "modbus-minimal",
+)
 
 #: The bare round trip's replies (``echo``): sized as a status and a monitor reply.
 ECHO_REPLIES: dict[bytes, bytes] = {b"S": b"S" * 14, b"M": b"M" * 110}
+
+
+def _sj300_status_reply() -> bytes:
+    from sj300_async.sj300 import (
+        DataReply,
+        InverterStatus,
+        StatusA,
+        StatusB,
+        StatusC,
+        encode_reply,
+        encode_status,
+    )
+
+    running = InverterStatus(StatusA.RUNNING, StatusB.RUNNING, StatusC.CONSTANT_SPEED)
+    return encode_reply(DataReply(1, encode_status(running)))
+
+
+#: ``sj300-minimal``'s answer to every request: node 1's command 04 reply (14 bytes).
+SJ300_STATUS_REPLY: bytes = _sj300_status_reply()
+#: Registers ``modbus-minimal`` answers with: a read of this many holding registers.
+MODBUS_REGISTERS = 4
+#: ``modbus-minimal``'s answer after the transaction id: protocol 0, length, device 1,
+#: function 3, byte count, the registers 0..3 (17 bytes with the id).
+MODBUS_REPLY: bytes = bytes(
+    (0, 0, 0, 3 + 2 * MODBUS_REGISTERS, 1, 3, 2 * MODBUS_REGISTERS)
+) + b"".join(n.to_bytes(2, "big") for n in range(MODBUS_REGISTERS))
 
 #: Holding registers the pymodbus server offers (the benchmark reads at most 50).
 _REGISTERS = 256
@@ -99,9 +156,49 @@ class _Echo(asyncio.Protocol):
         self._transport.write(ECHO_REPLIES[data[:1]])
 
 
+class _Sj300Minimal(asyncio.Protocol):
+    """Answers every request (up to its CR) with node 1's status reply; nothing else."""
+
+    def connection_made(self, transport: asyncio.BaseTransport) -> None:
+        self._transport = cast(asyncio.Transport, transport)
+
+    def data_received(self, data: bytes) -> None:
+        requests = data.count(13)  # CR ends a request
+        if requests:
+            self._transport.write(SJ300_STATUS_REPLY * requests)
+
+
+class _ModbusMinimal(asyncio.Protocol):
+    """Answers every Modbus TCP request with :data:`MODBUS_REPLY` under its transaction id."""
+
+    def connection_made(self, transport: asyncio.BaseTransport) -> None:
+        self._transport = cast(asyncio.Transport, transport)
+        self._buffer = b""
+
+    def data_received(self, data: bytes) -> None:
+        buffer = self._buffer + data if self._buffer else data
+        # An MBAP header (7 bytes) gives the length of what follows its first 6.
+        while len(buffer) >= 7 and len(buffer) >= 6 + int.from_bytes(buffer[4:6], "big"):
+            self._transport.write(buffer[:2] + MODBUS_REPLY)
+            buffer = buffer[6 + int.from_bytes(buffer[4:6], "big") :]
+        self._buffer = buffer
+
+
 async def _serve_echo() -> None:
+    await _serve_bare(_Echo)
+
+
+async def _serve_sj300_minimal() -> None:
+    await _serve_bare(_Sj300Minimal)
+
+
+async def _serve_modbus_minimal() -> None:
+    await _serve_bare(_ModbusMinimal)
+
+
+async def _serve_bare(protocol: Callable[[], asyncio.Protocol]) -> None:
     loop = asyncio.get_running_loop()
-    server = await loop.create_server(_Echo, "127.0.0.1", 0)
+    server = await loop.create_server(protocol, "127.0.0.1", 0)
     print(f"port {server.sockets[0].getsockname()[1]}", flush=True)
     try:
         await _stdin_closed()
@@ -259,7 +356,7 @@ class ServerProcess:
 def main(argv: Sequence[str] | None = None) -> int:
     """Serve until standard input closes; return the exit status."""
     parser = argparse.ArgumentParser(prog="python -m benchmarks._servers")
-    parser.add_argument("kind", choices=("sj300", "pymodbus", "sj300-pty", "echo"))
+    parser.add_argument("kind", choices=KINDS)
     parser.add_argument("--uvloop", action="store_true", help="serve on uvloop")
     parser.add_argument("--baudrate", type=int, default=19200, help="sj300-pty: line speed")
     parser.add_argument("--drives", type=int, default=32, help="sj300-pty: drives 1..N")
@@ -274,7 +371,13 @@ def main(argv: Sequence[str] | None = None) -> int:
         with asyncio.Runner(loop_factory=spinning) as runner:
             runner.run(_serve_sj300_pty(args.baudrate, args.drives))
         return 0
-    serve = {"sj300": _serve_sj300, "pymodbus": _serve_pymodbus, "echo": _serve_echo}[args.kind]
+    serve = {
+        "sj300": _serve_sj300,
+        "pymodbus": _serve_pymodbus,
+        "echo": _serve_echo,
+        "sj300-minimal": _serve_sj300_minimal,
+        "modbus-minimal": _serve_modbus_minimal,
+    }[args.kind]
     if args.uvloop:
         import uvloop
 

@@ -22,6 +22,7 @@ pymodbus's ``FramerAscii.decode`` loop (LRC and hex, no PDU object).
 
 from __future__ import annotations
 
+import statistics
 from collections.abc import Callable, Sequence
 from importlib.metadata import version
 
@@ -41,7 +42,7 @@ from sj300_async.sj300 import (
     decode_trip_history,
 )
 
-from ._harness import Config, Result, Section, compare
+from ._harness import Config, Result, Section, Timing, interleave
 from ._streams import KINDS, MAX_CHUNK, Streams, build_streams, chunk_sizes, split
 
 __all__ = [
@@ -63,8 +64,9 @@ USES_EVENT_LOOP = False
 #: Frames in the stream of a full run, and of a ``--quick`` run.
 FRAMES = 20_000
 QUICK_FRAMES = 300
-#: The project's aim for parse + decode frames/s, as a multiple of pymodbus.
-TARGET_RATIO = 3.0
+#: The project's aim for parse + decode frames/s, as a multiple of pymodbus in the same
+#: run (issue 18: 3x, measured 3.01-3.28x and once 2.29x on a loaded machine, had no margin).
+TARGET_RATIO = 3.5
 
 _DATA_DECODERS: dict[int, Callable[[bytes], object]] = {
     8: decode_status,
@@ -204,19 +206,42 @@ def _notes(workload: Workload, config: Config) -> tuple[str, ...]:
     return tuple(lines)
 
 
+def _pair_ratios(label: str, timings: Sequence[Timing], target: float | None) -> str:
+    """The ratio of each repeat's pair of runs, next to each other in time: the spread."""
+    ours, peer = timings
+    ratios = sorted(p / o for o, p in zip(ours.wall_s, peer.wall_s, strict=True))
+    line = (
+        f"{label}, ours vs pymodbus per interleaved pair of runs: {ratios[0]:.2f}x to "
+        f"{ratios[-1]:.2f}x, median {statistics.median(ratios):.2f}x "
+        f"(the row: best of each, {peer.best_wall_s / ours.best_wall_s:.2f}x)"
+    )
+    if target is not None:
+        met = sum(r >= target for r in ratios)
+        line += f"; {met} of {len(ratios)} pairs >= {target:g}x"
+    return line + "."
+
+
 def run(config: Config) -> Section:
     """Measure parse + typed decode, and framing alone, for both stacks."""
     workload = build_workload(QUICK_FRAMES if config.quick else FRAMES, config.seed)
     _check(workload)
     ours_chunks, peer_chunks = workload.ours_chunks, workload.peer_chunks
 
-    t_ours, t_peer = compare(
-        lambda: decode_ours(ours_chunks), lambda: decode_peer(peer_chunks), config.repeats
+    decoded = interleave(
+        [lambda: decode_ours(ours_chunks), lambda: decode_peer(peer_chunks)], config.repeats
     )
-    f_ours, f_peer = compare(
-        lambda: frame_ours(ours_chunks), lambda: frame_peer(peer_chunks), config.repeats
+    framed = interleave(
+        [lambda: frame_ours(ours_chunks), lambda: frame_peer(peer_chunks)], config.repeats
     )
+    t_ours, t_peer = (t.best_wall_s for t in decoded)
+    f_ours, f_peer = (t.best_wall_s for t in framed)
     n = workload.frames
+    notes = (
+        *_notes(workload, config),
+        "",
+        _pair_ratios("parse + typed decode", decoded, TARGET_RATIO),
+        _pair_ratios("framing only", framed, None),
+    )
     results = (
         Result("codec: parse + typed decode", n / t_ours, n / t_peer, "frames/s", TARGET_RATIO),
         Result(
@@ -227,4 +252,4 @@ def run(config: Config) -> Section:
         ),
         Result("codec: framing only (no payload decode)", n / f_ours, n / f_peer, "frames/s"),
     )
-    return Section(TITLE, _notes(workload, config), results)
+    return Section(TITLE, notes, results)

@@ -21,7 +21,8 @@ from dataclasses import dataclass
 from sj300_async import Bus, Drive, open_bus
 from sj300_async.sj300 import requests
 
-from ._harness import Config, Result, Section, best_time, new_runner
+from ._floor import memory_round_trips
+from ._harness import Config, Result, Section, best_time, interleave, new_runner
 from ._sim import instant_simulator, simulator_cost
 
 __all__ = [
@@ -75,6 +76,8 @@ class Rates:
     sim_s: float
     #: Replies the bus counted over every run, warm-ups included.
     replies: int
+    #: Best wall time of as many in-memory floor transactions (interleaved with one task).
+    floor_s: float = 0.0
 
     @property
     def one_task_tps(self) -> float:
@@ -85,6 +88,11 @@ class Rates:
     def tasks_tps(self) -> float:
         """Transactions/s, :data:`TASKS` tasks."""
         return self.transactions / self.tasks_s
+
+    @property
+    def floor_tps(self) -> float:
+        """Transactions/s of the in-memory asyncio floor (a future per transaction)."""
+        return self.transactions / self.floor_s
 
     @property
     def stack_only_tps(self) -> float:
@@ -107,7 +115,14 @@ def measure(config: Config) -> Rates:
             opened = open_bus("sim://?nodes=1-8", simulator=instant_simulator(nodes))
             bus = runner.run(stack.enter_async_context(opened))
             drive = bus.drive(1)
-            one = best_time(lambda: runner.run(_sequential(drive, n)), config.repeats)
+            one_timing, floor_timing = interleave(
+                [
+                    lambda: runner.run(_sequential(drive, n)),
+                    lambda: runner.run(memory_round_trips(n)),
+                ],
+                config.repeats,
+            )
+            one, floor = one_timing.best_wall_s, floor_timing.best_wall_s
             many = best_time(lambda: runner.run(_concurrent(bus, n)), config.repeats)
             replies = bus.stats.transactions.replies
         finally:
@@ -117,7 +132,7 @@ def measure(config: Config) -> Rates:
         raise RuntimeError(f"the bus counted {replies} replies, expected {expected}")
     rounds = 5 if config.quick else 50
     sim_s = simulator_cost([requests.read_status(node) for node in nodes], rounds * 25)
-    return Rates(n, one, many, sim_s, replies)
+    return Rates(n, one, many, sim_s, replies, floor)
 
 
 def run(config: Config) -> Section:
@@ -130,7 +145,12 @@ def run(config: Config) -> Section:
         f"({rates.transactions // TASKS:,} each). The simulator runs in this process: its "
         f"sans-IO core alone takes {rates.sim_s * 1e6:.1f} µs per status request "
         f"({rates.sim_s * rates.one_task_tps:.0%} of the one-task run), "
-        "taken out in the last row.",
+        "taken out in the third row.",
+        "",
+        f"The same run's in-memory asyncio floor (a future per transaction answered on the "
+        f"loop's next turn, no protocol, interleaved with the one-task runs): "
+        f"{rates.floor_tps:,.0f} transactions/s; one task reaches "
+        f"{rates.one_task_tps / rates.floor_tps:.2f} of it.",
     )
     results = (
         Result(
@@ -155,6 +175,14 @@ def run(config: Config) -> Section:
             TARGET_TPS,
             "transactions/s",
             against="target",
+        ),
+        Result(
+            "loopback: read_status, 1 task vs in-memory asyncio floor, same run",
+            rates.one_task_tps,
+            rates.floor_tps,
+            "transactions/s",
+            against="in-memory floor",
+            percent=True,
         ),
     )
     return Section(TITLE, notes, results)

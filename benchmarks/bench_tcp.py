@@ -1,11 +1,31 @@
-"""TCP round trips: our client and simulator against pymodbus's client and server.
+"""TCP round trips: our client against pymodbus's and a bare asyncio client.
 
-Each server runs in a process of its own (:mod:`benchmarks._servers`); both
-clients run in this process, on one event loop, connected before timing
-starts. A timed run is N sequential requests, each awaited before the next,
-as a host polling one drive through a serial device server would send them.
+**The headline: the same minimal responder for every client.** Each
+protocol's server is a bare asyncio protocol in a process of its own
+(:mod:`benchmarks._servers`) that answers each request with one fixed,
+valid reply, with no model and no parsing beyond finding the request's end:
 
-Two request sizes, matched on the wire:
+- ``sj300-minimal`` answers node 1's 14-byte status reply (the library's own
+  reply encoding) to our ``Drive.read_status()`` (8-byte request, the reply
+  parsed, BCC-checked and decoded to :class:`~sj300_async.InverterStatus`);
+- ``modbus-minimal`` answers a 4-register read (17 bytes, the request's
+  transaction id copied in) to pymodbus's ``read_holding_registers(count=4)``
+  (12-byte request, decoded to a response with 4 registers);
+- ``echo``, the floor: a bare ``asyncio.Protocol`` client writes 8 bytes and
+  waits on a future for a fixed 14-byte answer, no framing, no checks.
+
+So the servers cost alike and the rows differ by the clients' stacks only.
+All three clients run in this process on one event loop, connected before
+timing; a timed run is N sequential requests, each awaited before the next;
+the three alternate, rotating their order, best of each. Besides wall time,
+the client's CPU time per round trip (``time.process_time()`` of this
+process, which runs nothing else meanwhile). The targets (issue 18): ours at
+least 0.90 of the floor's requests/s, and our client CPU per round trip at
+most 0.7 of pymodbus's, both from the same run.
+
+**The second table: each stack on its own server.** Our client and simulator
+against pymodbus's client and server, at two request sizes matched on the
+wire:
 
 - small: our ``Drive.read_status()`` (8-byte request, 14-byte reply, decoded
   to :class:`~sj300_async.InverterStatus`) against pymodbus's
@@ -14,6 +34,8 @@ Two request sizes, matched on the wire:
   :class:`~sj300_async.MonitorData`) against
   ``read_holding_registers(count=50)`` (12 bytes, 109-byte reply).
 
+These rows time the two servers as much as the clients (issue 18: most of
+issue 7's 1.69x came from the servers), so they carry no target now.
 Our simulator runs with ``processing_s=0``: by default it waits 1 ms before
 each reply to emulate a drive's processing, which would time the emulated
 drive, not the stack. pymodbus's server answers as fast as it can. Our bus is
@@ -26,21 +48,32 @@ from __future__ import annotations
 
 import asyncio
 import contextlib
-import socket
+import statistics
 import time
-from collections.abc import Callable, Coroutine
+from collections.abc import Callable, Coroutine, Sequence
 from dataclasses import dataclass
 from importlib.metadata import version
-from typing import Any, cast
+from typing import Any
 
 from pymodbus.client import AsyncModbusTcpClient
 
 from sj300_async import Drive, LineSettings, open_bus
 
-from ._harness import Config, Result, Section, compare, new_runner
-from ._servers import ECHO_REPLIES, ServerProcess
+from ._floor import EchoClient, connect_echo, echo_round_trips
+from ._harness import Config, Result, Section, Timing, compare, interleave, new_runner
+from ._servers import MODBUS_REGISTERS, ServerProcess
 
-__all__ = ["REQUESTS", "TITLE", "USES_EVENT_LOOP", "Rate", "measure", "run"]
+__all__ = [
+    "REQUESTS",
+    "TITLE",
+    "USES_EVENT_LOOP",
+    "Minimal",
+    "Rate",
+    "Side",
+    "measure",
+    "measure_minimal",
+    "run",
+]
 
 #: No RS-485 line behind the simulator's socket: no wire time, so no guard interval.
 INSTANT_LINE = LineSettings(baudrate=0)
@@ -50,8 +83,10 @@ USES_EVENT_LOOP = True
 #: Sequential requests per timed run, full and ``--quick``.
 REQUESTS = 2_000
 QUICK_REQUESTS = 50
-#: The project's aim for requests/s, as a multiple of pymodbus.
-TARGET_RATIO = 2.5
+#: Issue 18's aims, same minimal responder: our requests/s at least this share of the
+#: bare asyncio floor's, and our client CPU per round trip at most this share of pymodbus's.
+TARGET_VS_FLOOR = 0.90
+TARGET_CPU_VS_PYMODBUS = 0.7
 
 #: A timed run: N sequential requests; returns N.
 _Batch = Callable[[], Coroutine[Any, Any, int]]
@@ -84,47 +119,9 @@ def _peer(client: AsyncModbusTcpClient, count: int, n: int) -> _Batch:
     return requests
 
 
-class _EchoClient(asyncio.Protocol):
-    """The floor's client: writes a request, waits for the whole fixed-size reply."""
-
-    def __init__(self) -> None:
-        self._transport: asyncio.Transport | None = None
-        self._waiter: asyncio.Future[None] | None = None
-        self._missing = 0
-
-    def connection_made(self, transport: asyncio.BaseTransport) -> None:
-        # A cast, not isinstance(): uvloop's transports do not derive from asyncio's.
-        self._transport = cast(asyncio.Transport, transport)
-        sock = transport.get_extra_info("socket")
-        sock.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)  # as our transport does
-
-    def data_received(self, data: bytes) -> None:
-        self._missing -= len(data)
-        if self._missing <= 0 and self._waiter is not None:
-            self._waiter.set_result(None)
-
-    async def ask(self, kind: bytes) -> None:
-        assert self._transport is not None
-        self._waiter = asyncio.get_running_loop().create_future()
-        self._missing = len(ECHO_REPLIES[kind])
-        self._transport.write(kind + b"0104\r\n\x00")  # 8 bytes, as our requests
-        await self._waiter
-
-
-def _floor(client: _EchoClient, read: str, n: int) -> _Batch:
-    async def requests() -> int:
-        kind = b"S" if read == "status" else b"M"
-        for _ in range(n):
-            await client.ask(kind)
-        return n
-
-    return requests
-
-
-async def _connect_echo(port: int) -> _EchoClient:
-    loop = asyncio.get_running_loop()
-    _transport, client = await loop.create_connection(_EchoClient, "127.0.0.1", port)
-    return client
+def _floor(client: EchoClient, read: str, n: int) -> _Batch:
+    kind = b"S" if read == "status" else b"M"
+    return lambda: echo_round_trips(client, kind, n)
 
 
 async def _connect_peer(port: int) -> AsyncModbusTcpClient:
@@ -188,7 +185,7 @@ def measure(config: Config) -> list[Rate]:
             bus = runner.run(stack.enter_async_context(open_bus(url, line=INSTANT_LINE)))
             client = runner.run(_connect_peer(peer_server.port))
             stack.callback(client.close)
-            echo = runner.run(_connect_echo(echo_server.port))
+            echo = runner.run(connect_echo(echo_server.port))
             drive = bus.drive(1)
             for label, read, count in _SIZES:
                 ours, peer = _CpuMeter(), _CpuMeter()
@@ -227,11 +224,227 @@ def measure(config: Config) -> list[Rate]:
     return rates
 
 
-def run(config: Config) -> Section:
-    """Measure sequential TCP round trips of both stacks."""
+@dataclass(frozen=True, slots=True)
+class Side:
+    """One client against its minimal responder: its timed runs and the server's CPU."""
+
+    label: str
+    timing: Timing
+    requests: int
+    #: The server process's CPU seconds per request, mean over every run (warm-up included).
+    server_cpu_s: float
+
+    @property
+    def rps(self) -> float:
+        """Requests per second of the fastest run."""
+        return self.requests / self.timing.best_wall_s
+
+    @property
+    def wall_s(self) -> float:
+        """Wall seconds per round trip, fastest run."""
+        return self.timing.best_wall_s / self.requests
+
+    @property
+    def cpu_s(self) -> float:
+        """This process's CPU seconds per round trip, in the run that took the least."""
+        return self.timing.best_cpu_s / self.requests
+
+
+@dataclass(frozen=True, slots=True)
+class Minimal:
+    """The headline: the three clients, each against the same kind of minimal responder."""
+
+    floor: Side
+    ours: Side
+    pymodbus: Side
+
+    @property
+    def ours_vs_floor(self) -> float:
+        """Our requests/s as a share of the floor's (target >= 0.90)."""
+        return self.ours.rps / self.floor.rps
+
+    @property
+    def cpu_vs_pymodbus(self) -> float:
+        """Our client CPU per round trip as a share of pymodbus's (target <= 0.7)."""
+        return self.ours.cpu_s / self.pymodbus.cpu_s
+
+
+def _peer_minimal(client: AsyncModbusTcpClient, n: int) -> _Batch:
+    async def requests() -> int:
+        for _ in range(n):
+            response = await client.read_holding_registers(0, count=MODBUS_REGISTERS, device_id=1)
+            if response.isError() or len(response.registers) != MODBUS_REGISTERS:
+                raise RuntimeError(f"pymodbus: unexpected response {response}")
+        return n
+
+    return requests
+
+
+def _runs(runner: asyncio.Runner, batch: _Batch) -> Callable[[], int]:
+    return lambda: runner.run(batch())
+
+
+def measure_minimal(config: Config) -> Minimal:
+    """Time the floor, ours and pymodbus, each against its minimal responder, interleaved.
+
+    Raises:
+        RuntimeError: a server did not start, or a request went unanswered.
+    """
     n = QUICK_REQUESTS if config.quick else REQUESTS
+    uvloop = config.loop == "uvloop"
+    with (
+        ServerProcess("echo", uvloop=uvloop) as floor_server,
+        ServerProcess("sj300-minimal", uvloop=uvloop) as ours_server,
+        ServerProcess("modbus-minimal", uvloop=uvloop) as peer_server,
+        new_runner(config.loop) as runner,
+    ):
+        servers = (floor_server, ours_server, peer_server)
+        stack = contextlib.AsyncExitStack()
+        try:
+            echo = runner.run(connect_echo(floor_server.port))
+            url = f"tcp://127.0.0.1:{ours_server.port}"
+            bus = runner.run(stack.enter_async_context(open_bus(url, line=INSTANT_LINE)))
+            client = runner.run(_connect_peer(peer_server.port))
+            stack.callback(client.close)
+            batches = (
+                _floor(echo, "status", n),
+                _ours(bus.drive(1), "status", n),
+                _peer_minimal(client, n),
+            )
+            before = [server.cpu_seconds() for server in servers]
+            timings = interleave([_runs(runner, batch) for batch in batches], config.repeats)
+            server_s = [s.cpu_seconds() - b for s, b in zip(servers, before, strict=True)]
+            expected = n * (config.repeats + 1)  # every timed run and the warm-up
+            if bus.stats.transactions.replies != expected:
+                raise RuntimeError(f"ours: {bus.stats.transactions.replies} of {expected} replies")
+        finally:
+            runner.run(stack.aclose())
+    labels = (
+        "bare asyncio client (future per request, no parsing)",
+        "sj300_async `drive.read_status()`",
+        f"pymodbus {version('pymodbus')} `read_holding_registers(count={MODBUS_REGISTERS})`",
+    )
+    floor, ours, peer = (
+        Side(label, timing, n, seconds / expected)
+        for label, timing, seconds in zip(labels, timings, server_s, strict=True)
+    )
+    return Minimal(floor, ours, peer)
+
+
+def _spread(numerators: Sequence[float], denominators: Sequence[float]) -> str:
+    ratios = sorted(a / b for a, b in zip(numerators, denominators, strict=True))
+    return (
+        f"{ratios[0]:.2f} to {ratios[-1]:.2f}, median {statistics.median(ratios):.2f} "
+        f"over {len(ratios)}"
+    )
+
+
+def _minimal_notes(m: Minimal, n: int, repeats: int) -> tuple[str, ...]:
+    us = 1e6
+    sides = (m.floor, m.ours, m.pymodbus)
+    servers = ("`echo`", "`sj300-minimal`", "`modbus-minimal`")
+    lines = [
+        "**Same minimal responder** (the headline): each client against a bare asyncio server "
+        "in its own process that answers every request with one fixed valid reply "
+        "(`python -m benchmarks._servers echo | sj300-minimal | modbus-minimal`). "
+        f"{n:,} sequential round trips per timed run on 127.0.0.1, the three clients "
+        f"interleaved (order rotating), best of {repeats} each; client CPU is "
+        "`time.process_time()` of this process over a run, the least of the runs.",
+        "",
+        "| client | server | req/s | vs floor | wall µs/rt | client CPU µs/rt "
+        "| CPU vs pymodbus | server CPU µs/rt |",
+        "|---|---|---:|---:|---:|---:|---:|---:|",
+    ]
+    for side, server in zip(sides, servers, strict=True):
+        lines.append(
+            f"| {side.label} | {server} | {side.rps:,.0f} | {side.rps / m.floor.rps:.2f} "
+            f"| {side.wall_s * us:.1f} | {side.cpu_s * us:.1f} "
+            f"| {side.cpu_s / m.pymodbus.cpu_s:.2f} | {side.server_cpu_s * us:.1f} |"
+        )
+
+    def verdict(ok: bool) -> str:
+        return "met" if ok else "**not met**"
+
+    lines += [
+        "",
+        f"Targets, this run: ours / floor = {m.ours_vs_floor:.2f} (>= {TARGET_VS_FLOOR:g}: "
+        f"{verdict(m.ours_vs_floor >= TARGET_VS_FLOOR)}); our client CPU / pymodbus's = "
+        f"{m.cpu_vs_pymodbus:.2f} (<= {TARGET_CPU_VS_PYMODBUS:g}: "
+        f"{verdict(m.cpu_vs_pymodbus <= TARGET_CPU_VS_PYMODBUS)}); ours / pymodbus = "
+        f"{m.ours.rps / m.pymodbus.rps:.2f}x in requests/s. "
+        f"Over the floor per round trip: ours +{(m.ours.wall_s - m.floor.wall_s) * us:.1f} µs "
+        f"wall, +{(m.ours.cpu_s - m.floor.cpu_s) * us:.1f} µs client CPU; pymodbus "
+        f"+{(m.pymodbus.wall_s - m.floor.wall_s) * us:.1f} µs wall, "
+        f"+{(m.pymodbus.cpu_s - m.floor.cpu_s) * us:.1f} µs client CPU.",
+        "",
+        "Spread, repeat by repeat (the three sides of a repeat run next to each other): "
+        f"ours / floor {_spread(m.floor.timing.wall_s, m.ours.timing.wall_s)}; our client "
+        f"CPU / pymodbus's {_spread(m.ours.timing.cpu_s, m.pymodbus.timing.cpu_s)}.",
+    ]
+    return tuple(lines)
+
+
+def _minimal_results(m: Minimal) -> list[Result]:
+    us = 1e6
+    peer = f"pymodbus {version('pymodbus')}"
+    return [
+        Result(
+            "tcp: read_status vs bare asyncio floor, same minimal responder",
+            m.ours.rps,
+            m.floor.rps,
+            "requests/s",
+            TARGET_VS_FLOOR,
+            against="bare asyncio floor",
+            percent=True,
+        ),
+        Result(
+            "tcp: client CPU per round trip, read_status vs read_holding_registers(count=4), "
+            "minimal responders",
+            m.ours.cpu_s * us,
+            m.pymodbus.cpu_s * us,
+            "µs",
+            1 / TARGET_CPU_VS_PYMODBUS,
+            higher_is_better=False,
+            against=peer,
+            as_multiple=True,
+        ),
+        Result(
+            "tcp: read_status vs read_holding_registers(count=4), minimal responders",
+            m.ours.rps,
+            m.pymodbus.rps,
+            "requests/s",
+            against=peer,
+        ),
+        Result(
+            "tcp floor: bare asyncio round trip vs pymodbus, minimal responders",
+            m.floor.rps,
+            m.pymodbus.rps,
+            "requests/s",
+            against=peer,
+        ),
+        Result(
+            "tcp floor: client CPU per bare asyncio round trip vs pymodbus, minimal responders",
+            m.floor.cpu_s * us,
+            m.pymodbus.cpu_s * us,
+            "µs",
+            higher_is_better=False,
+            against=peer,
+            as_multiple=True,
+        ),
+    ]
+
+
+def run(config: Config) -> Section:
+    """Measure sequential TCP round trips: the minimal responders, then each stack's server."""
+    n = QUICK_REQUESTS if config.quick else REQUESTS
+    minimal = measure_minimal(config)
     rates = measure(config)
     notes: tuple[str, ...] = (
+        *_minimal_notes(minimal, n, config.repeats),
+        "",
+        "**Each stack on its own server** (the second table; these rows time the servers "
+        "as much as the clients, so they carry no target):",
+        "",
         f"{n:,} sequential requests per timed run, each stack's client in this process "
         "and its server in a process of its own, on 127.0.0.1.",
         "Ours: `open_bus('tcp://…')` + `Drive.read_status()` / `read_monitor()` (decoded) "
@@ -269,10 +482,10 @@ def run(config: Config) -> Section:
         + ", ".join(f"{r.floor_rps / r.peer_vs_floor_rps:.2f}x ({r.label})" for r in rates)
         + ".",
     )
-    results: list[Result] = []
+    results = _minimal_results(minimal)
     for r in rates:
         results += [
-            Result(f"tcp: {r.label}", r.ours_rps, r.peer_rps, "requests/s", TARGET_RATIO),
+            Result(f"tcp: {r.label}", r.ours_rps, r.peer_rps, "requests/s"),
             Result(
                 f"tcp floor: bare asyncio round trip, {r.label.split()[0]} sizes",
                 r.floor_rps,

@@ -10,11 +10,21 @@ as the current directory and as ``PYTHONPATH``, on this same Python), then
 the working tree's, and prints one row per benchmark row, matched by name,
 unit and event loop: REF's value of ours, the working tree's, the unit and
 the change in percent, where + is better whatever the unit (a rate that rose,
-a time that fell). Rows more than 5 % worse are flagged. The worktree is
+a time that fell); and, for a row with a reference measured in the same run
+(pymodbus, a floor, a limit), that same-run ratio on each side and its change.
+Rows more than 5 % worse are flagged: by their same-run ratio where they
+have one (drift of the machine between the two runs cancels out of it), by
+their value otherwise. The worktree is
 removed at the end, also on error.
 
+With ``--same-benchmarks``, REF's worktree gets the working tree's
+``benchmarks/`` before it runs: both sides then run the same benchmark code
+on their own library, so rows added since REF (issue 18's tcp headline, the
+scale ratio) are compared too. REF's library must have what those
+benchmarks use.
+
 Any other argument (``--quick``, ``--repeats N``, ``--seed N``,
-``--uvloop``) goes to both runs. The rows are read from ``--json``; a
+``--uvloop``, ``--wire-runs N``) goes to both runs. The rows are read from ``--json``; a
 commit older than that option is read from its printed markdown table, whose
 values have three significant digits (thousands are whole numbers).
 
@@ -62,6 +72,8 @@ class Row:
     loop: str = "asyncio"
     #: The row's own flag, used only for a unit this script does not know.
     higher_is_better: bool | None = None
+    #: The row's reference measured in the same run (pymodbus, a floor, a limit), if any.
+    peer: float | None = None
 
 
 def higher_is_better(row: Row) -> bool:
@@ -84,6 +96,20 @@ def change_percent(old: Row, new: Row) -> float | None:
         return 0.0 if old.value == new.value else None
     change = (new.value - old.value) / abs(old.value) * 100
     return change if higher_is_better(new) else -change
+
+
+def same_run_ratio(row: Row) -> float | None:
+    """How many times better than its same-run reference the row is; None without one.
+
+    The figure the targets are set on: drift of the machine between the two
+    runs moves a row's value and its reference alike, so this ratio is steadier
+    than the value.
+    """
+    if row.peer is None or not row.peer or not row.value:
+        return None
+    if not (math.isfinite(row.peer) and math.isfinite(row.value)):
+        return None
+    return row.value / row.peer if higher_is_better(row) else row.peer / row.value
 
 
 def _number(text: str) -> float | None:
@@ -123,7 +149,7 @@ def parse_table(output: str) -> list[Row]:
             continue
         value = _number(cells[1])
         if value is not None:
-            rows.append(Row(cells[0], value, cells[3], loop))
+            rows.append(Row(cells[0], value, cells[3], loop, peer=_number(cells[2])))
     return rows
 
 
@@ -135,6 +161,7 @@ def _read_json(path: Path) -> list[Row]:
             item["unit"],
             item.get("loop", "asyncio"),
             item.get("higher_is_better"),
+            None if item.get("peer") is None else float(item["peer"]),
         )
         for item in json.loads(path.read_text(encoding="utf-8"))
     ]
@@ -224,8 +251,9 @@ def render(old: Sequence[Row], new: Sequence[Row], ref_label: str) -> tuple[str,
     old_keyed, new_keyed = _key(old), _key(new)
     keys = list(new_keyed) + [key for key in old_keyed if key not in new_keyed]
     lines = [
-        f"| benchmark | {ref_label} | working tree | unit | change | |",
-        "|---|---:|---:|---|---:|---|",
+        f"| benchmark | {ref_label} | working tree | unit | change "
+        "| same-run ratio, REF | working tree | ratio change | |",
+        "|---|---:|---:|---|---:|---:|---:|---:|---|",
     ]
     worse = 0
     for key in keys:
@@ -233,20 +261,33 @@ def render(old: Sequence[Row], new: Sequence[Row], ref_label: str) -> tuple[str,
         shown = name if loop == "asyncio" else f"{name} ({loop})"
         before, after = old_keyed.get(key), new_keyed.get(key)
         flag = ""
+        ratios = ["—", "—"]
+        ratio_change = "—"
         if before is None or after is None:
             change = "—"
             flag = "only in the working tree" if before is None else f"only in {ref_label}"
         else:
             percent = change_percent(before, after)
             change = "—" if percent is None else f"{percent:+.1f} %"
+            old_ratio, new_ratio = same_run_ratio(before), same_run_ratio(after)
+            ratios = [_format_ratio(old_ratio), _format_ratio(new_ratio)]
+            if old_ratio is not None and new_ratio is not None:
+                # The ratio decides where there is one: it is what the targets are set on.
+                percent = (new_ratio - old_ratio) / old_ratio * 100
+                ratio_change = f"{percent:+.1f} %"
             if percent is not None and percent < -THRESHOLD_PERCENT:
                 flag = f"**worse by more than {THRESHOLD_PERCENT:g} %**"
                 worse += 1
         lines.append(
             f"| {shown} | {'—' if before is None else _format(before.value)} "
-            f"| {'—' if after is None else _format(after.value)} | {unit} | {change} | {flag} |"
+            f"| {'—' if after is None else _format(after.value)} | {unit} | {change} "
+            f"| {ratios[0]} | {ratios[1]} | {ratio_change} | {flag} |"
         )
     return "\n".join(lines), worse
+
+
+def _format_ratio(ratio: float | None) -> str:
+    return "—" if ratio is None else f"{ratio:.3g}x"
 
 
 def _parse_args(argv: Sequence[str] | None) -> tuple[argparse.Namespace, list[str]]:
@@ -258,6 +299,11 @@ def _parse_args(argv: Sequence[str] | None) -> tuple[argparse.Namespace, list[st
     parser.add_argument("--ref", required=True, help="the commit to compare with (any git ref)")
     parser.add_argument(
         "--only", action="append", default=[], metavar="NAME", help="run only this one (repeatable)"
+    )
+    parser.add_argument(
+        "--same-benchmarks",
+        action="store_true",
+        help="run the working tree's benchmarks/ on REF's library too (rows added since REF)",
     )
     return parser.parse_known_args(argv)
 
@@ -279,6 +325,14 @@ def main(argv: Sequence[str] | None = None) -> int:
     worktree = scratch / "ref"
     try:
         _git("worktree", "add", "--detach", str(worktree), commit)
+        if args.same_benchmarks:
+            shutil.rmtree(worktree / "benchmarks", ignore_errors=True)
+            shutil.copytree(
+                _REPO / "benchmarks",
+                worktree / "benchmarks",
+                ignore=shutil.ignore_patterns("__pycache__"),
+            )
+            ref_label += " + working tree's benchmarks"
         old, old_ok = _run(worktree, ref_label, bench_args, scratch / "ref.json")
         new, new_ok = _run(_REPO, "the working tree", bench_args, scratch / "working.json")
     finally:
@@ -295,7 +349,11 @@ def main(argv: Sequence[str] | None = None) -> int:
     table, worse = render(old, new, ref_label)
     print(f"# benchmarks: {ref_label} against the working tree")
     print()
-    print("Our value of each row (not the reference's); change: + is better, whatever the unit.")
+    print(
+        "Our value of each row (not the reference's); change: + is better, whatever the unit. "
+        "Same-run ratio: times better than the row's reference in the same run (the flag "
+        "follows it where there is one)."
+    )
     print()
     print(table)
     print()

@@ -18,7 +18,7 @@ from typing import TYPE_CHECKING
 import pytest
 
 from sj300_async import BusTiming, InverterStatus, MonitorData, TripHistory
-from sj300_async.sj300 import AckReply, DataReply, NakReply, ReplyParser
+from sj300_async.sj300 import AckReply, DataReply, NakReply, ReplyParser, decode_status
 
 if TYPE_CHECKING:
     from benchmarks.bench_codec import Workload
@@ -134,8 +134,13 @@ def test_run_quick_reports_the_three_rows(bench_codec: ModuleType) -> None:
         ("codec: framing only (no payload decode)", "frames/s"),
     ]
     assert all(r.ours > 0 and r.peer > 0 for r in section.results)
-    assert section.results[0].target == 3.0
+    assert section.results[0].target == 3.5
     assert any("| 05 trip history | 2% | 6 | 446 |" in line for line in section.notes)
+    # the spread of the same-run ratio, pair by pair (one pair in a quick run)
+    assert any(
+        "per interleaved pair of runs" in line and "of 1 pairs >= 3.5x" in line
+        for line in section.notes
+    )
 
 
 def test_cli_prints_environment_and_table() -> None:
@@ -212,6 +217,32 @@ def test_table_names_each_reference_and_shows_efficiencies_in_percent(
     assert lines[4] == "| latency | 40 | — | µs | — | — | — | — |"
 
 
+def test_cost_rows_can_read_as_a_multiple_of_their_reference(harness: ModuleType) -> None:
+    result = harness.Result
+    # ours <= 0.7x the reference: the ratio kept as "times better" (1 / 0.7), shown as ours / ref
+    cpu = result("cpu", 23.0, 33.0, "µs", 1 / 0.7, False, against="pymodbus", as_multiple=True)
+    assert cpu.met is True
+    table = harness.markdown_table([cpu], "pymodbus")
+    assert table.splitlines()[2] == "| cpu | 23 | 33 | µs | pymodbus | 0.70x | <= 0.7x | yes |"
+    worse = result("scale", 31.0, 5.0, "µs", 1 / 6, False, as_multiple=True)
+    assert worse.met is False
+    assert "| 6.20x | <= 6x | **no** |" in harness.markdown_table([worse], "x")
+
+
+def test_interleave_rotates_the_order_and_times_cpu(harness: ModuleType) -> None:
+    order: list[str] = []
+    timings = harness.interleave(
+        [lambda: order.append("a"), lambda: order.append("b"), lambda: order.append("c")], 3
+    )
+    # one untimed run each, then each repeat starts one side further on
+    assert order == ["a", "b", "c", "a", "b", "c", "b", "c", "a", "c", "a", "b"]
+    assert [len(t.wall_s) for t in timings] == [3, 3, 3]
+    assert all(len(t.cpu_s) == 3 and t.best_cpu_s >= 0 for t in timings)
+    assert timings[0].best_wall_s == min(timings[0].wall_s)
+    with pytest.raises(ValueError, match="repeats"):
+        harness.interleave([lambda: None], 0)
+
+
 def test_best_time_runs_once_untimed_then_each_repeat(harness: ModuleType) -> None:
     calls: list[int] = []
     assert harness.best_time(lambda: calls.append(1), 3) >= 0
@@ -247,23 +278,72 @@ def _quick(harness: ModuleType, loop: str = "asyncio") -> object:
     return config
 
 
+TCP_ROWS = [
+    ("tcp: read_status vs bare asyncio floor, same minimal responder", "requests/s", 0.9),
+    (
+        "tcp: client CPU per round trip, read_status vs read_holding_registers(count=4), "
+        "minimal responders",
+        "µs",
+        pytest.approx(1 / 0.7),
+    ),
+    ("tcp: read_status vs read_holding_registers(count=4), minimal responders", "requests/s", None),
+    ("tcp floor: bare asyncio round trip vs pymodbus, minimal responders", "requests/s", None),
+    (
+        "tcp floor: client CPU per bare asyncio round trip vs pymodbus, minimal responders",
+        "µs",
+        None,
+    ),
+    # the second table: each stack on its own server
+    ("tcp: read_status vs 1 register", "requests/s", None),
+    ("tcp floor: bare asyncio round trip, read_status sizes", "requests/s", None),
+    ("tcp: read_monitor vs 50 registers", "requests/s", None),
+    ("tcp floor: bare asyncio round trip, read_monitor sizes", "requests/s", None),
+]
+
+
 def test_tcp_times_both_stacks_on_their_own_servers(harness: ModuleType) -> None:
     bench_tcp = importlib.import_module("benchmarks.bench_tcp")
     section = bench_tcp.run(_quick(harness))  # raises unless every request was answered
-    assert [(r.name, r.unit, r.target) for r in section.results] == [
-        ("tcp: read_status vs 1 register", "requests/s", 2.5),
-        ("tcp floor: bare asyncio round trip, read_status sizes", "requests/s", None),
-        ("tcp: read_monitor vs 50 registers", "requests/s", 2.5),
-        ("tcp floor: bare asyncio round trip, read_monitor sizes", "requests/s", None),
-    ]
+    assert [(r.name, r.unit, r.target) for r in section.results] == TCP_ROWS
     assert all(r.ours > 0 and r.peer > 0 for r in section.results)
     assert any("processing_s=0" in note for note in section.notes)
     assert any("most any stack on the same loop" in note for note in section.notes)
+    assert any(note.startswith("Targets, this run: ours / floor = ") for note in section.notes)
+    # the headline's table: floor, ours, pymodbus, each against its minimal responder
+    assert sum(note.startswith("| ") and "minimal`" in note for note in section.notes) == 2
+    assert sum(note.startswith("| ") and "| `echo` |" in note for note in section.notes) == 1
+
+
+def test_tcp_minimal_responders_answer_every_request(harness: ModuleType) -> None:
+    bench_tcp = importlib.import_module("benchmarks.bench_tcp")
+    config = _quick(harness)
+    m = bench_tcp.measure_minimal(config)  # raises unless our bus counted every reply
+    for side in (m.floor, m.ours, m.pymodbus):
+        assert side.requests == bench_tcp.QUICK_REQUESTS
+        assert len(side.timing.wall_s) == len(side.timing.cpu_s) == 1
+        assert side.rps > 0
+        assert side.cpu_s > 0
+        assert side.server_cpu_s > 0
+    assert m.ours_vs_floor == m.ours.rps / m.floor.rps
+    assert m.cpu_vs_pymodbus == m.ours.cpu_s / m.pymodbus.cpu_s
+
+
+def test_minimal_responders_give_valid_replies(harness: ModuleType) -> None:
+    servers = importlib.import_module("benchmarks._servers")
+    events = list(ReplyParser().feed(servers.SJ300_STATUS_REPLY))
+    assert len(servers.SJ300_STATUS_REPLY) == 14
+    assert len(events) == 1
+    assert isinstance(events[0], DataReply)
+    assert events[0].node == 1
+    assert isinstance(decode_status(events[0].data), InverterStatus)
+    # Modbus TCP: transaction id (2) + protocol 0, length 11, device 1, function 3, 8 bytes
+    assert len(servers.MODBUS_REPLY) + 2 == 17
+    assert servers.MODBUS_REPLY[:7] == bytes((0, 0, 0, 11, 1, 3, 8))
 
 
 def test_server_processes_end_with_their_context(harness: ModuleType) -> None:
     servers = importlib.import_module("benchmarks._servers")
-    for kind in ("sj300", "pymodbus", "echo"):
+    for kind in ("sj300", "pymodbus", "echo", "sj300-minimal", "modbus-minimal"):
         server = servers.ServerProcess(kind)
         with server:
             assert server.port > 0
@@ -291,12 +371,22 @@ def test_loopback_counts_every_reply(harness: ModuleType) -> None:
     # one task and eight tasks, each: one untimed run and one timed run
     assert rates.replies == 2 * 200 * 2
     assert 0 < rates.sim_s * rates.transactions < rates.one_task_s
+    assert rates.floor_s > 0
     section = bench.run(_quick(harness))
-    assert [(r.name, r.peer, r.against, r.target) for r in section.results] == [
+    assert [(r.name, r.peer, r.against, r.target) for r in section.results][:3] == [
         ("loopback: read_status, 1 task", 50_000, "target", 1.0),
         ("loopback: read_status, 8 tasks on 8 drives", 50_000, "target", 1.0),
         ("loopback: read_status, 1 task, simulator's share taken out", 50_000, "target", None),
     ]
+    # the same run's in-memory asyncio floor, as a reference
+    floor = section.results[3]
+    assert (floor.name, floor.against, floor.target) == (
+        "loopback: read_status, 1 task vs in-memory asyncio floor, same run",
+        "in-memory floor",
+        None,
+    )
+    assert floor.ours == section.results[0].ours
+    assert floor.peer > 0
 
 
 def test_latency_times_every_transaction(harness: ModuleType) -> None:
@@ -308,10 +398,17 @@ def test_latency_times_every_transaction(harness: ModuleType) -> None:
     assert lat.percentile(100) == lat.round_trips_s[-1]
     assert lat.percentile(50) <= lat.percentile(99)
     assert lat.overhead(50) == lat.percentile(50) - lat.sim_s
+    assert len(lat.floor_s) == bench.QUICK_TRANSACTIONS
+    assert 0 < lat.floor(50) <= lat.floor(99)
     section = bench.run(_quick(harness))
-    assert [(r.name, r.unit, r.peer) for r in section.results] == [
-        ("latency: library overhead per transaction, p50", "µs", None),
-        ("latency: library overhead per transaction, p99", "µs", None),
+    assert [(r.name, r.unit, r.peer is None) for r in section.results] == [
+        ("latency: library overhead per transaction, p50", "µs", True),
+        ("latency: library overhead per transaction, p99", "µs", True),
+        (
+            "latency: library overhead per transaction, p50 vs in-memory asyncio floor, same run",
+            "µs",
+            False,
+        ),
     ]
 
 
@@ -339,6 +436,27 @@ def test_wire_limit_is_computed_from_frames_bits_and_processing(harness: ModuleT
     ] * 2
 
 
+def test_wire_runs_n_times_and_counts_the_runs_that_met_the_target(
+    harness: ModuleType,
+) -> None:
+    bench = importlib.import_module("benchmarks.bench_wire")
+    config = harness.Config(quick=True, repeats=1, wire_runs=2)
+    section = bench.run(config)
+    rows = section.results
+    assert [(r.unit, r.against, r.target) for r in rows] == [
+        ("ms", "wire limit", 0.99),
+        ("runs", "runs made", 1.0),
+    ] * 2
+    for headline, count in (rows[0:2], rows[2:4]):
+        assert count.peer == 2
+        assert count.ours in (0, 1, 2)
+        assert count.met is (count.ours == 2)
+        # the headline is the lower of the two runs (the median of an even count)
+        assert headline.met is (count.ours == 2)
+    assert any(" runs >= 99 % (" in note for note in section.notes)
+    assert sum("(run 2)" in note for note in section.notes) == 2
+
+
 def test_scale_polls_every_bus(harness: ModuleType) -> None:
     bench = importlib.import_module("benchmarks.bench_scale")
     scale = bench.measure(_quick(harness))  # raises if a bus was never polled
@@ -349,12 +467,22 @@ def test_scale_polls_every_bus(harness: ModuleType) -> None:
     assert scale.rss_before > 0
     assert scale.rss_after > 0
     assert len(scale.rss_trend) == 10
+    assert len(scale.cpu_windows_s) == 10
+    assert scale.best_library_cpu_per_poll_s == min(scale.cpu_windows_s) - scale.sim_s
+    ref = scale.reference
+    assert ref is not None
+    assert ref.tcp_floor_s > 0
+    assert ref.memory_floor_s > 0
+    assert ref.runs == 2  # one before the polls, one after
     section = bench.run(_quick(harness))
-    assert [(r.unit, r.peer, r.target) for r in section.results] == [
-        ("µs", 30.0, 1.0),
-        ("µs", 30.0, None),
-        ("MB", 1.0, 1.0),
+    assert [(r.unit, r.against, r.target) for r in section.results] == [
+        ("µs", "in-memory floor", pytest.approx(1 / bench.TARGET_VS_MEMORY_FLOOR)),
+        ("µs", "tcp floor", None),
+        ("µs", "old target", None),
+        ("µs", "old target", None),
+        ("MB", "target", 1.0),
     ]
+    assert section.results[0].as_multiple
 
 
 def test_gateway_serves_every_read_from_its_cache(harness: ModuleType) -> None:
@@ -432,7 +560,8 @@ def test_cli_quick_runs_every_benchmark_into_one_table() -> None:
         assert f"\n## {title}\n" in out
     table = out.split("\n## results\n", 1)[1]
     rows = [line for line in table.splitlines() if line.startswith("| ") and "---" not in line]
-    assert len(rows) == 1 + 3 + 4 + 3 + 2 + 2 + 3 + 3 + 3  # header + rows of each benchmark
+    # header + rows of each benchmark: codec, tcp, loopback, latency, wire, scale, gateway, mqtt
+    assert len(rows) == 1 + 3 + 9 + 4 + 3 + 2 + 5 + 3 + 3
     assert "**failed**" not in out
 
 
@@ -467,13 +596,13 @@ def test_cli_uvloop_prints_a_table_of_its_own() -> None:
     assert "\n## loopback (uvloop)\n" in out
     assert "\n## codec (uvloop)\n" not in out  # no event loop: nothing to rerun
     uv_table = out.split("## results on uvloop", 1)[1]
-    assert uv_table.count("| loopback: ") == 3
+    assert uv_table.count("| loopback: ") == 4
 
 
 def test_tcp_runs_on_uvloop(harness: ModuleType) -> None:
     bench_tcp = importlib.import_module("benchmarks.bench_tcp")
     section = bench_tcp.run(_quick(harness, "uvloop"))
-    assert len(section.results) == 4
+    assert len(section.results) == len(TCP_ROWS)
 
 
 def test_hotspots_profile_sees_the_library_per_transaction(harness: ModuleType) -> None:
@@ -490,3 +619,71 @@ def test_hotspots_profile_sees_the_library_per_transaction(harness: ModuleType) 
     ]
     assert len(reads) == 1
     assert reads[0].calls >= 50  # a coroutine counts once more each time it resumes
+
+
+# -- the profile of a TCP round trip -------------------------------------------------
+
+_ANNOTATE = """\
+--------------------------------------------------------------------------------
+Ir
+--------------------------------------------------------------------------------
+1,000,000 (100.0%)  PROGRAM TOTALS
+
+--------------------------------------------------------------------------------
+Ir                  file:function
+--------------------------------------------------------------------------------
+400,000 (40.00%)  Python/ceval.c:_PyEval_EvalFrameDefault [/lib/libpython3.11.so]
+100,000 (10.00%)  Python/ceval.c:_PyEval_EvalFrameDefault'2 [/lib/libpython3.11.so]
+ 50,000 ( 5.00%)  build/Python-3.11.7/./Include/object.h:builtin_sum
+ 20,000 ( 2.00%)  ???:send [/usr/lib/x86_64-linux-gnu/libc.so.6]
+"""
+
+
+def test_profile_tcp_reads_callgrind_annotate(harness: ModuleType) -> None:
+    profile_tcp = importlib.import_module("benchmarks.profile_tcp")
+    total, counts = profile_tcp.parse_annotate(_ANNOTATE)
+    assert total == 1_000_000
+    assert counts == {
+        ("ceval.c", "_PyEval_EvalFrameDefault"): 500_000,  # recursion levels added up
+        ("object.h", "builtin_sum"): 50_000,
+        ("libc.so.6", "send"): 20_000,  # no debug information: the object names it
+    }
+
+
+def test_profile_tcp_prints_where_the_time_goes(
+    harness: ModuleType, capsys: pytest.CaptureFixture[str]
+) -> None:
+    profile_tcp = importlib.import_module("benchmarks.profile_tcp")
+    assert profile_tcp.main(["-n", "50", "--top", "8", "--no-callgrind"]) == 0
+    out = capsys.readouterr().out
+    assert "| ours |" in out
+    assert "| bare asyncio floor |" in out
+    assert "50 round trips under cProfile" in out
+    assert "_arbiter.py" in out  # the library's own functions are listed
+    assert "Bytecodes per round trip: ours " in out
+    assert "(skipped: --no-callgrind)" in out
+
+
+# -- bench-compare ---------------------------------------------------------------------
+
+
+def test_compare_flags_a_row_by_its_same_run_ratio(harness: ModuleType) -> None:
+    compare = importlib.import_module("benchmarks.compare")
+    row = compare.Row
+    # The machine was 20 % slower in the second run: ours and its reference fell alike.
+    old = [row("tcp", 10_000.0, "requests/s", peer=8_000.0), row("lat", 10.0, "µs")]
+    new = [row("tcp", 8_000.0, "requests/s", peer=6_400.0), row("lat", 12.0, "µs")]
+    assert compare.same_run_ratio(old[0]) == 1.25
+    assert compare.same_run_ratio(row("cpu", 20.0, "µs", peer=30.0)) == 1.5
+    assert compare.same_run_ratio(old[1]) is None
+    table, worse = compare.render(old, new, "REF")
+    lines = table.splitlines()
+    assert lines[2].endswith("| -20.0 % | 1.25x | 1.25x | +0.0 % |  |")  # not flagged
+    assert "**worse by more than 5 %**" in lines[3]  # no reference: the value decides
+    assert worse == 1
+    # the printed table of an older commit gives the reference too
+    parsed = compare.parse_table(
+        "## results\n\n| benchmark | ours | reference | unit |\n|---|---:|---:|---|\n"
+        "| tcp | 10,000 | 8,000 | requests/s | pymodbus | 1.25x | — | — |\n"
+    )
+    assert parsed == [row("tcp", 10_000.0, "requests/s", "asyncio", None, 8_000.0)]
