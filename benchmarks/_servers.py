@@ -48,6 +48,7 @@ from __future__ import annotations
 
 import argparse
 import asyncio
+import contextlib
 import functools
 import os
 import signal
@@ -308,6 +309,11 @@ class ServerProcess:
         process = self._process
         if process is None:
             return ""
+        # SIGUSR1 first: a child that installed a handler prints its asyncio tasks'
+        # stacks (what its event loop waits for), which faulthandler cannot show.
+        process.send_signal(signal.SIGUSR1)
+        with contextlib.suppress(subprocess.TimeoutExpired):
+            process.wait(timeout=1)
         process.send_signal(signal.SIGABRT)
         try:
             process.wait(timeout=5)

@@ -110,6 +110,7 @@ import math
 import os
 import random
 import shutil
+import signal
 import socket
 import subprocess
 import sys
@@ -252,6 +253,14 @@ def _answer_parent(loop: asyncio.AbstractEventLoop, counts: _Counts) -> None:
             print(f"unknown {command}", flush=True)
 
 
+def _print_tasks() -> None:
+    """Every asyncio task's stack on stderr: what a hung child's loop is waiting for."""
+    for task in asyncio.all_tasks():
+        print(f"-- {task!r}", file=sys.stderr)
+        task.print_stack(file=sys.stderr)
+    sys.stderr.flush()
+
+
 async def _serve_gateway(gateway_id: str, url: str, interval_s: float, broker_port: int) -> None:
     from sj300_async.gateway._config import parse_config
     from sj300_async.gateway._gateway import Gateway
@@ -259,6 +268,7 @@ async def _serve_gateway(gateway_id: str, url: str, interval_s: float, broker_po
     text = _gateway_toml(gateway_id, url, interval_s, broker_port)
     config = parse_config(text, f"bench_mqtt_{gateway_id}.toml")
     loop = asyncio.get_running_loop()
+    loop.add_signal_handler(signal.SIGUSR1, _print_tasks)  # the parent's hang diagnosis
     async with Gateway(config) as gateway:
         counts = _Counts(gateway)
         deadline = loop.time() + READY_TIMEOUT_S
