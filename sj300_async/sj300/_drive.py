@@ -8,7 +8,8 @@ defined once.
 
 from __future__ import annotations
 
-from typing import TYPE_CHECKING
+from collections.abc import Coroutine
+from typing import TYPE_CHECKING, Any
 
 from ..bus._stats import TransactionStats
 from ..wire import LocalProtocolError
@@ -151,8 +152,10 @@ class Drive(_Commands):
     async def _execute(self, request: Request, *, urgent: bool = False) -> None:
         await self._data(request, urgent=urgent)
 
-    async def _data(self, request: Request, *, urgent: bool = False) -> bytes:
-        return await self._channel.transact(
+    def _data(self, request: Request, *, urgent: bool = False) -> Coroutine[Any, Any, bytes]:
+        # Not a coroutine itself: the caller awaits the arbiter's, one frame less on
+        # every resume of a transaction (see Channel.transact).
+        return self._channel.transact(
             request, self.stats, wait_s=self.wait_time_s, timeout_s=self.timeout_s, urgent=urgent
         )
 
