@@ -155,11 +155,24 @@ def decode_status(data: bytes) -> InverterStatus:
 
 
 def _decode_status(data: bytes) -> InverterStatus:
-    status = _new(InverterStatus)
-    _set_status_a(status, _STATUS_A_CHARS[data[0:2]])
-    _set_status_b(status, _STATUS_B_CHARS[data[2:4]])
-    _set_status_c(status, _STATUS_C_CHARS[data[4:6]])
+    # A drive's status is one of a few dozen combinations and a poll reads it over
+    # and over: each is decoded once and the frozen object shared (bounded: the
+    # table starts over when full, as a line of ever-new statuses would fill it).
+    status = _STATUSES.get(data)
+    if status is None:
+        if len(_STATUSES) >= _STATUSES_KEPT:
+            _STATUSES.clear()
+        status = _new(InverterStatus)
+        _set_status_a(status, _STATUS_A_CHARS[data[0:2]])
+        _set_status_b(status, _STATUS_B_CHARS[data[2:4]])
+        _set_status_c(status, _STATUS_C_CHARS[data[4:6]])
+        _STATUSES[data] = status  # only once whole
     return status
+
+
+#: Decoded statuses by their 8 characters (see _decode_status), and how many are kept.
+_STATUSES: Final[dict[bytes, InverterStatus]] = {}
+_STATUSES_KEPT: Final = 512
 
 
 _set_status_a, _set_status_b, _set_status_c = slot_setters(InverterStatus)
