@@ -41,6 +41,12 @@ from ._framing import FrameSplitter
 
 __all__ = ["DATA_PATTERNS", "DECIMAL_FIELD", "ReplyParser", "parse_bcc", "parse_node"]
 
+#: Short reply bodies decoded once and shared (see ReplyParser._decode_body): the
+#: longest body kept (a parameter reply: node, ACK, 8 digits, BCC) and how many.
+_CACHED_BODY_MAX: Final = 13
+_SHORT_REPLIES_KEPT: Final = 1024
+_SHORT_REPLIES: Final[dict[bytes, Reply]] = {}
+
 # One 8-character decimal field: eight digits, or a minus sign and seven digits.
 _DEC = rb"(?:[0-9]{8}|-[0-9]{7})"
 _HEX8 = rb"[0-9A-Fa-f]{8}"
@@ -125,6 +131,25 @@ class ReplyParser(FrameSplitter[Reply]):
         super().__init__(MAX_REPLY_BODY)
 
     def _decode_body(self, body: bytes) -> Reply | BadFrame:
+        # A poll gets the same short replies over and over (a drive's status, the
+        # ACK of a write, a parameter that does not change): each short body is
+        # decoded once and its frozen reply shared. Bounded, and only bodies of up
+        # to 13 characters (a monitor block or a trip history varies, and hashing
+        # it costs more than it saves); a bad frame is never kept (it is counted
+        # each time it comes).
+        if len(body) <= _CACHED_BODY_MAX:
+            known = _SHORT_REPLIES.get(body)
+            if known is not None:
+                return known
+            event = self._decode_fresh(body)
+            if not isinstance(event, BadFrame):
+                if len(_SHORT_REPLIES) >= _SHORT_REPLIES_KEPT:
+                    _SHORT_REPLIES.clear()
+                _SHORT_REPLIES[body] = event
+            return event
+        return self._decode_fresh(body)
+
+    def _decode_fresh(self, body: bytes) -> Reply | BadFrame:
         # Fast path for a valid reply, with the checks of _decode_general in
         # their cheapest form (bytes.isdigit() is ASCII-only): it returns only
         # what _decode_general would return for the same body, and leaves
