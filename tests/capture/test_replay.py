@@ -83,18 +83,25 @@ TIMEOUT_S = 0.2
 RETRIES = 1
 
 
+async def _calls(
+    bus: sj.Bus[sj.Drive, sj.Broadcast], sim: SimulatedBus | None, calls: int | None
+) -> list[tuple[str, Outcome]]:
+    """The workload's first *calls* calls on *bus* (all: None), each one's outcome."""
+    results: list[tuple[str, Outcome]] = []
+    for name, call in _workload(sim)[:calls]:
+        try:
+            value = await call(bus)
+        except sj.SJ300Error as exc:
+            value = exc
+        results.append((name, _outcome(value)))
+    return results
+
+
 async def _run(
     url: str, sim: SimulatedBus | None, calls: int | None = None, **options: Any
 ) -> list[tuple[str, Outcome]]:
-    results: list[tuple[str, Outcome]] = []
     async with sj.open_bus(url, timeout=TIMEOUT_S, retries=RETRIES, **options) as bus:
-        for name, call in _workload(sim)[:calls]:
-            try:
-                value = await call(bus)
-            except sj.SJ300Error as exc:
-                value = exc
-            results.append((name, _outcome(value)))
-    return results
+        return await _calls(bus, sim, calls)
 
 
 @pytest_asyncio.fixture
@@ -135,18 +142,10 @@ async def test_a_replay_twice_over_gives_the_same_results_again(
     calls = 6  # no faults: what is tested is finding the requests again
     url = f"tcp://127.0.0.1:{server.port}?baudrate=19200"
     live = await _run(url, sim, calls, capture=path)
-    results: list[list[tuple[str, Outcome]]] = []
     async with sj.open_bus(f"replay://{path}", timeout=TIMEOUT_S) as bus:
-        for _ in range(2):
-            run: list[tuple[str, Outcome]] = []
-            for name, call in _workload(None)[:calls]:
-                try:
-                    value = await call(bus)
-                except sj.SJ300Error as exc:
-                    value = exc
-                run.append((name, _outcome(value)))
-            results.append(run)
-    assert results == [live, live]
+        first = await _calls(bus, None, calls)
+        second = await _calls(bus, None, calls)
+    assert [first, second] == [live, live]
 
 
 async def test_the_replay_times_like_the_capture(tmp_path: Path) -> None:
