@@ -86,6 +86,8 @@ class CaptureFile:
         self._lines: list[LineCapture] = []
         #: Packets written so far, every line together.
         self.packets = 0
+        #: Packets that came after the file was closed, so not in it.
+        self.unwritten = 0
 
     @property
     def closed(self) -> bool:
@@ -107,8 +109,10 @@ class CaptureFile:
         return capture
 
     def write(self, packet: CapturedPacket) -> None:
-        """Write one packet (a closed file ignores it: a bus may outlive its capture)."""
+        """Write one packet; after :meth:`close` it is counted in :attr:`unwritten`, not
+        written (a bus may outlive its capture)."""
         if self._file.closed:
+            self.unwritten += 1
             return
         self._file.write(self._writer.packet(packet))
         self.packets += 1

@@ -188,6 +188,7 @@ async def test_a_bus_that_outlives_its_capture_file_keeps_working(tmp_path: Path
         capture.close()
         await bus.drive(1).read_status()
     assert len(read_pcapng((tmp_path / "short.pcapng").read_bytes()).packets) == 2
+    assert (capture.packets, capture.unwritten) == (2, 2)
 
 
 async def test_an_unfinished_frame_is_captured_as_noise_when_the_capture_closes(
