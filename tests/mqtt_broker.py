@@ -24,6 +24,7 @@ from collections.abc import AsyncIterator
 from dataclasses import dataclass
 from pathlib import Path
 
+from transports.bridges import wait_for_port
 from waiting import wait_for
 
 __all__ = ["READY", "Broker", "free_port", "publish", "running_broker", "tool"]
@@ -106,7 +107,7 @@ class Broker:
         if proc.returncode is not None:
             self.proc = None
             return False  # the port was taken: the log says so
-        await _wait_for_port(self.port)
+        await wait_for_port(self.port)
         self.starts += 1
         return True
 
@@ -150,22 +151,6 @@ async def publish(
             proc.kill()
             await proc.wait()
     assert proc.returncode == 0, err.decode()
-
-
-async def _wait_for_port(port: int, timeout: float = 5.0) -> None:
-    loop = asyncio.get_running_loop()
-    deadline = loop.time() + timeout
-    while True:
-        try:
-            _, writer = await asyncio.open_connection("127.0.0.1", port)
-        except OSError:
-            if loop.time() > deadline:
-                raise AssertionError(f"port {port} never accepted a connection") from None
-            await asyncio.sleep(0.01)
-            continue
-        writer.close()
-        await writer.wait_closed()
-        return
 
 
 @contextlib.asynccontextmanager

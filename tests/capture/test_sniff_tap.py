@@ -20,7 +20,6 @@ import json
 import re
 import signal
 import socket
-import sys
 import time
 from collections import Counter
 from collections.abc import AsyncIterator, Callable, Iterator
@@ -29,7 +28,7 @@ from pathlib import Path
 from typing import Any
 
 import pytest
-from cli.clirun import TIMEOUT, cli_env, closed_port, sj300
+from cli.clirun import TIMEOUT, closed_port, running, sj300
 from waiting import wait_for
 
 import sj300_async as sj
@@ -591,28 +590,9 @@ async def _read_line(stream: asyncio.StreamReader, what: str) -> str:
     return line.decode().rstrip("\n")
 
 
-@contextlib.asynccontextmanager
-async def _cli(*args: str) -> AsyncIterator[asyncio.subprocess.Process]:
-    proc = await asyncio.create_subprocess_exec(
-        sys.executable,
-        "-m",
-        "sj300_async",
-        *args,
-        stdout=asyncio.subprocess.PIPE,
-        stderr=asyncio.subprocess.PIPE,
-        env=cli_env(),
-    )
-    try:
-        yield proc
-    finally:
-        if proc.returncode is None:
-            proc.kill()
-            await proc.wait()
-
-
 async def test_sj300_simulate_tap_and_sj300_sniff_json_end_to_end(tmp_path: Path) -> None:
     capture = tmp_path / "sniffed.pcapng"
-    async with _cli(
+    async with running(
         "simulate", "--listen", "tcp://127.0.0.1:0", "--tap", "tcp://127.0.0.1:0", "--nodes", "1-2"
     ) as simulate:
         assert simulate.stdout is not None
@@ -624,7 +604,7 @@ async def test_sj300_simulate_tap_and_sj300_sniff_json_end_to_end(tmp_path: Path
         assert tap_url, tap_line
         assert sim_url, listen_line
         started = time.time()
-        async with _cli(
+        async with running(
             "sniff", tap_url[1], "--json", "--count", "4", "--capture", str(capture)
         ) as sniffer:
             assert sniffer.stdout is not None

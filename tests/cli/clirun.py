@@ -12,6 +12,7 @@ import socket
 import struct
 import sys
 import termios
+from collections.abc import AsyncIterator
 from dataclasses import dataclass
 from typing import Any
 
@@ -93,6 +94,28 @@ async def sj300(*args: str, env_url: str | None = None, timeout: float = TIMEOUT
             await proc.wait()
     assert proc.returncode is not None
     return Result(proc.returncode, out.decode(), err.decode())
+
+
+@contextlib.asynccontextmanager
+async def running(*args: str) -> AsyncIterator[asyncio.subprocess.Process]:
+    """``python -m sj300_async ARGS`` left running: stdin empty, stdout and stderr on
+    pipes; killed if it still runs at the end of the block."""
+    proc = await asyncio.create_subprocess_exec(
+        sys.executable,
+        "-m",
+        "sj300_async",
+        *args,
+        stdin=asyncio.subprocess.DEVNULL,
+        stdout=asyncio.subprocess.PIPE,
+        stderr=asyncio.subprocess.PIPE,
+        env=cli_env(),
+    )
+    try:
+        yield proc
+    finally:
+        if proc.returncode is None:
+            proc.kill()
+            await proc.wait()
 
 
 async def sj300_on_terminal(*args: str, timeout: float = TIMEOUT, columns: int = 160) -> Result:

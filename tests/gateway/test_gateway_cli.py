@@ -13,13 +13,13 @@ import contextlib
 import json
 import re
 import signal
-import sys
 import textwrap
 from collections.abc import AsyncIterator
+from contextlib import AbstractAsyncContextManager
 from pathlib import Path
 
 import pytest
-from cli.clirun import TIMEOUT, Result, cli_env, sj300
+from cli.clirun import TIMEOUT, Result, running, sj300
 from pymodbus.client import AsyncModbusTcpClient
 
 from sj300_async import sj300 as sj3
@@ -33,26 +33,9 @@ _MODBUS = re.compile(r"modbus on (\S+):(\d+)")
 _METRICS = re.compile(r"metrics on http://(\S+):(\d+)/metrics")
 
 
-@contextlib.asynccontextmanager
-async def gateway_process(*args: str) -> AsyncIterator[asyncio.subprocess.Process]:
+def gateway_process(*args: str) -> AbstractAsyncContextManager[asyncio.subprocess.Process]:
     """``sj300 gateway ARGS``, stdout and stderr on pipes; killed if still running at the end."""
-    proc = await asyncio.create_subprocess_exec(
-        sys.executable,
-        "-m",
-        "sj300_async",
-        "gateway",
-        *args,
-        stdin=asyncio.subprocess.DEVNULL,
-        stdout=asyncio.subprocess.PIPE,
-        stderr=asyncio.subprocess.PIPE,
-        env=cli_env(),
-    )
-    try:
-        yield proc
-    finally:
-        if proc.returncode is None:
-            proc.kill()
-            await proc.wait()
+    return running("gateway", *args)
 
 
 async def read_servers(proc: asyncio.subprocess.Process, *kinds: str) -> dict[str, int]:

@@ -48,11 +48,8 @@ async def test_tasks_that_ended_with_an_error_are_waited_for_and_left_to_the_cal
         task.result()
 
 
-@pytest.mark.skipif(
-    sys.version_info >= (3, 12), reason="wait_for keeps the cancellation since 3.12"
-)
 async def test_on_this_python_wait_for_can_lose_a_cancellation() -> None:
-    """Why the bridge cancels again: the race, reproduced on 3.11."""
+    """Why the bridge cancels again: the race, reproduced (3.11 loses it; 3.12 keeps it)."""
     loop = asyncio.get_running_loop()
     answer: asyncio.Future[None] = loop.create_future()
     got: list[str] = []
