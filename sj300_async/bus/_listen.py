@@ -28,7 +28,7 @@ from ._capture import CaptureFile, LineCapture, open_capture
 from ._dialect import Dialect
 from ._line_connector import AnyConnector, line_connector
 from ._open import make_dialect
-from ._sniffer import LineSniffer, SniffedFrame, Unanswered
+from ._sniffer import LineSniffer, SniffedFrame, SnifferStats, Unanswered
 from ._timing import BusTiming
 from ._url import parse_bus_url
 
@@ -88,7 +88,8 @@ class Sniffing:
         self.connected = asyncio.Event()
 
     @property
-    def stats(self) -> Any:
+    def stats(self) -> SnifferStats:
+        """The sniffer's counters (frames by role, flags by kind, pairs, bytes)."""
         return self.sniffer.stats
 
     async def reports(self) -> AsyncIterator[Report]:

@@ -42,7 +42,14 @@ from ..wire._frames import FrameRole, LineFrame
 from ._dialect import Dialect, LineRequest
 from ._timing import BusTiming
 
-__all__ = ["MAX_INTERRUPTED", "Anomaly", "LineSniffer", "SniffedFrame", "Unanswered"]
+__all__ = [
+    "MAX_INTERRUPTED",
+    "Anomaly",
+    "LineSniffer",
+    "SniffedFrame",
+    "SnifferStats",
+    "Unanswered",
+]
 
 #: Requests interrupted by another master's that keep waiting for their answers; the
 #: oldest is forgotten beyond this (a line of many masters needs no more to be judged).
