@@ -126,6 +126,10 @@ class Arbiter(Generic[RequestT, ReplyT]):
     ) -> None:
         self.link = link
         self.dialect = dialect
+        # Does the protocol let the host answer a reply (rule 7)? Asked once:
+        # SJ300 never does, and the question would cost a call per answer.
+        self._acknowledges = dialect.acknowledges
+        self._answers = dialect.answers
         self._line = line
         self._timing = timing
         self._guard_s = timing.guard(line)
@@ -186,7 +190,7 @@ class Arbiter(Generic[RequestT, ReplyT]):
             self.stats.unsolicited_frames += 1
             _log.debug("unsolicited frame discarded: %s", event)
             return
-        if self.dialect.answers(out.request, event):
+        if self._answers(out.request, event):
             if now >= out.not_before:
                 out.waiter.set_result(event)
             else:
@@ -309,28 +313,105 @@ class Arbiter(Generic[RequestT, ReplyT]):
         """
         # Nothing here costs a successful call more than a few attribute reads:
         # the call's start is taken only with a deadline, else at its first failure.
+        #
+        # Each attempt runs in this coroutine's own frame, not in one of its
+        # own: every resume of a transaction passes through one frame less, and
+        # a call creates one coroutine less (issue 18). Whatever a clean line
+        # never needs (drain, sync, rest, a paused transport) is in _prepare,
+        # which the fast path skips after one test.
+        loop = self._loop
+        link = self.link
+        queue = self.queue
         limit = self._call_deadline
-        start = 0.0 if limit is None else self._loop.time()
+        start = 0.0 if limit is None else loop.time()
         failed: list[SJ300Error] | None = None
         while True:
-            self.link.require()  # fail promptly, before queueing, while the link is down
-            await self.queue.acquire(urgent)
-            try:
-                if limit is not None and self._loop.time() - start >= limit:
+            protocol = link.require()  # fail promptly, before queueing, while the link is down
+            queued = not queue.take()
+            if queued:
+                await queue.acquire(urgent)
+            try:  # the line is ours from here: released in the finally, whatever happens
+                if queued:
+                    protocol = link.require()  # the link may have dropped while we queued
+                now = loop.time()
+                if limit is not None and now - start >= limit:
                     break  # no attempt starts after the call's deadline
-                return await self._attempt(request, stats, wait_s, timeout_s)
+                if (
+                    self._drain_quiet is not None
+                    or self._rest_until > now
+                    or protocol.write_paused
+                    or (self._unsynced and request.node in self._unsynced)
+                ):
+                    protocol = await self._prepare(request, stats, wait_s, timeout_s)
+                    now = loop.time()
+                totals = self.stats.transactions
+                # Only requests that expect an answer have a timing: a known
+                # one needs no other test.
+                timing = self._timings.get((request.frame, wait_s))
+                if timing is None:
+                    if not request.expects_reply:
+                        protocol.write(request.frame)
+                        self._count(stats, totals, "broadcasts")
+                        self._rest_until = loop.time() + self._timing.after_broadcast(
+                            request, self._line
+                        )
+                        return b""
+                    timing = self._request_timing(request, wait_s)
+                timeout = timeout_s if timeout_s else timing[0]
+                waiter: asyncio.Future[ReplyT | None] = loop.create_future()
+                out = _Outstanding(request, waiter, stats, timeout, now + timeout, now + timing[1])
+                self._outstanding = out  # registered before the write: no answer goes unseen
+                if self._deadline_timer is None or self._deadline_due > out.deadline:
+                    self._arm_deadline(out.deadline)
+                answered = acknowledged = False
+                try:
+                    protocol.write(request.frame)
+                    stats.requests += 1
+                    if stats is not totals:
+                        totals.requests += 1
+                    reply = await waiter
+                    if reply is None:  # the deadline passed
+                        self._failed_sent = now
+                        self._missed(request, timeout)  # its reply may still come: rule 9
+                        raise self._no_answer(
+                            out, stats, totals, request.node, request.label, timeout,
+                            ReplyTimeoutError,
+                        )  # fmt: skip
+                    answered = True
+                    # When the answer arrived, not when this task resumed.
+                    totals.record_answer(stats, self._last_rx - now)
+                    try:
+                        data = self.dialect.accept(request, reply)
+                    except NakError as refusal:
+                        stats.naks[refusal.code] += 1
+                        if stats is not totals:
+                            totals.naks[refusal.code] += 1
+                        raise
+                    if self._acknowledges:
+                        ack = self.dialect.acknowledgement(request, reply)
+                        if ack is not None:
+                            acknowledged = await self._acknowledge(protocol, ack)
+                    return data
+                except TransportError:
+                    self._count(stats, totals, "transport_errors")
+                    raise
+                except asyncio.CancelledError:
+                    self._count(stats, totals, "cancelled")
+                    raise
+                finally:
+                    self._finish(out, answered, acknowledged)
             except (ReplyTimeoutError, RemoteProtocolError, NakError) as exc:
                 if failed is None:
                     failed = []
                     if limit is None:
                         # Without a deadline the call counts from its first write.
-                        answered = isinstance(exc, NakError)
-                        start = self._loop.time() if answered else self._failed_sent
+                        refused = isinstance(exc, NakError)
+                        start = loop.time() if refused else self._failed_sent
                 failed.append(exc)
                 if (
                     len(failed) > retries
                     or not self.dialect.retryable(exc)
-                    or (limit is not None and self._loop.time() - start >= limit)
+                    or (limit is not None and loop.time() - start >= limit)
                 ):
                     break
                 stats.retries += 1
@@ -338,8 +419,8 @@ class Arbiter(Generic[RequestT, ReplyT]):
                     self.stats.transactions.retries += 1
                 _log.debug("retry %d of %s: %s", len(failed), request.frame.hex(" "), exc)
             finally:
-                self.queue.release()
-        elapsed = self._loop.time() - start
+                queue.release()
+        elapsed = loop.time() - start
         if failed and not isinstance(failed[-1], ReplyTimeoutError):
             raise failed[-1]  # the drive's NAK, a corrupted answer: as the last attempt got it
         raise self._call_timed_out(request, failed or [], elapsed, limit)
@@ -390,85 +471,37 @@ class Arbiter(Generic[RequestT, ReplyT]):
         """
         await self.transact(request, stats, urgent=urgent)
 
-    async def _attempt(
+    async def _prepare(
         self,
         request: RequestT,
         stats: TransactionStats,
         wait_s: float,
         timeout_s: float | None,
-    ) -> bytes:
+    ) -> LineProtocol[Any]:
+        """Make the line ready for *request*: drained after a failure (rule 5),
+        its node synced (rule 9), rested (rule 2), the transport writable.
+        Return the protocol to write to.
+
+        Raises:
+            ReplyTimeoutError: the node's sync request got no answer.
+            RemoteProtocolError: the sync got only a corrupted frame.
+            TransportError: the link is down or dropped.
+        """
         protocol = self.link.require()
-        loop = self._loop
         if self._drain_quiet is not None:
             await self._drain()
             protocol = self.link.require()
         if self._unsynced and request.expects_reply and request.node in self._unsynced:
             await self._sync(request.node, stats, wait_s, timeout_s)  # rule 9
             protocol = self.link.require()
-        now = loop.time()
+        now = self._loop.time()
         if self._rest_until > now:
             await asyncio.sleep(self._rest_until - now)
             protocol = self.link.require()
-            now = loop.time()
-        if not protocol.writable:
+        if protocol.write_paused:
             await protocol.wait_writable()
             protocol = self.link.require()  # the link may have dropped while we waited
-            now = loop.time()
-        totals = self.stats.transactions
-        if not request.expects_reply:
-            protocol.write(request.frame)
-            self._count(stats, totals, "broadcasts")
-            self._rest_until = loop.time() + self._timing.after_broadcast(request, self._line)
-            return b""
-
-        dialect = self.dialect
-        timeout, floor = self._request_timing(request, wait_s)
-        if timeout_s:
-            timeout = timeout_s
-        waiter: asyncio.Future[ReplyT | None] = loop.create_future()
-        sent = now
-        out = _Outstanding(request, waiter, stats, timeout, sent + timeout, sent + floor)
-        self._outstanding = out  # registered before the write: no answer goes unseen
-        self._arm_deadline(out.deadline)
-        answered = acknowledged = False
-        try:
-            protocol.write(request.frame)
-            stats.requests += 1
-            if stats is not totals:
-                totals.requests += 1
-            reply = await waiter
-            if reply is None:  # the deadline passed
-                self._failed_sent = sent
-                self._missed(request, timeout)  # its reply may still come: rule 9
-                raise self._no_answer(
-                    out, stats, totals, request.node, request.label, timeout, ReplyTimeoutError
-                )
-            answered = True
-            latency = self._last_rx - sent  # when the answer arrived, not when we resumed
-            stats.replies += 1
-            stats.record_latency(latency)
-            if stats is not totals:
-                totals.replies += 1
-                totals.record_latency(latency)
-            try:
-                data = dialect.accept(request, reply)
-            except NakError as refusal:
-                stats.naks[refusal.code] += 1
-                if stats is not totals:
-                    totals.naks[refusal.code] += 1
-                raise
-            ack = dialect.acknowledgement(request, reply)
-            if ack is not None:
-                acknowledged = await self._acknowledge(protocol, ack)
-            return data
-        except TransportError:
-            self._count(stats, totals, "transport_errors")
-            raise
-        except asyncio.CancelledError:
-            self._count(stats, totals, "cancelled")
-            raise
-        finally:
-            self._finish(out, answered, acknowledged)
+        return protocol
 
     def _request_timing(self, request: RequestT, wait_s: float) -> tuple[float, float]:
         """The computed response time-out of *request* with the device waiting *wait_s*,
@@ -540,7 +573,7 @@ class Arbiter(Generic[RequestT, ReplyT]):
             await asyncio.sleep(self._rest_until - now)
             protocol = self.link.require()
             now = loop.time()
-        if not protocol.writable:
+        if protocol.write_paused:
             await protocol.wait_writable()
             protocol = self.link.require()
             now = loop.time()
@@ -584,12 +617,7 @@ class Arbiter(Generic[RequestT, ReplyT]):
                     _SyncMissed,
                 )  # fmt: skip
             del self._unsynced[node]  # in order: whatever was late is behind us
-            latency = self._last_rx - now
-            stats.replies += 1
-            stats.record_latency(latency)
-            if stats is not totals:
-                totals.replies += 1
-                totals.record_latency(latency)
+            totals.record_answer(stats, self._last_rx - now)
             assert reply is not None
             ack = dialect.acknowledgement(sync, reply)
             if ack is not None:

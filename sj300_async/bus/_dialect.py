@@ -202,6 +202,14 @@ class Dialect(Protocol[RequestT, ReplyT]):
     def processing_s(self, request: RequestT) -> float:
         """The device's own processing time for *request*, beyond the wire and wait times."""
 
+    @property
+    def acknowledges(self) -> bool:
+        """Does the host ever answer a good reply (may :meth:`acknowledgement` give bytes)?
+
+        The arbiter asks once, and then asks :meth:`acknowledgement` after
+        every answer only when this is true.
+        """
+
     def acknowledgement(self, request: RequestT, reply: ReplyT) -> bytes | None:
         """Bytes the host sends after a good reply (FR-700 computer ACK), or None."""
 

@@ -157,6 +157,9 @@ class LineProtocol(asyncio.Protocol, Generic[ReplyT]):
         self._loop = asyncio.get_running_loop()
         self._writable = asyncio.Event()
         self._writable.set()
+        #: True while the transport has asked us to pause writing: a plain
+        #: attribute, since the arbiter reads it before every write.
+        self.write_paused = False
         #: Set when the transport hands itself over (some transports, like
         #: pyserial-asyncio's, do so a loop iteration after they are created).
         self.made: asyncio.Future[None] = self._loop.create_future()
@@ -183,21 +186,29 @@ class LineProtocol(asyncio.Protocol, Generic[ReplyT]):
         events = self._parser.feed(data) if data else []
         if self.trace is not None:
             self.trace(TraceRecord(now, "rx", arrived, tuple(events)))
+        listener = self._listener
         for event in events:
-            self._account(event)
-            self._listener.event_received(event, now)
+            # _account's test written out for the commonest event, a good frame.
+            if type(event) is Discarded or type(event) is BadFrame:
+                self._account(event)
+            elif _log.isEnabledFor(logging.DEBUG):
+                _log.debug("rx %s", event)
+            listener.event_received(event, now)
 
     def connection_lost(self, exc: Exception | None) -> None:
         self._transport = None
+        self.write_paused = False
         self._writable.set()
         if not self.lost.done():
             self.lost.set_result(exc)
         self._listener.connection_lost(exc)
 
     def pause_writing(self) -> None:
+        self.write_paused = True
         self._writable.clear()
 
     def resume_writing(self) -> None:
+        self.write_paused = False
         self._writable.set()
 
     # -- for the arbiter --------------------------------------------------------
@@ -221,11 +232,6 @@ class LineProtocol(asyncio.Protocol, Generic[ReplyT]):
             _log.debug("tx %s", frame.hex(" "))
         self._stats.bytes_written += len(frame)
         self._transport.write(frame)
-
-    @property
-    def writable(self) -> bool:
-        """False while the transport has asked us to pause writing."""
-        return self._writable.is_set()
 
     async def wait_writable(self) -> None:
         """Return when the transport's write buffer is below its high-water mark."""

@@ -241,6 +241,10 @@ class Fr700Dialect:
             check = CHECK_TIME_S
         return self.options.wait_s + check
 
+    @property
+    def acknowledges(self) -> bool:
+        return self.send_ack
+
     def acknowledgement(self, request: Fr700Request, reply: Fr700Reply) -> bytes | None:
         if self.send_ack and isinstance(reply, Fr700Data):
             return encode_host_ack(request.station, self.options.terminator)

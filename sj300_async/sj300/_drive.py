@@ -137,6 +137,9 @@ class Drive(_Commands):
             raise LocalProtocolError(f"node must be 1..32, got {node!r}")
         self._channel = channel
         self._node = node
+        # The two reads a poll repeats, built once: no builder call per poll.
+        self._status_request = rq.read_status(node)
+        self._monitor_request = rq.read_monitor(node)
         self.stats = TransactionStats()
         self.wait_time_s = wait_time_s
         self.timeout_s: float | None = None
@@ -169,11 +172,11 @@ class Drive(_Commands):
             TransportError: the link is down, or a write failed.
         """
         # The reply parser has checked every character: decode without checking again.
-        return _decode_status(await self._data(rq.read_status(self._node)))
+        return _decode_status(await self._data(self._status_request))
 
     async def read_monitor(self) -> MonitorData:
         """Command 03: the monitor block. Raises as :meth:`read_status`."""
-        return _decode_monitor(await self._data(rq.read_monitor(self._node)))
+        return _decode_monitor(await self._data(self._monitor_request))
 
     async def read_trip_history(self) -> TripHistory:
         """Command 05: trip count and the six latest trips. Raises as :meth:`read_status`."""

@@ -19,7 +19,9 @@ the first starts where the last chunk left off, the others HUNTING. A piece
 that is a whole frame on its own (STX, no other STX, at most ``max_body``
 bytes) is decoded at once, and one that continues the partial frame without
 an STX is appended to it; either is exactly what the machine would do. Any
-other piece runs through the machine.
+other piece runs through the machine. A chunk that is exactly one whole
+frame, the commonest on a fast line, skips even the split, and so does a
+chunk inside a frame that neither ends it nor starts another.
 """
 
 from __future__ import annotations
@@ -103,8 +105,26 @@ class FrameSplitter(Generic[FrameT]):
         """Consume a chunk; return the events it completed (possibly none)."""
         if type(data) is not bytes:
             data = bytes(data)
-        events: list[FrameT | BadFrame | Discarded] = []
         partial = self._partial
+        if partial is None:
+            # The commonest chunk on a TCP bridge or a fast line: one whole frame
+            # and nothing else (its only CR last, an STX first and nowhere else).
+            # Decoded here, without splitting: 98 -> 40 bytecodes a reply.
+            # (`in` with an int: far cheaper than a method call such as find.)
+            if data and data[-1] == _CR and data[0] == _STX:
+                whole = data[1:-1]
+                if _CR not in whole and _STX not in whole and len(whole) <= self.max_body:
+                    self.stats.frames += 1
+                    return [self._decode_body(whole)]
+        elif _CR not in data and _STX not in data:
+            # More of a frame and not its end (a slow line's or a USB adapter's
+            # chunk): the frame grows, if not past the longest legal one.
+            partial += data
+            if len(partial) <= self.max_body:
+                self._partial = partial
+                return []
+            partial = self._partial
+        events: list[FrameT | BadFrame | Discarded] = []
         max_body = self.max_body
         # The shortcut of the module docstring, up to the first piece that needs
         # the machine: the machine takes the rest of the chunk from there (so

@@ -8,11 +8,23 @@ counted and discarded while the wait goes on.
 
 from __future__ import annotations
 
-from ._commands import ReplyKind
+from ._commands import COMMAND_SPECS, Command, ReplyKind
 from ._events import AckDataReply, AckReply, DataReply, NakReply, Reply
 from ._requests import Request
 
 __all__ = ["answers"]
+
+_KINDS: dict[ReplyKind, type[Reply]] = {
+    ReplyKind.ACK: AckReply,
+    ReplyKind.ACK_DATA: AckDataReply,
+    ReplyKind.DATA: DataReply,
+}
+#: Each command's positive answer: its reply class (exact: the parser makes no
+#: subclasses) and its data length (0 for a bare ACK). Looked up once per
+#: frame, where the command's spec would take a property call and two tests.
+_SHAPES: dict[Command, tuple[type[Reply], int]] = {
+    command: (_KINDS[spec.reply], spec.reply_length) for command, spec in COMMAND_SPECS.items()
+}
 
 
 def answers(request: Request, reply: Reply) -> bool:
@@ -22,11 +34,10 @@ def answers(request: Request, reply: Reply) -> bool:
     """
     if reply.node != request.node:
         return False
-    if isinstance(reply, NakReply):
+    kind = type(reply)
+    if kind is NakReply:
         return True
-    spec = request.command.spec
-    if spec.reply is ReplyKind.ACK:
-        return isinstance(reply, AckReply)
-    if spec.reply is ReplyKind.ACK_DATA:
-        return isinstance(reply, AckDataReply) and len(reply.data) == spec.reply_length
-    return isinstance(reply, DataReply) and len(reply.data) == spec.reply_length
+    shape, length = _SHAPES[request.command]
+    if kind is not shape:
+        return False
+    return kind is AckReply or len(reply.data) == length  # type: ignore[union-attr]

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import sj300_async as sj
 from sj300_async.bus import TraceRecord
-from sj300_async.bus._stats import LATENCY_BUCKETS_S, BusTransactionStats
+from sj300_async.bus._stats import LATENCY_BUCKETS_S, BusTransactionStats, TransactionStats
 
 
 async def test_bytes_and_latencies_are_counted_as_they_crossed_the_line() -> None:
@@ -35,3 +35,19 @@ def test_the_histogram_puts_each_round_trip_in_its_bucket() -> None:
     assert counts[5.0] == 2
     assert counts[float("inf")] == 1
     assert stats.latency_max_s == 60.0
+
+
+def test_an_answer_is_counted_in_the_totals_and_in_the_drive_once_each() -> None:
+    totals, drive = BusTransactionStats(), TransactionStats()
+    totals.record_answer(drive, 0.004)
+    totals.record_answer(drive, 0.002)
+    for stats in (totals, drive):
+        assert stats.replies == 2
+        assert (stats.latency_min_s, stats.latency_max_s) == (0.002, 0.004)
+        assert stats.latency_sum_s == 0.006
+    assert sum(totals.latency_counts) == 2
+    # A call made with the totals as its own counters counts once, not twice.
+    totals.record_answer(totals, 0.003)
+    assert totals.replies == 3
+    assert sum(totals.latency_counts) == 3
+    assert drive.replies == 2

@@ -15,6 +15,7 @@ import re
 
 import pytest
 from toyproto import TOY_DIALECT, ToyRequest
+from waiting import wait_for
 
 import sj300_async as sj
 from sj300_async import fr700 as fr
@@ -178,6 +179,31 @@ async def test_a_dropped_link_is_still_a_transport_error(scripted: MakeRig) -> N
             await in_flight
         assert type(info.value) is sj.TransportError
         assert "connection lost" in str(info.value)
+
+
+async def test_a_request_queued_when_the_link_drops_fails_and_frees_the_line(
+    scripted: MakeRig,
+) -> None:
+    # Node 1 never answers; node 2's request waits behind it for the line. The
+    # link drops: both fail at once, and once it is back the line is free (a
+    # line held by a failed queued request would starve every later call).
+    def respond(request: sj3.Request) -> Frames:
+        return [] if request.node == 1 else answer_all(request)
+
+    # (The line is drained after the failure: as long as the 0.5 s time-out.)
+    async with scripted(respond, timing=sj.BusTiming(fixed_timeout_s=0.5)) as rig:
+        bus = rig.bus
+        in_flight = asyncio.create_task(bus.drive(1).read_status())
+        queued = asyncio.create_task(bus.drive(2).read_status())
+        await wait_for(lambda: rig.peer.requests, "node 1's request on the line")
+        await wait_for(lambda: bus._arbiter.queue.waiting == 1, "node 2's request queued")
+        bus.link.drop()
+        for task in (in_flight, queued):
+            with pytest.raises(sj.TransportError):
+                await task
+        assert not bus._arbiter.queue.busy
+        await wait_for(lambda: bus.link.connected, "the link back")
+        assert isinstance(await bus.drive(2).read_status(), sj.InverterStatus)
 
 
 async def test_the_drain_warning_says_what_it_waited_for(

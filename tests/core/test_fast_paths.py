@@ -286,6 +286,31 @@ def test_feed_equals_the_state_machine_byte_by_byte(parts: list[bytes]) -> None:
 
 
 @PROPERTY
+@given(stream_parts)
+def test_feed_equals_the_state_machine_part_by_part(parts: list[bytes]) -> None:
+    # Each part its own chunk: whole frames alone in a chunk (the shortcut
+    # for one whole frame), bodies of 444 and 445 bytes around the longest
+    # legal one, frames with an STX inside, and all of these after a partial
+    # frame or noise.
+    run_both(ReplyParser(), MachineOnlyReplyParser(), parts)
+
+
+def test_a_chunk_of_one_whole_frame_is_one_event() -> None:
+    frame = encode_reply(AckReply(7))
+    parser = ReplyParser()
+    assert parser.feed(frame) == [AckReply(7)]
+    assert parser.feed(bytearray(frame)) == [AckReply(7)]
+    assert parser.stats.frames == 2
+    assert parser.buffered == 0
+    # The same bytes after a partial frame end that frame instead.
+    assert parser.feed(STX + b"07") == []
+    events = parser.feed(frame)
+    assert len(events) == 2
+    assert isinstance(events[0], Discarded)
+    assert events[1] == AckReply(7)
+
+
+@PROPERTY
 @given(
     st.lists(
         st.one_of(

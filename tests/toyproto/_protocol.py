@@ -239,6 +239,8 @@ class ToyDialect:
     def processing_s(self, request: ToyRequest) -> float:
         return 0.0
 
+    acknowledges = False
+
     def acknowledgement(self, request: ToyRequest, reply: ToyReply) -> bytes | None:
         return None
 
