@@ -131,36 +131,33 @@ class ReplyParser(FrameSplitter[Reply]):
         super().__init__(MAX_REPLY_BODY)
 
     def _decode_body(self, body: bytes) -> Reply | BadFrame:
+        # Fast paths for a valid reply, with the checks of _decode_general in
+        # their cheapest form (bytes.isdigit() is ASCII-only): they return only
+        # what _decode_general would return for the same body, and leave
+        # everything else (negative values, any defect) to it.
+        #
         # A poll gets the same short replies over and over (a drive's status, the
         # ACK of a write, a parameter that does not change): each short body is
         # decoded once and its frozen reply shared. Bounded, and only bodies of up
         # to 13 characters (a monitor block or a trip history varies, and hashing
         # it costs more than it saves); a bad frame is never kept (it is counted
         # each time it comes).
-        if len(body) <= _CACHED_BODY_MAX:
+        n = len(body)
+        if n <= _CACHED_BODY_MAX:
             known = _SHORT_REPLIES.get(body)
             if known is not None:
                 return known
-            event = self._decode_fresh(body)
+            event = self._decode_short(body)
             if not isinstance(event, BadFrame):
                 if len(_SHORT_REPLIES) >= _SHORT_REPLIES_KEPT:
                     _SHORT_REPLIES.clear()
                 _SHORT_REPLIES[body] = event
             return event
-        return self._decode_fresh(body)
-
-    def _decode_fresh(self, body: bytes) -> Reply | BadFrame:
-        # Fast path for a valid reply, with the checks of _decode_general in
-        # their cheapest form (bytes.isdigit() is ASCII-only): it returns only
-        # what _decode_general would return for the same body, and leaves
-        # everything else (negative values, any defect) to it.
-        n = len(body)
-        expected = _WHOLE_BODY_XOR.get(body[-2:])
+        # A monitor block or a trip history: decoded here, not in a method of
+        # its own (a call less on a third of a poll's replies).
         node = _NODES.get(body[:2])
-        if n not in _REPLY_BODY_LENGTHS or node is None:  # (expected: see below)
-            return self._decode_general(body)
-        if xor_bytes(body) != expected:  # (also when the BCC is not hex: expected is None)
-            return self._decode_general(body)
+        if node is None or xor_bytes(body) != _WHOLE_BODY_XOR.get(body[-2:]):
+            return self._decode_general(body)  # (also when the BCC is not hex)
         if n == _MONITOR_BODY_LEN:
             # Items 1-4 and 7-13 all digits (no minus sign), items 5-6 hex.
             if (
@@ -172,7 +169,24 @@ class ReplyParser(FrameSplitter[Reply]):
                 _set_data_node(reply, node)
                 _set_data_data(reply, body[2:106])
                 return reply
-        elif n == _STATUS_BODY_LEN or n == _TRIP_HISTORY_BODY_LEN:  # noqa: SIM109 (no tuple)
+        elif n == _TRIP_HISTORY_BODY_LEN:
+            data = body[2:-2]
+            if data.isdigit():
+                reply = _new(DataReply)
+                _set_data_node(reply, node)
+                _set_data_data(reply, data)
+                return reply
+        return self._decode_general(body)
+
+    def _decode_short(self, body: bytes) -> Reply | BadFrame:
+        """A body of up to 13 characters (ACK, NAK, status, parameter), not seen lately."""
+        n = len(body)
+        node = _NODES.get(body[:2])
+        if node is None or n not in _REPLY_BODY_LENGTHS:
+            return self._decode_general(body)
+        if xor_bytes(body) != _WHOLE_BODY_XOR.get(body[-2:]):
+            return self._decode_general(body)  # (also when the BCC is not hex)
+        if n == _STATUS_BODY_LEN:
             data = body[2:-2]
             if data.isdigit():  # (an ACK or NAK marker is not a digit)
                 reply = _new(DataReply)
