@@ -42,8 +42,8 @@ from ._framing import FrameSplitter
 __all__ = ["DATA_PATTERNS", "DECIMAL_FIELD", "ReplyParser", "parse_bcc", "parse_node"]
 
 #: Short reply bodies decoded once and shared (see ReplyParser._decode_body): the
-#: longest body kept (a parameter reply: node, ACK, 8 digits, BCC) and how many.
-_CACHED_BODY_MAX: Final = 13
+#: longest body kept (a status reply: node, 8 digits, BCC) and how many.
+_CACHED_BODY_MAX: Final = 12
 _SHORT_REPLIES_KEPT: Final = 1024
 _SHORT_REPLIES: Final[dict[bytes, Reply]] = {}
 
@@ -137,11 +137,16 @@ class ReplyParser(FrameSplitter[Reply]):
         # everything else (negative values, any defect) to it.
         #
         # A poll gets the same short replies over and over (a drive's status, the
-        # ACK of a write, a parameter that does not change): each short body is
-        # decoded once and its frozen reply shared. Bounded, and only bodies of up
-        # to 13 characters (a monitor block or a trip history varies, and hashing
-        # it costs more than it saves); a bad frame is never kept (it is counted
-        # each time it comes).
+        # ACK of a write, a NAK): each such body is decoded once and its frozen
+        # reply shared. Only bodies of up to 12 characters, whose values are
+        # few (32 nodes; a status is one of a few hundred combinations), so in
+        # a steady poll the table fills once and stays. A parameter value (13)
+        # has 10^8 of them: a stream of changing values would empty the table
+        # over and over, evicting the statuses with it (the codec benchmark's
+        # random values did: 1,127 of 20,000 statuses, ACKs and NAKs missed).
+        # A monitor block or a trip history varies, and hashing it costs more
+        # than it saves. Bounded all the same; a bad frame is never kept (it
+        # is counted each time it comes).
         n = len(body)
         if n <= _CACHED_BODY_MAX:
             known = _SHORT_REPLIES.get(body)
@@ -153,6 +158,8 @@ class ReplyParser(FrameSplitter[Reply]):
                     _SHORT_REPLIES.clear()
                 _SHORT_REPLIES[body] = event
             return event
+        if n == _PARAMETER_BODY_LEN:
+            return self._decode_short(body)
         # A monitor block or a trip history: decoded here, not in a method of
         # its own (a call less on a third of a poll's replies).
         node = _NODES.get(body[:2])
@@ -179,7 +186,7 @@ class ReplyParser(FrameSplitter[Reply]):
         return self._decode_general(body)
 
     def _decode_short(self, body: bytes) -> Reply | BadFrame:
-        """A body of up to 13 characters (ACK, NAK, status, parameter), not seen lately."""
+        """A body of up to 13 characters (ACK, NAK, status, parameter), not in the table."""
         n = len(body)
         node = _NODES.get(body[:2])
         if node is None or n not in _REPLY_BODY_LENGTHS:

@@ -13,7 +13,16 @@ from operator import xor
 import pytest
 
 from sj300_async import NakCode
-from sj300_async.sj300 import AckDataReply, AckReply, DataReply, NakReply, ParserEvent, ReplyParser
+from sj300_async.sj300 import (
+    AckDataReply,
+    AckReply,
+    DataReply,
+    NakReply,
+    ParserEvent,
+    ReplyParser,
+    _parser,
+    encode_reply,
+)
 from sj300_async.wire import BadFrame, BadFrameReason, Discarded, DiscardReason
 
 STX = b"\x02"
@@ -498,3 +507,23 @@ def test_reset_reports_the_partial_frame() -> None:
     assert b"01" + ACK in event.data
     assert parser.buffered == 0
     assert parser.feed(frame(b"01" + ACK)) == [AckReply(1)]
+
+
+def test_short_replies_are_decoded_once_and_shared_parameter_values_are_not_kept() -> None:
+    status = encode_reply(DataReply(5, b"00030103"))
+    ack = encode_reply(AckReply(5))
+    parameter = encode_reply(AckDataReply(5, b"00001234"))
+    first, second = ReplyParser(), ReplyParser()
+    for frame in (status, ack):
+        (a,) = first.feed(frame)
+        (b,) = second.feed(frame)
+        assert a is b  # one frozen object for every parser
+    (a,) = first.feed(parameter)
+    (b,) = second.feed(parameter)
+    assert a == b == AckDataReply(5, b"00001234")
+    assert parameter[1:-1] not in _parser._SHORT_REPLIES
+    # A stream of ever-new parameter values leaves the table as it was.
+    kept = dict(_parser._SHORT_REPLIES)
+    for value in range(3 * _parser._SHORT_REPLIES_KEPT):
+        first.feed(encode_reply(AckDataReply(5, b"%08d" % value)))
+    assert kept == _parser._SHORT_REPLIES
