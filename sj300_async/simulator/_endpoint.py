@@ -9,8 +9,15 @@ it their write function.
 Without pacing, host bytes reach the bus at once and each reply is sent
 after its delay. With pacing (a :class:`PacedLine`), host bytes reach the
 bus when their last character has crossed the line, and replies are
-delivered a few characters at a time, never before those characters'
-wire time has passed.
+delivered a few characters at a time (or one at a time: the line's
+``group_s``), never before those characters' wire time has passed.
+
+Each delivery has a timer at its absolute time (``call_at``: a late timer
+does not make the next one later). A timer that fires late finds later
+deliveries due as well, and sends everything due by then, consecutive
+bytes in one call: as a UART hands over every character whose stop bit has
+ended, and one write for a loop that woke late instead of one per character.
+Nothing goes out before its time.
 
 All deliveries go through one queue ordered by (time, sequence), so two
 deliveries due at the same instant keep their order: the event loop's
@@ -157,15 +164,29 @@ class SimulatorEndpoint:
         def fire() -> None:
             assert timer is not None
             self._timers.discard(timer)
-            self._run_due(when)
+            # A loop that wakes late finds later deliveries due as well: they
+            # go now, with this one.
+            self._run_due(max(when, loop.time()))
 
         timer = loop.call_at(when, fire)
         self._timers.add(timer)
 
     def _run_due(self, until: float) -> None:
-        # Everything due by this timer's time, in (time, sequence) order; a job
-        # whose own timer has not fired yet but is due goes now, its timer finds
-        # nothing left to do.
+        # Everything due by *until* (never later than now), in (time, sequence)
+        # order; a job whose own timer has not fired yet but is due goes now, its
+        # timer finds nothing left to do. Consecutive sends go out as one: a
+        # UART hands over every character whose stop bit has ended, and a
+        # paced line that delivers one character at a time (or a loop that
+        # woke late) would otherwise cost a write for each.
+        batch: list[bytes] = []
         while self._queue and self._queue[0][0] <= until and not self._closed:
             _when, _seq, job = heapq.heappop(self._queue)
+            if isinstance(job, functools.partial) and job.func == self._send:
+                batch.append(job.args[0])
+                continue
+            if batch:
+                self._send(b"".join(batch))
+                batch.clear()
             job()
+        if batch and not self._closed:
+            self._send(b"".join(batch))

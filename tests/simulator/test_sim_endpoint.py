@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import asyncio
+import time
 
 import pytest
 
@@ -144,6 +145,46 @@ async def test_pacing_holds_every_byte_for_its_wire_time() -> None:
     assert len(host.chunks) > 1  # delivered a few characters at a time
     # and not much later than the physical limit
     assert host.chunks[-1][0] - written_at < (len(req) + len(expected)) * char + 0.05
+    ep.close()
+
+
+async def test_single_characters_each_at_its_stop_bit() -> None:
+    pacing = LinePacing(1200, 8, "N", 1)  # 8.33 ms a character
+    char = pacing.char_time_s
+    host = Host()
+    bus = SimulatedBus(nodes=[1])
+    ep = SimulatorEndpoint(bus, send=host.send, line=PacedLine(pacing, group_s=0.0))
+    written_at = asyncio.get_running_loop().time()
+    req = request(b"01", b"04")
+    expected = data_reply(b"01", b"02000100")
+    ep.data_received(req)
+    assert await host.wait_for(len(expected)) == expected
+    first_byte_start = written_at + len(req) * char + bus.drives[1].reply_delay_s
+    delivered = 0
+    for at, chunk in host.chunks:
+        delivered += len(chunk)
+        assert at >= first_byte_start + delivered * char - 1e-6  # never early
+    assert len(host.chunks) > len(expected) // 2  # (a loaded loop may merge a few)
+    ep.close()
+
+
+async def test_characters_due_together_go_out_in_one_send() -> None:
+    pacing = LinePacing(1200, 8, "N", 1)
+    char = pacing.char_time_s
+    host = Host()
+    bus = SimulatedBus(nodes=[1])
+    ep = SimulatorEndpoint(bus, send=host.send, line=PacedLine(pacing, group_s=0.0))
+    written_at = asyncio.get_running_loop().time()
+    req = request(b"01", b"04")
+    expected = data_reply(b"01", b"02000100")
+    ep.data_received(req)
+    # The loop wakes late: blocked (on purpose, not waiting for anything) until
+    # the whole reply has crossed the line. Every character is then due at once.
+    reply_end = written_at + (len(req) + len(expected)) * char + bus.drives[1].reply_delay_s
+    time.sleep(max(0.0, reply_end - asyncio.get_running_loop().time()) + 0.01)
+    assert await host.wait_for(len(expected)) == expected
+    assert len(host.chunks) == 1
+    assert host.chunks[0][0] >= reply_end
     ep.close()
 
 
