@@ -29,7 +29,14 @@ reply of the protocol, so that the clients' stacks are all that differs:
 drives 1..N (C078 = 0, the default 1 ms processing) on a pseudo-terminal
 paced at B baud 8N1, on :func:`~sj300_async.simulator.precise_event_loop`
 (see there why a paced line needs it) with ``spin=True``, and prints
-``path /dev/pts/M``: the wire benchmark's line. It keeps one CPU busy.
+``path /dev/pts/M``: the wire benchmark's line. It keeps one CPU busy. The
+line hands each reply character over on its own, when its stop bit ends
+(``PacedLine(group_s=0)``), as a UART does: the default groups of 4 ms
+(7 characters at 19200 baud) would hold every character of a group but the
+last back for up to 6 character times, and wake the host once per group
+instead of once per character (see ``DEFAULT_GROUP_S`` in
+``sj300_async/simulator/_pacing.py``). Characters that fall due together (a
+late wake-up) go out in one write.
 
 - ``sj300``: :func:`sj300_async.simulator.serve_tcp` over a
   :class:`~sj300_async.simulator.SimulatedBus` with one drive whose
@@ -214,7 +221,9 @@ async def _serve_sj300_pty(baudrate: int, drives: int) -> None:
     from sj300_async.simulator.sj300 import SimulatedBus
 
     bus = SimulatedBus(nodes=range(1, drives + 1), wait_ms=0)
-    server = await open_pty_server(bus, line=PacedLine(LineSettings(baudrate)))
+    # One character at a time, at the end of its stop bit: a UART (see above).
+    line = PacedLine(LineSettings(baudrate), group_s=0.0)
+    server = await open_pty_server(bus, line=line)
     print(f"path {server.path}", flush=True)
     try:
         await _stdin_closed()

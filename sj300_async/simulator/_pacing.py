@@ -19,7 +19,12 @@ from ..wire._line import LineSettings
 __all__ = ["PLAUSIBLE_PACING", "LinePacing", "PacedLine", "PlausibleLine", "server_line"]
 
 #: A paced reply is handed over in groups of characters about this long, so a
-#: 446-byte trip history does not need 446 timers; no byte is ever early.
+#: 446-byte trip history does not need 446 timers; no byte is ever early, but
+#: each one of a group but the last is late by up to a group's time, and a
+#: host reads once per group. A line that stands in for a UART whose timing is
+#: measured (the wire benchmark's) uses ``group_s=0``: each character is handed
+#: over when its stop bit ends, and characters that fall due together (a late
+#: wake-up) go out in one write (``SimulatorEndpoint``).
 DEFAULT_GROUP_S: Final = 0.004
 #: The shortest reply a host's plausibility floor may count on, in characters:
 #: an SJ300 NAK (9), longer than any other shortest reply (an SJ300 ACK is 7,
