@@ -60,7 +60,11 @@ drive's ``read_status``, ``read_monitor`` and ``read_parameter``.
 Results go to callbacks (:meth:`Poller.on_sample`) and to any number of
 async iterators (:meth:`Poller.samples`). An iterator whose consumer falls
 behind holds at most ``buffer`` samples; older ones are dropped and counted
-in :attr:`Poller.dropped_samples` — never silently.
+in :attr:`Poller.dropped_samples` — never silently. A drive's sample is
+published once the next drive's request is on the line (the cycle's last one
+at the cycle's end), so that the line does not wait for the callbacks; with
+``callback_errors="raise"``, at once. Its drive's health is up to date
+before.
 """
 
 from __future__ import annotations
@@ -157,6 +161,24 @@ class BusPollStats:
         return self.total_cycle_s / self.cycles if self.cycles else None
 
 
+#: A drive's poll, done and not yet published: the fields of its :class:`Sample`
+#: but the bus (node, timestamp, online, status, monitor, parameters, error,
+#: latency_s, answered, started). A tuple: it is built on the line's critical
+#: path, between a reply and the next request, where a class costs more.
+_Poll = tuple[
+    int,
+    float,
+    bool,
+    InverterStatus | Fr700Status | None,
+    MonitorData | Fr700Monitor | None,
+    dict[str, float],
+    str | None,
+    float | None,
+    bool,
+    float,
+]
+
+
 @dataclass(slots=True)
 class _Target:
     bus: Bus[Any]
@@ -167,6 +189,10 @@ class _Target:
     health: dict[int, DriveHealth] = field(default_factory=dict)
     #: The probes' transaction counters (they go through no drive object).
     probe_stats: TransactionStats = field(default_factory=TransactionStats)
+    #: The drive objects of ``nodes`` (``bus.drive(node)``, looked up once).
+    drives: dict[int, Any] = field(default_factory=dict)
+    #: Polls done and not yet published (see ``Poller._poll_bus``).
+    unpublished: list[_Poll] = field(default_factory=list)
 
 
 _END: Final = object()
@@ -255,8 +281,7 @@ class Poller:
     def add(self, bus: Bus[Any], nodes: Iterable[int]) -> None:
         """Poll *nodes* on *bus* (may be called while running: the bus starts at once)."""
         nodes = sorted(set(nodes))
-        for node in nodes:
-            bus.drive(node)  # validates the node number
+        drives = {node: bus.drive(node) for node in nodes}  # validates the node numbers
         target = self._targets.get(id(bus))
         if target is None:
             own = tuple(p for p in self.parameters if bus.dialect.parameter_code(p) == p)
@@ -268,6 +293,7 @@ class Poller:
             if node not in target.nodes:
                 target.nodes.append(node)
                 target.health[node] = DriveHealth()
+                target.drives[node] = drives[node]
         target.nodes.sort()
 
     def on_sample(self, callback: Callable[[Sample], None]) -> Callable[[], None]:
@@ -321,10 +347,14 @@ class Poller:
         task_group, self._task_group = self._task_group, None
         if task_group is not None:
             task_group.cancel_scope.cancel()
-        for queue in self._queues:
-            _put_dropping(queue, _END)
-        if stack is not None:
-            await stack.aclose()
+        try:
+            if stack is not None:
+                await stack.aclose()
+        finally:
+            # Last: a polling task publishes what it has polled as it ends
+            # (see _poll_bus), and no sample may follow the end.
+            for queue in self._queues:
+                _put_dropping(queue, _END)
 
     async def samples(self) -> AsyncGenerator[Sample, None]:
         """Yield samples as they are polled, until the poller stops."""
@@ -346,18 +376,39 @@ class Poller:
         # The loop's clock, read directly: it is what anyio.current_time()
         # returns on asyncio (the only backend the buses run on), without
         # the backend lookup on each of the several reads per poll.
-        clock = asyncio.get_running_loop().time
+        loop = asyncio.get_running_loop()
+        clock = loop.time
         # This task's reads make at most 1 + self.retries attempts: set once for
         # the task's life (a block per drive poll cost 2 µs of every poll).
         cap_retries(self.retries)
+        reads = self.reads + target.parameters
+        # A poll's sample is published once the next drive's first request is on
+        # the line, from a loop callback, not between the reply and the next
+        # request: on a line polled back to back, that is the one stretch where
+        # the host's work costs line time (issue 18: building and publishing a
+        # sample took about 20 µs of it on the wire benchmark's just-woken host).
+        # The callback is scheduled in this task's step, so the loop runs it
+        # before this task can resume, whatever resumes it (a reply, an error,
+        # a cancellation): a stopped poller has published every poll it
+        # finished before ``__aexit__`` ends the iterators. The cycle's last
+        # sample goes out at the cycle's end, before the statistics count it.
+        # With callback_errors="raise" samples go out at once, so that a failing
+        # callback stops the poller before its next request.
+        defer = self.callback_errors == "log"
         while True:
             start = clock()
             for node in list(target.nodes):
                 health = target.health.get(node)
                 if health is None or not health.online:
                     continue  # offline drives: probed below
-                sample, _ = await self._poll_drive(target, node, health, clock)
-                self._publish(target, sample)
+                poll, _ = await self._poll_drive(target, node, health, reads, clock)
+                if not defer:
+                    self._publish(target, poll)
+                    continue
+                target.unpublished.append(poll)
+                if len(target.unpublished) == 1:  # else one is on its way
+                    loop.call_soon(self._publish_polled, target)
+            self._publish_polled(target)
             # Offline drives due for a probe, longest-waiting first: at most one
             # unanswered probe per cycle (an answered one lets the next go).
             now = clock()
@@ -367,8 +418,9 @@ class Poller:
                 if not h.online and now >= h.next_probe and node in target.nodes
             )
             for _, node in due:
-                sample, answered = await self._poll_drive(target, node, target.health[node], clock)
-                self._publish(target, sample)
+                health = target.health[node]
+                poll, answered = await self._poll_drive(target, node, health, reads, clock)
+                self._publish(target, poll)
                 if not answered:
                     break
             elapsed = clock() - start
@@ -381,10 +433,18 @@ class Poller:
             await anyio.sleep(max(0.0, self.interval_s - elapsed))
 
     async def _poll_drive(
-        self, target: _Target, node: int, health: DriveHealth, clock: Callable[[], float]
-    ) -> tuple[Sample, bool]:
-        """Poll one drive (probing it first if its last poll failed); (sample, answered)."""
-        drive = target.bus.drive(node)
+        self,
+        target: _Target,
+        node: int,
+        health: DriveHealth,
+        reads: tuple[str, ...],
+        clock: Callable[[], float],
+    ) -> tuple[_Poll, bool]:
+        """Poll one drive (probing it first if its last poll failed); (poll, answered).
+
+        The drive's health is up to date on return; the poll is not published.
+        """
+        drive = target.drives[node]
         started = clock()
         status: InverterStatus | Fr700Status | None = None
         monitor: MonitorData | Fr700Monitor | None = None
@@ -397,7 +457,7 @@ class Poller:
             error = await self._probe(target, node, health, drive)
             answered = error is None
         if error is None:  # (retries capped for this task in _poll_bus)
-            for read in self.reads + target.parameters:
+            for read in reads:
                 begin = clock()
                 try:
                     if read == "status":
@@ -416,20 +476,10 @@ class Poller:
                 health.answered = True
         now = clock()
         self._update_health(target, node, health, error, now)
-        sample = Sample(
-            bus=target.bus.description,
-            node=node,
-            timestamp=now,
-            online=health.online,
-            status=status,
-            monitor=monitor,
-            parameters=parameters,
-            error=error,
-            latency_s=spent / ok_reads if ok_reads else None,
-            answered=health.answered,
-            started=started,
-        )
-        return sample, answered
+        latency_s = spent / ok_reads if ok_reads else None
+        poll = (node, now, health.online, status, monitor, parameters, error, latency_s,
+                health.answered, started)  # fmt: skip
+        return poll, answered
 
     async def _probe(
         self, target: _Target, node: int, health: DriveHealth, drive: Any
@@ -478,7 +528,27 @@ class Poller:
         if not health.online:
             health.next_probe = now + self.offline_probe_interval_s
 
-    def _publish(self, target: _Target, sample: Sample) -> None:
+    def _publish_polled(self, target: _Target) -> None:
+        """Publish the polls *target*'s task has done and not published yet, in order."""
+        unpublished = target.unpublished
+        while unpublished:
+            self._publish(target, unpublished.pop(0))
+
+    def _publish(self, target: _Target, poll: _Poll) -> None:
+        node, now, online, status, monitor, parameters, error, latency_s, answered, started = poll
+        sample = Sample(
+            bus=target.bus.description,
+            node=node,
+            timestamp=now,
+            online=online,
+            status=status,
+            monitor=monitor,
+            parameters=parameters,
+            error=error,
+            latency_s=latency_s,
+            answered=answered,
+            started=started,
+        )
         for callback in list(self._callbacks):
             try:
                 callback(sample)
