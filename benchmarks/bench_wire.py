@@ -257,8 +257,8 @@ def _notes(runs: list[list[Cycle]], config: Config) -> tuple[str, ...]:
         f"{first.transactions} transactions (8-byte requests, 14- and 110-byte replies). "
         f"The cycle is the best of {CYCLES} of the poller's own `BusPollStats.last_cycle_s`, "
         "each on a fresh bus without a trace, as a user polls; the breakdown comes from one "
-        "more cycle on a bus that traces every frame (the trace re-encodes each reply for its "
-        "record, which costs time of its own: the traced cycle is longer).",
+        "more cycle on a bus that traces every frame (building a record per chunk costs time "
+        "of its own: the traced cycle can be longer).",
         "",
         "| line | cycle ms | traced cycle ms | wire ms | processing ms "
         f"| guard ms ({_GUARD_CHARS:g} chars) | host turnaround beyond guard ms "
