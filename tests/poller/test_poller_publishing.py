@@ -74,19 +74,27 @@ async def test_stopping_loses_no_sample_and_none_follows_the_end() -> None:
         await _stop_after(stop_after)
 
 
+def _watch(
+    poller: sj.Poller,
+) -> tuple[list[sj.Sample], list[sj.Sample], asyncio.Task[None]]:
+    """What a callback and an iterator see of *poller*, and the iterating task
+    (started before the polling task, so it misses nothing)."""
+    called: list[sj.Sample] = []
+    poller.on_sample(called.append)
+    iterated: list[sj.Sample] = []
+
+    async def read() -> None:
+        async for sample in poller.samples():
+            iterated.append(sample)
+
+    return called, iterated, asyncio.create_task(read())
+
+
 async def _stop_after(samples: int) -> None:
     async with sj.open_bus("sim://?nodes=1-3", timeout=0.05) as bus:
         poller = sj.Poller(interval_s=0.0, buffer=10_000)
         poller.add(bus, _NODES)
-        called: list[sj.Sample] = []
-        poller.on_sample(called.append)
-        iterated: list[sj.Sample] = []
-
-        async def read() -> None:
-            async for sample in poller.samples():
-                iterated.append(sample)
-
-        reader = asyncio.create_task(read())  # starts before the polling task
+        called, iterated, reader = _watch(poller)
         async with poller:
             await wait_for(lambda: len(called) >= samples, f"{samples} samples")
         await asyncio.wait_for(reader, 1.0)
@@ -113,15 +121,7 @@ async def test_a_stop_right_after_a_poll_still_publishes_it_before_the_end() -> 
     async with sj.open_bus("sim://?nodes=1-3", timeout=0.05, trace=trace) as bus:
         poller = sj.Poller(interval_s=10.0, reads=("status",))
         poller.add(bus, _NODES)
-        called: list[sj.Sample] = []
-        poller.on_sample(called.append)
-        iterated: list[sj.Sample] = []
-
-        async def read() -> None:
-            async for sample in poller.samples():
-                iterated.append(sample)
-
-        reader = asyncio.create_task(read())  # starts before the polling task
+        called, iterated, reader = _watch(poller)
         async with poller:
             await stop.wait()
         await asyncio.wait_for(reader, 1.0)

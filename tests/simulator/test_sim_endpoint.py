@@ -180,6 +180,8 @@ async def test_characters_due_together_go_out_in_one_send() -> None:
     ep.data_received(req)
     # The loop wakes late: blocked (on purpose, not waiting for anything) until
     # the whole reply has crossed the line. Every character is then due at once.
+    # A blocking sleep is the subject here, not a wait for a state: only a loop
+    # that really runs late makes its timers find later deliveries due.
     reply_end = written_at + (len(req) + len(expected)) * char + bus.drives[1].reply_delay_s
     time.sleep(max(0.0, reply_end - asyncio.get_running_loop().time()) + 0.01)
     assert await host.wait_for(len(expected)) == expected
