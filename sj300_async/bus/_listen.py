@@ -21,6 +21,7 @@ from collections.abc import AsyncIterator
 from os import PathLike
 from typing import Any, Final
 
+from ..transports._buffered import BufferedReads
 from ..wire import LineSettings, LocalProtocolError, TransportError
 from ..wire._frames import FrameRole
 from ..wire._pcapng import PacketDirection
@@ -46,10 +47,11 @@ _BRIDGE_MARGIN_S: Final = 0.1
 Report = SniffedFrame | Unanswered
 
 
-class _Ear(asyncio.Protocol):
+class _Ear(BufferedReads):
     """Hears; has no way to speak."""
 
     def __init__(self, owner: Sniffing) -> None:
+        super().__init__()
         self._owner = owner
         self.lost: asyncio.Future[None] = asyncio.get_running_loop().create_future()
 

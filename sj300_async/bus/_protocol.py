@@ -90,6 +90,7 @@ import asyncio
 import logging
 from typing import Final, Generic, Protocol, TypeVar, cast
 
+from ..transports._buffered import BufferedReads
 from ..wire import BadFrame, Discarded
 from ._dialect import LineParser, ReplyT
 from ._stats import BusStats
@@ -120,8 +121,12 @@ class LineListener(Protocol[_ReplyT_contra]):
         """The transport is gone; whatever waits for an answer must fail now."""
 
 
-class LineProtocol(asyncio.Protocol, Generic[ReplyT]):
+class LineProtocol(BufferedReads, Generic[ReplyT]):
     """Adapter between an asyncio transport and the sans-IO reply parser.
+
+    A socket transport reads into the adapter's own buffer (see
+    :class:`~sj300_async.transports._buffered.BufferedReads`); every other
+    transport calls :meth:`data_received`.
 
     Args:
         strip_echo: None to find out whether the line echoes and strip what it
@@ -138,6 +143,7 @@ class LineProtocol(asyncio.Protocol, Generic[ReplyT]):
         strip_echo: bool | None = False,
         trace: TraceHook | None = None,
     ) -> None:
+        super().__init__()
         self._parser = parser
         self._listener = listener
         self._stats = stats

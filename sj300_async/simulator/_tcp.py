@@ -21,6 +21,7 @@ from collections.abc import Callable
 from types import TracebackType
 from typing import cast
 
+from ..transports._buffered import BufferedReads
 from ._endpoint import SimulatorEndpoint
 from ._model import BusModel
 from ._pacing import LinePacing, PacedLine, server_line
@@ -30,10 +31,11 @@ __all__ = ["SimulatorServer", "serve_tcp"]
 _log = logging.getLogger("sj300_async.simulator")
 
 
-class _Connection(asyncio.Protocol):
+class _Connection(BufferedReads):
     """One client of the device server."""
 
     def __init__(self, server: SimulatorServer) -> None:
+        super().__init__()
         self._server = server
         self._transport: asyncio.Transport | None = None
         self._endpoint: SimulatorEndpoint | None = None

@@ -40,6 +40,7 @@ from typing import Any, Final
 
 from ..wire._errors import TransportError
 from ..wire._line import LineSettings
+from ._buffered import BufferedReads
 from ._telnet import (
     BINARY,
     COM_PORT,
@@ -160,10 +161,11 @@ def rfc2217_connector(
     return connect
 
 
-class _TcpSide(asyncio.Protocol):
+class _TcpSide(BufferedReads):
     """The TCP connection's protocol: hands everything to the RFC 2217 transport above it."""
 
     def __init__(self, owner: Rfc2217Transport) -> None:
+        super().__init__()
         self._owner = owner
 
     def connection_made(self, transport: asyncio.BaseTransport) -> None:

@@ -195,8 +195,9 @@ class RawLine:
     #: True when the transport buffers writes and calls pause_writing/resume_writing.
     buffers_writes: bool = True
 
-    async def open(self) -> tuple[asyncio.Transport, Recorder]:
-        recorder = Recorder()
+    async def open(self, recorder: Recorder | None = None) -> tuple[asyncio.Transport, Recorder]:
+        if recorder is None:
+            recorder = Recorder()
         transport = await self.connect(lambda: recorder)
         assert isinstance(transport, asyncio.Transport)
         # As the bus's link does: pyserial-asyncio-fast returns before it has
