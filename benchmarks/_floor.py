@@ -5,6 +5,13 @@
   fixed-size answer has arrived from ``python -m benchmarks._servers echo``;
   no framing, no checks, no decoding. The tcp benchmark's floor, and the
   reference the scale benchmark's CPU per poll is divided by.
+- :class:`BufferedEchoClient`: the same client on asyncio's other read path,
+  ``BufferedProtocol``, reading into one reused buffer as our adapter does
+  (:mod:`sj300_async.transports._buffered`) and copying each chunk out as
+  ``bytes``. The plain floor's reads allocate 256 KiB each
+  (``sock.recv(256 KiB)``), which costs an ``mmap``/``mremap``/``munmap``
+  per read whenever glibc serves that size by ``mmap``; this floor shows
+  what our stack costs over the same read path.
 - In memory (:func:`memory_round_trips`): a future per transaction, resolved
   from a callback the loop runs on its next turn, as the loopback transport
   hands a reply over: the least an asyncio transaction with no socket costs.
@@ -16,9 +23,17 @@ import asyncio
 import socket
 from typing import cast
 
+from sj300_async.transports._buffered import BufferedReads
+
 from ._servers import ECHO_REPLIES
 
-__all__ = ["EchoClient", "connect_echo", "echo_round_trips", "memory_round_trips"]
+__all__ = [
+    "BufferedEchoClient",
+    "EchoClient",
+    "connect_echo",
+    "echo_round_trips",
+    "memory_round_trips",
+]
 
 
 class EchoClient(asyncio.Protocol):
@@ -49,10 +64,21 @@ class EchoClient(asyncio.Protocol):
         await self._waiter
 
 
-async def connect_echo(port: int) -> EchoClient:
-    """Connect an :class:`EchoClient` to the echo server on 127.0.0.1:*port*."""
+class BufferedEchoClient(BufferedReads, EchoClient):
+    """The floor's client reading into one reused buffer (asyncio's ``BufferedProtocol``),
+    with the adapter's own read code."""
+
+    def __init__(self) -> None:
+        EchoClient.__init__(self)
+        BufferedReads.__init__(self)
+
+
+async def connect_echo(port: int, *, buffered: bool = False) -> EchoClient:
+    """Connect an :class:`EchoClient` (or, *buffered*, a :class:`BufferedEchoClient`)
+    to the echo server on 127.0.0.1:*port*."""
     loop = asyncio.get_running_loop()
-    _transport, client = await loop.create_connection(EchoClient, "127.0.0.1", port)
+    factory = BufferedEchoClient if buffered else EchoClient
+    _transport, client = await loop.create_connection(factory, "127.0.0.1", port)
     return client
 
 

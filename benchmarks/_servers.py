@@ -12,6 +12,15 @@ parent's side.
 bare protocol that answers each request with a fixed reply of a status's or
 a monitor's size (:data:`ECHO_REPLIES`), no parsing, no checks.
 
+``echo`` and the minimal responders read into one reused buffer
+(the library's :class:`~sj300_async.transports._buffered.BufferedReads`, the
+way our adapter reads), so that their cost per request does not depend on
+the process's history: a plain protocol's every read allocates 256 KiB,
+which costs an ``mmap``/``mremap``/``munmap`` whenever glibc serves that
+size by ``mmap`` (11 µs a read more in one process than in another). The
+servers' cost is in every client's wall time, and a server that happened to
+start in the expensive state skewed that client's figures.
+
 ``python -m benchmarks._servers sj300-minimal`` and ``modbus-minimal`` are the
 *same minimal responder* for each protocol (the tcp benchmark's headline): a
 bare protocol like ``echo`` that answers each request with one fixed, valid
@@ -66,6 +75,8 @@ from collections.abc import Callable, Sequence
 from pathlib import Path
 from types import TracebackType
 from typing import Any, Literal, cast
+
+from sj300_async.transports._buffered import BufferedReads
 
 __all__ = [
     "ECHO_REPLIES",
@@ -153,7 +164,7 @@ async def _serve_sj300() -> None:
         await server.wait_closed()
 
 
-class _Echo(asyncio.Protocol):
+class _Echo(BufferedReads):
     """Answers each request with the reply its first byte names; nothing else."""
 
     def connection_made(self, transport: asyncio.BaseTransport) -> None:
@@ -164,7 +175,7 @@ class _Echo(asyncio.Protocol):
         self._transport.write(ECHO_REPLIES[data[:1]])
 
 
-class _Sj300Minimal(asyncio.Protocol):
+class _Sj300Minimal(BufferedReads):
     """Answers every request (up to its CR) with node 1's status reply; nothing else."""
 
     def connection_made(self, transport: asyncio.BaseTransport) -> None:
@@ -176,7 +187,7 @@ class _Sj300Minimal(asyncio.Protocol):
             self._transport.write(SJ300_STATUS_REPLY * requests)
 
 
-class _ModbusMinimal(asyncio.Protocol):
+class _ModbusMinimal(BufferedReads):
     """Answers every Modbus TCP request with :data:`MODBUS_REPLY` under its transaction id."""
 
     def connection_made(self, transport: asyncio.BaseTransport) -> None:

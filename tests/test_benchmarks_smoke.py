@@ -287,6 +287,7 @@ TCP_ROWS = [
         pytest.approx(1 / 0.7),
     ),
     ("tcp: read_status vs read_holding_registers(count=4), minimal responders", "requests/s", None),
+    ("tcp: read_status vs bare asyncio floor on the same (buffered) read path", "requests/s", None),
     ("tcp floor: bare asyncio round trip vs pymodbus, minimal responders", "requests/s", None),
     (
         "tcp floor: client CPU per bare asyncio round trip vs pymodbus, minimal responders",
@@ -309,16 +310,18 @@ def test_tcp_times_both_stacks_on_their_own_servers(harness: ModuleType) -> None
     assert any("processing_s=0" in note for note in section.notes)
     assert any("most any stack on the same loop" in note for note in section.notes)
     assert any(note.startswith("Targets, this run: ours / floor = ") for note in section.notes)
-    # the headline's table: floor, ours, pymodbus, each against its minimal responder
+    # the headline's table: floor, ours, pymodbus, each against its minimal responder,
+    # and the floor again on the buffered read path
     assert sum(note.startswith("| ") and "minimal`" in note for note in section.notes) == 2
-    assert sum(note.startswith("| ") and "| `echo` |" in note for note in section.notes) == 1
+    assert sum(note.startswith("| ") and "| `echo` |" in note for note in section.notes) == 2
+    assert any(note.startswith("Against the same read path (no target)") for note in section.notes)
 
 
 def test_tcp_minimal_responders_answer_every_request(harness: ModuleType) -> None:
     bench_tcp = importlib.import_module("benchmarks.bench_tcp")
     config = _quick(harness)
     m = bench_tcp.measure_minimal(config)  # raises unless our bus counted every reply
-    for side in (m.floor, m.ours, m.pymodbus):
+    for side in (m.floor, m.ours, m.pymodbus, m.floor_buffered):
         assert side.requests == bench_tcp.QUICK_REQUESTS
         assert len(side.timing.wall_s) == len(side.timing.cpu_s) == 1
         assert side.rps > 0
@@ -326,6 +329,7 @@ def test_tcp_minimal_responders_answer_every_request(harness: ModuleType) -> Non
         assert side.server_cpu_s > 0
     assert m.ours_vs_floor == m.ours.rps / m.floor.rps
     assert m.cpu_vs_pymodbus == m.ours.cpu_s / m.pymodbus.cpu_s
+    assert m.ours_vs_buffered_floor == m.ours.rps / m.floor_buffered.rps
 
 
 def test_minimal_responders_give_valid_replies(harness: ModuleType) -> None:
@@ -561,7 +565,7 @@ def test_cli_quick_runs_every_benchmark_into_one_table() -> None:
     table = out.split("\n## results\n", 1)[1]
     rows = [line for line in table.splitlines() if line.startswith("| ") and "---" not in line]
     # header + rows of each benchmark: codec, tcp, loopback, latency, wire, scale, gateway, mqtt
-    assert len(rows) == 1 + 3 + 9 + 4 + 3 + 2 + 5 + 3 + 3
+    assert len(rows) == 1 + 3 + 10 + 4 + 3 + 2 + 5 + 3 + 3
     assert "**failed**" not in out
 
 
