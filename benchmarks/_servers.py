@@ -13,8 +13,7 @@ bare protocol that answers each request with a fixed reply of a status's or
 a monitor's size (:data:`ECHO_REPLIES`), no parsing, no checks.
 
 ``echo`` and the minimal responders read into one reused buffer
-(the library's :class:`~sj300_async.transports._buffered.BufferedReads`, the
-way our adapter reads), so that their cost per request does not depend on
+(``_OneReadBuffer``, the way our adapter reads), so that their cost per request does not depend on
 the process's history: a plain protocol's every read allocates 256 KiB,
 which costs an ``mmap``/``mremap``/``munmap`` whenever glibc serves that
 size by ``mmap`` (11 µs a read more in one process than in another). The
@@ -75,8 +74,6 @@ from collections.abc import Callable, Sequence
 from pathlib import Path
 from types import TracebackType
 from typing import Any, Literal, cast
-
-from sj300_async.transports._buffered import BufferedReads
 
 __all__ = [
     "ECHO_REPLIES",
@@ -164,7 +161,28 @@ async def _serve_sj300() -> None:
         await server.wait_closed()
 
 
-class _Echo(BufferedReads):
+class _OneReadBuffer(asyncio.BufferedProtocol, asyncio.Protocol):
+    """Socket reads into one buffer kept for the connection, copied out as ``bytes``.
+
+    The library's ``BufferedReads`` written again on purpose: this module
+    runs pymodbus's reference server too, and importing the library there
+    changed that process enough to move pymodbus's gateway reference from
+    15,000 to 22,000 reads/s (the memory layout and allocator state a process
+    ends up in after its imports; see docs/BENCHMARKS.md). The servers
+    import nothing of the library at start-up.
+    """
+
+    def __init__(self) -> None:
+        self._view = memoryview(bytearray(16384))
+
+    def get_buffer(self, sizehint: int) -> memoryview:
+        return self._view
+
+    def buffer_updated(self, nbytes: int) -> None:
+        self.data_received(self._view[:nbytes].tobytes())
+
+
+class _Echo(_OneReadBuffer):
     """Answers each request with the reply its first byte names; nothing else."""
 
     def connection_made(self, transport: asyncio.BaseTransport) -> None:
@@ -175,7 +193,7 @@ class _Echo(BufferedReads):
         self._transport.write(ECHO_REPLIES[data[:1]])
 
 
-class _Sj300Minimal(BufferedReads):
+class _Sj300Minimal(_OneReadBuffer):
     """Answers every request (up to its CR) with node 1's status reply; nothing else."""
 
     def connection_made(self, transport: asyncio.BaseTransport) -> None:
@@ -187,7 +205,7 @@ class _Sj300Minimal(BufferedReads):
             self._transport.write(SJ300_STATUS_REPLY * requests)
 
 
-class _ModbusMinimal(BufferedReads):
+class _ModbusMinimal(_OneReadBuffer):
     """Answers every Modbus TCP request with :data:`MODBUS_REPLY` under its transaction id."""
 
     def connection_made(self, transport: asyncio.BaseTransport) -> None:
