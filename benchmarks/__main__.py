@@ -23,6 +23,7 @@ from collections.abc import Sequence
 from importlib.metadata import version
 
 from . import BENCHMARKS, load
+from ._allocator import allocator_note, pin_or_reexec
 from ._harness import DEFAULT_SEED, Config, Result, markdown_table
 
 
@@ -72,6 +73,7 @@ def _environment(uvloop: bool) -> str:
         f"- sj300_async {version('sj300-async')}, pymodbus {version('pymodbus')}",
         "- event loop: asyncio's default"
         + (f"; then uvloop {version('uvloop')} in a table of its own" if uvloop else ""),
+        allocator_note(),
     ]
     return "\n".join(lines)
 
@@ -139,4 +141,5 @@ def main(argv: Sequence[str] | None = None) -> int:
 
 
 if __name__ == "__main__":
+    pin_or_reexec("benchmarks", sys.argv[1:])  # every process of the run allocates alike
     sys.exit(main())

@@ -407,7 +407,8 @@ def _minimal_notes(m: Minimal, n: int, repeats: int) -> tuple[str, ...]:
         "The plain floor's reads allocate 256 KiB each: "
         f"{(m.floor.cpu_s - m.floor_buffered.cpu_s) * us:+.1f} µs client CPU per round trip "
         "against the buffered floor in this run (the cost depends on whether glibc serves "
-        "that size by `mmap`, which depends on the process's history).",
+        "that size by `mmap`: the allocator line of the run's environment says how it was "
+        "set up, `benchmarks/_allocator.py` why).",
     ]
     return tuple(lines)
 

@@ -37,7 +37,6 @@ from __future__ import annotations
 import argparse
 import json
 import math
-import os
 import shutil
 import signal
 import subprocess
@@ -47,6 +46,8 @@ import time
 from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
+
+from ._allocator import pinned_environment
 
 __all__ = ["Row", "change_percent", "higher_is_better", "main", "parse_table"]
 
@@ -175,7 +176,9 @@ def _git(*args: str, cwd: Path = _REPO) -> str:
 
 
 def _env(tree: Path) -> dict[str, str]:
-    env = dict(os.environ)
+    # Both trees run with the allocator pinned (._allocator), a commit from before
+    # the pin included: the same malloc behaviour on both sides.
+    env = pinned_environment()
     env["PYTHONPATH"] = str(tree)
     return env
 

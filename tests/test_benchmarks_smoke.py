@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import importlib
 import os
+import platform
 import subprocess
 import sys
 from pathlib import Path
@@ -546,10 +547,11 @@ def test_mqtt_counts_every_state_and_times_every_change(harness: ModuleType) -> 
 # -- the command line ----------------------------------------------------------------
 
 
-def _cli(*args: str) -> subprocess.CompletedProcess[str]:
+def _cli(*args: str, env: dict[str, str] | None = None) -> subprocess.CompletedProcess[str]:
     return subprocess.run(
         [sys.executable, "-m", "benchmarks", "--quick", *args],
         cwd=ROOT,
+        env=env,
         capture_output=True,
         text=True,
         timeout=120,
@@ -562,6 +564,9 @@ def test_cli_quick_runs_every_benchmark_into_one_table() -> None:
     out = done.stdout
     for title in ("codec", "tcp", "loopback", "latency", "wire", "scale", "gateway", "mqtt"):
         assert f"\n## {title}\n" in out
+    # The run re-executed itself with glibc's malloc thresholds pinned (benchmarks._allocator).
+    if sys.platform == "linux" and platform.libc_ver()[0] == "glibc":
+        assert "- allocator: glibc malloc thresholds pinned" in out
     table = out.split("\n## results\n", 1)[1]
     rows = [line for line in table.splitlines() if line.startswith("| ") and "---" not in line]
     # header + rows of each benchmark: codec, tcp, loopback, latency, wire, scale, gateway, mqtt
@@ -691,3 +696,28 @@ def test_compare_flags_a_row_by_its_same_run_ratio(harness: ModuleType) -> None:
         "| tcp | 10,000 | 8,000 | requests/s | pymodbus | 1.25x | — | — |\n"
     )
     assert parsed == [row("tcp", 10_000.0, "requests/s", "asyncio", None, 8_000.0)]
+
+
+def test_the_allocator_pin_adds_to_the_tunables_once_and_can_be_turned_off(
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    monkeypatch.syspath_prepend(str(ROOT))
+    allocator = importlib.import_module("benchmarks._allocator")
+    if not (sys.platform == "linux" and platform.libc_ver()[0] == "glibc"):
+        assert allocator.pinned_environment({"A": "1"}) == {"A": "1"}  # nothing to pin
+        return
+    pinned = allocator.pinned_environment({"A": "1"})
+    assert pinned == {"A": "1", "GLIBC_TUNABLES": allocator.TUNABLES}
+    assert allocator.pinned_environment(pinned) == pinned  # once
+    other = allocator.pinned_environment({"GLIBC_TUNABLES": "glibc.malloc.tcache_count=0"})
+    assert other["GLIBC_TUNABLES"] == f"glibc.malloc.tcache_count=0:{allocator.TUNABLES}"
+    dynamic = {"SJ300_BENCH_DYNAMIC_MALLOC": "1"}
+    assert allocator.pinned_environment(dynamic) == dynamic
+
+
+def test_a_run_told_to_keep_dynamic_thresholds_says_so() -> None:
+    env = {k: v for k, v in os.environ.items() if k != "GLIBC_TUNABLES"}
+    env["SJ300_BENCH_DYNAMIC_MALLOC"] = "1"
+    done = _cli("--only", "codec", env=env)
+    assert done.returncode == 0, done.stdout + done.stderr
+    assert "- allocator: glibc's dynamic malloc thresholds (not pinned)" in done.stdout
