@@ -49,7 +49,7 @@ test: lint typecheck lint-imports docs pytest
 
 lint: $(DEV_STAMP)
 	$(BIN)/ruff check sj300_async tests benchmarks examples
-	$(BIN)/ruff format --check sj300_async tests benchmarks examples
+	$(BIN)/ruff format --check sj300_async tests benchmarks examples docs
 
 typecheck: $(DEV_STAMP)
 	$(BIN)/mypy --strict sj300_async tests
