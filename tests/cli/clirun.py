@@ -89,9 +89,7 @@ async def sj300(*args: str, env_url: str | None = None, timeout: float = TIMEOUT
     try:
         out, err = await asyncio.wait_for(proc.communicate(), timeout)
     finally:
-        if proc.returncode is None:
-            proc.kill()
-            await proc.wait()
+        await _reap(proc)
     assert proc.returncode is not None
     return Result(proc.returncode, out.decode(), err.decode())
 
@@ -113,9 +111,14 @@ async def running(*args: str) -> AsyncIterator[asyncio.subprocess.Process]:
     try:
         yield proc
     finally:
-        if proc.returncode is None:
-            proc.kill()
-            await proc.wait()
+        await _reap(proc)
+
+
+async def _reap(proc: asyncio.subprocess.Process) -> None:
+    """Kill *proc* if it still runs, and wait for it: no child outlives its test."""
+    if proc.returncode is None:
+        proc.kill()
+        await proc.wait()
 
 
 async def sj300_on_terminal(*args: str, timeout: float = TIMEOUT, columns: int = 160) -> Result:

@@ -10,7 +10,6 @@ monitor is read line by line.
 from __future__ import annotations
 
 import asyncio
-import contextlib
 import dataclasses
 import json
 import re
@@ -27,7 +26,7 @@ from sj300_async.cli._errors import CliError
 from sj300_async.cli._fleet import Fleet, FleetUrl, parse_fleet_url
 from sj300_async.gateway._mqtt_topics import StateMessage, Topics
 
-from .clirun import TIMEOUT, Result, cli_env, closed_port, sj300, sj300_on_terminal
+from .clirun import TIMEOUT, Result, cli_env, closed_port, running, sj300, sj300_on_terminal
 
 _FIELDS = {f.name for f in dataclasses.fields(StateMessage)}
 
@@ -139,19 +138,6 @@ async def test_a_prefix_of_two_levels(broker: Broker) -> None:
     _assert_shown(_by_drive(result), north)
 
 
-async def _start_monitor(*args: str) -> asyncio.subprocess.Process:
-    return await asyncio.create_subprocess_exec(
-        sys.executable,
-        "-m",
-        "sj300_async",
-        "monitor",
-        *args,
-        stdout=asyncio.subprocess.PIPE,
-        stderr=asyncio.subprocess.PIPE,
-        env=cli_env(),
-    )
-
-
 async def _lines(proc: asyncio.subprocess.Process, n: int) -> list[dict[str, object]]:
     assert proc.stdout is not None
     lines = []
@@ -162,22 +148,11 @@ async def _lines(proc: asyncio.subprocess.Process, n: int) -> list[dict[str, obj
     return lines
 
 
-@contextlib.asynccontextmanager
-async def _monitor(*args: str) -> AsyncIterator[asyncio.subprocess.Process]:
-    proc = await _start_monitor(*args)
-    try:
-        yield proc
-    finally:
-        if proc.returncode is None:
-            proc.kill()
-            await proc.wait()
-
-
 async def test_malformed_messages_are_counted_and_skipped(broker: Broker) -> None:
     good = _state("gw-a", 1)
     await publish_states(broker, [good])
     topic = Topics("gw-a").state("hall", 1)
-    async with _monitor("--url", broker.url, "--json", "--count", "2") as proc:
+    async with running("monitor", "--url", broker.url, "--json", "--count", "2") as proc:
         assert (await _lines(proc, 1))[0]["node"] == 1  # subscribed: the retained state came
         # Live (QoS 1, one after the other): they reach the monitor in this order.
         await broker.publish(topic, "{not json", retain=False)
@@ -200,7 +175,7 @@ async def test_malformed_messages_are_counted_and_skipped(broker: Broker) -> Non
 async def test_a_lost_broker_is_reconnected(broker: Broker) -> None:
     first = [_state("gw-a", 1), _state("gw-a", 2)]
     await publish_states(broker, first)
-    async with _monitor("--url", broker.url, "--json", "--count", "4") as proc:
+    async with running("monitor", "--url", broker.url, "--json", "--count", "4") as proc:
         assert len(await _lines(proc, 2)) == 2
         await broker.stop()
         await broker.start()  # same port; no persistence: its retained states are gone

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import asyncio
 import time
+from dataclasses import dataclass
 
 import pytest
 
@@ -148,16 +149,36 @@ async def test_pacing_holds_every_byte_for_its_wire_time() -> None:
     ep.close()
 
 
-async def test_single_characters_each_at_its_stop_bit() -> None:
+@dataclass
+class _Paced:
+    """A status request just handed to a drive behind a 1200-baud line, one
+    character per delivery (``group_s=0``)."""
+
+    host: Host
+    bus: SimulatedBus
+    endpoint: SimulatorEndpoint
+    char: float
+    written_at: float
+    req: bytes
+    expected: bytes
+
+
+def _status_request_on_a_paced_line() -> _Paced:
     pacing = LinePacing(1200, 8, "N", 1)  # 8.33 ms a character
-    char = pacing.char_time_s
     host = Host()
     bus = SimulatedBus(nodes=[1])
     ep = SimulatorEndpoint(bus, send=host.send, line=PacedLine(pacing, group_s=0.0))
     written_at = asyncio.get_running_loop().time()
     req = request(b"01", b"04")
-    expected = data_reply(b"01", b"02000100")
     ep.data_received(req)
+    expected = data_reply(b"01", b"02000100")
+    return _Paced(host, bus, ep, pacing.char_time_s, written_at, req, expected)
+
+
+async def test_single_characters_each_at_its_stop_bit() -> None:
+    paced = _status_request_on_a_paced_line()
+    host, bus, ep, char = paced.host, paced.bus, paced.endpoint, paced.char
+    written_at, req, expected = paced.written_at, paced.req, paced.expected
     assert await host.wait_for(len(expected)) == expected
     first_byte_start = written_at + len(req) * char + bus.drives[1].reply_delay_s
     delivered = 0
@@ -169,15 +190,9 @@ async def test_single_characters_each_at_its_stop_bit() -> None:
 
 
 async def test_characters_due_together_go_out_in_one_send() -> None:
-    pacing = LinePacing(1200, 8, "N", 1)
-    char = pacing.char_time_s
-    host = Host()
-    bus = SimulatedBus(nodes=[1])
-    ep = SimulatorEndpoint(bus, send=host.send, line=PacedLine(pacing, group_s=0.0))
-    written_at = asyncio.get_running_loop().time()
-    req = request(b"01", b"04")
-    expected = data_reply(b"01", b"02000100")
-    ep.data_received(req)
+    paced = _status_request_on_a_paced_line()
+    host, bus, ep, char = paced.host, paced.bus, paced.endpoint, paced.char
+    written_at, req, expected = paced.written_at, paced.req, paced.expected
     # The loop wakes late: blocked (on purpose, not waiting for anything) until
     # the whole reply has crossed the line. Every character is then due at once.
     # A blocking sleep is the subject here, not a wait for a state: only a loop
