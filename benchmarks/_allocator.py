@@ -8,16 +8,13 @@ it changes what the same code costs:
 
 - asyncio's plain-protocol socket reads allocate 256 KiB each: ``mmap`` +
   ``mremap`` + ``munmap`` and a page fault per read in one state, none in
-  the other. The bare tcp floor's client measured 26-28 µs of CPU per round
-  trip in some processes and 37-42 µs in others (docs/BENCHMARKS.md).
+  the other, so the bare tcp floor's client cost differently from one
+  process to another.
 - A commit that touched neither path (it added one small module to the
   library and changed its socket protocols' base class) moved pymodbus's
-  reference server in the gateway benchmark from about 15,000 to 22,000
-  reads/s at 4 clients, and the MQTT gateway's CPU per published state from 281-321 µs
-  (3 runs) to 307-456 µs (6 runs), though neither runs the changed code
-  (the gateway alone polled at the same CPU either way). With both
-  thresholds fixed (at 4 and 16 MiB), the commits before and after
-  measured alike: 287 and 289 µs before, 275 and 267 after.
+  reference server in the gateway benchmark and the MQTT gateway's CPU per
+  published state, though neither runs the changed code. With both
+  thresholds fixed, the commits before and after measured alike.
 
 So a benchmark run fixes both thresholds at glibc's own start values
 (128 KiB) through ``GLIBC_TUNABLES`` before Python starts (``python -m
@@ -26,10 +23,10 @@ it). A fixed threshold is never raised: every process of the run allocates
 as a freshly started one does, the default any script or service starts
 with, whatever it imported or freed before. It is the state in which our
 client's reads into its own buffer save the most against a plain
-protocol's; the other fixed state (high thresholds: large allocations from
-the heap, no ``mmap``), where they save nothing, was measured as well and
-docs/BENCHMARKS.md gives both. ``SJ300_BENCH_DYNAMIC_MALLOC=1`` leaves the
-dynamic thresholds alone (to see their effect).
+protocol's; in the other fixed state (high thresholds: large allocations
+from the heap, no ``mmap``) they save nothing (docs/BENCHMARKS.md, "The
+allocator pin"). ``SJ300_BENCH_DYNAMIC_MALLOC=1`` leaves the dynamic
+thresholds alone (to see their effect).
 """
 
 from __future__ import annotations

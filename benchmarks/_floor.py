@@ -23,7 +23,7 @@ import asyncio
 import socket
 from typing import cast
 
-from sj300_async.transports._buffered import BufferedReads
+from sj300_async.transports import BufferedReads
 
 from ._servers import ECHO_REPLIES
 

@@ -16,7 +16,7 @@ a monitor's size (:data:`ECHO_REPLIES`), no parsing, no checks.
 (``_OneReadBuffer``, the way our adapter reads), so that their cost per request does not depend on
 the process's history: a plain protocol's every read allocates 256 KiB,
 which costs an ``mmap``/``mremap``/``munmap`` whenever glibc serves that
-size by ``mmap`` (11 µs a read more in one process than in another). The
+size by ``mmap``, in one process and not in another. The
 servers' cost is in every client's wall time, and a server that happened to
 start in the expensive state skewed that client's figures.
 
@@ -166,10 +166,10 @@ class _OneReadBuffer(asyncio.BufferedProtocol, asyncio.Protocol):
 
     The library's ``BufferedReads`` written again on purpose: this module
     runs pymodbus's reference server too, and importing the library there
-    changed that process enough to move pymodbus's gateway reference from
-    15,000 to 22,000 reads/s (the memory layout and allocator state a process
-    ends up in after its imports; see docs/BENCHMARKS.md). The servers
-    import nothing of the library at start-up.
+    changed that process enough to move pymodbus's gateway reference (the
+    memory layout and allocator state a process ends up in after its imports;
+    see :mod:`benchmarks._allocator`). The servers import nothing of the
+    library at start-up.
     """
 
     def __init__(self) -> None:

@@ -7,8 +7,8 @@ core (:meth:`SimulatedBus.receive`: parse the request, run the drive model,
 encode the reply) alone on the same requests, and the benchmarks subtract
 it. What the subtraction leaves in "ours" although it belongs to the
 simulator: the endpoint that schedules each reply on the event loop (a timer
-handle and a heap entry per reply), a few microseconds. So the library's
-share is, if anything, overstated.
+handle and a heap entry per reply). So the library's share is, if anything,
+overstated.
 """
 
 from __future__ import annotations

@@ -65,7 +65,7 @@ USES_EVENT_LOOP = False
 FRAMES = 20_000
 QUICK_FRAMES = 300
 #: The project's aim for parse + decode frames/s, as a multiple of pymodbus in the same
-#: run (issue 18: 3x, measured 3.01-3.28x and once 2.29x on a loaded machine, had no margin).
+#: run (issue 18 raised it from 3x, which had no margin on a loaded machine).
 TARGET_RATIO = 3.5
 
 _DATA_DECODERS: dict[int, Callable[[bytes], object]] = {

@@ -77,12 +77,16 @@ import time
 from collections.abc import Callable, Coroutine, Sequence
 from dataclasses import dataclass
 from importlib.metadata import version
-from typing import Any, Literal
+from typing import TYPE_CHECKING, Any, Literal, Protocol, cast
 
 from pymodbus.client import AsyncModbusTcpClient
 
 from ._harness import Config, Result, Section, new_runner
 from ._servers import ServerProcess
+
+if TYPE_CHECKING:
+    from sj300_async.gateway import Gateway
+    from sj300_async.gateway.modbus import ClientCounters
 
 __all__ = [
     "CONCURRENT_CLIENTS",
@@ -126,6 +130,23 @@ ServerKind = Literal["gateway", "pymodbus"]
 # -- the servers' side (their processes) ------------------------------------------------
 
 
+class _ModbusServing(Protocol):
+    """What this benchmark reads of the running Modbus northbound (``gateway.northbounds``).
+
+    Its class is not part of the gateway's public face; these two attributes are.
+    """
+
+    @property
+    def port(self) -> int: ...
+
+    @property
+    def clients(self) -> ClientCounters: ...
+
+
+def _modbus(gateway: Gateway) -> _ModbusServing:
+    return cast(_ModbusServing, gateway.northbounds["modbus"])
+
+
 def _gateway_toml(drives: int, interval_s: float) -> str:
     return textwrap.dedent(
         f"""
@@ -144,9 +165,9 @@ def _gateway_toml(drives: int, interval_s: float) -> str:
 class _CycleMarks:
     """Marks taken in the gateway's process at the end of a poll cycle (module docstring)."""
 
-    def __init__(self, gateway: Any) -> None:
+    def __init__(self, gateway: Gateway) -> None:
         line = gateway.lines[0]
-        self._gateway = gateway
+        self._modbus = _modbus(gateway)
         self._simulator = line.bus.simulator
         self._last_node: int = line.config.nodes[-1]
         self._waiting: list[asyncio.Future[str]] = []
@@ -162,7 +183,7 @@ class _CycleMarks:
             return
         # The cycle's last poll is answered and the next has not started: the
         # line is quiet, and every request so far belongs to a counted poll.
-        served = sum(self._gateway.clients.requests.values())
+        served = sum(self._modbus.clients.requests.values())
         mark = f"mark {self._simulator.stats.requests} {self.polls} {self.failed} {served}"
         waiting, self._waiting = self._waiting, []
         for future in waiting:
@@ -189,15 +210,13 @@ def _answer_parent(loop: asyncio.AbstractEventLoop, marks: _CycleMarks | None) -
 
 
 async def _serve_gateway(drives: int, interval_s: float) -> None:
-    from sj300_async.gateway._config import parse_config
-    from sj300_async.gateway._gateway import Gateway
+    from sj300_async.gateway import Gateway, parse_config
 
     config = parse_config(_gateway_toml(drives, interval_s), "bench_gateway.toml")
     async with Gateway(config) as gateway:
         marks = _CycleMarks(gateway)
         await marks.next()  # ready: every drive polled once
-        assert gateway.modbus is not None
-        print(f"port {gateway.modbus.port}", flush=True)
+        print(f"port {_modbus(gateway).port}", flush=True)
         loop = asyncio.get_running_loop()
         await loop.run_in_executor(None, _answer_parent, loop, marks)
 

@@ -23,7 +23,7 @@ Two figures, each against something measured in the same run:
    (:func:`sj300_async.simulator.serve_tcp`); a gateway process polls them
    (``tcp://127.0.0.1:PORT``) every :data:`LATENCY_INTERVAL_S` and
    publishes; this process follows the broker as ``sj300 monitor --url
-   mqtt://...`` does (:func:`sj300_async.cli._fleet.follow`: aiomqtt,
+   mqtt://...`` does (:func:`sj300_async.gateway.mqtt.follow`: aiomqtt,
    ``StateMessage.from_json``, the fleet view's checks). It trips a drive
    (``SimulatedDrive.trip``), timestamps that, and timestamps the first
    state of that drive the fleet view gets with ``tripped`` true; then
@@ -37,7 +37,7 @@ Decisions:
   once, the ready line :class:`~benchmarks._servers.ServerProcess` waits
   for (it serves no port here), and answers ``cpu``, ``stats`` and
   ``stop`` on its standard input. The gateway runs in process as
-  ``sj300 gateway`` runs it (:class:`~sj300_async.gateway._gateway.Gateway`
+  ``sj300 gateway`` runs it (:class:`~sj300_async.gateway.Gateway`
   from a TOML configuration), with its defaults: QoS 1, Home Assistant
   discovery on (published at connect, before any window), keepalive 30 s.
 - **CPU: both gateways at once, not one after the other.** The MQTT-on
@@ -120,10 +120,14 @@ import time
 from collections.abc import Callable, Coroutine, Iterator, Sequence
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any, Protocol, cast
 
 from ._harness import Config, Result, Section, new_runner
 from ._servers import ServerProcess
+
+if TYPE_CHECKING:
+    from sj300_async.gateway import Gateway
+    from sj300_async.gateway.mqtt import BridgeStats
 
 __all__ = [
     "CHANGES",
@@ -194,13 +198,24 @@ def _gateway_toml(gateway_id: str, url: str, interval_s: float, broker_port: int
     )
 
 
+class _Bridge(Protocol):
+    """What this benchmark reads of the running MQTT northbound (``gateway.northbounds``).
+
+    Its class is not part of the gateway's public face; its counters are.
+    """
+
+    @property
+    def stats(self) -> BridgeStats: ...
+
+
 class _Counts:
     """Polls of the gateway's line, counted from its poller (a child's side)."""
 
-    def __init__(self, gateway: Any) -> None:
+    def __init__(self, gateway: Gateway) -> None:
         line = gateway.lines[0]
         self.gateway = gateway
-        self.bridge = gateway.mqtt  # kept: the gateway forgets it when it stops
+        # Kept: the gateway forgets its northbounds when it stops.
+        self.bridge = cast("_Bridge | None", gateway.northbounds.get("mqtt"))
         self.poller, self.bus = line.poller, line.bus
         self.polls = 0
         self.failed = 0
@@ -262,8 +277,7 @@ def _print_tasks() -> None:
 
 
 async def _serve_gateway(gateway_id: str, url: str, interval_s: float, broker_port: int) -> None:
-    from sj300_async.gateway._config import parse_config
-    from sj300_async.gateway._gateway import Gateway
+    from sj300_async.gateway import Gateway, parse_config
 
     text = _gateway_toml(gateway_id, url, interval_s, broker_port)
     config = parse_config(text, f"bench_mqtt_{gateway_id}.toml")
@@ -532,7 +546,7 @@ class _View:
     """The fleet view this process runs (``follow``), and what the benchmark reads of it."""
 
     def __init__(self, port: int) -> None:
-        from sj300_async.cli._fleet import Fleet, parse_fleet_url
+        from sj300_async.gateway.mqtt import Fleet, parse_fleet_url
 
         self.fleet = Fleet(parse_fleet_url(f"mqtt://127.0.0.1:{port}"))
         self.counts: collections.Counter[str] = collections.Counter()
@@ -558,7 +572,7 @@ class _View:
             raise RuntimeError(f"the fleet view lost the broker: {problem}")
 
     async def __aenter__(self) -> _View:
-        from sj300_async.cli._fleet import follow
+        from sj300_async.gateway.mqtt import follow
 
         self._task = asyncio.create_task(follow(self.fleet, self._on_state, on_link=self._on_link))
         waiting = asyncio.create_task(self.subscribed.wait())
@@ -652,7 +666,7 @@ def _floor_run(port: int, payloads: Path, count: int, *, uvloop: bool) -> dict[s
 
 
 async def _measure_cpu(view: _View, port: int, config: Config, directory: Path) -> CpuRun:
-    from sj300_async.gateway._mqtt_topics import Topics
+    from sj300_async.gateway.mqtt import Topics
 
     window_s = QUICK_WINDOW_S if config.quick else WINDOW_S
     count = QUICK_FLOOR_MESSAGES if config.quick else FLOOR_MESSAGES

@@ -15,9 +15,9 @@ one million polls are timed:
   after the last poll, each after a full garbage collection. Growth means
   something accumulates per transaction (a list, a dict of futures, a log).
 
-CPU per poll is a figure of the machine as much as of the code (20 µs in one
-run, 55 µs in another on a loaded machine), so the target is a ratio to a
-floor measured in the same run (issue 18): the library's share in the
+CPU per poll is a figure of the machine as much as of the code (a loaded
+machine moves it far), so the target is a ratio to a floor measured in the
+same run (issue 18): the library's share in the
 cheapest tenth of the timed polls, divided by the least CPU per transaction
 of the in-memory asyncio floor (:func:`~._floor.memory_round_trips`: a
 future answered on the loop's next turn), timed before and after the polls.
@@ -25,7 +25,7 @@ That floor is the same kind of work as a poll (interpreter and event loop,
 no system call), so what slows one slows the other; the tcp floor's CPU per
 round trip (:class:`~._floor.EchoClient`), the issue's example, is reported
 too, but it is mostly system calls and the kernel's loopback, which moved
-apart from the polls in the runs made (once 2x while the polls did not).
+apart from the polls in the runs made.
 
 The Poller keys its buses by ``Bus.description``, which is the same for every
 ``sim://`` bus with the same nodes: each bus is renamed ``sim bus NN`` before
@@ -57,8 +57,8 @@ TITLE = "scale"
 USES_EVENT_LOOP = True
 #: The project's aims (issue 18): the library's CPU per poll at most this many times
 #: the in-memory asyncio floor's CPU per transaction measured in the same run, and RSS
-#: growth over the timed polls. Measured 4.6-5.2x on a quiet and on a loaded machine
-#: alike; 6x fails a regression the size of the one d7bd9de once made (+21 %).
+#: growth over the timed polls. 6x holds on a quiet and on a loaded machine alike, and
+#: fails a regression the size of one the library once had.
 TARGET_VS_MEMORY_FLOOR = 6.0
 TARGET_GROWTH_BYTES = 1_000_000
 #: Issue 7's absolute aim, still shown for comparison; it does not hold on a busy machine.

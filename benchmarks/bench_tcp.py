@@ -41,7 +41,7 @@ wire:
   ``read_holding_registers(count=50)`` (12 bytes, 109-byte reply).
 
 These rows time the two servers as much as the clients (issue 18: most of
-issue 7's 1.69x came from the servers), so they carry no target now.
+issue 7's ratio came from the servers), so they carry no target now.
 Our simulator runs with ``processing_s=0``: by default it waits 1 ms before
 each reply to emulate a drive's processing, which would time the emulated
 drive, not the stack. pymodbus's server answers as fast as it can. Our bus is

@@ -12,7 +12,6 @@ from __future__ import annotations
 
 from ._open import open_bus
 from ._poller import BusPollStats, DriveHealth, Poller, Sample
-from ._version import __version__
 from .bus import Bus, BusStats, BusTiming, ReconnectPolicy
 from .fr700 import Fr700Drive, Fr700Monitor, Fr700Status
 from .sj300 import (
@@ -32,6 +31,7 @@ from .sj300 import (
     TripStatusB,
     TripStatusC,
 )
+from .version import __version__
 from .wire import (
     BusClosedError,
     Direction,

@@ -14,8 +14,7 @@ answer keep their pace while others fail:
   retry, and a drive goes offline only after ``offline_after`` failed polls.
   Its poll stops at the first failed read. (``retries=1`` rides out a lost
   reply within the poll, at the price of two more time-outs per failing
-  drive in its first failed cycle: 80 % instead of 90 % of the pace in the
-  test below.)
+  drive in its first failed cycle.)
 - A drive whose last poll failed (failing, or offline) is first *probed*:
   one attempt (no retry) of its protocol's cheap read-only request (the
   dialect's ``sync_request``, e.g. SJ300's command 09, FR-700's status
@@ -34,9 +33,8 @@ So per cycle, failing drives take at most two short-request time-outs each
 while being declared offline (``offline_after`` cycles), and two in all once
 offline; with one offline drive, it is back online within about one cycle
 (or ``offline_probe_interval_s``, the longer) of answering again.
-Measured (tests/poller/test_poller_pace.py: 8 drives at 19200 baud, status
-and monitor every 0.2 s, 2 silent): the 6 others keep about 90 % of their
-rate while the 2 are declared offline, 100 % while offline.
+tests/poller/test_poller_pace.py measures the pace the drives that answer
+keep while others are declared offline, and once they are.
 Docs: docs/RELIABILITY.md, "The poller when drives fail".
 
 Errors from :meth:`Poller.on_sample` callbacks are logged (logger
@@ -80,9 +78,7 @@ from typing import Any, Final, Literal, get_args
 import anyio
 import anyio.abc
 
-from .bus import Bus, get_dialect, protocol_names
-from .bus._channel import cap_retries, retries_at_most
-from .bus._stats import TransactionStats
+from .bus import Bus, TransactionStats, cap_retries, get_dialect, protocol_names, retries_at_most
 from .fr700 import Fr700Monitor, Fr700Status
 from .sj300 import InverterStatus, MonitorData
 from .wire import LocalProtocolError, NakError, SJ300Error
@@ -379,14 +375,14 @@ class Poller:
         loop = asyncio.get_running_loop()
         clock = loop.time
         # This task's reads make at most 1 + self.retries attempts: set once for
-        # the task's life (a block per drive poll cost 2 µs of every poll).
+        # the task's life, not in a block per drive poll that every poll pays for.
         cap_retries(self.retries)
         reads = self.reads + target.parameters
         # A poll's sample is published once the next drive's first request is on
         # the line, from a loop callback, not between the reply and the next
         # request: on a line polled back to back, that is the one stretch where
-        # the host's work costs line time (issue 18: building and publishing a
-        # sample took about 20 µs of it on the wire benchmark's just-woken host).
+        # the host's work costs line time (the wire benchmark's notes measure
+        # that turnaround).
         # The callback is scheduled in this task's step, so the loop runs it
         # before this task can resume, whatever resumes it (a reply, an error,
         # a cancellation): a stopped poller has published every poll it

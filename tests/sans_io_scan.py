@@ -79,6 +79,7 @@ SJ300_CODEC: Final = tuple(
         "_request_parser",
         "_requests",
         "_terminals",
+        "codec",  # the codec's public face, for the simulated drives
     )
 )
 
@@ -103,30 +104,41 @@ FR700_CODEC: Final = tuple(
         "_payloads",
         "_request_parser",
         "_requests",
+        "codec",  # the codec's public face, for the simulated drives
     )
 )
 
 #: The simulator's shared model: line model interface, faults, motion, electrical, pacing.
 SIMULATOR_MODEL: Final = tuple(
-    f"simulator.{m}" for m in ("_electrical", "_faults", "_model", "_motion", "_pacing")
+    f"simulator.{m}"
+    for m in ("_command_line", "_electrical", "_faults", "_model", "_motion", "_pacing")
 )
 #: The simulated SJ300 drives and line (the package's ``__init__`` only re-exports them).
 SIMULATOR_SJ300: Final = (
     "simulator.sj300",
     *(
         f"simulator.sj300.{m}"
-        for m in ("_bus", "_drive", "_memory", "_parameters_table", "_status", "_trips")
+        for m in (
+            "_bus",
+            "_command_line",
+            "_drive",
+            "_memory",
+            "_parameters_table",
+            "_status",
+            "_trips",
+        )
     ),
 )
 #: The simulated FR-700 drives and line.
 SIMULATOR_FR700: Final = (
     "simulator.fr700",
-    *(f"simulator.fr700.{m}" for m in ("_bus", "_drive", "_parameters")),
+    *(f"simulator.fr700.{m}" for m in ("_bus", "_command_line", "_drive", "_parameters")),
 )
 
 #: Not sans-IO, by design. The package ``__init__`` modules re-export the async classes.
-SJ300_IO: Final = ("sj300", "sj300._dialect", "sj300._drive")
-FR700_IO: Final = ("fr700", "fr700._dialect", "fr700._drive")
+#: A protocol's profile reads its drives (``read_trips``...) and names its drive class.
+SJ300_IO: Final = ("sj300", "sj300._dialect", "sj300._drive", "sj300._profile")
+FR700_IO: Final = ("fr700", "fr700._dialect", "fr700._drive", "fr700._profile")
 #: The async stack. (``_stats`` and ``_channel`` import no asyncio themselves, but are the
 #: stack's bookkeeping and the drives' door to the arbiter: not claimed.)
 BUS_IO: Final = (
@@ -157,16 +169,18 @@ SIMULATOR_IO: Final = (
     "simulator._fd_link",
     "simulator._precise_loop",
     "simulator._pty",
+    "simulator._sim_connector",  # the bus's connector for sim:// (found by its scheme)
     "simulator._tap",
     "simulator._tcp",
 )
 #: The root: the user's API (open_bus, the poller), ``python -m`` and the version.
-ROOT_MODULES: Final = ("", "__main__", "_open", "_poller", "_version")
+ROOT_MODULES: Final = ("", "__main__", "_open", "_poller", "version")
 #: Whole packages that are I/O by nature, not scanned module by module. The
 #: gateway is a process (servers, pollers, leases); its register map does no
 #: I/O itself but works on the drives' payload types, which come with the
-#: protocol packages and so with the async stack.
-IO_PACKAGES: Final = ("cli", "gateway", "transports")
+#: protocol packages and so with the async stack. The profiles' model is
+#: plain data, but their registry finds a profile through the bus's registry.
+IO_PACKAGES: Final = ("cli", "gateway", "profiles", "transports")
 
 #: Every package whose modules are classified one by one above.
 CLASSIFIED_PACKAGES: Final = (

@@ -2,36 +2,50 @@
 
 It imports no protocol package: it finds a protocol's dialect by name in
 the registry (:func:`get_dialect`, :func:`register_protocol`), and the
-dialect tells it everything protocol-specific (see :class:`Dialect`).
+dialect tells it everything protocol-specific (see :class:`Dialect`). Nor
+does it import the simulator: a ``sim://`` URL's connector is found by its
+scheme in the same registry (a :class:`SchemeConnector`).
 """
 
 from __future__ import annotations
 
 from ._bus import Bus
 from ._capture import CaptureFile
-from ._channel import Channel
+from ._channel import Channel, cap_retries, retries_at_most
 from ._dialect import Dialect, LineFramer, LineParser, LineRequest, SimulatorFactory
 from ._link import ReconnectPolicy
 from ._listen import Sniffing, sniff
-from ._open import make_dialect, open_bus
+from ._open import BusOptions, make_dialect, open_bus
 from ._registry import (
     DEFAULT_PROTOCOL,
+    SchemeConnection,
+    SchemeConnector,
     get_dialect,
+    load_object,
     protocol_names,
     register_protocol,
     unregister_protocol,
 )
 from ._sniffer import Anomaly, LineSniffer, SniffedFrame, Unanswered
-from ._stats import BusStats, StatsSnapshot, TransactionStats
+from ._stats import LATENCY_BUCKETS_S, BusStats, StatsSnapshot, TransactionStats
 from ._timing import BusTiming
 from ._trace import TraceHook, TraceRecord
-from ._url import BusAddress, format_node_list, parse_bus_url, parse_flag, parse_node_list
+from ._url import (
+    BusAddress,
+    format_node_list,
+    parse_bus_url,
+    parse_flag,
+    parse_node_list,
+    url_protocol,
+)
 
 __all__ = [
     "DEFAULT_PROTOCOL",
+    "LATENCY_BUCKETS_S",
     "Anomaly",
     "Bus",
     "BusAddress",
+    "BusOptions",
     "BusStats",
     "BusTiming",
     "CaptureFile",
@@ -42,6 +56,8 @@ __all__ = [
     "LineRequest",
     "LineSniffer",
     "ReconnectPolicy",
+    "SchemeConnection",
+    "SchemeConnector",
     "SimulatorFactory",
     "SniffedFrame",
     "Sniffing",
@@ -50,8 +66,10 @@ __all__ = [
     "TraceRecord",
     "TransactionStats",
     "Unanswered",
+    "cap_retries",
     "format_node_list",
     "get_dialect",
+    "load_object",
     "make_dialect",
     "open_bus",
     "parse_bus_url",
@@ -59,6 +77,8 @@ __all__ = [
     "parse_node_list",
     "protocol_names",
     "register_protocol",
+    "retries_at_most",
     "sniff",
     "unregister_protocol",
+    "url_protocol",
 ]

@@ -56,16 +56,17 @@ import logging
 from dataclasses import dataclass
 from typing import Any, Generic
 
-from ..wire._errors import (
+from ..wire import (
+    BadFrame,
     BusClosedError,
+    Discarded,
+    LineSettings,
     NakError,
     RemoteProtocolError,
     ReplyTimeoutError,
     SJ300Error,
     TransportError,
 )
-from ..wire._events import BadFrame, Discarded
-from ..wire._line import LineSettings
 from ._dialect import Dialect, ReplyT, RequestT
 from ._linequeue import LineQueue
 from ._link import Link

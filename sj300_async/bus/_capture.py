@@ -28,13 +28,15 @@ from os import PathLike, fspath
 from pathlib import Path
 from typing import Any, BinaryIO, Final
 
-from .._version import __version__
-from ..wire import LineSettings, LocalProtocolError
-from ..wire._frames import FrameRole, LineFrame
-from ..wire._pcapng import (
+from ..version import __version__
+from ..wire import (
     FLAG_CHECK_ERROR,
     FLAG_NOISE,
     CapturedPacket,
+    FrameRole,
+    LineFrame,
+    LineSettings,
+    LocalProtocolError,
     PacketDirection,
     PcapngInterface,
     PcapngWriter,

@@ -132,10 +132,10 @@ class Channel(Generic[RequestT]):
 
         Not a coroutine function: it checks the call and returns the arbiter's
         coroutine for the caller to await, so a transaction's every resume
-        passes through one frame less. With ``Drive._data`` done the same
-        way, callgrind counts 120,163 -> 118,172 instructions a TCP round
-        trip (``python -m benchmarks.profile_tcp``). The refusals below are
-        raised by the call itself, before any ``await``.
+        passes through one frame less (``Drive._data`` is done the same way;
+        ``python -m benchmarks.profile_tcp`` counts the instructions of a TCP
+        round trip). The refusals below are raised by the call itself, before
+        any ``await``.
 
         *retries* replaces the bus's retries for this call (None: the bus's);
         :func:`retries_at_most` caps either for a whole block of calls.

@@ -10,7 +10,8 @@ protocol-neutral; a dialect tells them everything protocol-specific:
   the request that resynchronizes a node that missed an answer;
 - around the line: its drive class and broadcast, which requests change a
   drive (a read-only bus refuses them), the range of node numbers, its URL
-  options, and the simulator that serves it on ``sim://``.
+  options, the simulator that serves it on ``sim://`` and the profile that
+  tells the gateway and the command line what its drives' answers mean.
 
 A dialect is generic in its request type and its reply type, so the
 transaction path (drive → :class:`~sj300_async.bus.Channel` → arbiter →
@@ -25,8 +26,7 @@ from __future__ import annotations
 from collections.abc import Mapping, Sequence
 from typing import TYPE_CHECKING, Protocol, TypeVar, runtime_checkable
 
-from ..wire import BadFrame, Discarded, SJ300Error
-from ..wire._frames import LineFrame
+from ..wire import BadFrame, Discarded, LineFrame, SJ300Error
 
 if TYPE_CHECKING:
     from ._channel import Channel
@@ -145,6 +145,15 @@ class Dialect(Protocol[RequestT, ReplyT]):
     #: The pcapng link type of its captures: one of the user link types 147..162
     #: (docs/CAPTURE.md lists who has which).
     capture_linktype: int
+
+    @property
+    def profile(self) -> str | None:
+        """Where its profile lives, ``"package.module:attribute"``, or None.
+
+        A :class:`sj300_async.profiles.Profile` says what its drives' answers
+        mean, for the gateway and the command line; it is imported on first
+        use. None: the protocol has none (the library still talks to its drives).
+        """
 
     def configure(self, options: Mapping[str, str]) -> Dialect[RequestT, ReplyT]:
         """The dialect with the URL's protocol *options* applied (keys from :attr:`url_options`).

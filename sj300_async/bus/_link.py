@@ -20,7 +20,7 @@ from collections.abc import Awaitable, Callable
 from dataclasses import dataclass
 from typing import Any
 
-from ..wire._errors import BusClosedError, LocalProtocolError, TransportError
+from ..wire import BusClosedError, LocalProtocolError, TransportError
 from ._protocol import LineProtocol
 from ._stats import BusStats
 

@@ -21,10 +21,8 @@ from collections.abc import AsyncIterator
 from os import PathLike
 from typing import Any, Final
 
-from ..transports._buffered import BufferedReads
-from ..wire import LineSettings, LocalProtocolError, TransportError
-from ..wire._frames import FrameRole
-from ..wire._pcapng import PacketDirection
+from ..transports import BufferedReads
+from ..wire import FrameRole, LineSettings, LocalProtocolError, PacketDirection, TransportError
 from ._capture import CaptureFile, LineCapture, open_capture
 from ._dialect import Dialect
 from ._line_connector import AnyConnector, line_connector

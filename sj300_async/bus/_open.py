@@ -12,24 +12,51 @@ from collections.abc import AsyncIterator
 from contextlib import AbstractAsyncContextManager, asynccontextmanager
 from dataclasses import replace
 from os import PathLike
-from typing import Any, Final
+from typing import Any, Final, TypedDict
 
-from ..transports import LineFaults, loopback_connector
-from ..transports._replay import replay_connector
-from ..wire import LineSettings, LocalProtocolError
-from ..wire._line import INSTANT_LINE
+from typing_extensions import Unpack
+
+from ..transports import LineFaults, replay_connector
+from ..wire import INSTANT_LINE, LineSettings, LocalProtocolError
 from ._bus import Bus
 from ._capture import CaptureFile, open_capture
-from ._dialect import Dialect, SimulatorFactory
+from ._dialect import Dialect
 from ._line_connector import line_connector
 from ._link import Connector, ReconnectPolicy
-from ._registry import DEFAULT_PROTOCOL, get_dialect, load_object
+from ._registry import DEFAULT_PROTOCOL, get_dialect, scheme_connector
 from ._replay_open import open_replay
 from ._timing import BusTiming
 from ._trace import TraceHook
-from ._url import BusAddress, parse_bus_url, parse_flag
+from ._url import BusAddress, parse_bus_url
 
-__all__ = ["make_dialect", "open_bus"]
+__all__ = ["BusOptions", "make_dialect", "open_bus"]
+
+#: Attempts after the first when ``retries=`` is not given.
+_DEFAULT_RETRIES: Final = 2
+
+
+class BusOptions(TypedDict, total=False):
+    """The keyword arguments of :func:`open_bus` after ``protocol``; every one may be left out.
+
+    :func:`open_bus`'s docstring documents each, with its default. The
+    overloads of :func:`sj300_async.open_bus` take them as ``**options`` too
+    (``Unpack[BusOptions]``), so they are written once for every signature.
+    """
+
+    timeout: float | None
+    deadline: float | None
+    retries: int
+    strip_echo: bool | None
+    read_only: bool
+    line: LineSettings | None
+    timing: BusTiming | None
+    trace: TraceHook | None
+    reconnect: ReconnectPolicy | None
+    faults: tuple[LineFaults | None, LineFaults | None] | None
+    simulator: Any
+    dialect: Dialect[Any, Any] | None
+    capture: str | PathLike[str] | CaptureFile | None
+
 
 #: A TCP bridge adds network latency on top of the line's wire time.
 _TCP_MARGIN_S: Final = 0.1
@@ -51,76 +78,37 @@ def make_dialect(address: BusAddress, protocol: str | None = None) -> Dialect[An
     return get_dialect(name).configure(address.protocol_options)
 
 
-def _sim_connector(
-    address: BusAddress,
-    line: LineSettings,
-    dialect: Dialect[Any, Any],
-    faults: tuple[LineFaults | None, LineFaults | None] | None,
-    sim: Any,
-) -> tuple[Connector, Any]:
-    from ..simulator import LinePacing, PacedLine, PlausibleLine, SimulatorEndpoint
+def _dialect_of(
+    address: BusAddress, protocol: str | None, given: Dialect[Any, Any] | None
+) -> Dialect[Any, Any]:
+    """*given* (``dialect=``) if it speaks the bus's protocol, else the one the URL makes."""
+    made = make_dialect(address, protocol)
+    if given is None:
+        return made
+    if given.name != made.name:
+        raise LocalProtocolError(f"dialect {given.name} but the protocol is {made.name}")
+    return given
 
-    options = address.sim_options
-    wait_ms: int | None = None
-    if "wait_ms" in options:
-        try:
-            wait_ms = int(options["wait_ms"])
-        except ValueError:
-            raise LocalProtocolError(
-                f"wait_ms must be an integer, got {options['wait_ms']!r}"
-            ) from None
-    if sim is None:
-        factory: SimulatorFactory = load_object(dialect.simulator)
-        sim = factory(
-            dialect,
-            address.nodes,
-            factory_defaults=parse_flag("factory_defaults", options.get("factory_defaults", "0")),
-            wait_ms=wait_ms,
-        )
-    elif getattr(sim, "protocol", None) != dialect.name:
-        raise LocalProtocolError(f"simulator {sim!r} does not speak {dialect.name}")
-    elif wait_ms is not None:
-        for drive in sim.drives.values():
-            drive.set_wait_ms(wait_ms)
-    # pace=1: every character takes its wire time. Unpaced on a line with a
-    # speed: the drives answer at once but no reply arrives sooner than the
-    # request and a short reply could cross that line (PlausibleLine), or the
-    # host's plausibility floor would refuse every answer. Instant line: at once.
-    pacing = LinePacing(line.baudrate, line.bytesize, line.parity, line.stopbits)
-    paced = parse_flag("pace", options.get("pace", "0"))
 
-    def wire() -> PacedLine | None:  # one per connection: a line is booked per endpoint
-        if paced:
-            return PacedLine(pacing)
-        return PlausibleLine(pacing) if pacing.baudrate else None
-
-    to_peer, to_host = faults or (None, None)
-    served = sim
-    connector = loopback_connector(
-        lambda send: SimulatorEndpoint(served, send=send, line=wire()),
-        to_peer=to_peer,
-        to_host=to_host,
-    )
-    return connector, sim
+def _timing_of(address: BusAddress, options: BusOptions) -> BusTiming:
+    """``timing=`` (or the scheme's default) with ``timeout=`` and ``deadline=`` applied."""
+    timing = options.get("timing")
+    if timing is None:
+        # A replay answers as the captured line did: time it as a bridge (the
+        # margin most captures need; --timeout says otherwise).
+        bridged = address.scheme in ("tcp", "rfc2217", "replay")
+        timing = BusTiming(margin_s=_TCP_MARGIN_S) if bridged else BusTiming()
+    timeout = options.get("timeout")
+    if timeout is not None:
+        timing = replace(timing, fixed_timeout_s=timeout)
+    deadline = options.get("deadline")
+    if deadline is not None:
+        timing = replace(timing, call_deadline_s=deadline)
+    return timing
 
 
 def open_bus(
-    url: str,
-    *,
-    protocol: str | None = None,
-    timeout: float | None = None,
-    deadline: float | None = None,
-    retries: int = 2,
-    strip_echo: bool | None = None,
-    read_only: bool = False,
-    line: LineSettings | None = None,
-    timing: BusTiming | None = None,
-    trace: TraceHook | None = None,
-    reconnect: ReconnectPolicy | None = None,
-    faults: tuple[LineFaults | None, LineFaults | None] | None = None,
-    simulator: Any = None,
-    dialect: Dialect[Any, Any] | None = None,
-    capture: str | PathLike[str] | CaptureFile | None = None,
+    url: str, *, protocol: str | None = None, **options: Unpack[BusOptions]
 ) -> AbstractAsyncContextManager[Bus[Any, Any]]:
     """Open a bus, connect, and close everything on exit (also on error and cancellation).
 
@@ -130,7 +118,11 @@ def open_bus(
             path, or ``sim://?nodes=1-8`` (see :mod:`._url`).
         protocol: a registered protocol's name (``"sj300"``, the default, or
             ``"fr700"``); the URL's ``protocol=`` may say it instead (the two
-            must agree).
+            must agree). :func:`sj300_async.open_bus`, whose types follow this
+            argument, refuses a URL (or a ``replay://`` capture) that names
+            another protocol than it: pass that one.
+
+    Keyword Args:
         timeout: a fixed response time-out in seconds for every attempt of
             every request (default: computed from the line settings, the
             drive's wait time and a margin). A call makes up to ``retries + 1``
@@ -138,12 +130,13 @@ def open_bus(
         deadline: the longest a call may take in seconds, all its attempts
             together: no attempt starts after it (``BusTiming.call_deadline_s``;
             default none).
-        retries: attempts after the first, for time-outs and transmission errors.
+        retries: attempts after the first, for time-outs and transmission errors
+            (default 2).
         strip_echo: the RS-485 adapter's local echo: None to detect and strip it
             (the default, ``echo=auto``), True when the line echoes (``echo=1``:
             a missing echo is counted), False to never look (``echo=0``);
             default: the URL's ``echo``, else auto (see :mod:`._protocol`).
-        read_only: refuse every command that changes a drive.
+        read_only: refuse every command that changes a drive (default False).
         line: line settings (default: the URL's, else 19200 8N1; instant for sim://).
         timing: the full timing policy (``timeout`` overrides its fixed time-out).
         trace: a hook that sees every frame.
@@ -160,44 +153,18 @@ def open_bus(
     Raises:
         LocalProtocolError: a bad URL or setting (nothing is opened).
         TransportError: the first connection failed.
+        TypeError: a keyword argument that is none of these (at once).
     """
-    return _open_bus(
-        url,
-        protocol=protocol,
-        timeout=timeout,
-        deadline=deadline,
-        retries=retries,
-        strip_echo=strip_echo,
-        read_only=read_only,
-        line=line,
-        timing=timing,
-        trace=trace,
-        reconnect=reconnect,
-        faults=faults,
-        simulator=simulator,
-        dialect=dialect,
-        capture=capture,
-    )
+    unknown = options.keys() - BusOptions.__optional_keys__
+    if unknown:
+        names = ", ".join(sorted(unknown))
+        raise TypeError(f"open_bus() got unexpected keyword argument(s) {names}")
+    return _open_bus(url, protocol, options)
 
 
 @asynccontextmanager
 async def _open_bus(
-    url: str,
-    *,
-    protocol: str | None,
-    timeout: float | None,  # noqa: ASYNC109 - the response time-out, not a deadline
-    deadline: float | None,
-    retries: int,
-    strip_echo: bool | None,
-    read_only: bool,
-    line: LineSettings | None,
-    timing: BusTiming | None,
-    trace: TraceHook | None,
-    reconnect: ReconnectPolicy | None,
-    faults: tuple[LineFaults | None, LineFaults | None] | None,
-    simulator: Any,
-    dialect: Dialect[Any, Any] | None,
-    capture: str | PathLike[str] | CaptureFile | None,
+    url: str, protocol: str | None, options: BusOptions
 ) -> AsyncIterator[Bus[Any, Any]]:
     address = parse_bus_url(url, protocol=protocol)
     replay = None
@@ -205,46 +172,40 @@ async def _open_bus(
         replay = open_replay(address, protocol)
         protocol = replay.protocol
         address = replace(address, line=address.line or replay.line)
-    made = make_dialect(address, protocol)
-    if dialect is None:
-        dialect = made
-    elif dialect.name != made.name:
-        raise LocalProtocolError(f"dialect {dialect.name} but the protocol is {made.name}")
+    dialect = _dialect_of(address, protocol, options.get("dialect"))
+    line = options.get("line")
     if line is None:
         line = address.line or (INSTANT_LINE if address.scheme == "sim" else LineSettings())
-    if timing is None:
-        # A replay answers as the captured line did: time it as a bridge (the
-        # margin most captures need; --timeout says otherwise).
-        bridged = address.scheme in ("tcp", "rfc2217", "replay")
-        timing = BusTiming(margin_s=_TCP_MARGIN_S) if bridged else BusTiming()
-    if timeout is not None:
-        timing = replace(timing, fixed_timeout_s=timeout)
-    if deadline is not None:
-        timing = replace(timing, call_deadline_s=deadline)
-    if (faults is not None or simulator is not None) and address.scheme != "sim":
+    timing = _timing_of(address, options)
+    faults, simulator = options.get("faults"), options.get("simulator")
+    opener = None if replay is not None else scheme_connector(address.scheme)
+    if (faults is not None or simulator is not None) and opener is None:
         raise LocalProtocolError("faults= and simulator= are for sim:// buses only")
     connector: Connector
     if replay is not None:
         connector = replay_connector(replay.script)
-    elif address.scheme == "sim":
-        connector, simulator = _sim_connector(address, line, dialect, faults, simulator)
+    elif opener is not None:  # sim://: found by its scheme in the registry
+        opened = opener(address, line=line, dialect=dialect, faults=faults, simulator=simulator)
+        connector, simulator = opened.connector, opened.simulator
     else:
         connector = line_connector(address, line)
+    capture = options.get("capture")
     capture_file = open_capture(capture)
     line_capture = None
     if capture_file is not None:
         line_capture = capture_file.line(dialect, address.description, line)
+    strip_echo = options.get("strip_echo")
     bus: Bus[Any, Any] = Bus(
         connector,
         description=address.description,
         line=line,
         timing=timing,
         dialect=dialect,
-        retries=retries,
+        retries=options.get("retries", _DEFAULT_RETRIES),
         strip_echo=address.echo if strip_echo is None else strip_echo,
-        read_only=read_only,
-        trace=trace,
-        reconnect=reconnect,
+        read_only=options.get("read_only", False),
+        trace=options.get("trace"),
+        reconnect=options.get("reconnect"),
         capture=line_capture,
     )
     bus.simulator = simulator

@@ -1,4 +1,4 @@
-"""The protocol registry: a protocol's name → its dialect, imported on first use.
+"""The registries: a protocol's name → its dialect, a URL scheme → its connector.
 
 Nothing in the bus names a protocol's package: a bus URL's ``protocol=``
 (or ``open_bus(..., protocol=...)``) is looked up here, and the dialect's
@@ -6,6 +6,12 @@ module is imported only then, so a protocol that is not used costs nothing
 (python-can finds its interfaces the same way). Adding a protocol is one
 package with a dialect plus one entry: in :data:`_BUILT_IN` for the
 library's own, or :func:`register_protocol` for anyone else's.
+
+Nor does the bus name the simulator: a URL scheme whose line is no real
+one (``sim://``) is looked up in :data:`_SCHEME_CONNECTORS`, whose entry is
+imported when such a bus is opened (:func:`scheme_connector`). Real lines
+(``tcp``, ``rfc2217``, ``serial``) are opened by the transports below the
+bus, and ``replay://`` by the bus itself from the capture.
 """
 
 from __future__ import annotations
@@ -13,12 +19,27 @@ from __future__ import annotations
 import importlib
 import re
 from collections.abc import Callable
-from typing import Any, Final
+from dataclasses import dataclass
+from typing import TYPE_CHECKING, Any, Final, Protocol
 
-from ..wire import LocalProtocolError
+from ..wire import LineSettings, LocalProtocolError
 from ._dialect import Dialect
 
-__all__ = ["DEFAULT_PROTOCOL", "get_dialect", "load_object", "protocol_names", "register_protocol"]
+if TYPE_CHECKING:
+    from ..transports import LineFaults
+    from ._link import Connector
+    from ._url import BusAddress
+
+__all__ = [
+    "DEFAULT_PROTOCOL",
+    "SchemeConnection",
+    "SchemeConnector",
+    "get_dialect",
+    "load_object",
+    "protocol_names",
+    "register_protocol",
+    "scheme_connector",
+]
 
 AnyDialect = Dialect[Any, Any]
 
@@ -89,3 +110,61 @@ def load_object(path: str) -> Any:
     """Import ``"package.module:attribute"`` and return the attribute."""
     module_name, _, attribute = path.partition(":")
     return getattr(importlib.import_module(module_name), attribute)
+
+
+# -- URL schemes ---------------------------------------------------------------------------
+
+
+@dataclass(frozen=True, slots=True)
+class SchemeConnection:
+    """What a :class:`SchemeConnector` gives the bus: how to connect, and who serves the line."""
+
+    #: Opens the transport, on the first connection and on every reconnection.
+    connector: Connector
+    #: What serves the line, for ``bus.simulator`` (the simulated drives on ``sim://``).
+    simulator: Any = None
+
+
+class SchemeConnector(Protocol):
+    """Builds the connection of a URL scheme that is no real line: :data:`_SCHEME_CONNECTORS`."""
+
+    def __call__(
+        self,
+        address: BusAddress,
+        *,
+        line: LineSettings,
+        dialect: AnyDialect,
+        faults: tuple[LineFaults | None, LineFaults | None] | None,
+        simulator: Any,
+    ) -> SchemeConnection:
+        """The connection of the bus at *address*; called once per bus, before it connects.
+
+        Args:
+            address: the parsed URL (its nodes and the scheme's options in
+                ``sim_options``).
+            line: the line settings of the bus (a speed of 0 is an instant line).
+            dialect: the protocol the bus speaks, configured.
+            faults: ``open_bus``'s (to-drive, to-host) line faults, or None.
+            simulator: ``open_bus``'s ``simulator=``, or None.
+
+        Raises:
+            LocalProtocolError: a bad option of the scheme, or a *simulator*
+                that does not fit the protocol (nothing is opened).
+        """
+        ...
+
+
+#: URL schemes that are no real line: scheme → ``"module:attribute"`` of its
+#: :class:`SchemeConnector`, imported when a bus with such a URL is opened.
+_SCHEME_CONNECTORS: Final = {
+    "sim": "sj300_async.simulator._sim_connector:sim_connector",
+}
+
+
+def scheme_connector(scheme: str) -> SchemeConnector | None:
+    """The connector of URL scheme *scheme*, imported on first use; None for a real line."""
+    entry = _SCHEME_CONNECTORS.get(scheme)
+    if entry is None:
+        return None
+    found: SchemeConnector = load_object(entry)
+    return found

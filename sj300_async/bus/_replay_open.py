@@ -13,10 +13,15 @@ import re
 from pathlib import Path
 from typing import Any, Final
 
-from ..transports._replay import ReplayScript
-from ..wire import LineSettings, LocalProtocolError
-from ..wire._line import INSTANT_LINE
-from ..wire._pcapng import PcapngCapture, PcapngInterface, read_pcapng
+from ..transports import ReplayScript
+from ..wire import (
+    INSTANT_LINE,
+    LineSettings,
+    LocalProtocolError,
+    PcapngCapture,
+    PcapngInterface,
+    read_pcapng,
+)
 from ._dialect import Dialect
 from ._registry import get_dialect, protocol_names
 from ._url import BusAddress
@@ -97,7 +102,9 @@ def open_replay(address: BusAddress, protocol: str | None) -> ReplaySetup:
     name = _protocol_of(interface, path)
     wanted = protocol or address.protocol
     if wanted is not None and wanted != name:
-        raise LocalProtocolError(f"{path} is a capture of {name}, not {wanted}")
+        raise LocalProtocolError(
+            f"{path} is a capture of {name}, not {wanted}: pass protocol={name!r}"
+        )
     dialect: Dialect[Any, Any] = get_dialect(name).configure(address.protocol_options)
     framer = dialect.line_framer()
     script = ReplayScript(

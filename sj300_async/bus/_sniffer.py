@@ -37,8 +37,7 @@ from collections import Counter
 from dataclasses import dataclass, field
 from typing import Any, Final
 
-from ..wire import LineSettings
-from ..wire._frames import FrameRole, LineFrame
+from ..wire import FrameRole, LineFrame, LineSettings
 from ._dialect import Dialect, LineRequest
 from ._timing import BusTiming
 

@@ -54,8 +54,7 @@ import math
 from dataclasses import dataclass
 from typing import TYPE_CHECKING
 
-from ..wire._errors import LocalProtocolError
-from ..wire._line import LineSettings
+from ..wire import LineSettings, LocalProtocolError
 
 if TYPE_CHECKING:
     from ._dialect import LineRequest

@@ -40,7 +40,7 @@ from urllib.parse import parse_qsl, urlsplit
 from ..wire import LineSettings, LocalProtocolError
 from ._registry import DEFAULT_PROTOCOL, get_dialect, protocol_names
 
-__all__ = ["BusAddress", "parse_bus_url", "parse_node_list"]
+__all__ = ["BusAddress", "parse_bus_url", "parse_node_list", "url_protocol"]
 
 Scheme = Literal["tcp", "rfc2217", "serial", "sim", "replay"]
 
@@ -151,6 +151,22 @@ def _parse_echo(value: str) -> bool | None:
         return parse_flag("echo", value)
     except LocalProtocolError:
         raise LocalProtocolError(f"echo must be auto, 1 or 0, got {value!r}") from None
+
+
+def url_protocol(url: str) -> str | None:
+    """The protocol a bus URL's query names (``protocol=``, lower-cased), or None.
+
+    Only that key is read, as :func:`parse_bus_url` reads it; the rest of the
+    URL is not checked (a URL :func:`parse_bus_url` refuses may give None).
+    """
+    if not isinstance(url, str) or "://" not in url:
+        return None
+    try:
+        query = urlsplit(url.strip()).query
+    except ValueError:
+        return None
+    named = dict(parse_qsl(query, keep_blank_values=True)).get("protocol")
+    return None if named is None else named.lower()
 
 
 def parse_bus_url(url: str, *, protocol: str | None = None) -> BusAddress:

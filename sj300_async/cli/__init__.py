@@ -38,8 +38,8 @@ import sys
 from typing import Final, NoReturn
 
 from .. import __version__
-from ..transports._serial import SerialSettingsError
-from ..wire._errors import LocalProtocolError, SJ300Error
+from ..transports import SerialSettingsError
+from ..wire import LocalProtocolError, SJ300Error
 from ._common import GlobalOptionsOnParent, add_global_options, misplaced_option
 from ._errors import FAILURE, USAGE, CliError
 

@@ -12,8 +12,8 @@ from dataclasses import dataclass
 from typing import Final
 from urllib.parse import urlsplit
 
-from ..bus._url import format_node_list, parse_node_list
-from ..wire._errors import LocalProtocolError
+from ..bus import format_node_list, parse_node_list
+from ..wire import LocalProtocolError
 
 __all__ = ["ListenAddress", "format_nodes", "parse_any_nodes", "parse_listen", "parse_nodes"]
 

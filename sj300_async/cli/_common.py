@@ -50,9 +50,14 @@ describe the RS-485 line behind the bridge, which sets the computed reply
 time-outs; on ``sim://`` they are the simulated line's speed, paced with
 ``pace=1``. Settings not given keep the URL's, else 19200 8N1.
 
-``--protocol fr700`` (or ``protocol=fr700`` in the URL) talks to Mitsubishi
-FR-700 drives (stations 0..31); the commands written for SJ300 parameters
-and terminals refuse it, ``monitor`` shows either.
+Protocols. ``--protocol NAME`` (or ``protocol=NAME`` in the URL; the
+choices are the registered protocols that have a profile) picks the
+drives' protocol, SJ300 by default. Every command works through the
+protocol's profile (:mod:`sj300_async.profiles`): node numbers are checked
+against its range and named with its noun (FR-700 stations 0..31), and a
+command that needs what a protocol's drives lack (a trip history, a
+broadcast, a parameter backup format) says so before anything is opened
+(:func:`open_cli_bus`'s ``needs``).
 
 ``--trace`` prints every frame on stderr as it crosses the line (see
 :mod:`._trace`), for every command: :func:`open_cli_bus` sets the hook.
@@ -71,11 +76,9 @@ from collections.abc import AsyncIterator, Iterator, Sequence
 from contextlib import asynccontextmanager, contextmanager
 from typing import Any, Final
 
-from ..bus import Bus, open_bus
-from ..bus._url import parse_bus_url
-from ..sj300._constants import MAX_NODE, MIN_NODE
-from ..wire._errors import LocalProtocolError
-from ..wire._line import LineSettings
+from ..bus import DEFAULT_PROTOCOL, Bus, open_bus, parse_bus_url
+from ..profiles import Profile, get_profile, profiled_protocols
+from ..wire import LineSettings
 from ._errors import CliError
 from ._output import simulated_output
 from ._session import lent_bus
@@ -90,11 +93,13 @@ __all__ = [
     "add_json_option",
     "add_node_option",
     "bus_url",
+    "cli_profile",
     "command_name",
     "misplaced_option",
     "node_number",
     "open_cli_bus",
     "positive_float",
+    "profile_of",
 ]
 
 #: The environment variable that gives the bus URL when ``--url`` does not.
@@ -130,13 +135,11 @@ def _retries(text: str) -> int:
 
 
 def node_number(text: str) -> int:
-    """argparse type: a node address 1..32."""
+    """argparse type: a drive's address, a whole number (the protocol's range is checked later)."""
     try:
         value = int(text)
     except ValueError:
-        value = 0
-    if not MIN_NODE <= value <= MAX_NODE:
-        raise argparse.ArgumentTypeError(f"a node is {MIN_NODE}..{MAX_NODE}, got {text!r}")
+        raise argparse.ArgumentTypeError(f"a node is a whole number, got {text!r}") from None
     return value
 
 
@@ -247,8 +250,8 @@ def _add_shared_options(
     add.value(
         bus,
         "--protocol",
-        choices=("sj300", "fr700"),
-        help="the drives' protocol (default: the URL's protocol=, else sj300)",
+        choices=profiled_protocols(),
+        help=f"the drives' protocol (default: the URL's protocol=, else {DEFAULT_PROTOCOL})",
     )
     add.flag(
         bus,
@@ -384,50 +387,105 @@ def line_settings(args: argparse.Namespace, url: str) -> LineSettings | None:
     )
 
 
+#: What a command may need beyond the common reads and commands (a
+#: :class:`~sj300_async.profiles.Capabilities` field), and its name in a refusal.
+NEEDS: Final = {
+    "trip_history": "a trip history",
+    "broadcast_stop": "a broadcast stop",
+    "store": "storing settings apart",
+    "parameter_backup": "a parameter backup format",
+}
+
+
+def profile_of(bus: Bus) -> Profile:
+    """The profile of *bus*'s protocol.
+
+    Raises:
+        LocalProtocolError: the protocol has none (the commands cannot serve it).
+    """
+    return get_profile(bus.dialect.name)
+
+
+def cli_profile(args: argparse.Namespace, url: str | None = None) -> Profile:
+    """The profile of the drives the command will talk to, before its bus is open.
+
+    The shell's bus's when it lends one, else the protocol the options and
+    the URL name (the default protocol when neither does).
+
+    Raises:
+        LocalProtocolError: a bad URL, or a protocol without a profile.
+        CliError: both ``--url`` and ``--sim``.
+    """
+    lent = lent_bus()
+    if lent is not None:
+        return profile_of(lent)
+    return _profile_named(args, url or bus_url(args) or DEFAULT_URL)
+
+
+def _profile_named(args: argparse.Namespace, url: str) -> Profile:
+    """The profile of the protocol the options and *url* name (before any bus is open)."""
+    protocol = getattr(args, "protocol", None)
+    return get_profile(
+        protocol or parse_bus_url(url, protocol=protocol).protocol or DEFAULT_PROTOCOL
+    )
+
+
+def _check(args: argparse.Namespace, profile: Profile, needs: str | None) -> None:
+    """Refuse, before anything is sent, what *profile*'s drives cannot do or be.
+
+    Raises:
+        CliError: ``-n`` outside the protocol's range, or a capability it lacks (exit 2).
+    """
+    node = getattr(args, "node", None)
+    low, high = profile.node_range
+    if isinstance(node, int) and not low <= node <= high:
+        raise CliError(f"argument -n/--node: a {profile.node_noun} is {low}..{high}, got '{node}'")
+    if needs is not None and not getattr(profile.capabilities, needs):
+        raise CliError(
+            f"{command_name(args)} needs {NEEDS[needs]}, which {profile.model} drives "
+            f"(protocol {profile.name}) do not have here"
+        )
+
+
 @asynccontextmanager
 async def open_cli_bus(
-    args: argparse.Namespace, url: str | None = None, *, any_protocol: bool = False
+    args: argparse.Namespace, url: str | None = None, *, needs: str | None = None
 ) -> AsyncIterator[Bus]:
     """Open the bus the options name (or *url*), closed on exit.
 
     Args:
-        any_protocol: accept a URL of any protocol (``protocol=fr700``); by
-            default the bus must speak SJ300, as the SJ300 commands need.
+        needs: a capability the command needs of the drives' protocol (a
+            :data:`NEEDS` key); a protocol without it is refused before
+            anything is opened.
 
     Raises:
-        LocalProtocolError: a bad URL or setting, or another protocol.
+        CliError: a node outside the protocol's range, or a capability it lacks.
+        LocalProtocolError: a bad URL or setting, or a protocol without a profile.
         TransportError: the bus cannot be reached.
     """
     lent = lent_bus()
     if lent is not None:  # in `sj300 shell`: its bus, which stays open
-        if not any_protocol and lent.dialect.name != "sj300":
-            raise LocalProtocolError(
-                f"this command works with SJ300 drives only, not {lent.dialect.name}"
-            )
+        _check(args, profile_of(lent), needs)
         with _tracing(lent, args, asyncio.get_running_loop().time()):
             yield lent
         return
     started = asyncio.get_running_loop().time()
     command = command_name(args)
     implicit = implicit_bus(args)
+    url = url or bus_url(args) or DEFAULT_URL
+    _check(args, _profile_named(args, url), needs)
     if implicit and command in CHANGES_DRIVES:
         raise CliError(
             f"{command} changes drives: say which bus with --url URL or ${ENV_URL}, "
             "or --sim for the in-memory simulator"
         )
-    url = url or bus_url(args) or DEFAULT_URL
-    protocol = getattr(args, "protocol", None)
-    if not any_protocol:
-        if protocol not in (None, "sj300"):
-            raise LocalProtocolError(f"this command works with SJ300 drives only, not {protocol}")
-        protocol = "sj300"
     retries = getattr(args, "retries", None)
     async with open_bus(
         url,
         timeout=args.timeout,
         retries=getattr(args, "default_retries", 2) if retries is None else retries,
         line=line_settings(args, url),
-        protocol=protocol,
+        protocol=getattr(args, "protocol", None),
         capture=getattr(args, "capture", None),
     ) as bus:
         if implicit:

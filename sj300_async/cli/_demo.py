@@ -5,8 +5,8 @@ program on the line would: it starts the drives at different speeds and
 ramp times, then now and then changes a setpoint, reverses or stops a drive
 and starts it again. Every ``trip_every_s`` (give or take) one running drive
 trips (the simulator's fault hook, as a fault inside the drive would), sits
-in its trip for a few seconds, and is reset with the RS terminal (command
-02) and started again.
+in its trip for a few seconds, and is reset the way its profile resets a
+drive (SJ300: the RS terminal through command 02) and started again.
 
 It shares the bus with the poller: its commands queue on the same arbiter.
 A command that fails is skipped; the demo goes on.
@@ -20,11 +20,9 @@ import random
 from collections.abc import Awaitable
 from typing import Final
 
-from ..bus._bus import Bus
-from ..fr700 import Fr700Drive
-from ..sj300._terminals import InputTerminal
-from ..wire._enums import Direction
-from ..wire._errors import LocalProtocolError, SJ300Error
+from ..bus import Bus
+from ..profiles import get_profile
+from ..wire import Direction, LocalProtocolError, SJ300Error
 
 __all__ = ["run_demo"]
 
@@ -32,7 +30,9 @@ _log = logging.getLogger("sj300_async.cli.demo")
 
 #: Setpoints the demo picks from (Hz; the simulated drives' maximum is 50 Hz).
 _SETPOINTS: Final = (10.0, 15.0, 20.0, 25.0, 30.0, 35.0, 40.0, 45.0, 50.0)
-#: Trips the demo causes: None is the over-current code that fits the drive's phase.
+#: Trips the demo causes: None is the over-current code that fits the drive's phase; the
+#: others are SJ300 trip factors (overload, over-voltage, thermal), which the demo's
+#: simulated line (the SJ300's, unless --protocol says otherwise) names.
 _TRIP_CODES: Final = (None, None, 5, 7, 21)
 
 
@@ -66,6 +66,7 @@ class _Demo:
     ) -> None:
         assert bus.simulator is not None
         self._bus = bus
+        self._profile = get_profile(bus.dialect.name)
         self._sim = bus.simulator
         self._rng = rng
         self._trip_every_s = trip_every_s
@@ -82,12 +83,8 @@ class _Demo:
         for node in self._nodes:
             ramp = self._rng.choice((2.0, 3.0, 5.0, 8.0))
             drive = self._bus.drive(node)
-            if isinstance(drive, Fr700Drive):  # Pr.7 / Pr.8: acceleration / deceleration time
-                await self._do(drive.write_parameter(7, ramp))
-                await self._do(drive.write_parameter(8, ramp))
-            else:
-                await self._do(drive.write_parameter("F002", ramp))
-                await self._do(drive.write_parameter("F003", ramp))
+            for code in self._profile.ramp_parameters:  # acceleration, deceleration time
+                await self._do(drive.write_parameter(code, ramp))
             if node != self._nodes[-1]:  # one drive starts stopped: something to start later
                 await self._start(node)
         next_trip = loop.time() + self._trip_every_s / 2
@@ -150,9 +147,5 @@ class _Demo:
             self._resets[node] = now + self._tripped_s
 
     async def _reset(self, node: int) -> None:
-        drive = self._bus.drive(node)
-        if isinstance(drive, Fr700Drive):  # HFD H9696: the FR-700's reset
-            await self._do(drive.reset())
-        elif await self._do(drive.set_terminals(InputTerminal.RS)):
-            await self._do(drive.set_terminals(0))
+        await self._do(self._profile.reset(self._bus.drive(node)))
         await self._start(node)

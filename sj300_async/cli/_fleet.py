@@ -1,31 +1,27 @@
 """``sj300 monitor --url mqtt://HOST:PORT[/prefix]``: every drive of every gateway on a broker.
 
-The fleet view opens no bus: it subscribes to what the gateways' MQTT
-bridges publish (the contract is :mod:`sj300_async.gateway._mqtt_topics`),
-``<prefix>/+/availability`` and ``<prefix>/+/+/+/state``, and shows the
-latest state of each (gateway, line, node). Read-only: it never publishes
-(no will, no command topic; a clean session, so it leaves nothing behind on
-the broker either).
-
-The URL: ``mqtt://[USER[:PASSWORD]@]HOST[:PORT][/PREFIX]``, ``mqtts://`` for
-TLS (the system's certificate authorities). Ports default to 1883 and 8883;
-the prefix to ``sj300``, and it may have several levels
-(``mqtt://broker/plant/north``). Each level follows the contract's naming
-rule (no wildcard, no empty level); a bad URL is exit 2. ``--timeout``
-bounds the connection and the subscription (default 10 s); the options
-that describe a bus (``--nodes``, ``--protocol``, ``--trace``, the line
-settings) are refused, since the gateways own the buses; ``--interval`` and
-``--retries`` are the bus monitor's and do nothing here.
+The fleet view opens no bus: it follows what the gateways' MQTT bridges
+publish through the library's fleet subscriber
+(:class:`sj300_async.gateway.mqtt.Fleet` and
+:func:`~sj300_async.gateway.mqtt.follow`: the URL, the read-only
+subscription, reconnection and the checks on every message are there) and
+shows the latest state of each (gateway, line, node). This module only
+renders it. ``--timeout`` bounds the connection and the subscription
+(default 10 s); the options that describe a bus (``--nodes``,
+``--protocol``, ``--trace``, the line settings) are refused, since the
+gateways own the buses; ``--interval`` and ``--retries`` are the bus
+monitor's and do nothing here.
 
 Output, as the bus monitor's:
 
 - a terminal: a live table, one row per drive sorted by gateway, line and
   node: gateway, line, node, online, output frequency, current, voltage,
   direction, state (a tripped drive names its trip) and the age of its
-  data. The caption says how the broker connection is doing;
+  data. The caption says how the broker connection is doing, and how many
+  malformed messages were skipped;
 - ``--json``: one object per state message received, flushed: the
-  message's fields (:class:`~sj300_async.gateway._mqtt_topics.StateMessage`)
-  plus ``age_s``, the wall-clock seconds since the gateway polled the drive
+  message's fields (:class:`~sj300_async.gateway.mqtt.StateMessage`) plus
+  ``age_s``, the wall-clock seconds since the gateway polled the drive
   (negative when the two clocks disagree: not hidden), and
   ``gateway_online`` (False once the gateway's last will said offline);
 - anything else: one plain line per state message.
@@ -37,38 +33,21 @@ Ctrl-C with 130, as the bus monitor.
 
 Decisions:
 
-- Staleness: a gateway whose availability is ``offline`` (its last will:
-  it died or lost the broker) shows its drives as ``offline (stale)``: its
-  retained states describe a past that nobody is refreshing. The
-  availability is subscribed before the states, so that the broker hands
-  over the retained availability first and no row shows a dead gateway's
-  drive online, even for a moment.
-- The topic is authoritative: a state whose payload names another
-  (gateway, line, node) than its topic is malformed (a misrouted or
-  hand-made message), as is one whose shown fields have the wrong type
-  (``StateMessage.from_json`` checks only the gateway and the node: a text
-  where a number belongs would otherwise break the table), a gateway or
-  line that breaks the contract's naming rule, or text that is not
-  printable (an escape sequence would reach the terminal as it is).
-- Malformed messages (a payload that is no state, an availability that is
-  neither ``online`` nor ``offline``, a topic the contract does not name)
-  are skipped, counted and logged at DEBUG with their payload. The count
-  shows in the live table's caption, and when any was skipped a summary
-  line ends the run on stderr (``sj300 monitor: note: 2 malformed messages
-  skipped (first: TOPIC: REASON)``): stdout stays the states alone, and
-  nobody needs ``-v`` to learn that something on the broker is wrong.
-- An empty payload clears a retained message (``mosquitto_pub -r -n``):
-  it removes the drive (or forgets the gateway's availability) rather than
-  counting as malformed.
+- The state in words and the trip's meaning are the gateway's
+  (``state``, ``trip_meaning``: its drive profile worked them out); a
+  message from a gateway that sends neither is shown from its ``running``,
+  ``tripped`` and ``direction`` alone, never by decoding a protocol's
+  status codes here.
+- A drive of a gateway whose availability is ``offline`` shows as
+  ``offline (stale)``.
+- When any message was skipped as malformed, a summary line ends the run
+  on stderr (``sj300 monitor: note: 2 malformed messages skipped (first:
+  TOPIC: REASON)``): stdout stays the states alone, and nobody needs ``-v``
+  to learn that something on the broker is wrong.
 - Broker unreachable at the start: one line, exit 1, as an unreachable
-  bus. Lost later: reconnect with a growing back-off (0.5 s, doubling, at
-  most 10 s: a viewer wants to see the fleet back soon, and one client
-  retrying every 10 s costs a broker nothing); the table's caption says so,
-  and without the table a note on stderr does. After a reconnect the broker
-  hands over the retained states again (``--json`` prints them again).
-- aiomqtt (the ``gateway`` extra) is imported only when a broker is asked
-  for: the bus monitor does not need it, and without it the fleet view is
-  one line naming ``pip install 'sj300-async[gateway]'``, exit 2.
+  bus; lost later: the caption says so, and without the table a note on
+  stderr does. Without aiomqtt (the ``gateway`` extra) the view is one line
+  naming ``pip install 'sj300-async[gateway]'``, exit 2.
 """
 
 from __future__ import annotations
@@ -76,48 +55,28 @@ from __future__ import annotations
 import argparse
 import asyncio
 import contextlib
-import logging
-import math
-import ssl
+import importlib.util
 import sys
 import time
-import urllib.parse
-from collections.abc import Callable, Iterator
+from collections.abc import Iterator
 from dataclasses import dataclass
-from typing import TYPE_CHECKING, Any, Final
+from typing import Any, Final
 
-from ..gateway._mqtt_topics import (
-    AVAILABLE,
-    DEFAULT_PREFIX,
-    UNAVAILABLE,
+from ..gateway.mqtt import (
+    BrokerUnreachable,
+    Fleet,
     StateMessage,
-    parse_state_topic,
-    valid_name,
+    SubscriptionRefused,
+    follow,
+    parse_fleet_url,
 )
-from ..sj300._codes import StatusA, StatusB, StatusC
-from ..sj300._payloads import InverterStatus
 from ._errors import FAILURE, USAGE, CliError
-from ._output import drive_state, is_terminal, jsonable, print_json
-from ._tripinfo import sj300_trip
+from ._output import is_terminal, jsonable, print_json
 
-if TYPE_CHECKING:
-    import aiomqtt
+__all__ = ["fleet_table", "plain_line", "state_json", "state_text", "watch_fleet"]
 
-__all__ = ["Fleet", "FleetUrl", "is_fleet_url", "parse_fleet_url", "watch_fleet"]
-
-_log = logging.getLogger("sj300_async.cli.fleet")
-
-#: URL schemes of a broker (the fleet view) rather than a bus.
-SCHEMES: Final = {"mqtt": 1883, "mqtts": 8883}
-#: The reconnection back-off (seconds): the first wait, doubled at each failure up to the ceiling.
-BACKOFF_FIRST_S: Final = 0.5
-BACKOFF_MAX_S: Final = 10.0
-#: The broker connection's keep-alive: a silently dropped link is noticed within 1.5x this.
-KEEPALIVE_S: Final = 10
 #: How long connecting and subscribing may take without ``--timeout``.
 DEFAULT_TIMEOUT_S: Final = 10.0
-#: How much of a malformed payload the DEBUG log shows.
-_LOGGED_PAYLOAD: Final = 2048
 #: The options of a bus, refused with a broker URL (the attribute, the option).
 _BUS_OPTIONS: Final = (
     ("nodes", "--nodes"),
@@ -128,209 +87,6 @@ _BUS_OPTIONS: Final = (
     ("bytesize", "--bytesize"),
     ("stopbits", "--stopbits"),
 )
-
-
-def is_fleet_url(url: str) -> bool:
-    """True when *url* names a broker (``mqtt://``, ``mqtts://``), not a bus."""
-    scheme, sep, _ = url.partition("://")
-    return bool(sep) and scheme.lower() in SCHEMES
-
-
-@dataclass(frozen=True, slots=True)
-class FleetUrl:
-    """A broker URL, taken apart."""
-
-    scheme: str
-    host: str
-    port: int
-    prefix: str = DEFAULT_PREFIX
-    username: str | None = None
-    password: str | None = None
-
-    @property
-    def tls(self) -> bool:
-        return self.scheme == "mqtts"
-
-    @property
-    def broker(self) -> str:
-        """``mqtt://HOST:PORT`` (never the password), for messages."""
-        host = f"[{self.host}]" if ":" in self.host else self.host
-        return f"{self.scheme}://{host}:{self.port}"
-
-    @property
-    def availability_filter(self) -> str:
-        return f"{self.prefix}/+/availability"
-
-    @property
-    def state_filter(self) -> str:
-        return f"{self.prefix}/+/+/+/state"
-
-
-def parse_fleet_url(url: str) -> FleetUrl:
-    """Take ``mqtt[s]://[USER[:PASSWORD]@]HOST[:PORT][/PREFIX]`` apart.
-
-    Raises:
-        CliError: not such a URL (exit 2).
-    """
-    parts = urllib.parse.urlsplit(url)
-    scheme = parts.scheme.lower()
-    if scheme not in SCHEMES:
-        raise CliError(f"not a broker URL: {url!r} (mqtt://HOST:PORT[/prefix], mqtts://...)")
-    try:
-        port = parts.port or SCHEMES[scheme]
-    except ValueError as exc:  # a port that is no number or out of range
-        raise CliError(f"bad broker URL {url!r}: {exc}") from None
-    if not parts.hostname:
-        raise CliError(f"bad broker URL {url!r}: no host (mqtt://HOST:PORT[/prefix])")
-    if parts.query or parts.fragment:
-        raise CliError(f"bad broker URL {url!r}: it takes no ?query or #fragment")
-    prefix = parts.path.strip("/") or DEFAULT_PREFIX
-    if not all(valid_name(level) for level in prefix.split("/")):
-        raise CliError(
-            f"bad topic prefix {prefix!r}: levels of letters, digits, '_', '.', '-' "
-            "separated by '/'"
-        )
-    unquote = urllib.parse.unquote
-    return FleetUrl(
-        scheme,
-        parts.hostname,
-        port,
-        prefix,
-        None if parts.username is None else unquote(parts.username),
-        None if parts.password is None else unquote(parts.password),
-    )
-
-
-# --- what is known of the fleet (no I/O) -----------------------------------------------------
-
-
-@dataclass(frozen=True, slots=True)
-class Malformed:
-    """The first malformed message: where it came, and why it was refused."""
-
-    topic: str
-    reason: str
-
-
-class Fleet:
-    """The latest state of every drive on the broker, and how the connection is doing."""
-
-    def __init__(self, url: FleetUrl) -> None:
-        self.url = url
-        self._drives: dict[tuple[str, str, int], StateMessage] = {}
-        #: Each gateway's availability (True: online), once heard.
-        self.gateways: dict[str, bool] = {}
-        self.malformed = 0
-        self.first_malformed: Malformed | None = None
-        #: None while connected; else what is going on (``connecting``, ``lost ...``).
-        self.link_problem: str | None = "connecting"
-
-    @property
-    def drives(self) -> list[StateMessage]:
-        """Every drive's latest state, sorted by gateway, line and node."""
-        return [self._drives[key] for key in sorted(self._drives)]
-
-    def gateway_online(self, gateway: str) -> bool:
-        """False only when the gateway said ``offline`` (not yet heard: trusted)."""
-        return self.gateways.get(gateway, True)
-
-    def receive(self, topic: str, payload: bytes) -> StateMessage | None:
-        """Take one message in; the state it carries, if it is one (else None)."""
-        key = parse_state_topic(topic, self.url.prefix)
-        if key is not None:
-            return self._state(key, topic, payload)
-        gateway = self._availability_of(topic)
-        if gateway is None:
-            self._malformed(topic, payload, "not a state or availability topic")
-        elif not payload:  # a retained availability cleared
-            self.gateways.pop(gateway, None)
-        elif payload in (AVAILABLE.encode(), UNAVAILABLE.encode()):
-            self.gateways[gateway] = payload == AVAILABLE.encode()
-        else:
-            self._malformed(topic, payload, f"availability is {AVAILABLE!r} or {UNAVAILABLE!r}")
-        return None
-
-    def _state(self, key: tuple[str, str, int], topic: str, payload: bytes) -> StateMessage | None:
-        if not payload:  # a retained state cleared: the drive is gone
-            self._drives.pop(key, None)
-            return None
-        try:
-            message = StateMessage.from_json(payload)
-            _check_shown_fields(message)
-        except ValueError as exc:
-            self._malformed(topic, payload, str(exc))
-            return None
-        named = (message.gateway, message.line, message.node)
-        if named != key:
-            gateway, line, node = named
-            self._malformed(topic, payload, f"the payload is {gateway}/{line}/{node}'s state")
-            return None
-        self._drives[key] = message
-        return message
-
-    def _availability_of(self, topic: str) -> str | None:
-        head = self.url.prefix.split("/")
-        parts = topic.split("/")
-        if len(parts) != len(head) + 2 or parts[: len(head)] != head:
-            return None
-        gateway, last = parts[len(head) :]
-        return gateway if last == "availability" else None
-
-    def _malformed(self, topic: str, payload: bytes, reason: str) -> None:
-        self.malformed += 1
-        if self.first_malformed is None:  # shown on stderr: no control character gets there
-            self.first_malformed = Malformed(_escaped(topic), _escaped(" ".join(reason.split())))
-        shown = payload[:_LOGGED_PAYLOAD]
-        more = f" (+{len(payload) - len(shown)} bytes)" if len(payload) > len(shown) else ""
-        _log.debug("skipped a malformed message on %s: %s: %r%s", topic, reason, shown, more)
-
-    def summary(self) -> str | None:
-        """The line that ends a run that skipped malformed messages (None: none skipped)."""
-        first = self.first_malformed
-        if first is None:
-            return None
-        plural = "s" if self.malformed != 1 else ""
-        return (
-            f"{self.malformed} malformed message{plural} skipped "
-            f"(first: {first.topic}: {first.reason})"
-        )
-
-
-def _escaped(text: str) -> str:
-    """*text* with each unprintable character written as Python escapes it (``\\x1b``)."""
-    return "".join(c if c.isprintable() else repr(c)[1:-1] for c in text)
-
-
-def _check_shown_fields(message: StateMessage) -> None:
-    """Refuse a state whose fields the view shows have the wrong type, or unprintable text.
-
-    Text goes to a terminal as it is (the plain lines): an escape sequence in
-    a payload must not reach it.
-
-    Raises:
-        ValueError: the first such field.
-    """
-
-    def number(value: Any) -> bool:
-        return isinstance(value, int | float) and not isinstance(value, bool)
-
-    for name in ("gateway", "line"):
-        if not isinstance(getattr(message, name), str) or not valid_name(getattr(message, name)):
-            raise ValueError(f"{name} is not a name (letters, digits, '_', '.', '-')")
-    if not number(message.time) or not math.isfinite(message.time):
-        raise ValueError("time is not a finite number")
-    if not isinstance(message.online, bool):
-        raise ValueError("online is not true/false")
-    for name in ("output_frequency_hz", "output_current_a", "output_voltage_v"):
-        value = getattr(message, name)
-        if value is not None and not number(value):
-            raise ValueError(f"{name} is not a number")
-    for name in ("direction", "trip", "protocol"):
-        value = getattr(message, name)
-        if value is not None and not (isinstance(value, str) and value.isprintable()):
-            raise ValueError(f"{name} is not printable text")
-    if message.status is not None and not isinstance(message.status, dict):
-        raise ValueError("status is not an object")
 
 
 # --- how it is shown -------------------------------------------------------------------------
@@ -364,17 +120,9 @@ def state_text(message: StateMessage) -> str:
 
 
 def _status_words(message: StateMessage) -> str:
-    status = message.status
-    if status is not None:
-        with contextlib.suppress(KeyError, TypeError, ValueError):  # names from newer firmware
-            if "bits" in status:  # FR-700
-                from ..fr700._codes import Fr700StatusBits
-                from ..fr700._payloads import Fr700Status
-
-                return drive_state(Fr700Status(Fr700StatusBits(int(status["bits"]))))
-            return drive_state(
-                InverterStatus(StatusA[status["a"]], StatusB[status["b"]], StatusC[status["c"]])
-            )
+    """The gateway's words; from an older gateway, what running and direction tell."""
+    if message.state is not None:
+        return message.state
     if message.running is None:
         return "-"
     if not message.running:
@@ -383,15 +131,11 @@ def _status_words(message: StateMessage) -> str:
 
 
 def _trip_words(message: StateMessage) -> str:
-    """``E07 over-voltage`` (SJ300), ``fault H10`` (FR-700), or the code as it came."""
+    """``E07 over-voltage``; ``fault H10`` when the gateway gives no meaning."""
     code = message.trip
     if code is None:
         return ""
-    if message.protocol == "sj300" and code[:1] == "E" and code[1:].isdigit():
-        return str(sj300_trip(int(code[1:])))
-    if message.protocol == "fr700":
-        return f"fault {code}"
-    return code
+    return f"{code} {message.trip_meaning}" if message.trip_meaning else f"fault {code}"
 
 
 def _number(value: float | None, digits: int) -> str:
@@ -585,17 +329,14 @@ def state_json(
 # --- the subscription ------------------------------------------------------------------------
 
 
-def _import_aiomqtt() -> Any:
-    """aiomqtt, or exit 2 naming the extra that brings it."""
-    try:
-        import aiomqtt
-    except ImportError as exc:
+def _need_aiomqtt() -> None:
+    """Exit 2 naming the extra that brings aiomqtt, when it is missing."""
+    if importlib.util.find_spec("aiomqtt") is None:
         raise CliError(
-            f"the fleet view needs the gateway extra ({exc.name or 'aiomqtt'} is missing): "
+            "the fleet view needs the gateway extra (aiomqtt is missing): "
             "pip install 'sj300-async[gateway]'",
             status=USAGE,
-        ) from None
-    return aiomqtt
+        )
 
 
 def _refuse_bus_options(args: argparse.Namespace) -> None:
@@ -605,98 +346,6 @@ def _refuse_bus_options(args: argparse.Namespace) -> None:
             raise CliError(
                 f"{option} does not apply to a broker URL: the gateways own the buses "
                 "(the fleet view shows every drive they publish)"
-            )
-
-
-def backoff(attempt: int) -> float:
-    """The delay before reconnection *attempt* (0, 1, ...): 0.5 s doubling, at most 10 s."""
-    return min(BACKOFF_FIRST_S * 2.0 ** min(attempt, 16), BACKOFF_MAX_S)
-
-
-async def follow(
-    fleet: Fleet,
-    on_state: Callable[[StateMessage], bool],
-    *,
-    timeout_s: float = DEFAULT_TIMEOUT_S,
-    on_link: Callable[[str | None], None] | None = None,
-) -> None:
-    """Subscribe and feed *fleet* until *on_state* answers False; reconnect when lost.
-
-    *on_state* gets each state received and says whether to go on. *on_link*
-    hears when the link is up (None: connected and subscribed) and when it
-    is down (what happened, and when the next attempt comes).
-
-    Raises:
-        CliError: the broker cannot be reached or refuses the subscription
-            at the start (exit 1), or aiomqtt is missing (exit 2).
-    """
-    mqtt = _import_aiomqtt()
-    url = fleet.url
-    attempt = 0
-    connected_once = False
-
-    def link(problem: str | None) -> None:
-        fleet.link_problem = problem
-        if on_link is not None:
-            on_link(problem)
-
-    while True:
-        subscribed = False
-        client: aiomqtt.Client = mqtt.Client(
-            url.host,
-            url.port,
-            username=url.username,
-            password=url.password,
-            tls_context=ssl.create_default_context() if url.tls else None,
-            timeout=timeout_s,
-            keepalive=KEEPALIVE_S,
-        )
-        try:
-            async with client:
-                # Availability first: the broker hands over retained messages in the order of
-                # the filters, so a dead gateway's drives never show online, even briefly.
-                granted = await client.subscribe(
-                    [(url.availability_filter, 1), (url.state_filter, 1)]
-                )
-                _check_granted(url, granted)
-                connected_once = subscribed = True
-                attempt = 0
-                link(None)
-                async for message in client.messages:
-                    payload = message.payload  # bytes from paho; typed wider by aiomqtt
-                    data = b"" if payload is None else payload
-                    if not isinstance(data, bytes | bytearray):
-                        data = str(data).encode()
-                    state = fleet.receive(message.topic.value, bytes(data))
-                    if state is not None and not on_state(state):
-                        return
-        except mqtt.MqttError as exc:
-            reason = " ".join(str(exc).split()) or type(exc).__name__
-            if not connected_once:
-                raise CliError(
-                    f"cannot connect to {url.broker}: {reason}", status=FAILURE
-                ) from None
-            delay = backoff(attempt)
-            attempt += 1
-            what = "connection to {} lost" if subscribed else "cannot reconnect to {}"
-            link(f"{what.format(url.broker)} ({reason}): next attempt in {delay:g} s")
-            _log.info("%s: %s; next attempt in %g s", what.format(url.broker), reason, delay)
-            await asyncio.sleep(delay)
-            fleet.link_problem = f"reconnecting to {url.broker} (attempt {attempt})"
-
-
-def _check_granted(url: FleetUrl, granted: Any) -> None:
-    """A subscription the broker refused (an ACL): exit 1, naming the filter.
-
-    Raises:
-        CliError: a refusal (the SUBACK's reason code 0x80 or above).
-    """
-    filters = (url.availability_filter, url.state_filter)
-    for topic_filter, code in zip(filters, granted, strict=False):
-        failed = code.is_failure if hasattr(code, "is_failure") else int(code) >= 0x80
-        if failed:
-            raise CliError(
-                f"{url.broker} refused the subscription to {topic_filter}: {code}", status=FAILURE
             )
 
 
@@ -712,7 +361,7 @@ async def watch_fleet(args: argparse.Namespace, url_text: str) -> None:
     """
     url = parse_fleet_url(url_text)
     _refuse_bus_options(args)
-    _import_aiomqtt()  # before anything is shown
+    _need_aiomqtt()  # before anything is shown
     fleet = Fleet(url)
     live = is_terminal() and not args.json
     count: int | None = args.count
@@ -748,6 +397,10 @@ async def watch_fleet(args: argparse.Namespace, url_text: str) -> None:
             with contextlib.suppress(TimeoutError):  # --duration is up
                 async with asyncio.timeout(args.duration):
                     await follow(fleet, on_state, timeout_s=timeout_s, on_link=on_link)
+        except BrokerUnreachable as exc:
+            raise CliError(f"cannot connect to {url.broker}: {exc}", status=FAILURE) from None
+        except SubscriptionRefused as exc:
+            raise CliError(str(exc), status=FAILURE) from None
         finally:
             stack.close()  # the table's last frame, then the summary under it
             summary = fleet.summary()

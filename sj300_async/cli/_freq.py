@@ -1,7 +1,8 @@
-"""``sj300 freq HZ``: set a drive's output frequency (command 01; the drive needs A001 = 03).
+"""``sj300 freq HZ``: set a drive's output frequency.
 
-HZ has a resolution of 0.01 Hz; the drive refuses (NAK 16) a frequency
-above its maximum A004.
+HZ has a resolution of 0.01 Hz. A refusal is explained the way the drive's
+profile knows it (SJ300: NAK 13, the frequency source A001 must be 03;
+NAK 16, above the maximum frequency A004).
 
 JSON: ``{"node": 1, "frequency_hz": 30.0}``.
 """
@@ -11,19 +12,13 @@ from __future__ import annotations
 import argparse
 from typing import Any
 
-from ..sj300._codes import NakCode
-from ..wire._errors import NakError
-from ._common import add_bus_options, add_json_option, add_node_option, open_cli_bus
+from ..wire import NakError
+from ._common import add_bus_options, add_json_option, add_node_option, open_cli_bus, profile_of
 from ._errors import FAILURE, CliError
 from ._output import print_json
 from ._session import run_async
 
 __all__ = ["add_parser"]
-
-_HINTS: dict[int, str] = {
-    NakCode.EXECUTION_DISABLED: "the frequency source A001 must be 03 (serial)",
-    NakCode.ABNORMAL_PARAMETER: "above the maximum frequency A004?",
-}
 
 
 def _hertz(text: str) -> float:
@@ -38,7 +33,7 @@ def add_parser(subparsers: Any) -> None:
     p = subparsers.add_parser(
         "freq",
         help="set the output frequency",
-        description="Set the output frequency (command 01).",
+        description="Set the output frequency (SJ300 command 01, FR-700 HED).",
     )
     p.add_argument("hz", type=_hertz, metavar="HZ", help="frequency in Hz, e.g. 42.5")
     add_node_option(p)
@@ -57,7 +52,7 @@ async def _freq(args: argparse.Namespace) -> int:
         try:
             await bus.drive(args.node).set_frequency(args.hz)
         except NakError as exc:
-            hint = _HINTS.get(exc.code)
+            hint = profile_of(bus).nak_hint(exc.code, "frequency")
             if hint is None:
                 raise
             raise CliError(f"{args.hz:g} Hz: {exc}: {hint}", status=FAILURE) from None

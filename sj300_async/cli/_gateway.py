@@ -1,30 +1,41 @@
-"""``sj300 gateway``: own the lines, poll the drives, serve Modbus TCP and metrics until stopped.
+"""``sj300 gateway``: own the lines, poll the drives, serve them through the northbounds.
 
 ``--config gateway.toml`` describes everything (several lines, write
 grants, leases; docs/GATEWAY.md); the flags cover the simple case, one
-read-only line: ``--url URL --nodes LIST [--protocol fr700] --modbus
-HOST:PORT --metrics HOST:PORT --mqtt mqtt://HOST:PORT --id NAME``. A bad
-configuration starts nothing (exit 2, one line naming the file, line and
-key).
+read-only line: ``--url URL --nodes LIST [--protocol NAME] --id NAME`` and
+one flag per registered northbound that has one (``--modbus HOST:PORT``,
+``--metrics HOST:PORT``, ``--mqtt mqtt://HOST:PORT``: each northbound
+declares its own, :class:`~sj300_async.gateway.Flag`). A bad configuration
+starts nothing (exit 2, one line naming the file, line and key).
 
-stdout carries one line per server, ``modbus on 127.0.0.1:1502``,
-``metrics on http://127.0.0.1:9300/metrics`` and ``mqtt to
-mqtt://127.0.0.1:1883 as gw1`` (the broker is connected to in the
-background: the line says where, not that it answered), flushed at once so
-that a script can read the real port when it asked for port 0. SIGINT and SIGTERM
-stop it cleanly (docs/GATEWAY.md: the order, and the one command it may
-send on the way out); exit status 0.
+stdout carries one line per northbound, as it announces itself (``modbus
+on 127.0.0.1:1502``, ``metrics on http://127.0.0.1:9300/metrics``, ``mqtt
+to mqtt://127.0.0.1:1883 as gw1``: the broker is connected to in the
+background, the line says where, not that it answered), flushed at once so
+that a script can read the real port when it asked for port 0. SIGINT and
+SIGTERM stop it cleanly (docs/GATEWAY.md: the order, and the one command it
+may send on the way out); exit status 0.
 """
 
 from __future__ import annotations
 
 import argparse
 import asyncio
+import importlib.util
 import logging
 import signal
 import sys
 from typing import Any
 
+from ..bus import protocol_names
+from ..gateway import (
+    DEFAULT_STALE_AFTER_S,
+    GatewayConfig,
+    config_from_flags,
+    get_northbound,
+    load_config,
+    northbound_names,
+)
 from ._errors import USAGE, CliError
 
 __all__ = ["add_parser"]
@@ -34,9 +45,9 @@ def add_parser(subparsers: Any) -> None:
     """Add ``gateway`` to the ``sj300`` subcommands."""
     p = subparsers.add_parser(
         "gateway",
-        help="own the lines and serve the drives over Modbus TCP, with Prometheus metrics",
+        help="own the lines and serve the drives over Modbus TCP, MQTT and HTTP",
         description="Own one or more RS-485 lines, poll their drives and serve them: "
-        "Modbus TCP for SCADA (a unit id per drive), /metrics and /healthz over HTTP. "
+        "Modbus TCP for SCADA (a unit id per drive), MQTT, /metrics and /healthz over HTTP. "
         "Read-only unless the --config file grants writes. Needs the gateway extra.",
     )
     p.add_argument("--config", metavar="FILE", help="the gateway's TOML configuration")
@@ -44,17 +55,11 @@ def add_parser(subparsers: Any) -> None:
     # --trace...) do not apply to a process that owns several lines.
     p.add_argument("--url", default=None, help="the one line's bus URL (without --config)")
     p.add_argument(
-        "--protocol", default=None, help="with --url: the line's protocol (sj300, fr700)"
+        "--protocol", default=None, help=f"with --url: the line's protocol ({_protocols()})"
     )
     p.add_argument("--nodes", metavar="LIST", help="with --url: the drives to poll, e.g. 1-8")
-    p.add_argument("--modbus", metavar="HOST:PORT", help="serve Modbus TCP there (port 0: any)")
-    p.add_argument("--metrics", metavar="HOST:PORT", help="serve /metrics and /healthz there")
-    p.add_argument(
-        "--mqtt",
-        metavar="URL",
-        help="publish to this MQTT broker (mqtt://HOST[:PORT] or mqtts://): state, "
-        "availability, Home Assistant discovery",
-    )
+    for section, flag in _flags():
+        p.add_argument(flag.option, dest=_dest(section), metavar=flag.metavar, help=flag.help)
     p.add_argument(
         "--id", metavar="NAME", help="the gateway's name on MQTT (default: the host name)"
     )
@@ -75,58 +80,74 @@ def add_parser(subparsers: Any) -> None:
     p.set_defaults(run=run)
 
 
-def _config(args: argparse.Namespace) -> Any:
-    from ..gateway._config import config_from_flags, load_config
-    from ..gateway._model import DEFAULT_STALE_AFTER_S
+def _protocols() -> str:
+    return ", ".join(protocol_names())
 
+
+def _flags() -> list[tuple[str, Any]]:
+    """``(section, Flag)`` of every registered northbound that has a flag."""
+    out = []
+    for section in northbound_names():
+        flag = get_northbound(section).flag
+        if flag is not None:
+            out.append((section, flag))
+    return out
+
+
+def _dest(section: str) -> str:
+    return f"northbound_{section}"
+
+
+def _config(args: argparse.Namespace) -> GatewayConfig:
+    flags = _flags()
+    given = {section: getattr(args, _dest(section)) for section, _ in flags}
+    given = {section: value for section, value in given.items() if value is not None}
+    options = ", ".join(["--url", "--nodes", *(flag.option for _, flag in flags), "--id"])
     if args.config is not None:
-        if args.url or args.nodes or args.modbus or args.metrics or args.mqtt or args.id:
-            raise CliError(
-                "--config describes everything: "
-                "no --url, --nodes, --modbus, --metrics, --mqtt, --id"
-            )
+        if args.url or args.nodes or given or args.id:
+            raise CliError(f"--config describes everything: no {options}")
         return load_config(args.config)
     if not args.url or not args.nodes:
         raise CliError("give --config FILE, or --url URL and --nodes LIST", status=USAGE)
-    if not args.modbus and not args.metrics and not args.mqtt:
-        raise CliError(
-            "nothing to serve: give --modbus HOST:PORT, --metrics HOST:PORT and/or --mqtt URL"
-        )
+    if not given:
+        serving = " and/or ".join(f"{flag.option} {flag.metavar}" for _, flag in flags)
+        raise CliError(f"nothing to serve: give {serving}")
     return config_from_flags(
         url=args.url,
         nodes=args.nodes,
         protocol=args.protocol,
-        modbus=args.modbus,
-        metrics=args.metrics,
         stale_after_s=DEFAULT_STALE_AFTER_S if args.stale_after is None else args.stale_after,
         interval_s=0.5 if args.interval is None else args.interval,
-        mqtt=args.mqtt,
         gateway_id=args.id,
+        northbounds=given,
     )
+
+
+def _check_requirements(config: GatewayConfig) -> None:
+    """Exit 2 naming the extra when a configured northbound's library is missing."""
+    for section in config.northbounds:
+        for module in get_northbound(section).requires:
+            if importlib.util.find_spec(module) is None:
+                raise CliError(
+                    f"the gateway's {section} needs the gateway extra ({module} is missing): "
+                    "pip install 'sj300-async[gateway]'"
+                )
 
 
 def run(args: argparse.Namespace) -> int:
     """Serve until SIGINT / SIGTERM; return 0."""
-    try:
-        import aiomqtt  # noqa: F401
-        import prometheus_client  # noqa: F401
-        import pymodbus  # noqa: F401
-    except ImportError as exc:
-        raise CliError(
-            f"the gateway needs the gateway extra ({exc.name} is missing): "
-            "pip install 'sj300-async[gateway]'"
-        ) from None
     if args.verbose:
         logging.basicConfig(
             level=logging.DEBUG if args.verbose > 1 else logging.INFO,
             format="%(asctime)s %(name)s %(levelname)s %(message)s",
         )
     config = _config(args)  # a bad one raises here: nothing has started
+    _check_requirements(config)
     return asyncio.run(_serve(config, args.capture))
 
 
-async def _serve(config: Any, capture: str | None) -> int:
-    from ..gateway._gateway import Gateway
+async def _serve(config: GatewayConfig, capture: str | None) -> int:
+    from ..gateway import Gateway
 
     loop = asyncio.get_running_loop()
     stop = asyncio.Event()
@@ -134,14 +155,10 @@ async def _serve(config: Any, capture: str | None) -> int:
         loop.add_signal_handler(sig, stop.set)
     try:
         async with Gateway(config, capture=capture) as gateway:
-            if gateway.modbus is not None:
-                host = config.modbus.host
-                print(f"modbus on {host}:{gateway.modbus.port}", flush=True)
-            if gateway.http is not None:
-                port = gateway.http.sockets[0].getsockname()[1]
-                print(f"metrics on http://{config.metrics.host}:{port}/metrics", flush=True)
-            if config.mqtt is not None:
-                print(f"mqtt to {config.mqtt.url} as {config.gateway_id}", flush=True)
+            for northbound in gateway.northbounds.values():
+                line = northbound.announce()
+                if line is not None:
+                    print(line, flush=True)
             await stop.wait()
             print("stopping", file=sys.stderr, flush=True)
     except OSError as exc:

@@ -26,10 +26,13 @@ Output, by where stdout goes:
   ``sj300 status --json``; ``parameters`` holds ``F001``), plus ``time``,
   the wall-clock time (Unix seconds; ``timestamp`` is the event loop's).
 
-States read as a person would (``stopped``, ``accelerating``, ``running``,
-``tripped``: :func:`~._output.drive_state`). A tripped drive's row names its
+Each sample becomes a :class:`~sj300_async.profiles.DriveSnapshot` built by
+the drive's profile, and the rows show the snapshot: states read as a person
+would (``stopped``, ``accelerating``, ``running``, ``tripped``), the set
+frequency where the profile names a parameter for it (SJ300 F001), torque
+and power where the protocol measures them. A tripped drive's row names its
 trip (``tripped E07 over-voltage``; an FR-700 ``tripped fault H10``), read
-once per trip from the drive's trip history. A drive that has never
+once per trip from the drive's history by its profile. A drive that has never
 answered is ``offline`` (:attr:`~sj300_async.Sample.answered`); one that
 stops answering turns offline and is probed every few seconds instead of
 being polled; the monitor itself never stops for a failing drive or a
@@ -58,21 +61,26 @@ from collections.abc import AsyncIterator, Coroutine
 from dataclasses import dataclass
 from typing import Any, Final
 
-from .._poller import Poller, Sample
-from ..bus._bus import Bus
-from ..bus._url import parse_bus_url
-from ..sj300._codes import StatusA
-from ..sj300._payloads import InverterStatus, MonitorData
-from ..wire._errors import SJ300Error
+from .. import Poller, Sample
+from ..bus import Bus, parse_bus_url
+from ..profiles import DriveReadings, DriveSnapshot, Profile, Trip, build_snapshot
+from ..wire import SJ300Error
 from ._args import format_nodes, parse_any_nodes
-from ._common import add_bus_options, add_json_option, bus_url, open_cli_bus, positive_float
+from ._common import (
+    add_bus_options,
+    add_json_option,
+    bus_url,
+    open_cli_bus,
+    positive_float,
+    profile_of,
+)
 from ._demo import run_demo
 from ._errors import FAILURE, CliError
-from ._output import Justify, drive_state, is_terminal, jsonable, print_json
+from ._output import Justify, is_terminal, jsonable, print_json
 from ._progress import progress
 from ._scan import probe
 from ._session import run_async
-from ._tripinfo import Trip, latest_trip
+from ._tripinfo import trip_or_none
 
 __all__ = ["add_parser"]
 
@@ -82,8 +90,6 @@ _log = logging.getLogger("sj300_async.cli.monitor")
 DEMO_URL: Final = "sim://?nodes=1-8"
 #: The nodes polled on a ``sim://`` bus whose simulated drives are not known.
 _DEFAULT_NODES: Final = tuple(range(1, 9))
-#: The setpoint each poll reads along with status and monitor.
-_SETPOINT: Final = "F001"
 #: Exit status of Ctrl-C (SIGINT), as for every command.
 INTERRUPTED: Final = 130
 #: Below this many terminal columns the table takes its compact layout.
@@ -205,24 +211,28 @@ def run(args: argparse.Namespace) -> int:
 
 async def _monitor(args: argparse.Namespace) -> int:
     url = bus_url(args)
-    from ._fleet import is_fleet_url, watch_fleet  # here: every sj300 command imports this module
+    if url is not None and _is_fleet_url(url):  # a broker, not a bus: the fleet view
+        from ._fleet import watch_fleet  # here: every sj300 command imports this module
 
-    if url is not None and is_fleet_url(url):  # a broker, not a bus: the fleet view
         await _until_terminated(watch_fleet(args, url))
         return 0
     nodes: list[int] | None = args.nodes
     if nodes is None and url is not None and _real_bus(args, url):
         nodes = await _scan_first(args, url)
-    async with open_cli_bus(args, url or DEMO_URL, any_protocol=True) as bus:
+    async with open_cli_bus(args, url or DEMO_URL) as bus:
         if nodes is None:
             nodes = await _simulated_or_scanned(args, bus)
-        poller = Poller(interval_s=args.interval, parameters=(_SETPOINT,))
+        profile = profile_of(bus)
+        setpoint = profile.setpoint_parameter
+        poller = Poller(
+            interval_s=args.interval, parameters=() if setpoint is None else (setpoint,)
+        )
         poller.add(bus, nodes)
         # Subscribed before polling starts, so not even the first sample is missed.
         # Unbounded, but printing is synchronous: the poller cannot run ahead of it.
         samples: asyncio.Queue[Sample] = asyncio.Queue()
         poller.on_sample(samples.put_nowait)
-        board = _Board(bus, nodes, demo=url is None)
+        board = _Board(bus, profile, nodes, demo=url is None)
         async with poller, _demo(bus, enabled=url is None):
             try:
                 with board.live(enabled=is_terminal() and not args.json):
@@ -230,6 +240,12 @@ async def _monitor(args: argparse.Namespace) -> int:
             finally:
                 board.trips.close()
     return 0
+
+
+def _is_fleet_url(url: str) -> bool:
+    """True when *url* names a broker (``mqtt://``, ``mqtts://``): the fleet view, not a bus."""
+    scheme, sep, _ = url.partition("://")
+    return bool(sep) and scheme.lower() in ("mqtt", "mqtts")
 
 
 def _real_bus(args: argparse.Namespace, url: str) -> bool:
@@ -249,7 +265,7 @@ async def _scan_first(args: argparse.Namespace, url: str) -> list[int]:
         TransportError: the bus cannot be reached.
     """
     scan_args = argparse.Namespace(**{**vars(args), "retries": 0})
-    async with open_cli_bus(scan_args, url, any_protocol=True) as bus:
+    async with open_cli_bus(scan_args, url) as bus:
         return await _scan(bus)
 
 
@@ -356,22 +372,22 @@ async def _consume(
 class _TripNames:
     """The trip each tripped drive is in, read once per trip from its history.
 
-    The status says only that a drive is tripped; :func:`latest_trip` reads
-    which trip, in a task of its own (the poll goes on meanwhile). A read
-    that fails is tried again at the next tripped sample.
+    The status says only that a drive is tripped; the profile reads which
+    trip, in a task of its own (the poll goes on meanwhile). A read that
+    fails is tried again at the next tripped sample.
     """
 
-    def __init__(self, bus: Bus) -> None:
+    def __init__(self, bus: Bus, profile: Profile) -> None:
         self._bus = bus
+        self._profile = profile
         self._known: dict[int, Trip | None] = {}
         self._reading: dict[int, asyncio.Task[None]] = {}
 
-    def update(self, sample: Sample) -> None:
-        status = sample.status
-        node = sample.node
-        if status is None:  # not read this poll: nothing learnt
+    def update(self, snapshot: DriveSnapshot) -> None:
+        node = snapshot.node
+        if snapshot.tripped is None:  # no status this poll: nothing learnt
             return
-        if not status.tripped:
+        if not snapshot.tripped:
             self._known.pop(node, None)
             task = self._reading.pop(node, None)
             if task is not None:
@@ -386,7 +402,7 @@ class _TripNames:
 
     async def _read(self, node: int) -> None:
         try:
-            self._known[node] = await latest_trip(self._bus.drive(node))
+            self._known[node] = await trip_or_none(self._profile, self._bus.drive(node))
         except SJ300Error as exc:
             _log.debug("node %02d: trip history not read: %s", node, exc)
         finally:
@@ -408,19 +424,23 @@ class _LastError:
 class _Board:
     """The latest sample and the last error of every drive, rendered as a table or lines."""
 
-    def __init__(self, bus: Bus, nodes: list[int], *, demo: bool) -> None:
+    def __init__(self, bus: Bus, profile: Profile, nodes: list[int], *, demo: bool) -> None:
         self._bus = bus
+        self._profile = profile
         self.nodes = nodes
         self._demo = demo
         self._samples: dict[int, Sample] = {}
+        self._snapshots: dict[int, DriveSnapshot] = {}
         self._errors: dict[int, _LastError] = {}
-        self.trips = _TripNames(bus)
+        self.trips = _TripNames(bus, profile)
         self.is_live = False
         self._console: Any = None
 
     def update(self, sample: Sample) -> None:
         self._samples[sample.node] = sample
-        self.trips.update(sample)
+        snapshot = self.snapshot(sample)
+        self._snapshots[sample.node] = snapshot
+        self.trips.update(snapshot)
         if sample.error is not None:
             self._errors[sample.node] = _LastError(sample.error, time.time())
 
@@ -467,7 +487,7 @@ class _Board:
             sample = self._samples.get(node)
             styled: dict[str, Any] = dict(cells)
             if sample is not None:
-                styled["state"] = Text(cells["state"], style=_state_style(sample))
+                styled["state"] = Text(cells["state"], style=self._state_style(node))
                 styled["error"] = Text(cells["error"], style="red" if sample.error else "dim")
                 styled["link"] = Text(cells["link"], style="green" if _up(sample) else "bold red")
             table.add_row(*(styled[field.key] for field in fields))
@@ -487,35 +507,56 @@ class _Board:
             return last.message
         return f"{last.message} ({time.time() - last.at:.0f} s ago)"
 
+    def snapshot(self, sample: Sample) -> DriveSnapshot:
+        """*sample* alone as the profile sees it (a value not read this poll is unknown)."""
+        readings = DriveReadings()
+        readings.take(sample, self._profile)
+        return build_snapshot(
+            self._profile,
+            readings,
+            line=self._bus.description,
+            node=sample.node,
+            unit=None,
+            now=sample.timestamp,
+            wall=time.time(),
+        )
+
     def cells(self, sample: Sample) -> dict[str, str]:
         """Every cell of *sample*'s row as text, keyed as :class:`_Field` names them."""
-        m = sample.monitor
-        setpoint = sample.parameters.get(_SETPOINT)
+        s = self._snapshots.get(sample.node)
+        if s is None or s.taken_at != sample.timestamp:
+            s = self.snapshot(sample)
         latency = "-" if sample.latency_s is None else f"{sample.latency_s * 1000:.1f}"
         return {
             "node": f"{sample.node:02d}",
-            "state": self._state(sample),
-            "set_hz": "-" if setpoint is None else f"{setpoint:.2f}",
-            "out_hz": "-" if m is None else f"{m.output_frequency_hz:.2f}",
-            "amps": "-" if m is None else f"{m.output_current_a:.1f}",
-            "volts": "-" if m is None else f"{m.output_voltage_v:.1f}",
-            "torque": "-" if not isinstance(m, MonitorData) else str(m.output_torque_percent),
-            "kw": "-" if not isinstance(m, MonitorData) else f"{m.power_kw:.1f}",
+            "state": self._state(s),
+            "set_hz": _number(s.set_frequency_hz, 2),
+            "out_hz": _number(s.output_frequency_hz, 2),
+            "amps": _number(s.output_current_a, 1),
+            "volts": _number(s.output_voltage_v, 1),
+            "torque": _number(s.output_torque_percent, 0),
+            "kw": _number(s.power_kw, 1),
             "error": sample.error or "",
             "latency": latency,
             "link": "online" if _up(sample) else "offline",
         }
 
-    def _state(self, sample: Sample) -> str:
-        status = sample.status
-        if status is None:
+    def _state(self, snapshot: DriveSnapshot) -> str:
+        if snapshot.state is None:
             return "-"
-        state = drive_state(status)
-        if status.tripped:
-            trip = self.trips.get(sample.node)
+        if snapshot.tripped:
+            trip = self.trips.get(snapshot.node)
             if trip is not None:
-                return f"{state} {trip}"
-        return state
+                return f"{snapshot.state} {trip}"
+        return snapshot.state
+
+    def _state_style(self, node: int) -> str:
+        snapshot = self._snapshots.get(node)
+        if snapshot is None or snapshot.tripped is None:
+            return "dim"
+        if snapshot.tripped:
+            return "bold red"
+        return "green" if snapshot.running else ""
 
     def plain_line(self, sample: Sample) -> str:
         """One line for a log: time, node, link, state, values with units, then any error."""
@@ -562,16 +603,10 @@ def _layout(width: int, rows: list[dict[str, str]]) -> tuple[tuple[_Field, ...],
     return fields, widths
 
 
+def _number(value: float | None, digits: int) -> str:
+    return "-" if value is None else f"{value:.{digits}f}"
+
+
 def _up(sample: Sample) -> bool:
     """Online and heard from: a drive that has never answered is offline."""
     return sample.online and sample.answered
-
-
-def _state_style(sample: Sample) -> str:
-    status = sample.status
-    if status is None:
-        return "dim"
-    if status.tripped:
-        return "bold red"
-    running = status.a == StatusA.RUNNING if isinstance(status, InverterStatus) else status.running
-    return "green" if running else ""

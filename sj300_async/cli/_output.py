@@ -6,9 +6,8 @@ way everywhere (:func:`jsonable`): an enumeration becomes its member's name
 (``"RUNNING"``; an undocumented code ``"UNKNOWN_12"``), a bit field
 (terminals, trip status B) its integer value, a nested dataclass an object.
 
-States read as a person would (:func:`drive_state`: ``stopped``,
-``accelerating``, ``tripped``), mapped here from the manual's codes, which
-the enums keep as the manual words them ("on stopping").
+A drive's state in words is its profile's (:mod:`sj300_async.profiles`),
+never worked out here.
 
 Tables go to stdout. On a terminal they are rich tables; otherwise (a pipe,
 a file, a CI log) the same rows as space-aligned plain text without colour
@@ -24,16 +23,12 @@ import json
 import math
 import sys
 from collections.abc import Mapping, Sequence
-from typing import Any, Final, Literal, TextIO
+from typing import Any, Literal, TextIO
 
-from ..fr700._payloads import Fr700Status
-from ..sj300._codes import StatusA, StatusC
-from ..sj300._parameters import ParameterInfo
-from ..sj300._payloads import InverterStatus
+from ..profiles import ParameterSpec, words
 
 __all__ = [
     "Column",
-    "drive_state",
     "format_raw",
     "human",
     "is_terminal",
@@ -103,55 +98,10 @@ def human(member: enum.Enum) -> str:
 
     A bit field lists its set members' names: ``OVER_VOLTAGE|THERMAL``, ``-`` for none.
     """
-    if isinstance(member, enum.Flag):
-        names = [m.name for m in type(member) if m.name and m in member]
-        return "|".join(names) if names else "-"
-    return (member.name or str(member.value)).lower().replace("_", " ")
+    return words(member)
 
 
-#: Status A as a person says it; RUNNING is told apart by status C (:data:`_MOVING`).
-_STATES: Final[dict[StatusA, str]] = {
-    StatusA.INITIAL: "starting up",
-    StatusA.STOPPING: "stopped",  # "on stopping": the output is off
-    StatusA.FREE_RUN_STOP: "coasting",
-    StatusA.JOGGING: "jogging",
-    StatusA.DYNAMIC_BRAKING: "braking",
-    StatusA.RETRY: "retrying",
-    StatusA.TRIP: "tripped",
-    StatusA.UNDER_VOLTAGE: "under-voltage",
-}
-#: What a running drive's output does, by status C (anything else: "running").
-_MOVING: Final[dict[StatusC, str]] = {
-    StatusC.ACCELERATING: "accelerating",
-    StatusC.DECELERATING: "decelerating",
-    StatusC.FORWARD_START: "starting",
-    StatusC.REVERSE_START: "starting",
-    StatusC.REVERSE_FROM_FORWARD: "reversing",
-    StatusC.FORWARD_FROM_REVERSE: "reversing",
-}
-
-
-def drive_state(status: InverterStatus | Fr700Status) -> str:
-    """A drive's state in a word or two: ``stopped``, ``running``, ``accelerating``, ``tripped``.
-
-    SJ300: status A, with status C telling how a running drive's output
-    moves; a code the manual does not list reads ``state 42``. FR-700: its
-    status bits (``running reverse`` when the reverse bit is set).
-    """
-    if status.tripped:
-        return "tripped"
-    if isinstance(status, Fr700Status):
-        if status.running:
-            return "running reverse" if status.reverse else "running"
-        return "stopped"
-    if status.a == StatusA.RUNNING:
-        return _MOVING.get(status.c, "running")
-    if status.a == StatusA.STOPPING and status.c == StatusC.DECELERATING:
-        return "stopping"  # ramping down to a stop
-    return _STATES.get(status.a) or f"state {int(status.a)}"
-
-
-def format_raw(info: ParameterInfo, raw: int) -> str:
+def format_raw(info: ParameterSpec, raw: int) -> str:
     """A raw parameter value in engineering units, at the parameter's resolution: ``30.00 s``."""
     digits = len(str(info.scale)) - 1 if str(info.scale).strip("0") == "1" else 3
     text = f"{info.from_raw(raw):.{digits}f}"

@@ -1,7 +1,12 @@
 """``sj300 params backup|restore|diff FILE``: a drive's parameters to and from a JSON snapshot.
 
-- ``backup FILE`` reads every parameter of the SJ300 function-code table
-  (:data:`sj300_async.PARAMETERS`, 335 codes; or ``--codes``) and saves
+For the protocols whose profile has a parameter backup format (the
+``parameter_backup`` capability: SJ300); the others are refused with one
+line before anything is opened. Codes, names, units, the absent-code NAK
+and the communication settings below come from the protocol's profile.
+
+- ``backup FILE`` reads every parameter of the catalogue (SJ300: the
+  function-code table, 335 codes; or ``--codes``) and saves
   each one's code, name, unit, value in its unit and raw value, with the
   node, the protocol, the time (UTC) and the library version (format:
   :mod:`._snapshot`). A code the drive answers NAK 16 for is recorded as
@@ -35,11 +40,10 @@ and diff.
 
 FR-700 buses (``--protocol fr700``, ``protocol=fr700`` in the URL) are
 refused with one line, exit 2: a decision, not an oversight. The FR-700
-catalogue names only the parameters the library models, parameter numbers
-are not SJ300 codes, and its raw values, NAK codes and drive class differ;
-a backup of a few dozen of several hundred parameters would pass for a
-whole one. The file's ``protocol`` field keeps the door open for an
-FR-700 backup later, and keeps one from ever being restored onto an SJ300.
+catalogue names only the parameters the library models: a backup of a few
+dozen of several hundred parameters would pass for a whole one. The file's
+``protocol`` field keeps one protocol's file from ever being restored onto
+another's drive.
 """
 
 from __future__ import annotations
@@ -48,38 +52,31 @@ import argparse
 import os
 from collections.abc import Callable, Coroutine
 from pathlib import Path
-from typing import Any, Final
+from typing import Any
 
-from ..bus._url import parse_bus_url
-from ..sj300._codes import NakCode
-from ..sj300._drive import Drive
-from ..sj300._parameters import PARAMETERS, parameter_info
-from ..wire._errors import LocalProtocolError, NakError
+from ..profiles import Profile
+from ..wire import NakError
 from ._common import (
     DEFAULT_URL,
     add_bus_options,
     add_json_option,
     add_node_option,
     bus_url,
+    cli_profile,
     open_cli_bus,
 )
 from ._errors import FAILURE, USAGE, CliError
 from ._output import Column, format_raw, print_json, print_table
 from ._progress import progress
-from ._read import parameter_code
+from ._read import parameter_spec
 from ._session import run_async
-from ._snapshot import PROTOCOL, Snapshot, utc_now
+from ._snapshot import Snapshot, utc_now
 
-__all__ = ["COMM_CODES", "NODE_ADDRESS", "add_parser"]
-
-#: The node address: never restored.
-NODE_ADDRESS: Final = "C072"
-#: Line settings: restored only with --include-comm.
-COMM_CODES: Final = ("C071", "C073", "C074", "C075")
+__all__ = ["add_parser"]
 
 
 def _code_list(text: str) -> list[str]:
-    return [parameter_code(code) for code in text.replace(" ", "").split(",") if code]
+    return [code for code in text.replace(" ", "").split(",") if code]
 
 
 def add_parser(subparsers: Any) -> None:
@@ -94,7 +91,8 @@ def add_parser(subparsers: Any) -> None:
     backup = actions.add_parser(
         "backup",
         help="save the drive's parameters to FILE",
-        description="Read every parameter of the SJ300 function-code table (or --codes) and "
+        description="Read every parameter of the catalogue (SJ300: the function-code table; or "
+        "--codes) and "
         "save each one's code, name, unit, value and raw value as JSON, with the node, the "
         "protocol and the time. Codes the drive does not have (NAK 16) are recorded as absent.",
     )
@@ -143,23 +141,9 @@ def _runner(
     step: Callable[[argparse.Namespace], Coroutine[Any, Any, int]],
 ) -> Callable[[argparse.Namespace], int]:
     def run(args: argparse.Namespace) -> int:
-        _refuse_other_protocols(args)
         return run_async(step(args))
 
     return run
-
-
-def _refuse_other_protocols(args: argparse.Namespace) -> None:
-    """Stop with one line (exit 2) when the bus speaks another protocol than SJ300."""
-    try:
-        named = args.protocol or parse_bus_url(bus_url(args) or DEFAULT_URL).protocol
-    except LocalProtocolError:
-        return  # a bad URL: opening the bus says what is wrong with it
-    if named not in (None, PROTOCOL):
-        raise CliError(
-            f"params works with SJ300 drives only, not {named}: "
-            "there is no backup format for its parameters"
-        )
 
 
 def _absent_reason(exc: NakError) -> str:
@@ -167,22 +151,24 @@ def _absent_reason(exc: NakError) -> str:
     return f"NAK {int(exc.code):02d} ({description})"
 
 
-async def _read_or_absent(drive: Drive, code: str) -> int | str:
-    """The raw value of *code*, or why it is absent (NAK 16: the drive does not have it)."""
+async def _read_or_absent(profile: Profile, drive: Any, code: str) -> int | str:
+    """The raw value of *code*, or why it is absent (SJ300 NAK 16: the drive does not have it)."""
     try:
-        return await drive.read_parameter_raw(code)
+        return int(await drive.read_parameter_raw(code))
     except NakError as exc:
-        if exc.code == NakCode.ABNORMAL_PARAMETER:
+        if profile.absent(int(exc.code)):
             return _absent_reason(exc)
         raise CliError(f"{code}: {exc}", status=FAILURE) from None
 
 
-async def _read_all(drive: Drive, codes: list[str], what: str) -> dict[str, int | str]:
+async def _read_all(
+    profile: Profile, drive: Any, codes: list[str], what: str
+) -> dict[str, int | str]:
     """Each code's raw value, or the reason it is absent, with a progress bar on a terminal."""
     values: dict[str, int | str] = {}
     with progress(what, len(codes)) as advance:
         for code in codes:
-            values[code] = await _read_or_absent(drive, code)
+            values[code] = await _read_or_absent(profile, drive, code)
             advance(code)
     return values
 
@@ -206,20 +192,34 @@ def _check_destination(file: Path) -> None:
         raise CliError(f"{directory}: Permission denied")
 
 
+def _profile(args: argparse.Namespace) -> Profile:
+    """The drives' protocol's profile; one without a backup format refused (exit 2)."""
+    profile = cli_profile(args)
+    if not profile.capabilities.parameter_backup:
+        raise CliError(
+            f"{args.command_name} needs a parameter backup format, which {profile.model} "
+            f"drives (protocol {profile.name}) do not have here"
+        )
+    return profile
+
+
 async def _backup(args: argparse.Namespace) -> int:
+    profile = _profile(args)
     _check_destination(args.file)
-    codes: list[str] = list(dict.fromkeys(args.codes or PARAMETERS))
+    given = [parameter_spec(profile, code, argument="--codes").code for code in args.codes or ()]
+    codes: list[str] = list(dict.fromkeys(given or profile.parameters.codes()))
     taken_at = utc_now()
-    async with open_cli_bus(args) as bus:
-        values = await _read_all(bus.drive(args.node), codes, "reading")
+    async with open_cli_bus(args, needs="parameter_backup") as bus:
+        values = await _read_all(profile, bus.drive(args.node), codes, "reading")
     snapshot = Snapshot(
         node=args.node,
         url=bus_url(args) or DEFAULT_URL,
         parameters={code: raw for code, raw in values.items() if isinstance(raw, int)},
         absent={code: why for code, why in values.items() if isinstance(why, str)},
         taken_at=taken_at,
+        protocol=profile.name,
     )
-    snapshot.save(args.file)
+    snapshot.save(args.file, profile)
     if args.json:
         print_json(
             {
@@ -241,7 +241,7 @@ async def _backup(args: argparse.Namespace) -> int:
 # -- restore --------------------------------------------------------------------
 
 
-async def _write_all(drive: Drive, values: dict[str, int]) -> dict[str, str]:
+async def _write_all(drive: Any, values: dict[str, int]) -> dict[str, str]:
     """Write *values*; retry NAK'd ones while a pass makes progress. Returns code -> last error."""
     pending = list(values)
     errors: dict[str, str] = {}
@@ -262,21 +262,25 @@ async def _write_all(drive: Drive, values: dict[str, int]) -> dict[str, str]:
 
 
 async def _restore(args: argparse.Namespace) -> int:
-    snapshot = Snapshot.load(args.file)
-    node: int = args.node or snapshot.node
+    profile = _profile(args)
+    snapshot = Snapshot.load(args.file, profile)
+    node: int = args.node if args.node is not None else snapshot.node
+    noun = profile.node_noun
     if node != snapshot.node and not args.force:
         raise CliError(
-            f"{args.file} was taken from node {snapshot.node:02d}, not node {node:02d}: "
+            f"{args.file} was taken from {noun} {snapshot.node:02d}, not {noun} {node:02d}: "
             "--force restores it there"
         )
-    skipped = sorted([NODE_ADDRESS, *(() if args.include_comm else COMM_CODES)])
+    address = () if profile.address_parameter is None else (profile.address_parameter,)
+    skipped = sorted([*address, *(() if args.include_comm else profile.line_parameters)])
     values = {c: raw for c, raw in snapshot.parameters.items() if c not in skipped}
-    async with open_cli_bus(args) as bus:
+    args.node = node  # for the range check
+    async with open_cli_bus(args, needs="parameter_backup") as bus:
         drive = bus.drive(node)
         errors = await _write_all(drive, values)
         back = {
             c: _raw_or_none(v)
-            for c, v in (await _read_all(drive, list(values), "verifying")).items()
+            for c, v in (await _read_all(profile, drive, list(values), "verifying")).items()
         }
         mismatches = [code for code, raw in values.items() if back[code] != raw]
         stored = bool(args.store and not mismatches)
@@ -300,14 +304,15 @@ async def _restore(args: argparse.Namespace) -> int:
     else:
         if mismatches:
             rows = [
-                (c, _show(c, values[c]), _show(c, back[c]), errors.get(c, "")) for c in mismatches
+                (c, _show(profile, c, values[c]), _show(profile, c, back[c]), errors.get(c, ""))
+                for c in mismatches
             ]
             columns = (Column("code"), Column("file"), Column("drive"), Column("write error"))
             print_table(columns, rows, title="not restored")
         note = f"; skipped {', '.join(skipped)}" if skipped else ""
         done = len(values) - len(mismatches)
         print(
-            f"node {node:02d}: {done} of {len(values)} parameters restored and verified"
+            f"{noun} {node:02d}: {done} of {len(values)} parameters restored and verified"
             f"{' and stored' if stored else ''}{note}"
         )
     if mismatches:
@@ -315,20 +320,23 @@ async def _restore(args: argparse.Namespace) -> int:
     return 0
 
 
-def _show(code: str, raw: int | None) -> str:
-    return "(absent)" if raw is None else format_raw(parameter_info(code), raw)
+def _show(profile: Profile, code: str, raw: int | None) -> str:
+    return "(absent)" if raw is None else format_raw(profile.parameters.spec(code), raw)
 
 
 # -- diff -----------------------------------------------------------------------
 
 
 async def _diff(args: argparse.Namespace) -> int:
-    snapshot = Snapshot.load(args.file)
-    node: int = args.node or snapshot.node
+    profile = _profile(args)
+    snapshot = Snapshot.load(args.file, profile)
+    node: int = args.node if args.node is not None else snapshot.node
+    noun = profile.node_noun
     expected: dict[str, int | None] = dict(snapshot.parameters)
     expected.update(dict.fromkeys(snapshot.absent))
-    async with open_cli_bus(args) as bus:
-        read = await _read_all(bus.drive(node), list(expected), "reading")
+    args.node = node  # for the range check
+    async with open_cli_bus(args, needs="parameter_backup") as bus:
+        read = await _read_all(profile, bus.drive(node), list(expected), "reading")
     actual = {code: _raw_or_none(value) for code, value in read.items()}
     different = [code for code in expected if expected[code] != actual[code]]
     if args.json:
@@ -337,23 +345,30 @@ async def _diff(args: argparse.Namespace) -> int:
                 "node": node,
                 "file": str(args.file),
                 "equal": not different,
-                "differences": [_difference(c, expected[c], actual[c]) for c in different],
+                "differences": [_difference(profile, c, expected[c], actual[c]) for c in different],
             }
         )
     elif different:
         rows = [
-            (c, parameter_info(c).name, _show(c, expected[c]), _show(c, actual[c]))
+            (
+                c,
+                profile.parameters.spec(c).name,
+                _show(profile, c, expected[c]),
+                _show(profile, c, actual[c]),
+            )
             for c in different
         ]
         columns = (Column("code"), Column("name"), Column("file"), Column("drive"))
-        print_table(columns, rows, title=f"node {node:02d} differs from {args.file}")
+        print_table(columns, rows, title=f"{noun} {node:02d} differs from {args.file}")
     else:
-        print(f"node {node:02d} matches {args.file} ({len(expected)} parameters)")
+        print(f"{noun} {node:02d} matches {args.file} ({len(expected)} parameters)")
     return 1 if different else 0
 
 
-def _difference(code: str, file_raw: int | None, drive_raw: int | None) -> dict[str, Any]:
-    info = parameter_info(code)
+def _difference(
+    profile: Profile, code: str, file_raw: int | None, drive_raw: int | None
+) -> dict[str, Any]:
+    info = profile.parameters.spec(code)
     return {
         "code": code,
         "name": info.name,

@@ -1,7 +1,8 @@
-"""``sj300 read CODE...``: parameter values in engineering units (command 06).
+"""``sj300 read CODE...``: parameter values in engineering units (SJ300 command 06, FR-700 Pr.N).
 
-The catalogue (:data:`sj300_async.PARAMETERS`) gives each code its scale
-and unit; a code it does not know is read at the SJ300's default x 10.
+The protocol's parameter catalogue (its profile's) gives each code its
+scale and unit (SJ300: a code it does not know is read at the default
+x 10); a code is checked against the protocol before anything is sent.
 ``--raw`` shows the unscaled integers the drive sends.
 
 JSON: ``{"node": 1, "parameters": [{"code": "F002", "name": "acceleration
@@ -14,23 +15,26 @@ from __future__ import annotations
 import argparse
 from typing import Any
 
-from ..sj300._drive import Drive
-from ..sj300._parameters import normalize_code, parameter_info
-from ..wire._errors import NakError
-from ._common import add_bus_options, add_json_option, add_node_option, open_cli_bus
+from ..profiles import ParameterSpec, Profile
+from ..wire import LocalProtocolError, NakError
+from ._common import add_bus_options, add_json_option, add_node_option, cli_profile, open_cli_bus
 from ._errors import FAILURE, CliError
 from ._output import Column, format_raw, print_json, print_table
 from ._session import run_async
 
-__all__ = ["add_parser", "parameter_code", "parameter_json", "read_raw"]
+__all__ = ["add_parser", "parameter_json", "parameter_spec", "read_raw"]
 
 
-def parameter_code(text: str) -> str:
-    """argparse type: a parameter code, upper-cased (``b084`` -> ``B084``)."""
+def parameter_spec(profile: Profile, text: str, *, argument: str = "CODE") -> ParameterSpec:
+    """The catalogue entry of the code *text* names, in the protocol's own spelling.
+
+    Raises:
+        CliError: not a parameter code of the protocol (exit 2, nothing sent).
+    """
     try:
-        return normalize_code(text)
-    except ValueError as exc:
-        raise argparse.ArgumentTypeError(str(exc)) from None
+        return profile.parameters.spec(text)
+    except LocalProtocolError as exc:
+        raise CliError(f"argument {argument}: {exc}") from None
 
 
 def add_parser(subparsers: Any) -> None:
@@ -40,7 +44,7 @@ def add_parser(subparsers: Any) -> None:
         help="read parameters",
         description="Read parameters (command 06), scaled to engineering units by the catalogue.",
     )
-    p.add_argument("codes", nargs="+", type=parameter_code, metavar="CODE", help="e.g. F002 A004")
+    p.add_argument("codes", nargs="+", metavar="CODE", help="e.g. F002 A004 (FR-700: Pr.7)")
     p.add_argument("--raw", action="store_true", help="show the unscaled integers")
     add_node_option(p)
     add_json_option(p)
@@ -53,7 +57,7 @@ def run(args: argparse.Namespace) -> int:
     return run_async(_read(args))
 
 
-async def read_raw(drive: Drive, code: str) -> int:
+async def read_raw(drive: Any, code: str) -> int:
     """Read *code*; a NAK names the code.
 
     Raises:
@@ -61,16 +65,15 @@ async def read_raw(drive: Drive, code: str) -> int:
         ReplyTimeoutError, RemoteProtocolError, TransportError.
     """
     try:
-        return await drive.read_parameter_raw(code)
+        return int(await drive.read_parameter_raw(code))
     except NakError as exc:
         raise CliError(f"{code}: {exc}", status=FAILURE) from None
 
 
-def parameter_json(code: str, raw: int) -> dict[str, Any]:
+def parameter_json(info: ParameterSpec, raw: int) -> dict[str, Any]:
     """A parameter's JSON object: code, name, engineering value, unit, raw value."""
-    info = parameter_info(code)
     return {
-        "code": code,
+        "code": info.code,
         "name": info.name,
         "value": info.from_raw(raw),
         "unit": info.unit,
@@ -79,18 +82,19 @@ def parameter_json(code: str, raw: int) -> dict[str, Any]:
 
 
 async def _read(args: argparse.Namespace) -> int:
-    values: dict[str, int] = {}
+    values: list[tuple[ParameterSpec, int]] = []
+    profile = cli_profile(args)
+    specs = [parameter_spec(profile, text) for text in args.codes]  # all, before anything
     async with open_cli_bus(args) as bus:
         drive = bus.drive(args.node)
-        for code in args.codes:
-            values[code] = await read_raw(drive, code)
+        for info in specs:
+            values.append((info, await read_raw(drive, info.code)))
     if args.json:
-        params = [parameter_json(code, raw) for code, raw in values.items()]
+        params = [parameter_json(info, raw) for info, raw in values]
         print_json({"node": args.node, "parameters": params})
         return 0
     rows = []
-    for code, raw in values.items():
-        info = parameter_info(code)
-        rows.append((code, info.name, str(raw) if args.raw else format_raw(info, raw)))
+    for info, raw in values:
+        rows.append((info.code, info.name, str(raw) if args.raw else format_raw(info, raw)))
     print_table((Column("code"), Column("name"), Column("value", "right")), rows)
     return 0

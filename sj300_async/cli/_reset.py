@@ -1,5 +1,7 @@
 """``sj300 reset``: clear a drive's trip the way the manuals allow over the line.
 
+The drive's profile sends the reset (:meth:`~sj300_async.profiles.Profile.reset`):
+
 - SJ300: the RS (reset) intelligent input through command 02: RS on, then
   every command-02 input off (``set_terminals(0)``; an input held through
   command 02, such as FW, is released too).
@@ -25,33 +27,25 @@ import argparse
 import asyncio
 from typing import Any
 
-from ..fr700._drive import Fr700Drive
-from ..fr700._payloads import Fr700Status
-from ..sj300._drive import Drive
-from ..sj300._payloads import InverterStatus
-from ..sj300._terminals import InputTerminal
-from ..wire._errors import NakError, RemoteProtocolError, ReplyTimeoutError
-from ._common import add_bus_options, add_json_option, open_cli_bus, positive_float
+from ..profiles import Profile, Trip
+from ..wire import ReplyTimeoutError
+from ._common import (
+    add_bus_options,
+    add_json_option,
+    add_node_option,
+    open_cli_bus,
+    positive_float,
+    profile_of,
+)
 from ._errors import FAILURE, CliError
 from ._output import print_json
 from ._session import run_async
-from ._tripinfo import Trip, latest_trip
+from ._tripinfo import trip_or_none
 
-__all__ = ["add_parser", "trip_or_none"]
+__all__ = ["add_parser"]
 
 #: Time between two status reads while waiting for the trip to clear.
 _POLL_S = 0.1
-
-
-def _any_node(text: str) -> int:
-    """argparse type: 0..32, an SJ300 node or an FR-700 station (the bus checks which)."""
-    try:
-        value = int(text)
-    except ValueError:
-        value = -1
-    if not 0 <= value <= 32:
-        raise argparse.ArgumentTypeError(f"a node is 1..32 (an FR-700 station 0..31), got {text!r}")
-    return value
 
 
 def add_parser(subparsers: Any) -> None:
@@ -63,7 +57,7 @@ def add_parser(subparsers: Any) -> None:
         "the inverter reset (HFD H9696). Nothing is sent to a drive that is not tripped; "
         "exit 1 when the trip does not clear.",
     )
-    p.add_argument("-n", "--node", type=_any_node, default=1, metavar="N", help="drive (default 1)")
+    add_node_option(p)
     p.add_argument(
         "--wait",
         type=positive_float,
@@ -81,39 +75,23 @@ def run(args: argparse.Namespace) -> int:
     return run_async(_reset(args))
 
 
-async def trip_or_none(drive: Drive | Fr700Drive) -> Trip | None:
-    """:func:`latest_trip`, or None when the drive refuses or garbles its history.
-
-    Raises:
-        ReplyTimeoutError, TransportError: the drive or the link failed.
-    """
-    try:
-        return await latest_trip(drive)
-    except (NakError, RemoteProtocolError):
-        return None
-
-
 async def _reset(args: argparse.Namespace) -> int:
     node: int = args.node
-    async with open_cli_bus(args, any_protocol=True) as bus:
-        drive: Drive | Fr700Drive = bus.drive(node)
-        status: InverterStatus | Fr700Status = await drive.read_status()
-        if not status.tripped:
-            _report(args, was_tripped=False, trip=None)
+    async with open_cli_bus(args) as bus:
+        profile = profile_of(bus)
+        drive = bus.drive(node)
+        if not profile.status_view(await drive.read_status()).tripped:
+            _report(args, profile, was_tripped=False, trip=None)
             return 0
-        trip = await trip_or_none(drive)
-        if isinstance(drive, Fr700Drive):
-            await drive.reset()
-        else:
-            await drive.set_terminals(InputTerminal.RS)
-            await drive.set_terminals(0)
-        await _until_cleared(drive, node, trip, args.wait)
-    _report(args, was_tripped=True, trip=trip)
+        trip = await trip_or_none(profile, drive)
+        await profile.reset(drive)
+        await _until_cleared(profile, drive, node, trip, args.wait)
+    _report(args, profile, was_tripped=True, trip=trip)
     return 0
 
 
 async def _until_cleared(
-    drive: Drive | Fr700Drive, node: int, trip: Trip | None, wait_s: float
+    profile: Profile, drive: Any, node: int, trip: Trip | None, wait_s: float
 ) -> None:
     """Read the status until the trip is gone.
 
@@ -130,22 +108,26 @@ async def _until_cleared(
             pass
         else:
             answered = True
-            if not status.tripped:
+            if not profile.status_view(status).tripped:
                 return
         if loop.time() >= deadline:
             break
         await asyncio.sleep(_POLL_S)
+    noun = profile.node_noun
     if not answered:
         raise CliError(
-            f"node {node:02d} did not answer after the reset (waited {wait_s:g} s)",
+            f"{noun} {node:02d} did not answer after the reset (waited {wait_s:g} s)",
             status=FAILURE,
         )
     what = f": {trip}" if trip is not None else ""
-    raise CliError(f"node {node:02d} is still tripped after the reset{what}", status=FAILURE)
+    raise CliError(f"{noun} {node:02d} is still tripped after the reset{what}", status=FAILURE)
 
 
-def _report(args: argparse.Namespace, *, was_tripped: bool, trip: Trip | None) -> None:
+def _report(
+    args: argparse.Namespace, profile: Profile, *, was_tripped: bool, trip: Trip | None
+) -> None:
     node: int = args.node
+    noun = profile.node_noun
     if args.json:
         print_json(
             {
@@ -155,8 +137,8 @@ def _report(args: argparse.Namespace, *, was_tripped: bool, trip: Trip | None) -
             }
         )
     elif not was_tripped:
-        print(f"node {node:02d} is not tripped: nothing to reset")
+        print(f"{noun} {node:02d} is not tripped: nothing to reset")
     elif trip is None:
-        print(f"node {node:02d}: reset, the trip cleared")
+        print(f"{noun} {node:02d}: reset, the trip cleared")
     else:
-        print(f"node {node:02d}: reset, {trip} cleared")
+        print(f"{noun} {node:02d}: reset, {trip} cleared")

@@ -1,8 +1,10 @@
-"""``sj300 run forward|reverse``: start a drive (command 00; the drive needs A002 = 03).
+"""``sj300 run forward|reverse``: start a drive.
 
 The status is read first: a tripped drive acknowledges a run command and
 stays tripped, so the command is refused, naming the trip (exit 1, nothing
-sent): clear it with ``sj300 reset``.
+sent): clear it with ``sj300 reset``. A refusal is explained the way the
+drive's profile knows it (SJ300: NAK 13, the run command source A002 must
+be 03).
 
 JSON: ``{"node": 1, "direction": "FORWARD"}``.
 """
@@ -12,14 +14,12 @@ from __future__ import annotations
 import argparse
 from typing import Any
 
-from ..sj300._codes import NakCode
-from ..wire._enums import Direction
-from ..wire._errors import NakError
-from ._common import add_bus_options, add_json_option, add_node_option, open_cli_bus
+from ..wire import Direction, NakError
+from ._common import add_bus_options, add_json_option, add_node_option, open_cli_bus, profile_of
 from ._errors import FAILURE, CliError
 from ._output import human, print_json
-from ._reset import trip_or_none
 from ._session import run_async
+from ._tripinfo import trip_or_none
 
 __all__ = ["add_parser"]
 
@@ -31,7 +31,8 @@ def add_parser(subparsers: Any) -> None:
     p = subparsers.add_parser(
         "run",
         help="run a drive forward or reverse",
-        description="Run a drive (command 00). Set the frequency with `sj300 freq`.",
+        description="Run a drive (SJ300 command 00, FR-700 HFA). Set the frequency with "
+        "`sj300 freq`.",
     )
     p.add_argument("direction", choices=sorted(_DIRECTIONS), help="direction of rotation")
     add_node_option(p)
@@ -48,12 +49,13 @@ def run(args: argparse.Namespace) -> int:
 async def _run(args: argparse.Namespace) -> int:
     direction = _DIRECTIONS[args.direction]
     async with open_cli_bus(args) as bus:
+        profile = profile_of(bus)
         drive = bus.drive(args.node)
-        if (await drive.read_status()).tripped:
-            trip = await trip_or_none(drive)
+        if profile.status_view(await drive.read_status()).tripped:
+            trip = await trip_or_none(profile, drive)
             what = f": {trip}" if trip is not None else ""
             raise CliError(
-                f"node {args.node:02d} is tripped{what}; clear it with sj300 reset",
+                f"{profile.node_noun} {args.node:02d} is tripped{what}; clear it with sj300 reset",
                 status=FAILURE,
             )
         try:
@@ -62,12 +64,12 @@ async def _run(args: argparse.Namespace) -> int:
             else:
                 await drive.run_reverse()
         except NakError as exc:
-            if exc.code != NakCode.EXECUTION_DISABLED:
+            hint = profile.nak_hint(exc.code, "run")
+            if hint is None:
                 raise
-            hint = "the run command source A002 must be 03 (serial)"
             raise CliError(f"{exc}: {hint}", status=FAILURE) from None
     if args.json:
         print_json({"node": args.node, "direction": direction})
     else:
-        print(f"node {args.node:02d}: run {human(direction)}")
+        print(f"{profile.node_noun} {args.node:02d}: run {human(direction)}")
     return 0

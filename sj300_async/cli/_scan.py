@@ -1,6 +1,7 @@
-"""``sj300 scan``: which nodes answer.
+"""``sj300 scan``: which nodes (FR-700: stations) answer.
 
-Each node gets one status request (command 04) without retries, at the
+By default the protocol's whole address range (SJ300 nodes 1..32, FR-700
+stations 0..31). Each node gets one status request without retries, at the
 computed time-out (the line's wire time plus 50 ms, 100 ms over TCP) unless
 ``--timeout`` says otherwise; a missing node costs about twice that, its
 time-out and the quiet period after it. Any answer counts, a NAK too.
@@ -20,11 +21,11 @@ import sys
 from collections.abc import Callable
 from typing import Any
 
-from ..bus._bus import Bus
-from ..wire._errors import NakError, RemoteProtocolError, ReplyTimeoutError
-from ._args import format_nodes, parse_nodes
-from ._common import add_bus_options, add_json_option, open_cli_bus
-from ._errors import FAILURE
+from ..bus import Bus, parse_node_list
+from ..wire import LocalProtocolError, NakError, RemoteProtocolError, ReplyTimeoutError
+from ._args import format_nodes
+from ._common import add_bus_options, add_json_option, cli_profile, open_cli_bus
+from ._errors import FAILURE, CliError
 from ._output import is_terminal, print_json
 from ._session import run_async
 
@@ -40,10 +41,9 @@ def add_parser(subparsers: Any) -> None:
     )
     p.add_argument(
         "--nodes",
-        type=parse_nodes,
-        default=list(range(1, 33)),
         metavar="LIST",
-        help="nodes to try, e.g. 1-8,12 (default 1-32)",
+        help="nodes to try, e.g. 1-8,12 (default: the protocol's range, SJ300 1-32, "
+        "FR-700 stations 0-31)",
     )
     add_json_option(p)
     add_bus_options(p, retries=0)
@@ -71,18 +71,27 @@ async def probe(bus: Bus, node: int) -> bool:
 
 
 async def _scan(args: argparse.Namespace) -> int:
-    nodes: list[int] = args.nodes
+    profile = cli_profile(args)
+    low, high = profile.node_range
+    nodes = list(range(low, high + 1))
+    if args.nodes is not None:
+        try:
+            nodes = list(parse_node_list(args.nodes, low=low, high=high))
+        except LocalProtocolError as exc:
+            raise CliError(f"argument --nodes: {exc}") from None
+    noun = profile.node_noun
     async with open_cli_bus(args) as bus:
         if is_terminal(sys.stderr):
-            answering = await _with_progress_bar(bus, nodes)
+            answering = await _with_progress_bar(bus, nodes, noun)
         else:
-            answering = await _probe_all(bus, nodes, _plain_progress)
+            answering = await _probe_all(bus, nodes, _plain_progress(noun))
     if args.json:
         print_json({"scanned": nodes, "answering": answering})
     elif answering:
-        print(f"nodes answering: {format_nodes(answering)} ({len(answering)} of {len(nodes)})")
+        count = f"{len(answering)} of {len(nodes)}"
+        print(f"{noun}s answering: {format_nodes(answering)} ({count})")
     else:
-        print(f"no node answers (tried {format_nodes(nodes)})")
+        print(f"no {noun} answers (tried {format_nodes(nodes)})")
     return 0 if answering else FAILURE
 
 
@@ -96,16 +105,20 @@ async def _probe_all(bus: Bus, nodes: list[int], advance: Callable[[int, bool], 
     return answering
 
 
-def _plain_progress(node: int, found: bool) -> None:
-    print(f"node {node:02d}: {'answers' if found else 'no answer'}", file=sys.stderr, flush=True)
+def _plain_progress(noun: str) -> Callable[[int, bool], None]:
+    def advance(node: int, found: bool) -> None:
+        answer = "answers" if found else "no answer"
+        print(f"{noun} {node:02d}: {answer}", file=sys.stderr, flush=True)
+
+    return advance
 
 
-async def _with_progress_bar(bus: Bus, nodes: list[int]) -> list[int]:
+async def _with_progress_bar(bus: Bus, nodes: list[int], noun: str) -> list[int]:
     from rich.console import Console
     from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn
 
     progress = Progress(
-        TextColumn("scanning node {task.fields[node]:>2}"),
+        TextColumn(f"scanning {noun} {{task.fields[node]:>2}}"),
         BarColumn(),
         MofNCompleteColumn(),
         TextColumn("{task.fields[found]} answering"),

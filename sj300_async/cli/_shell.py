@@ -21,8 +21,8 @@ that command (``monitor`` runs until then) and returns to the prompt.
 On a terminal, with :mod:`readline` (POSIX; imported here, only when it is
 used): line editing, history kept in ``$SJ300_HISTORY``, else
 ``~/.sj300_history`` (``SJ300_HISTORY=`` keeps none), and Tab completion of
-command names, options, choices and parameter codes (the SJ300 catalogue,
-or FR-700 ``Pr.N`` on an FR-700 bus). Without readline, or when stdin is
+command names, options, choices and parameter codes (the catalogue of the
+bus's protocol: SJ300 codes, FR-700 ``Pr.N``). Without readline, or when stdin is
 not a terminal, lines are read plainly (``sj300 shell < commands.txt``).
 """
 
@@ -40,8 +40,6 @@ from pathlib import Path
 from typing import Any, Final
 
 from ..bus import Bus
-from ..fr700._parameters import FR700_PARAMETERS
-from ..sj300._parameters import PARAMETERS
 from . import _Expected, _fail, _first_expected, build_parser
 from ._common import (
     DEFAULT_URL,
@@ -51,6 +49,7 @@ from ._common import (
     command_name,
     misplaced_option,
     open_cli_bus,
+    profile_of,
 )
 from ._errors import USAGE, CliError
 from ._session import lending
@@ -104,7 +103,7 @@ def run(args: argparse.Namespace) -> int:
     url = bus_url(args) or DEFAULT_URL
     with asyncio.Runner() as runner:
         stack = AsyncExitStack()
-        bus = runner.run(stack.enter_async_context(open_cli_bus(args, url, any_protocol=True)))
+        bus = runner.run(stack.enter_async_context(open_cli_bus(args, url)))
         try:
             return _Shell(args, url, runner, bus).loop()
         finally:
@@ -264,10 +263,7 @@ class _Shell:
         print(f"The bus, for the whole session: {self._url}")
 
     def _completer(self) -> _Completer:
-        if self._bus.dialect.name == "fr700":
-            codes = [f"Pr.{n}" for n in sorted(FR700_PARAMETERS)]
-        else:
-            codes = list(PARAMETERS)
+        codes = list(profile_of(self._bus).parameters.codes())
         return _Completer(self._parser, self._commands, codes)
 
 

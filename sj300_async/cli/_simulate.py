@@ -13,10 +13,13 @@ there too. Everything else (the summary, warnings) goes to stderr.
 SIGINT and SIGTERM stop it cleanly: listeners and client connections are
 closed, pending replies cancelled, exit status 0.
 
-``--protocol fr700`` serves Mitsubishi FR-700 drives instead (stations
-0..31): by default with the drives' factory line settings, the
-waiting-time field expected and every frame ending with CR
-(``--no-wait-field``, ``--terminator none|cr|crlf`` change them).
+``--protocol NAME`` serves another registered protocol's drives (FR-700:
+stations 0..31). The command knows no protocol: each protocol's simulator
+declares the options only its line takes, in an argument group of their
+own (SJ300 ``--country``; FR-700 ``--no-wait-field``, ``--terminator``), and
+builds its line from them (:mod:`sj300_async.simulator._command_line`). The
+default ``--nodes`` is the first address of the protocol's range (SJ300
+node 1, FR-700 station 0).
 """
 
 from __future__ import annotations
@@ -24,38 +27,50 @@ from __future__ import annotations
 import argparse
 import asyncio
 import contextlib
+import importlib
 import logging
 import random
 import signal
 import sys
 from typing import TYPE_CHECKING, Any
 
-from ..bus import get_dialect, parse_node_list
+from ..bus import DEFAULT_PROTOCOL, get_dialect, parse_node_list, protocol_names
 from ..simulator import (
     LinePacing,
     PacedLine,
     PlausibleLine,
+    SimulateCommandLine,
+    SimulateSettings,
     SimulatorServer,
+    TapServer,
     precise_event_loop,
+    serve_tap,
     serve_tcp,
 )
-from ..simulator._tap import TapServer, serve_tap
-from ..simulator.fr700 import Fr700SimulatedBus, Fr700SimulatedDrive
-from ..simulator.sj300 import Country, SimulatedBus
-from ..wire._errors import LocalProtocolError
+from ..wire import LocalProtocolError
 from ._args import DEFAULT_PORT, LOOPBACK, ListenAddress, format_nodes, parse_listen
 from ._common import positive_float
 from ._errors import CliError
 
 if TYPE_CHECKING:  # POSIX-only (pty, termios): imported where used, so --help works without them
-    from ..simulator._device import SerialDeviceServer
-    from ..simulator._pty import PtyServer
+    from ..simulator import PtyServer, SerialDeviceServer
 
 __all__ = ["add_parser"]
 
-_COUNTRIES = {"jp": Country.JAPAN, "eu": Country.EUROPE, "us": Country.USA}
-_TERMINATORS = {"none": "", "cr": "\r", "crlf": "\r\n"}
-_DEFAULT_NODES = {"sj300": "1", "fr700": "0"}
+
+def _command_lines() -> dict[str, SimulateCommandLine]:
+    """Each registered protocol's part of ``sj300 simulate``, for those whose simulator has one.
+
+    It is the ``COMMAND_LINE`` attribute of the module the dialect's ``simulator``
+    entry names (:mod:`sj300_async.simulator._command_line`).
+    """
+    found = {}
+    for name in protocol_names():
+        module = importlib.import_module(get_dialect(name).simulator.partition(":")[0])
+        command_line: SimulateCommandLine | None = getattr(module, "COMMAND_LINE", None)
+        if command_line is not None:
+            found[name] = command_line
+    return found
 
 
 def _wait_ms(text: str) -> int:
@@ -73,8 +88,8 @@ def add_parser(subparsers: Any) -> None:
     p = subparsers.add_parser(
         "simulate",
         help="serve simulated SJ300 (or FR-700) drives over TCP or a pseudo-terminal",
-        description="Serve simulated SJ300 drives (or Mitsubishi FR-700 drives, with "
-        "--protocol fr700) on a virtual RS-485 line until interrupted.",
+        description="Serve simulated SJ300 drives (or another protocol's, with --protocol: "
+        "Mitsubishi FR-700) on a virtual RS-485 line until interrupted.",
     )
     p.add_argument(
         "--listen",
@@ -100,11 +115,12 @@ def add_parser(subparsers: Any) -> None:
         help="serve on this serial device (a real port, or one end of a socat pty pair); "
         "--baud etc. set its UART",
     )
+    command_lines = _command_lines()
     p.add_argument(
         "--protocol",
-        choices=("sj300", "fr700"),
-        default="sj300",
-        help="the drives' protocol: Hitachi SJ300 or Mitsubishi FR-700 (default sj300)",
+        choices=tuple(command_lines),
+        default=DEFAULT_PROTOCOL,
+        help=f"the drives' protocol (default {DEFAULT_PROTOCOL})",
     )
     p.add_argument(
         "--nodes",
@@ -117,29 +133,25 @@ def add_parser(subparsers: Any) -> None:
         metavar="MS",
         help="set C078 on every drive (FR-700: Pr.123 0..150, with --no-wait-field)",
     )
-    fr700 = p.add_argument_group("FR-700 line (with --protocol fr700)")
-    fr700.add_argument(
-        "--no-wait-field",
-        action="store_true",
-        help="requests carry no waiting-time character (Pr.123 != 9999)",
-    )
-    fr700.add_argument(
-        "--terminator",
-        choices=sorted(_TERMINATORS),
-        default="cr",
-        help="what ends every frame (Pr.124; default cr)",
-    )
     p.add_argument(
         "--factory-defaults",
         action="store_true",
         help="start with true factory values (A001=A002=01: serial run/frequency refused)",
     )
-    p.add_argument(
-        "--country",
-        choices=sorted(_COUNTRIES),
-        default="eu",
-        help="B085 factory values: eu 50 Hz, us/jp 60 Hz (default eu)",
-    )
+    for command_line in command_lines.values():
+        group = p.add_argument_group(command_line.title)
+        for option in command_line.options:
+            if option.switch:
+                group.add_argument(option.flag, dest=option.dest, action="store_true",
+                                   help=option.help)  # fmt: skip
+            else:
+                group.add_argument(
+                    option.flag,
+                    dest=option.dest,
+                    choices=option.choices or None,
+                    default=option.default,
+                    help=option.help,
+                )
     line = p.add_argument_group("serial line")
     line.add_argument(
         "--baud",
@@ -179,9 +191,17 @@ def run(args: argparse.Namespace) -> int:
     line_given = args.baud is not None or args.pace
     try:
         pacing = LinePacing(args.baud or 19200, args.bytesize, args.parity, args.stopbits)
+        command_line = _command_lines()[args.protocol]
         low, high = get_dialect(args.protocol).node_range
-        nodes = parse_node_list(args.nodes or _DEFAULT_NODES[args.protocol], low=low, high=high)
-        bus = _simulated_bus(args, nodes, pacing if line_given else None)
+        nodes = parse_node_list(args.nodes or str(low), low=low, high=high)
+        settings_of_line = SimulateSettings(
+            nodes,
+            factory_defaults=args.factory_defaults,
+            wait_ms=args.wait_ms,
+            line=pacing if line_given else None,
+            options={o.dest: getattr(args, o.dest) for o in command_line.options},
+        )
+        bus = command_line.build(settings_of_line)
     except LocalProtocolError as exc:
         raise CliError(str(exc)) from None
     for address in listen:
@@ -192,40 +212,16 @@ def run(args: argparse.Namespace) -> int:
     # A paced line's timers are the wire: they need sub-millisecond precision.
     factory = precise_event_loop if shared_line is not None else None
     with asyncio.Runner(loop_factory=factory) as runner:
-        return runner.run(_serve(args, bus, listen, shared_line, settings))
-
-
-def _simulated_bus(
-    args: argparse.Namespace, nodes: tuple[int, ...], line: LinePacing | None
-) -> SimulatedBus | Fr700SimulatedBus:
-    """The simulated line the options describe.
-
-    Raises:
-        LocalProtocolError: an option the drives refuse.
-    """
-    if args.protocol == "sj300":
-        return SimulatedBus(
-            nodes,
-            factory_defaults=args.factory_defaults,
-            country=_COUNTRIES[args.country],
-            wait_ms=args.wait_ms,
-            line=line,
+        return runner.run(
+            _serve(args, command_line, settings_of_line, bus, listen, shared_line, settings)
         )
-    bus = Fr700SimulatedBus(
-        nodes,
-        wait_field=not args.no_wait_field,
-        terminator=_TERMINATORS[args.terminator],
-        factory_defaults=args.factory_defaults,
-    )
-    if args.wait_ms is not None:
-        for drive in bus.drives.values():
-            drive.set_wait_ms(args.wait_ms)
-    return bus
 
 
 async def _serve(
     args: argparse.Namespace,
-    bus: SimulatedBus | Fr700SimulatedBus,
+    command_line: SimulateCommandLine,
+    simulated: SimulateSettings,
+    bus: Any,
     listen: list[ListenAddress],
     line: PacedLine | None,
     settings: LinePacing | None,
@@ -261,7 +257,7 @@ async def _serve(
             servers.append(server)
             print(f"listening on {ListenAddress(server.host, server.port)}", flush=True)
         if args.pty:
-            from ..simulator._pty import open_pty_server
+            from ..simulator import open_pty_server
 
             try:
                 ttys.append(await open_pty_server(bus, line=line))
@@ -269,7 +265,7 @@ async def _serve(
                 raise CliError(f"cannot open a pseudo-terminal: {exc.strerror or exc}") from None
             print(f"listening on {ttys[-1].path}", flush=True)
         for path in args.device or ():
-            from ..simulator._device import serve_serial_device
+            from ..simulator import serve_serial_device
 
             try:
                 ttys.append(await serve_serial_device(bus, path, settings=settings, line=line))
@@ -277,12 +273,7 @@ async def _serve(
                 why = exc.strerror if isinstance(exc, OSError) else exc
                 raise CliError(f"cannot serve on {path}: {why or exc}") from None
             print(f"listening on {path}", flush=True)
-        if isinstance(bus, Fr700SimulatedBus):
-            mode = "FR-700, " + ("external mode" if args.factory_defaults else "network mode")
-            mode += f", terminator {args.terminator}"
-            mode += "" if bus.wait_field else ", no waiting-time field"
-        else:
-            mode = "factory defaults" if args.factory_defaults else "serial control"
+        mode = command_line.describe(bus, simulated)
         pace = f", paced at {line.pacing.baudrate} bps" if line else ""
         print(
             f"simulating node(s) {format_nodes(sorted(bus.drives))} ({mode}{pace}); Ctrl-C to stop",
@@ -291,7 +282,7 @@ async def _serve(
         )
         if args.trip_every:
             tripper = asyncio.create_task(
-                _trip_periodically(bus, args.trip_every, random.Random(args.seed))
+                _trip_periodically(bus, command_line, args.trip_every, random.Random(args.seed))
             )
         await stop.wait()
     finally:
@@ -314,7 +305,7 @@ async def _serve(
 
 
 async def _trip_periodically(
-    bus: SimulatedBus | Fr700SimulatedBus, every_s: float, rng: random.Random
+    bus: Any, command_line: SimulateCommandLine, every_s: float, rng: random.Random
 ) -> None:
     """Demo: every *every_s*, trip one running drive with the over-current code of its phase."""
     loop = asyncio.get_running_loop()
@@ -326,8 +317,4 @@ async def _trip_periodically(
             continue
         drive = rng.choice(running)
         if drive.trip(now=now):
-            if isinstance(drive, Fr700SimulatedDrive):
-                name = f"fault H{drive.fault_history[0]:02X}"
-            else:
-                name = drive.trip_history().records[0].error_code
-            print(f"node {drive.node:02d} tripped: {name}", flush=True)
+            print(f"node {drive.node:02d} tripped: {command_line.trip_name(drive)}", flush=True)

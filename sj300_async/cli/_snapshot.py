@@ -20,21 +20,25 @@ Format (version 2, what ``params backup`` writes)::
       ]
     }
 
-Entries come in the catalogue's order (codes it lacks last, sorting is
-stable). ``raw`` is the integer of commands 06 / 07 (F002 = 30.00 s is 3000) and the
-one number ``params restore`` writes: it round-trips exactly, whatever
-scale a catalogue (or a firmware) gives the code, and a code the catalogue
-does not know is kept too. ``name``, ``unit`` and ``value`` (raw scaled by
-the catalogue of the version that wrote the file) are for people and other
-tools; a reader takes ``raw`` and ignores them, so a hand edit must change
-``raw``. A code the drive refused (NAK 16: its firmware lacks it) has
-``raw`` and ``value`` null and the reason in ``absent``.
+The file is the drives' protocol's: codes, names, units, the node's range
+and the raw values' come from the protocol's profile
+(:class:`~sj300_async.profiles.Profile`), and a file of one protocol is
+never read as another's. Entries come in the catalogue's order (codes it
+lacks last, sorting is stable). ``raw`` is the integer the drive holds
+(SJ300 commands 06 / 07: F002 = 30.00 s is 3000) and the one number ``params
+restore`` writes: it round-trips exactly, whatever scale a catalogue (or a
+firmware) gives the code, and a code the catalogue does not know is kept
+too. ``name``, ``unit`` and ``value`` (raw scaled by the catalogue of the
+version that wrote the file) are for people and other tools; a reader takes
+``raw`` and ignores them, so a hand edit must change ``raw``. A code the
+drive refused (NAK 16: its firmware lacks it) has ``raw`` and ``value`` null
+and the reason in ``absent``.
 
 Version 1 files (raw integers only: ``"parameters": {"F002": 3000, ...}``,
 ``"absent": ["P031"]``, ``"created"`` for the time, no protocol) are still
-read: only ``params`` wrote them, and it only ever talked to SJ300 drives, so
-their protocol is ``sj300``. Nothing is lost by reading them; a new backup
-writes version 2. Readers ignore keys they do not know.
+read: only ``params`` wrote them, when it talked to the default protocol's
+drives only (SJ300), so that is their protocol. Nothing is lost by reading
+them; a new backup writes version 2. Readers ignore keys they do not know.
 """
 
 from __future__ import annotations
@@ -48,27 +52,21 @@ from datetime import UTC, datetime
 from pathlib import Path
 from typing import Any, Final
 
-from .._version import __version__
-from ..sj300._constants import MAX_NODE, MIN_NODE
-from ..sj300._parameters import (
-    PARAMETERS,
-    RAW_VALUE_MAX,
-    RAW_VALUE_MIN,
-    normalize_code,
-    parameter_info,
-)
-from ..wire._errors import LocalProtocolError
+from .. import __version__
+from ..bus import DEFAULT_PROTOCOL
+from ..profiles import Profile
+from ..wire import LocalProtocolError
 from ._errors import CliError
 
-__all__ = ["FORMAT", "PROTOCOL", "READABLE_VERSIONS", "VERSION", "Snapshot"]
+__all__ = ["FORMAT", "READABLE_VERSIONS", "VERSION", "Snapshot"]
 
 FORMAT: Final = "sj300-params"
 #: The version a backup writes.
 VERSION: Final = 2
 #: The versions a restore or diff reads.
 READABLE_VERSIONS: Final = (1, 2)
-#: The protocol of the drives ``sj300 params`` backs up.
-PROTOCOL: Final = "sj300"
+#: The protocol of a version 1 file: it names none, and predates every other protocol.
+_V1_PROTOCOL: Final = DEFAULT_PROTOCOL
 #: The reason a version 1 file gives for an absent code (it recorded none).
 _V1_ABSENT: Final = "absent (version 1 file: no reason recorded)"
 
@@ -91,19 +89,19 @@ class Snapshot:
     #: When the backup was taken (ISO 8601, UTC), if known.
     taken_at: str | None = None
     #: The drives' protocol.
-    protocol: str = PROTOCOL
+    protocol: str = DEFAULT_PROTOCOL
     #: The library version that wrote the file, if known.
     library_version: str | None = None
     #: The file's format version (a new snapshot: :data:`VERSION`).
     version: int = VERSION
 
-    def to_json(self) -> dict[str, Any]:
-        """The file's JSON object (version 2)."""
+    def to_json(self, profile: Profile) -> dict[str, Any]:
+        """The file's JSON object (version 2); *profile* is the drives' protocol's."""
         readings: dict[str, int | str] = {**self.parameters, **self.absent}
-        position = {code: i for i, code in enumerate(PARAMETERS)}
+        position = {code: i for i, code in enumerate(profile.parameters.codes())}
         entries: list[dict[str, Any]] = []
         for code in sorted(readings, key=lambda c: position.get(c, len(position))):
-            info = parameter_info(code)
+            info = profile.parameters.spec(code)
             reading = readings[code]
             entry: dict[str, Any] = {"code": code, "name": info.name, "unit": info.unit}
             if isinstance(reading, int):
@@ -122,13 +120,13 @@ class Snapshot:
             "parameters": entries,
         }
 
-    def save(self, path: Path) -> None:
+    def save(self, path: Path, profile: Profile) -> None:
         """Write the file atomically: a reader never sees half of it.
 
         Raises:
             OSError: the file cannot be written.
         """
-        text = json.dumps(self.to_json(), indent=2) + "\n"
+        text = json.dumps(self.to_json(profile), indent=2) + "\n"
         fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", dir=path.parent)
         try:
             with os.fdopen(fd, "w", encoding="utf-8") as f:
@@ -140,8 +138,8 @@ class Snapshot:
             raise
 
     @classmethod
-    def load(cls, path: Path) -> Snapshot:
-        """Read and check a snapshot file of SJ300 drives.
+    def load(cls, path: Path, profile: Profile) -> Snapshot:
+        """Read and check a snapshot file of *profile*'s protocol's drives.
 
         Raises:
             CliError: it cannot be read, is not a valid version 1 or 2
@@ -157,30 +155,41 @@ class Snapshot:
             _check_header(data)
         except ValueError as exc:
             raise CliError(f"{path}: not an {FORMAT} file: {exc}") from None
-        protocol = data.get("protocol", PROTOCOL)
-        if protocol != PROTOCOL:
+        protocol = data.get("protocol", _V1_PROTOCOL)
+        if protocol != profile.name:
+            model = profile.model
             raise CliError(
-                f"{path}: a backup of {protocol} drives: its codes are not SJ300 parameters, "
-                "so it is never restored onto or compared with an SJ300 drive"
+                f"{path}: a backup of {protocol} drives: its codes are not {model} parameters, "
+                f"so it is never restored onto or compared with an {model} drive"
             )
         try:
-            return cls._from_json(data)
+            return _Reader(profile).snapshot(data)
         except (KeyError, TypeError, ValueError) as exc:
             version = data["version"]
             raise CliError(f"{path}: not an {FORMAT} version {version} file: {exc}") from None
 
-    @classmethod
-    def _from_json(cls, data: dict[str, Any]) -> Snapshot:
+
+class _Reader:
+    """A file's entries checked against the drives' protocol's profile."""
+
+    def __init__(self, profile: Profile) -> None:
+        self.profile = profile
+
+    def snapshot(self, data: dict[str, Any]) -> Snapshot:
         node = data["node"]
-        if type(node) is not int or not MIN_NODE <= node <= MAX_NODE:
-            raise ValueError(f"node {node!r} is not {MIN_NODE}..{MAX_NODE}")
+        low, high = self.profile.node_range
+        if type(node) is not int or not low <= node <= high:
+            raise ValueError(f"{self.profile.node_noun} {node!r} is not {low}..{high}")
         url = str(data.get("url", ""))
         if data["version"] == 1:
             parameters = {
-                _code(code): _raw(code, raw) for code, raw in dict(data["parameters"]).items()
+                self._code(code): self._raw(code, raw)
+                for code, raw in dict(data["parameters"]).items()
             }
-            absent = dict.fromkeys((_code(code) for code in data.get("absent", ())), _V1_ABSENT)
-            return cls(node, url, parameters, absent, _text(data, "created"), version=1)
+            absent = dict.fromkeys(
+                (self._code(code) for code in data.get("absent", ())), _V1_ABSENT
+            )
+            return Snapshot(node, url, parameters, absent, _text(data, "created"), version=1)
         parameters = {}
         absent = {}
         entries = data["parameters"]
@@ -189,21 +198,35 @@ class Snapshot:
         for entry in entries:
             if not isinstance(entry, dict):
                 raise TypeError(f"parameter entry {entry!r} is not an object")
-            code = _code(entry["code"])
+            code = self._code(entry["code"])
             if "absent" in entry and entry.get("raw") is None:
                 absent[code] = str(entry["absent"])
             else:
-                parameters[code] = _raw(code, entry["raw"])
-        return cls(
+                parameters[code] = self._raw(code, entry["raw"])
+        return Snapshot(
             node,
             url,
             parameters,
             absent,
             _text(data, "taken_at"),
-            PROTOCOL,
+            self.profile.name,
             _text(data, "library_version"),
             version=2,
         )
+
+    def _code(self, code: Any) -> str:
+        if not isinstance(code, str):
+            raise TypeError(f"parameter code {code!r} is not a string")
+        try:
+            return self.profile.parameters.spec(code).code
+        except LocalProtocolError as exc:
+            raise ValueError(str(exc)) from None
+
+    def _raw(self, code: Any, raw: Any) -> int:
+        low, high = self.profile.parameters.raw_range
+        if type(raw) is not int or not low <= raw <= high:
+            raise ValueError(f"{code}: {raw!r} is not a raw value {low}..{high}")
+        return raw
 
 
 def _check_header(data: Any) -> None:
@@ -213,24 +236,9 @@ def _check_header(data: Any) -> None:
     if version not in READABLE_VERSIONS:
         readable = " or ".join(map(str, READABLE_VERSIONS))
         raise ValueError(f"version {version!r} is not {readable}")
-    protocol = data.get("protocol", PROTOCOL)
+    protocol = data.get("protocol", _V1_PROTOCOL)
     if not isinstance(protocol, str):
         raise ValueError(f"protocol {protocol!r} is not a name")
-
-
-def _code(code: Any) -> str:
-    if not isinstance(code, str):
-        raise TypeError(f"parameter code {code!r} is not a string")
-    try:
-        return normalize_code(code)
-    except LocalProtocolError as exc:
-        raise ValueError(str(exc)) from None
-
-
-def _raw(code: Any, raw: Any) -> int:
-    if type(raw) is not int or not RAW_VALUE_MIN <= raw <= RAW_VALUE_MAX:
-        raise ValueError(f"{code}: {raw!r} is not a raw value 0..{RAW_VALUE_MAX}")
-    return raw
 
 
 def _text(data: dict[str, Any], key: str) -> str | None:

@@ -27,8 +27,7 @@ import time
 from collections import deque
 from typing import Any, Final
 
-from ..bus._listen import Sniffing, sniff
-from ..bus._sniffer import SniffedFrame, Unanswered
+from ..bus import SniffedFrame, Sniffing, Unanswered, protocol_names, sniff
 from ._common import add_json_option, positive_float
 from ._output import print_json
 
@@ -54,9 +53,7 @@ def add_parser(subparsers: Any) -> None:
         help="the tap: tcp://HOST:PORT, a serial port, rfc2217://HOST:PORT; line settings "
         "in the query (?baudrate=9600&parity=E)",
     )
-    p.add_argument(
-        "--protocol", choices=("sj300", "fr700"), default=None, help="the line's protocol"
-    )
+    p.add_argument("--protocol", choices=protocol_names(), default=None, help="the line's protocol")
     p.add_argument(
         "--timeout",
         type=positive_float,

@@ -1,9 +1,18 @@
-"""``sj300 status``: a drive's status A/B/C and its monitor block.
+"""``sj300 status``: a drive's state, status and monitor values, as its profile words them.
 
-JSON: ``{"node": 1, "status": {"a": "RUNNING", "b": "RUNNING", "c":
-"CONSTANT_SPEED"}, "monitor": {"output_frequency_hz": 50.0, ...}}``, the
-fields of :class:`~sj300_async.InverterStatus` and
-:class:`~sj300_async.MonitorData`.
+The rows are the profile's (:meth:`~sj300_async.profiles.Profile.status_rows`):
+the state in words first (``stopped``, ``accelerating``), then the
+protocol's own status (SJ300 status A/B/C, FR-700 status bits) and the
+monitor values with their units. A tripped drive's trip is named
+(``trip  E07 over-voltage``), read from its history.
+
+JSON: ``{"node": 1, "state": "stopped", "trip": null, "status": {"a": "STOPPING",
+"b": "STOPPED", "c": "STOP"}, "monitor": {"output_frequency_hz": 50.0, ...}}``:
+``status`` and ``monitor`` are the fields of the drive class's results
+(SJ300 :class:`~sj300_async.InverterStatus` and
+:class:`~sj300_async.MonitorData`; FR-700 :class:`~sj300_async.Fr700Status`
+and :class:`~sj300_async.Fr700Monitor`); ``trip`` is ``{"code": "E07",
+"number": 7, "name": ..., "meaning": ...}`` when tripped and known.
 """
 
 from __future__ import annotations
@@ -11,12 +20,12 @@ from __future__ import annotations
 import argparse
 from typing import Any
 
-from ..sj300._payloads import InverterStatus, MonitorData
-from ._common import add_bus_options, add_json_option, add_node_option, open_cli_bus
-from ._output import Column, human, print_json, print_table
+from ._common import add_bus_options, add_json_option, add_node_option, open_cli_bus, profile_of
+from ._output import Column, print_json, print_table
 from ._session import run_async
+from ._tripinfo import trip_or_none
 
-__all__ = ["add_parser", "status_rows"]
+__all__ = ["add_parser"]
 
 
 def add_parser(subparsers: Any) -> None:
@@ -24,7 +33,8 @@ def add_parser(subparsers: Any) -> None:
     p = subparsers.add_parser(
         "status",
         help="a drive's state and its monitor values",
-        description="Read status A/B/C (command 04) and the monitor block (command 03).",
+        description="Read a drive's status and monitor values (SJ300: commands 04 and 03; "
+        "FR-700: H7A and H6F/H70/H71).",
     )
     add_node_option(p)
     add_json_option(p)
@@ -39,38 +49,30 @@ def run(args: argparse.Namespace) -> int:
 
 async def _status(args: argparse.Namespace) -> int:
     async with open_cli_bus(args) as bus:
+        profile = profile_of(bus)
         drive = bus.drive(args.node)
         status = await drive.read_status()
         monitor = await drive.read_monitor()
+        view = profile.status_view(status)
+        trip = await trip_or_none(profile, drive) if view.tripped else None
     if args.json:
-        print_json({"node": args.node, "status": status, "monitor": monitor})
-    else:
-        print_table(
-            (Column("item"), Column("value")),
-            status_rows(status, monitor),
-            title=f"node {args.node:02d}",
-            show_header=False,
+        print_json(
+            {
+                "node": args.node,
+                "state": view.state,
+                "trip": None if trip is None else trip.as_json(),
+                "status": status,
+                "monitor": monitor,
+            }
         )
+        return 0
+    rows = profile.status_rows(status, monitor)
+    if trip is not None:
+        rows.insert(1, ("trip", str(trip)))
+    print_table(
+        (Column("item"), Column("value")),
+        rows,
+        title=f"{profile.node_noun} {args.node:02d}",
+        show_header=False,
+    )
     return 0
-
-
-def status_rows(status: InverterStatus, monitor: MonitorData) -> list[tuple[str, str]]:
-    """The status and monitor values as (label, value-with-unit) rows."""
-    m = monitor
-    return [
-        ("state (A)", human(status.a)),
-        ("run (B)", human(status.b)),
-        ("output (C)", human(status.c)),
-        ("output frequency", f"{m.output_frequency_hz:.2f} Hz"),
-        ("direction", human(m.direction)),
-        ("output current", f"{m.output_current_a:.1f} A"),
-        ("output voltage", f"{m.output_voltage_v:.1f} V"),
-        ("output torque", f"{m.output_torque_percent} %"),
-        ("power", f"{m.power_kw:.1f} kW"),
-        ("PID feedback", f"{m.pid_feedback_percent:.2f} %"),
-        ("frequency conversion", f"{m.frequency_conversion:.2f}"),
-        ("input terminals", human(m.input_terminals)),
-        ("output terminals", human(m.output_terminals)),
-        ("run time", f"{m.run_time_h} h"),
-        ("power-on time", f"{m.power_on_time_h} h"),
-    ]

@@ -15,14 +15,14 @@ One line per record of the bus's trace hook (:class:`~sj300_async.bus.TraceRecor
   reply as the protocol's dialect describes it (:meth:`Dialect.describe
   <sj300_async.bus.Dialect.describe>`), a bad frame or discarded bytes
   with the parser's reason. tx: the frame read back the way a drive reads
-  it, by the protocol's own request parser (SJ300
-  :class:`~sj300_async.sj300.RequestParser`, FR-700 the simulator's
-  :class:`~sj300_async.simulator.fr700.RequestParser`): node, command and
-  its name, data. The parser, not the request object, because the hook sees
-  bytes only; a frame is short, so a fresh parser per frame costs nothing
-  and carries no state between frames. A protocol without a request parser
-  here (one registered by a user) shows its frame's characters, control
-  bytes named (``<STX>01<CR>``).
+  it, by what the protocol's profile provides
+  (:meth:`~sj300_async.profiles.Profile.request_describer`: SJ300's and
+  FR-700's run their own request parser): node, command and its name,
+  data. A parser, not the request object, because the hook sees bytes
+  only; a frame is short, so a fresh parser per frame costs nothing and
+  carries no state between frames. A protocol without one (or without a
+  profile) shows its frame's characters, control bytes named
+  (``<STX>01<CR>``).
 
 Tracing never breaks a command: a frame that cannot be decoded prints its
 hex and why.
@@ -35,24 +35,12 @@ from collections.abc import Callable
 from typing import Any, Final, TextIO
 
 from ..bus import Dialect, TraceRecord
-from ..fr700._codes import Fr700Instruction
-from ..fr700._dialect import Fr700Dialect
-from ..sj300._constants import BROADCAST
-from ..sj300._dialect import SJ300Dialect
-from ..wire._events import BadFrame, Discarded
+from ..profiles import frame_text, get_profile
+from ..wire import BadFrame, Discarded, LocalProtocolError
 
 __all__ = ["FrameTracer", "describe_bytes", "request_describer"]
 
 _ARROWS: Final = {"tx": "→ tx", "rx": "← rx"}
-_CONTROL: Final = {
-    0x02: "<STX>",
-    0x03: "<ETX>",
-    0x05: "<ENQ>",
-    0x06: "<ACK>",
-    0x0A: "<LF>",
-    0x0D: "<CR>",
-    0x15: "<NAK>",
-}
 
 
 class FrameTracer:
@@ -100,73 +88,13 @@ class FrameTracer:
 
 def request_describer(dialect: Dialect[Any, Any]) -> Callable[[bytes], str]:
     """What turns a frame the host wrote into words, for *dialect*'s protocol."""
-    if isinstance(dialect, SJ300Dialect):
-        return _sj300_request
-    if isinstance(dialect, Fr700Dialect):
-        wait_field = dialect.options.wait_field
-        terminator = dialect.options.terminator
-
-        def fr700(frame: bytes) -> str:
-            return _fr700_request(frame, wait_field=wait_field, terminator=terminator)
-
-        return fr700
-    return describe_bytes
+    try:
+        describe = get_profile(dialect.name).request_describer(dialect)
+    except LocalProtocolError:  # a protocol without a profile
+        describe = None
+    return describe_bytes if describe is None else describe
 
 
 def describe_bytes(data: bytes) -> str:
     """*data* as text: printable ASCII as is, control bytes by name, the rest as ``.``."""
-    return "".join(_CONTROL.get(b, chr(b) if 0x20 <= b < 0x7F else ".") for b in data)
-
-
-def _sj300_request(frame: bytes) -> str:
-    from ..sj300._request_parser import RequestParser
-    from ..sj300._requests import Request
-
-    parts = []
-    for event in RequestParser().feed(frame):
-        if isinstance(event, Request):
-            who = "broadcast" if event.node == BROADCAST else f"node {event.node:02d}"
-            name = event.command.name.lower().replace("_", " ")
-            text = f"{who} command {event.command.wire.decode()} {name}"
-            parts.append(f"{text} {event.data.decode('ascii', 'replace')}" if event.data else text)
-        elif isinstance(event, BadFrame):
-            parts.append(f"bad request: {event.reason.value}")
-        else:
-            parts.append(f"discarded {len(event.data)} byte(s): {event.reason.value}")
-    return "; ".join(parts) or describe_bytes(frame)
-
-
-def _fr700_request(frame: bytes, *, wait_field: bool, terminator: bytes) -> str:
-    from ..simulator.fr700 import BadRequest, HostAnswer, HostRequest, RequestParser
-
-    parts = []
-    for event in RequestParser(wait_field=wait_field, terminator=terminator).feed(frame):
-        if isinstance(event, HostRequest):
-            code = event.instruction
-            text = f"station {event.station:02d} instruction H{code:02X} {_instruction(code)}"
-            parts.append(f"{text} {event.data.decode('ascii', 'replace')}" if event.data else text)
-        elif isinstance(event, HostAnswer):
-            answer = "NAK: send the data again" if event.reoutput else "ACK: data received"
-            parts.append(f"station {event.station:02d} host {answer}")
-        elif isinstance(event, BadRequest):
-            parts.append(f"bad request: {event.code.description}")
-        else:
-            parts.append(f"discarded {len(event.data)} byte(s): {event.reason.value}")
-    # Without a terminator a frame ends by its length: the parser may want more.
-    return "; ".join(parts) or describe_bytes(frame)
-
-
-def _instruction(code: int) -> str:
-    """An FR-700 instruction's name; the parameter ranges by their first code's."""
-    try:
-        name = Fr700Instruction(code).name
-    except ValueError:
-        if code <= 0x63:  # H00..H63: parameter offsets
-            name = Fr700Instruction.READ_PARAMETER.name
-        elif 0x74 <= code <= 0x77:
-            name = Fr700Instruction.FAULT_HISTORY.name
-        elif 0x80 <= code <= 0xE3:
-            name = Fr700Instruction.WRITE_PARAMETER.name
-        else:
-            return "(unnamed)"
-    return name.lower().replace("_", " ")
+    return frame_text(data)

@@ -1,20 +1,20 @@
-"""``sj300 trips``: a drive's trip count and its latest trips, newest first (command 05).
+"""``sj300 trips``: a drive's trip count and its latest trips, newest first.
 
-Each trip shows its code and meaning (``E07 over-voltage``, from
-:class:`~sj300_async.sj300.TripCode`; a code the reference does not list
-reads ``unknown trip``). ``sj300 trips --codes`` lists every known code with
-its meaning, without asking a drive.
+For a protocol whose profile reads trip histories (SJ300: command 05); the
+others are refused with one line. Each trip shows its code and meaning
+(``E07 over-voltage``; a code the reference does not list reads ``unknown
+trip``), the drive's values at the trip and what else the protocol's
+record says (SJ300: state, output, causes). ``sj300 trips --codes`` lists
+every code the protocol's reference names, with its meaning, without
+asking a drive.
 
 JSON: ``{"node": 1, "total_count": 3, "records": [{"error_code": "E07",
-"name": "OVER_VOLTAGE", "meaning": "over-voltage", "trip_factor": 7,
-"status_a": "RUNNING", "status_b": 8, "status_c": "CONSTANT_SPEED",
-"output_frequency_hz": 50.0, ...}]}``: the fields of
-:class:`~sj300_async.TripHistory` and :class:`~sj300_async.TripRecord`, with
-``error_code``, ``name`` and ``meaning`` added and the empty slots of the
-six-deep history left out. ``status_b`` is a bit field
-(:class:`~sj300_async.TripStatusB`). With ``--codes``: ``{"codes":
-[{"code": "E01", "number": 1, "name": "OVER_CURRENT_CONSTANT", "meaning":
-"over-current at constant speed"}, ...]}``.
+"name": "OVER_VOLTAGE", "meaning": "over-voltage", ...}]}``: ``error_code``,
+``name`` and ``meaning`` first, then the fields of the protocol's record as
+its drive class reads it (SJ300 :class:`~sj300_async.TripRecord`: ``status_b``
+is a bit field, :class:`~sj300_async.TripStatusB`), the empty slots left out.
+With ``--codes``: ``{"codes": [{"code": "E01", "number": 1, "name":
+"OVER_CURRENT_CONSTANT", "meaning": "over-current at constant speed"}, ...]}``.
 """
 
 from __future__ import annotations
@@ -22,12 +22,17 @@ from __future__ import annotations
 import argparse
 from typing import Any
 
-from ..sj300._codes import TripCode
-from ..sj300._payloads import TripRecord
-from ._common import add_bus_options, add_json_option, add_node_option, open_cli_bus
-from ._output import Column, human, jsonable, print_json, print_table
+from ..profiles import Trip
+from ._common import (
+    add_bus_options,
+    add_json_option,
+    add_node_option,
+    cli_profile,
+    open_cli_bus,
+    profile_of,
+)
+from ._output import Column, jsonable, print_json, print_table
 from ._session import run_async
-from ._tripinfo import sj300_trip
 
 __all__ = ["add_parser"]
 
@@ -37,8 +42,8 @@ def add_parser(subparsers: Any) -> None:
     p = subparsers.add_parser(
         "trips",
         help="trip history",
-        description="Read the trip count and the six latest trips (command 05), each with "
-        "its meaning; --codes lists every trip code the reference gives.",
+        description="Read the trip count and the latest trips (SJ300: command 05, six "
+        "records), each with its meaning; --codes lists every trip code the reference gives.",
     )
     p.add_argument(
         "--codes", action="store_true", help="list the trip codes and their meanings (no drive)"
@@ -57,7 +62,7 @@ def run(args: argparse.Namespace) -> int:
 
 
 def _codes(args: argparse.Namespace) -> int:
-    trips = [sj300_trip(code) for code in TripCode]
+    trips = cli_profile(args).trip_codes()
     if args.json:
         print_json({"codes": [trip.as_json() for trip in trips]})
     else:
@@ -66,34 +71,34 @@ def _codes(args: argparse.Namespace) -> int:
     return 0
 
 
-def _record_json(record: TripRecord) -> dict[str, Any]:
-    code = record.trip_code
-    return {
-        "error_code": record.error_code,
-        "name": code.name,
-        "meaning": code.description,
-        **jsonable(record),
-    }
+def _record_json(trip: Trip) -> dict[str, Any]:
+    own = jsonable(trip.record) if trip.record is not None else {}
+    return {"error_code": trip.code, "name": trip.name, "meaning": trip.meaning, **own}
+
+
+def _number(value: float | None, digits: int) -> str:
+    return "-" if value is None else f"{value:.{digits}f}"
 
 
 async def _trips(args: argparse.Namespace) -> int:
-    async with open_cli_bus(args) as bus:
-        history = await bus.drive(args.node).read_trip_history()
+    async with open_cli_bus(args, needs="trip_history") as bus:
+        profile = profile_of(bus)
+        log = profile.trip_log(await profile.read_trips(bus.drive(args.node)))
     if args.json:
-        records = [_record_json(r) for r in history.trips]
-        print_json({"node": args.node, "total_count": history.total_count, "records": records})
+        records = [_record_json(trip) for trip in log.records]
+        print_json({"node": args.node, "total_count": log.total_count, "records": records})
         return 0
-    title = f"node {args.node:02d}: {history.total_count} trip(s) in total"
-    if not history.trips:
+    count = "?" if log.total_count is None else str(log.total_count)
+    title = f"{profile.node_noun} {args.node:02d}: {count} trip(s) in total"
+    if not log.records:
         print(f"{title}, none recorded")
         return 0
+    labels = [label for label, _ in log.records[0].details]
     columns = (
         Column("#", "right"),
         Column("trip"),
         Column("meaning"),
-        Column("state"),
-        Column("output"),
-        Column("causes"),
+        *(Column(label) for label in labels),
         Column("Hz", "right"),
         Column("A", "right"),
         Column("V", "right"),
@@ -103,18 +108,16 @@ async def _trips(args: argparse.Namespace) -> int:
     rows = [
         (
             str(i),
-            r.error_code,
-            r.trip_code.description,
-            human(r.status_a),
-            human(r.status_c),
-            human(r.status_b),
-            f"{r.output_frequency_hz:.1f}",
-            f"{r.output_current_a:.1f}",
-            f"{r.output_voltage_v:.1f}",
-            str(r.run_time_h),
-            str(r.power_on_time_h),
+            trip.code,
+            trip.meaning or "",
+            *(text for _, text in trip.details),
+            _number(trip.output_frequency_hz, 1),
+            _number(trip.output_current_a, 1),
+            _number(trip.output_voltage_v, 1),
+            "-" if trip.run_time_h is None else str(trip.run_time_h),
+            "-" if trip.power_on_time_h is None else str(trip.power_on_time_h),
         )
-        for i, r in enumerate(history.trips, 1)
+        for i, trip in enumerate(log.records, 1)
     ]
     print_table(columns, rows, title=f"{title}, newest first")
     return 0

@@ -1,10 +1,11 @@
-"""``sj300 write CODE VALUE``: write a parameter (command 07), read it back, print both.
+"""``sj300 write CODE VALUE``: write a parameter, read it back, print both.
 
 VALUE is in the catalogue's engineering unit (``write F002 12.5`` for 12.50
-s), or the raw integer with ``--raw``. It is checked against the
-catalogue's range and resolution before anything is sent. The drive writes
-RAM: ``--store`` also stores every setting to EEPROM (command 0A), which a
-power cycle otherwise forgets.
+s), or the raw integer with ``--raw``. It is checked against the protocol's
+catalogue (range and resolution) before anything is sent. An SJ300 writes
+RAM (command 07): ``--store`` also stores every setting to EEPROM (command
+0A), which a power cycle otherwise forgets; a protocol whose drives have no
+such separate store refuses ``--store``.
 
 JSON: ``{"node": 1, "code": "F002", "name": ..., "unit": "s", "old_value":
 30.0, "old_raw": 3000, "value": 12.5, "raw": 1250, "stored": false}``.
@@ -15,13 +16,12 @@ from __future__ import annotations
 import argparse
 from typing import Any
 
-from ..sj300._drive import Drive
-from ..sj300._parameters import RAW_VALUE_MAX, RAW_VALUE_MIN, parameter_info
-from ..wire._errors import NakError
-from ._common import add_bus_options, add_json_option, add_node_option, open_cli_bus
+from ..profiles import ParameterSpec
+from ..wire import NakError
+from ._common import add_bus_options, add_json_option, add_node_option, cli_profile, open_cli_bus
 from ._errors import FAILURE, CliError
 from ._output import format_raw, print_json
-from ._read import parameter_code, read_raw
+from ._read import parameter_spec, read_raw
 from ._session import run_async
 
 __all__ = ["add_parser", "write_raw"]
@@ -34,7 +34,7 @@ def add_parser(subparsers: Any) -> None:
         help="write a parameter and read it back",
         description="Write a parameter (command 07) and read it back (command 06).",
     )
-    p.add_argument("code", type=parameter_code, metavar="CODE", help="e.g. F002")
+    p.add_argument("code", metavar="CODE", help="e.g. F002 (FR-700: Pr.7)")
     p.add_argument("value", metavar="VALUE", help="engineering value, e.g. 12.5 (--raw: integer)")
     p.add_argument("--raw", action="store_true", help="VALUE is the unscaled integer")
     p.add_argument("--store", action="store_true", help="then store settings to EEPROM (0A)")
@@ -49,11 +49,11 @@ def run(args: argparse.Namespace) -> int:
     return run_async(_write(args))
 
 
-def _raw_value(code: str, text: str, raw: bool) -> int:
+def _raw_value(info: ParameterSpec, text: str, raw: bool, raw_range: tuple[int, int]) -> int:
     """VALUE as the raw integer to send, checked before anything is sent.
 
     Raises:
-        CliError: VALUE is not a number.
+        CliError: VALUE is not a number, or a raw value outside the wire's range.
         LocalProtocolError: out of range or finer than the parameter's resolution.
     """
     try:
@@ -63,13 +63,14 @@ def _raw_value(code: str, text: str, raw: bool) -> int:
             f"VALUE must be {'an integer' if raw else 'a number'}, got {text!r}"
         ) from None
     if not raw:
-        return parameter_info(code).to_raw(number)
-    if not RAW_VALUE_MIN <= number <= RAW_VALUE_MAX:
-        raise CliError(f"a raw value is {RAW_VALUE_MIN}..{RAW_VALUE_MAX}, got {text!r}")
+        return info.to_raw(number)
+    low, high = raw_range
+    if not low <= number <= high:
+        raise CliError(f"a raw value is {low}..{high}, got {text!r}")
     return int(number)
 
 
-async def write_raw(drive: Drive, code: str, raw: int) -> None:
+async def write_raw(drive: Any, code: str, raw: int) -> None:
     """Write *code*; a NAK names the code.
 
     Raises:
@@ -83,9 +84,11 @@ async def write_raw(drive: Drive, code: str, raw: int) -> None:
 
 
 async def _write(args: argparse.Namespace) -> int:
-    code: str = args.code
-    raw = _raw_value(code, args.value, args.raw)
-    async with open_cli_bus(args) as bus:
+    profile = cli_profile(args)
+    info = parameter_spec(profile, args.code)
+    code = info.code
+    raw = _raw_value(info, args.value, args.raw, profile.parameters.raw_range)
+    async with open_cli_bus(args, needs="store" if args.store else None) as bus:
         drive = bus.drive(args.node)
         old = await read_raw(drive, code)
         await write_raw(drive, code, raw)
@@ -94,7 +97,6 @@ async def _write(args: argparse.Namespace) -> int:
             raise CliError(f"{code}: wrote {raw}, read back {back}", status=FAILURE)
         if args.store:
             await drive.store()
-    info = parameter_info(code)
     if args.json:
         print_json(
             {

@@ -1,8 +1,8 @@
 """Mitsubishi FR-700 "computer link" on the same stack as the SJ300.
 
-Open a bus with ``open_bus(url, protocol="fr700")`` (or ``?protocol=fr700``
-in the URL); ``bus.drive(station)`` then gives an :class:`Fr700Drive`
-(stations 0..31). The line options (waiting-time field, CR / CR LF, the
+Open a bus with ``open_bus(url, protocol="fr700")`` (a URL's
+``?protocol=fr700`` must agree with it); ``bus.drive(station)`` then
+gives an :class:`Fr700Drive` (stations 0..31). The line options (waiting-time field, CR / CR LF, the
 host's ACK) are :class:`Fr700Dialect`'s arguments, or the URL's
 ``wait_field=``, ``terminator=`` (``none``, ``cr``, ``crlf``) and ``ack=``.
 
@@ -12,51 +12,71 @@ The sans-IO core (:mod:`._codec`, :mod:`._parser`, :mod:`._requests`,
 and the whole line's framer :mod:`._line_frames`) imports no asyncio; only
 :class:`Fr700Drive` is async. Every decision the reference leaves open is
 recorded in the docstring of the module that makes it.
+
+:mod:`sj300_async.fr700.codec` holds every name of the codec (all of this
+package's names but the dialect and the drive), for sans-IO code that must
+not load the async stack with this package (the simulated drives).
 """
 
 from __future__ import annotations
 
-from . import _requests as requests
-from ._codec import (
+from ._dialect import Fr700Dialect
+from ._drive import Fr700Drive
+from .codec import (
+    A1_INSTRUCTIONS,
     DEFAULT_LINE_OPTIONS,
+    ETX,
+    FR700_PARAMETERS,
+    MAX_FRAME,
     MAX_REPLY_DATA,
     MAX_STATION,
     MIN_STATION,
+    PARAMETER_RAW_MAX,
+    RESET_DATA,
+    STX,
+    BadRequest,
+    Fr700Ack,
+    Fr700Data,
+    Fr700Instruction,
     Fr700LineOptions,
+    Fr700Monitor,
+    Fr700MultiReceive,
+    Fr700MultiReply,
+    Fr700Nak,
+    Fr700NakCode,
+    Fr700OperationMode,
+    Fr700ParameterInfo,
+    Fr700ParserEvent,
+    Fr700Reply,
+    Fr700ReplyParser,
+    Fr700Request,
+    Fr700RequestKind,
+    Fr700Status,
+    Fr700StatusBits,
+    HostAnswer,
+    HostRequest,
+    RequestParser,
+    decode_frame,
+    decode_hex,
+    decode_multi_reply,
     encode_ack,
     encode_data_reply,
     encode_host_ack,
     encode_nak,
     encode_reoutput_request,
     encode_request,
-    parse_station,
-    sum_check,
-)
-from ._codes import (
-    A1_INSTRUCTIONS,
-    RESET_DATA,
-    Fr700Instruction,
-    Fr700NakCode,
-    Fr700OperationMode,
-    Fr700StatusBits,
-)
-from ._dialect import Fr700Dialect
-from ._drive import Fr700Drive
-from ._events import Fr700Ack, Fr700Data, Fr700Nak, Fr700ParserEvent, Fr700Reply
-from ._parameters import (
-    FR700_PARAMETERS,
-    PARAMETER_RAW_MAX,
-    Fr700ParameterInfo,
     fr700_parameter_info,
     parameter_number,
+    parse_station,
+    requests,
+    sum_check,
+    terminator_bytes,
 )
-from ._parser import MAX_FRAME, Fr700ReplyParser, decode_frame
-from ._payloads import Fr700Monitor, Fr700MultiReply, Fr700Status, decode_hex, decode_multi_reply
-from ._requests import Fr700MultiReceive, Fr700Request, Fr700RequestKind
 
 __all__ = [
     "A1_INSTRUCTIONS",
     "DEFAULT_LINE_OPTIONS",
+    "ETX",
     "FR700_PARAMETERS",
     "MAX_FRAME",
     "MAX_REPLY_DATA",
@@ -64,6 +84,8 @@ __all__ = [
     "MIN_STATION",
     "PARAMETER_RAW_MAX",
     "RESET_DATA",
+    "STX",
+    "BadRequest",
     "Fr700Ack",
     "Fr700Data",
     "Fr700Dialect",
@@ -84,6 +106,9 @@ __all__ = [
     "Fr700RequestKind",
     "Fr700Status",
     "Fr700StatusBits",
+    "HostAnswer",
+    "HostRequest",
+    "RequestParser",
     "decode_frame",
     "decode_hex",
     "decode_multi_reply",
@@ -98,4 +123,5 @@ __all__ = [
     "parse_station",
     "requests",
     "sum_check",
+    "terminator_bytes",
 ]

@@ -35,7 +35,7 @@ import re
 from dataclasses import dataclass
 from typing import Final
 
-from ..wire._errors import LocalProtocolError
+from ..wire import LocalProtocolError
 from ._codes import ACK, ENQ, ETX, NAK, STX, Fr700Instruction, Fr700NakCode
 
 __all__ = [

@@ -23,7 +23,7 @@ from __future__ import annotations
 import enum
 from typing import Final
 
-from ..wire._enums import TolerantIntEnum as TolerantIntEnum
+from ..wire import TolerantIntEnum as TolerantIntEnum
 
 __all__ = [
     "A1_INSTRUCTIONS",

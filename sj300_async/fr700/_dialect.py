@@ -120,6 +120,7 @@ class Fr700Dialect:
     default_sim_nodes = "0-7"
     url_options = frozenset(("wait_field", "terminator", "ack"))
     simulator = "sj300_async.simulator.fr700:simulate"
+    profile = "sj300_async.fr700._profile:FR700_PROFILE"
     capture_linktype = 148  # LINKTYPE_USER1 (docs/CAPTURE.md)
 
     def __init__(

@@ -29,9 +29,8 @@ import asyncio
 from collections.abc import Coroutine
 from typing import TYPE_CHECKING, Any
 
-from ..bus._stats import TransactionStats
-from ..wire import LocalProtocolError
-from ..wire._enums import Direction
+from ..bus import TransactionStats
+from ..wire import Direction, LocalProtocolError
 from . import _requests as rq
 from ._codec import DEFAULT_LINE_OPTIONS, Fr700LineOptions
 from ._codes import Fr700Instruction, Fr700OperationMode, Fr700StatusBits

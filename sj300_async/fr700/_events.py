@@ -18,7 +18,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
-from ..wire._events import BadFrame, Discarded
+from ..wire import BadFrame, Discarded
 from ._codes import Fr700NakCode
 
 __all__ = ["Fr700Ack", "Fr700Data", "Fr700Nak", "Fr700ParserEvent", "Fr700Reply"]

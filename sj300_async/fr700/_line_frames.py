@@ -68,8 +68,7 @@ import enum
 import re
 from typing import Final
 
-from ..wire._events import BadFrame, BadFrameReason
-from ..wire._frames import FrameRole, LineFrame
+from ..wire import BadFrame, BadFrameReason, FrameRole, LineFrame
 from ._codec import DEFAULT_LINE_OPTIONS, Fr700LineOptions, parse_station
 from ._codes import ACK, CR, ENQ, ETX, LF, NAK, STX, Fr700Instruction, Fr700NakCode
 from ._events import Fr700Ack, Fr700Data, Fr700Nak, Fr700Reply

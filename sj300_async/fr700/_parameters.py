@@ -118,6 +118,11 @@ class Fr700ParameterInfo:
         return round(self.maximum * self.scale)
 
     @property
+    def code(self) -> str:
+        """``"Pr.7"``: the number as the gateway, the command line and MQTT name it."""
+        return f"Pr.{self.number}"
+
+    @property
     def label(self) -> str:
         """``"Pr.7 acceleration time"``: the number and name, for messages."""
         return f"Pr.{self.number} {self.name}"

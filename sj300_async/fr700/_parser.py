@@ -52,9 +52,14 @@ import logging
 import re
 from typing import Final
 
-from ..wire._errors import LocalProtocolError
-from ..wire._events import BadFrame, BadFrameReason, Discarded, DiscardReason
-from ..wire._parser_stats import ParserStats
+from ..wire import (
+    BadFrame,
+    BadFrameReason,
+    Discarded,
+    DiscardReason,
+    LocalProtocolError,
+    ParserStats,
+)
 from ._codec import MAX_REPLY_DATA, parse_station
 from ._codes import ACK, CR, ETX, LF, NAK, Fr700NakCode
 from ._events import Fr700Ack, Fr700Data, Fr700Nak, Fr700Reply

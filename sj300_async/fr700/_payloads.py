@@ -12,7 +12,7 @@ import re
 from dataclasses import dataclass
 from typing import Final
 
-from ..wire._errors import RemoteProtocolError
+from ..wire import RemoteProtocolError
 from ._codes import Fr700NakCode, Fr700StatusBits
 from ._requests import Fr700MultiReceive
 

@@ -44,8 +44,7 @@ import re
 from dataclasses import dataclass
 from typing import Final
 
-from ..wire._events import Discarded, DiscardReason
-from ..wire._parser_stats import ParserStats
+from ..wire import Discarded, DiscardReason, ParserStats
 from ._codec import parse_station, sum_check
 from ._codes import A1_INSTRUCTIONS, ACK, CR, ENQ, LF, NAK, Fr700Instruction, Fr700NakCode
 

@@ -24,8 +24,7 @@ import math
 from dataclasses import dataclass
 from typing import Final
 
-from ..wire._enums import Direction
-from ..wire._errors import LocalProtocolError
+from ..wire import Direction, LocalProtocolError
 from ._codec import DEFAULT_LINE_OPTIONS, Fr700LineOptions, encode_request
 from ._codes import A1_INSTRUCTIONS, RESET_DATA, Fr700Instruction, Fr700OperationMode
 

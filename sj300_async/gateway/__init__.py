@@ -1,10 +1,121 @@
 """``sj300 gateway``: one process owns the lines, polls the drives and serves them.
 
-Modbus TCP for SCADA (pymodbus's server under the gateway's own register
-map), Prometheus metrics and a health check over HTTP, and a control lease
-so that a controller that disappears does not leave a motor running. Needs
-the ``gateway`` extra (``pip install 'sj300-async[gateway]'``). The user's
-view is docs/GATEWAY.md.
+The core is protocol-neutral and knows no northbound by name: it opens
+the lines, polls them, keeps each drive's readings and latest
+:class:`~sj300_async.profiles.DriveSnapshot`, judges and carries out writes
+(write grants, control leases, the audit log), and hands every snapshot to
+the configured northbounds. The built-in northbounds are packages of their
+own behind :class:`Northbound`: :mod:`.modbus` (Modbus TCP for SCADA),
+:mod:`.mqtt` (state, Home Assistant discovery, commands; and the fleet
+view's subscriber), :mod:`.http` (Prometheus metrics and a health check).
+Needs the ``gateway`` extra (``pip install 'sj300-async[gateway]'``). The
+user's view is docs/GATEWAY.md; docs/ARCHITECTURE.md shows how to add a
+northbound.
 """
 
 from __future__ import annotations
+
+from ._audit import AuditLog, excerpt
+from ._config import config_from_flags, load_config, parse_config, valid_name
+from ._control import Controller
+from ._drive import GatewayDrive, Lease
+from ._gateway import Gateway, GatewayLine
+from ._metrics import (
+    DriveView,
+    LineView,
+    busy_seconds,
+    cumulative_buckets,
+    drive_view,
+    gateway_metrics,
+    line_problems,
+)
+from ._model import (
+    DEFAULT_LEASE_S,
+    DEFAULT_STALE_AFTER_S,
+    LAPSE_ACTIONS,
+    POLL_READS,
+    UNIT_RANGE,
+    Endpoint,
+    GatewayConfig,
+    LapseAction,
+    LineConfig,
+    PollRead,
+    WriteGrant,
+    default_gateway_id,
+    parse_endpoint,
+)
+from ._northbound import (
+    Flag,
+    GatewayView,
+    Northbound,
+    NorthboundSpec,
+    SectionContext,
+    get_northbound,
+    northbound_names,
+    register_northbound,
+    unregister_northbound,
+)
+from ._toml import COMMAND_LINE, ConfigContext, ConfigTable, GatewayConfigError
+from ._writes import (
+    Heartbeat,
+    ParameterWrite,
+    Refusal,
+    RunCommand,
+    SetFrequency,
+    WriteRequest,
+    WriteResult,
+)
+
+__all__ = [
+    "COMMAND_LINE",
+    "DEFAULT_LEASE_S",
+    "DEFAULT_STALE_AFTER_S",
+    "LAPSE_ACTIONS",
+    "POLL_READS",
+    "UNIT_RANGE",
+    "AuditLog",
+    "ConfigContext",
+    "ConfigTable",
+    "Controller",
+    "DriveView",
+    "Endpoint",
+    "Flag",
+    "Gateway",
+    "GatewayConfig",
+    "GatewayConfigError",
+    "GatewayDrive",
+    "GatewayLine",
+    "GatewayView",
+    "Heartbeat",
+    "LapseAction",
+    "Lease",
+    "LineConfig",
+    "LineView",
+    "Northbound",
+    "NorthboundSpec",
+    "ParameterWrite",
+    "PollRead",
+    "Refusal",
+    "RunCommand",
+    "SectionContext",
+    "SetFrequency",
+    "WriteGrant",
+    "WriteRequest",
+    "WriteResult",
+    "busy_seconds",
+    "config_from_flags",
+    "cumulative_buckets",
+    "default_gateway_id",
+    "drive_view",
+    "excerpt",
+    "gateway_metrics",
+    "get_northbound",
+    "line_problems",
+    "load_config",
+    "northbound_names",
+    "parse_config",
+    "parse_endpoint",
+    "register_northbound",
+    "unregister_northbound",
+    "valid_name",
+]

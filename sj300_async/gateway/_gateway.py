@@ -1,25 +1,26 @@
-"""The gateway process: open the lines, poll them, serve Modbus TCP and metrics, stop cleanly.
+"""The gateway process: open the lines, poll them, serve them through the northbounds, stop cleanly.
 
 :class:`Gateway` is an async context manager. Entering it opens every line
-(one :class:`~sj300_async.Bus` each, the only master on its wire), starts a
-:class:`~sj300_async.Poller` per line with the line's poll plan, feeds each
-sample into the drive's :class:`~._state.DriveState`, and serves: Modbus
-TCP (:mod:`._modbus`), /metrics + /healthz (:mod:`._http`) and MQTT
-(:mod:`._mqtt`: each sample is handed to the bridge after the state took
-it). Nothing is written to a drive on start-up: the poller only reads, and
-writes come only from clients.
+(one :class:`~sj300_async.Bus` each, the only master on its wire), starts
+the configured northbounds (:mod:`._northbound`: Modbus TCP, /metrics and
+/healthz, MQTT, or any registered one), then a
+:class:`~sj300_async.Poller` per line with the line's poll plan. Each
+sample goes into the drive's readings, a new
+:class:`~sj300_async.profiles.DriveSnapshot` is built from them, and every
+northbound gets it; so does every write's read-back. Nothing is written to
+a drive on start-up: the poller only reads, and writes come only from
+clients, through :meth:`Gateway.write`.
 
-Leaving it (SIGTERM in ``sj300 gateway``) stops in this order: the MQTT
-bridge (no MQTT command starts any more; it says "offline" and
-disconnects), the Modbus server (so no client write starts any more), the
-leases still held (their
-lapse action runs and is waited for: the one case a command is sent on
-the way out), the trip-history readers and pollers, the HTTP server, the
-lines, the audit log.
+Leaving it (SIGTERM in ``sj300 gateway``) stops in this order: the
+northbounds, last started first (no client write starts any more; MQTT
+says "offline"), the leases still held (their lapse action runs and is
+waited for: the one case a command is sent on the way out), the
+trip-history readers and the pollers, the lines, the audit log.
 
-The trip history (SJ300) is not part of the poll cycle: 446 characters
-would take most of a 19200-baud cycle. Each drive's is read every
-``trips_interval_s`` and as soon as its status shows a trip.
+A trip history is not part of the poll cycle (an SJ300's is 446
+characters: most of a 19200-baud cycle). For a protocol whose profile
+reads one, each drive's is read every ``trips_interval_s`` and as soon as
+its status shows a trip.
 """
 
 from __future__ import annotations
@@ -27,24 +28,26 @@ from __future__ import annotations
 import asyncio
 import contextlib
 import logging
-from collections.abc import Iterable, Iterator
+import time
+from collections.abc import Iterable, Iterator, Sequence
 from dataclasses import dataclass
 from types import TracebackType
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
-from .._open import open_bus
-from .._poller import Poller, Read, Sample
-from ..bus import Bus
-from ..bus._capture import CaptureFile
+from .. import Poller, Sample
+from ..bus import Bus, CaptureFile, open_bus
+from ..profiles import Profile, get_profile
 from ..wire import SJ300Error
-from ._control import AuditLog, Controller, raw_of
-from ._http import serve_http
-from ._metrics import ClientCounters, DriveView, LineView, line_problems, make_registry
-from ._modbus import ModbusGatewayServer, Unit, serve_modbus
+from ._audit import AuditLog
+from ._control import Controller
+from ._drive import GatewayDrive, Lease
+from ._metrics import LineView, drive_view, gateway_metrics, line_problems
 from ._model import GatewayConfig, LineConfig
-from ._mqtt import MqttBridge
-from ._registers import RegisterMap
-from ._state import DriveState, Lease
+from ._northbound import Northbound, get_northbound
+from ._writes import WriteRequest, WriteResult
+
+if TYPE_CHECKING:
+    from prometheus_client.core import Metric
 
 __all__ = ["Gateway", "GatewayLine"]
 
@@ -56,15 +59,15 @@ class GatewayLine:
     """One line while the gateway runs: its bus, poller, drives and controller."""
 
     config: LineConfig
+    profile: Profile
     bus: Bus[Any, Any]
     poller: Poller
     controller: Controller
-    registers: RegisterMap
-    states: dict[int, DriveState]
+    drives: dict[int, GatewayDrive]
 
 
 class Gateway:
-    """The whole gateway (see the module docstring)."""
+    """The whole gateway (see the module docstring); the northbounds' :class:`GatewayView`."""
 
     def __init__(self, config: GatewayConfig, *, capture: str | None = None) -> None:
         self.config = config
@@ -73,55 +76,54 @@ class Gateway:
         self.capture_path = capture
         self._capture: CaptureFile | None = None
         self.lines: list[GatewayLine] = []
-        self.clients = ClientCounters()
         self.audit = AuditLog(config.audit_log)
-        self.modbus: ModbusGatewayServer | None = None
-        self.http: asyncio.Server | None = None
-        self.mqtt: MqttBridge | None = None
+        #: The running northbounds by section name, in the order they started.
+        self.northbounds: dict[str, Northbound] = {}
+        self._drives: list[GatewayDrive] = []
+        self._by_key: dict[tuple[str, int], GatewayDrive] = {}
         self._stack = contextlib.AsyncExitStack()
         self._tasks: list[asyncio.Task[None]] = []
 
-    # -- what the servers read -------------------------------------------------
+    # -- what the northbounds see (GatewayView) --------------------------------------
 
     @property
-    def units(self) -> dict[int, Unit]:
-        """Every drive by its Modbus unit id."""
-        return {
-            state.unit: Unit(state, line.registers, line.controller)
-            for line in self.lines
-            for state in line.states.values()
-        }
+    def drives(self) -> Sequence[GatewayDrive]:
+        """Every drive, lines in the configuration's order, nodes ascending."""
+        return self._drives
 
-    def state(self, line: str, node: int) -> DriveState:
-        """The state of *node* on the line named *line*."""
-        for each in self.lines:
-            if each.config.name == line:
-                return each.states[node]
-        raise KeyError(line)
+    def drive(self, line: str, node: int) -> GatewayDrive | None:
+        """The drive *node* of line *line*, or None."""
+        return self._by_key.get((line, node))
 
-    # MetricsSource
-    def line_views(self) -> Iterator[LineView]:
-        for line in self.lines:
-            yield LineView(line.config.name, line.bus)
+    async def write(self, client: str, drive: GatewayDrive, request: WriteRequest) -> WriteResult:
+        """Judge and carry out *client*'s write through the drive's line (audited there)."""
+        return await self._line_of(drive).controller.write(client, drive, request)
 
-    def drives(self) -> Iterator[DriveView]:
+    def refused(
+        self, client: str, drive: GatewayDrive, what: str, value: object, result: WriteResult
+    ) -> None:
+        """Audit a request a northbound refused before handing it over."""
+        self.audit.write(client, drive, what, None, value, result)
+
+    def metrics(self) -> Iterator[Metric]:
+        """The lines' and drives' families, then each northbound's."""
         now = asyncio.get_running_loop().time()
-        for line in self.lines:
-            for state in line.states.values():
-                monitor = state.monitor
-                fresh = monitor is not None and now - state.monitor_at <= self.config.stale_after_s
-                yield DriveView(
-                    line=state.line,
-                    node=state.node,
-                    online=state.online,
-                    sample_age_s=state.sample_age_s(now),
-                    output_frequency_hz=monitor.output_frequency_hz if fresh and monitor else None,
-                    output_current_a=monitor.output_current_a if fresh and monitor else None,
-                )
+        stale = self.config.stale_after_s
+        yield from gateway_metrics(
+            self._line_views(), (drive_view(d.snapshot, now, stale) for d in self._drives)
+        )
+        for northbound in self.northbounds.values():
+            yield from northbound.metrics()
 
     def problems(self) -> list[str]:
         """Why the gateway is not healthy (empty: every line is up)."""
-        return line_problems(_Source(self))
+        return line_problems(self._line_views())
+
+    def _line_views(self) -> list[LineView]:
+        return [LineView(line.config.name, line.bus) for line in self.lines]
+
+    def _line_of(self, drive: GatewayDrive) -> GatewayLine:
+        return next(line for line in self.lines if line.config is drive.line)
 
     # -- running -----------------------------------------------------------------
 
@@ -132,26 +134,14 @@ class Gateway:
                 self._stack.callback(self._capture.close)
             for config in self.config.lines:
                 self.lines.append(await self._open_line(config))
-            if self.config.mqtt is not None:  # before the pollers: it gets the first samples
-                self.mqtt = MqttBridge(
-                    self.config.mqtt, self.config.gateway_id, self.lines, self.config.stale_after_s
-                )
-                self.mqtt.start()
+            for section, settings in self.config.northbounds.items():
+                northbound = get_northbound(section).create(settings)
+                await northbound.start(self)
+                self.northbounds[section] = northbound
             for line in self.lines:
                 await self._stack.enter_async_context(line.poller)
-                if line.config.protocol == "sj300" and line.config.trips_interval_s > 0:
+                if line.profile.capabilities.trip_history and line.config.trips_interval_s > 0:
                     self._tasks.append(asyncio.create_task(self._read_trips(line)))
-            if self.config.modbus is not None:
-                self.modbus = await serve_modbus(
-                    self.units, self.config.modbus, self.config.stale_after_s, self.clients
-                )
-            if self.config.metrics is not None:
-                registry = make_registry(
-                    _Source(self),
-                    self.clients,
-                    lambda: None if self.mqtt is None else self.mqtt.stats,
-                )
-                self.http = await serve_http(self.config.metrics, registry, self.problems)
         except BaseException:
             await self._shutdown()
             raise
@@ -166,6 +156,7 @@ class Gateway:
         await self._shutdown()
 
     async def _open_line(self, config: LineConfig) -> GatewayLine:
+        profile = get_profile(config.protocol)
         bus: Bus[Any, Any] = await self._stack.enter_async_context(
             open_bus(
                 config.url,
@@ -174,86 +165,80 @@ class Gateway:
                 capture=self._capture,
             )
         )
-        reads: tuple[Read, ...] = tuple(r for r in config.reads if r in ("status", "monitor"))  # type: ignore[misc]
-        poller = Poller(interval_s=config.interval_s, reads=reads, parameters=config.parameters)
+        poller = Poller(
+            interval_s=config.interval_s, reads=config.reads, parameters=config.parameters
+        )
         poller.add(bus, config.nodes)
-        states = {
-            node: DriveState(
-                config.name, node, config.unit(node), config.protocol, Lease(config.lease_s)
-            )
+        drives = {
+            node: GatewayDrive(config, node, profile, Lease(config.lease_s))
             for node in config.nodes
         }
+        for drive in drives.values():
+            self._drives.append(drive)
+            self._by_key[drive.key] = drive
         line = GatewayLine(
-            config,
-            bus,
-            poller,
-            Controller(config, bus, self.audit),
-            RegisterMap(config.protocol, config.parameters),
-            states,
+            config, profile, bus, poller, Controller(config, bus, self.audit, self._changed), drives
         )
         poller.on_sample(lambda sample: self._on_sample(line, sample))
-        _log.info("line %s: %s, %s %s", config.name, config.url, bus.dialect.node_noun,
+        _log.info("line %s: %s, %s %s", config.name, config.url, profile.node_noun,
                   ",".join(map(str, config.nodes)))  # fmt: skip
         return line
 
     def _on_sample(self, line: GatewayLine, sample: Sample) -> None:
-        protocol = line.config.protocol
-        raw = {code: raw_of(protocol, code, value) for code, value in sample.parameters.items()}
-        state = line.states[sample.node]
-        state.update(sample, raw)
-        if self.mqtt is not None:
-            self.mqtt.on_sample(state, sample)
+        drive = line.drives[sample.node]
+        drive.readings.take(sample, line.profile)
+        # The poll ended at sample.timestamp, on the loop's clock: the same instant in Unix time.
+        now = asyncio.get_running_loop().time()
+        self._publish(drive.rebuild(sample.timestamp, time.time() - (now - sample.timestamp)))
+
+    def _changed(self, drive: GatewayDrive) -> None:
+        """A write's read-back or a trip history changed *drive*'s readings: show it now."""
+        self._publish(drive.rebuild(asyncio.get_running_loop().time()))
+
+    def _publish(self, snapshot: Any) -> None:
+        for northbound in self.northbounds.values():
+            northbound.publish(snapshot)
 
     async def _read_trips(self, line: GatewayLine) -> None:
         loop = asyncio.get_running_loop()
         seen_trip: dict[int, bool] = {}
         while True:
             await asyncio.sleep(max(line.config.interval_s, 0.05))
-            for state in line.states.values():
-                if not state.online:
+            for drive in line.drives.values():
+                readings = drive.readings
+                if not readings.online:
                     continue
-                tripped = bool(state.tripped)
-                new_trip = tripped and not seen_trip.get(state.node, False)
-                due = loop.time() - state.trips_at >= line.config.trips_interval_s
+                tripped = bool(readings.status_view is not None and readings.status_view.tripped)
+                new_trip = tripped and not seen_trip.get(drive.node, False)
+                due = loop.time() - readings.trips_at >= line.config.trips_interval_s
                 if not (new_trip or due):
                     continue
                 try:
-                    state.trips = await line.bus.drive(state.node).read_trip_history()
+                    history = await line.profile.read_trips(line.bus.drive(drive.node))
                 except SJ300Error as exc:
-                    _log.debug("line %s node %d: trip history: %s", state.line, state.node, exc)
+                    _log.debug("line %s node %d: trip history: %s", line.config.name, drive.node,
+                               exc)  # fmt: skip
                     continue
-                state.trips_at = loop.time()
-                seen_trip[state.node] = tripped
+                readings.set_trips(history, loop.time(), line.profile)
+                seen_trip[drive.node] = tripped
+                self._changed(drive)
 
     async def _shutdown(self) -> None:
-        if self.mqtt is not None:
-            await self.mqtt.close()
-            self.mqtt = None
-        if self.modbus is not None:
-            await self.modbus.shutdown()  # type: ignore[no-untyped-call]
-            self.modbus = None
+        for section in reversed(list(self.northbounds)):
+            northbound = self.northbounds.pop(section)
+            try:
+                await northbound.close()
+            except Exception:  # one northbound's failure must not leave the others running
+                _log.exception("the %s northbound failed to close", section)
         for line in self.lines:
-            await line.controller.close(list(line.states.values()))
+            await line.controller.close(list(line.drives.values()))
         for task in self._tasks:
             task.cancel()
         await asyncio.gather(*self._tasks, return_exceptions=True)
         self._tasks.clear()
-        if self.http is not None:
-            self.http.close()
-            await self.http.wait_closed()
-            self.http = None
         await self._stack.aclose()
         self.audit.close()
 
-
-class _Source:
-    """The gateway as the metrics collector sees it."""
-
-    def __init__(self, gateway: Gateway) -> None:
-        self._gateway = gateway
-
-    def lines(self) -> Iterable[LineView]:
-        return list(self._gateway.line_views())
-
-    def drives(self) -> Iterable[DriveView]:
-        return list(self._gateway.drives())
+    def lines_by_name(self) -> Iterable[tuple[str, GatewayLine]]:
+        """``(name, line)`` of every line, in the configuration's order."""
+        return ((line.config.name, line) for line in self.lines)

@@ -2,7 +2,9 @@
 
 :mod:`._config` builds and validates a :class:`GatewayConfig` from a TOML
 file (errors name the file, line and key) or from the command line's flags;
-everything else in the gateway reads only these objects. Nothing here does
+everything else in the gateway reads only these objects. Each northbound
+owns its section and its configuration class (:mod:`._northbound`): the
+core holds them by section name, without knowing them. Nothing here does
 I/O.
 
 Decisions (docs/GATEWAY.md has the user's view):
@@ -14,21 +16,24 @@ Decisions (docs/GATEWAY.md has the user's view):
 - Control needs a lease (:mod:`._lease`): ``lease_s`` and ``on_lapse`` are
   per line, because the action on lapse depends on the line (a broadcast
   stop exists on SJ300 lines only).
-- Modbus unit ids: SJ300 node n is unit n; FR-700 station s is unit 100 + s
-  (station 0 exists, unit 0 is Modbus's broadcast, and the two protocols'
-  defaults never collide). ``unit_offset`` overrides: unit = node + offset.
-- MQTT (:class:`MqttConfig`, optional): the gateway is known on the broker
-  by its id, the host name unless configured (its first label, cut to the
-  characters a topic level may hold: :func:`default_gateway_id`).
+- Unit ids (Modbus units): unit = node + the protocol profile's offset
+  (SJ300 node n is unit n; FR-700 station s is unit 100 + s); a line's
+  ``unit_offset`` overrides it.
+- The gateway's id names it to the outside (MQTT topics): the host name
+  unless configured, its first label cut to the characters a topic level
+  may hold (:func:`default_gateway_id`).
 """
 
 from __future__ import annotations
 
 import re
 import socket
+from collections.abc import Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Final, Literal, get_args
+
+from ..wire import LocalProtocolError
 
 __all__ = [
     "DEFAULT_LEASE_S",
@@ -39,12 +44,14 @@ __all__ = [
     "GatewayConfig",
     "LapseAction",
     "LineConfig",
-    "MqttConfig",
     "WriteGrant",
     "default_gateway_id",
-    "default_unit_offset",
+    "parse_endpoint",
 ]
 
+#: What a line's poll reads of each drive besides its parameters (the poller's reads).
+PollRead = Literal["status", "monitor"]
+POLL_READS: Final[tuple[PollRead, ...]] = get_args(PollRead)
 #: What the gateway does when a control lease lapses.
 LapseAction = Literal["stop", "broadcast_stop", "hold"]
 LAPSE_ACTIONS: Final = get_args(LapseAction)
@@ -63,11 +70,6 @@ def default_gateway_id() -> str:
     """The host name's first label, cut to a topic level (``"gateway"`` if nothing is left)."""
     label = socket.gethostname().split(".", 1)[0]
     return _NOT_IN_ID.sub("-", label).strip("-") or "gateway"
-
-
-def default_unit_offset(protocol: str) -> int:
-    """Unit id = node + this, unless the line says otherwise (see the module docstring)."""
-    return 100 if protocol == "fr700" else 0
 
 
 @dataclass(frozen=True, slots=True)
@@ -101,17 +103,17 @@ class LineConfig:
     #: The line's name in metrics, logs and the audit log.
     name: str
     url: str
-    #: A registered protocol name (``"sj300"``, ``"fr700"``).
+    #: A registered protocol name (one with a profile).
     protocol: str
     nodes: tuple[int, ...]
     #: The poll plan: cycle interval, reads (``"status"``, ``"monitor"``) and
     #: parameters (normalised codes) read every cycle.
     interval_s: float = 0.5
-    reads: tuple[str, ...] = ("status", "monitor")
+    reads: tuple[PollRead, ...] = POLL_READS
     parameters: tuple[str, ...] = ()
     #: Seconds between two reads of a drive's trip history (0: never); it is
-    #: also read when the drive's status turns to tripped. SJ300 only (an
-    #: FR-700 line ignores it: its drive class reads no alarm history yet).
+    #: also read when the drive's status turns to tripped. Only for a protocol
+    #: whose profile reads trip histories (others ignore it).
     trips_interval_s: float = 30.0
     #: Unit id = node + unit_offset.
     unit_offset: int = 0
@@ -139,51 +141,47 @@ class LineConfig:
 
 
 @dataclass(frozen=True, slots=True)
-class MqttConfig:
-    """The MQTT broker the gateway publishes to (docs/GATEWAY.md, "MQTT")."""
-
-    host: str
-    port: int
-    #: TLS: an ``mqtts://`` URL, or a ``tls_ca`` given.
-    tls: bool = False
-    #: The MQTT client id (the configuration's default: ``sj300-<gateway id>``).
-    client_id: str = "sj300"
-    username: str | None = None
-    password: str | None = field(default=None, repr=False)
-    #: The CA certificates that verify the broker (None: the system's).
-    tls_ca: Path | None = None
-    #: The first topic level(s): ``<prefix>/<gateway id>/...``.
-    prefix: str = "sj300"
-    #: The QoS of everything published and subscribed (0 or 1).
-    qos: int = 1
-    #: Home Assistant's MQTT discovery: configs published, and republished on its birth.
-    discovery: bool = True
-    discovery_prefix: str = "homeassistant"
-    #: The MQTT keepalive: the broker publishes the last will ("offline") about
-    #: 1.5 keepalives after the gateway last spoke (plus its own check interval).
-    keepalive_s: int = 30
-
-    @property
-    def url(self) -> str:
-        host = f"[{self.host}]" if ":" in self.host else self.host
-        return f"{'mqtts' if self.tls else 'mqtt'}://{host}:{self.port}"
-
-
-@dataclass(frozen=True, slots=True)
 class GatewayConfig:
     """A whole gateway: its lines and what it serves."""
 
     lines: tuple[LineConfig, ...]
-    #: Where the Modbus TCP server listens (None: no Modbus server).
-    modbus: Endpoint | None = None
-    #: Where /metrics and /healthz are served (None: not served).
-    metrics: Endpoint | None = None
+    #: Each configured northbound's configuration, by its section name
+    #: (``"modbus"``), in the order the northbound registry lists them.
+    northbounds: Mapping[str, object] = field(default_factory=dict)
     stale_after_s: float = DEFAULT_STALE_AFTER_S
     #: A file the audit log is appended to, besides the ``sj300_async.gateway.audit`` logger.
     audit_log: Path | None = None
     #: Where the configuration came from (a file name, or ``"<command line>"``).
     source: str = field(default="<command line>", compare=False)
-    #: The MQTT broker (None: no MQTT).
-    mqtt: MqttConfig | None = None
-    #: The gateway's name on MQTT (a topic level; see the module docstring).
+    #: The gateway's name to the outside (an MQTT topic level; see the module docstring).
     gateway_id: str = field(default_factory=default_gateway_id)
+
+
+_HOST: Final = re.compile(r"[A-Za-z0-9_.%:-]+\Z")
+
+
+def parse_endpoint(text: str) -> Endpoint:
+    """Parse a listening address: ``"HOST:PORT"``, ``"[::1]:502"`` or ``":502"`` (every interface).
+
+    Port 0 asks the system for a free port.
+
+    Raises:
+        LocalProtocolError: not one of those forms, or a port outside 0..65535.
+    """
+    value = text.strip()
+    if value.startswith("["):
+        host, bracket, port = value[1:].partition("]:")
+        if not bracket:
+            raise LocalProtocolError(f"expected [IPV6]:PORT, got {text!r}")
+    else:
+        host, colon, port = value.rpartition(":")
+        if not colon:
+            raise LocalProtocolError(f"expected HOST:PORT, got {text!r}")
+        if ":" in host:
+            raise LocalProtocolError(f"put an IPv6 address in brackets: [{host}]:{port}")
+        host = host or "0.0.0.0"
+    if not _HOST.match(host):
+        raise LocalProtocolError(f"bad host {host!r} in {text!r}")
+    if not (port.isascii() and port.isdigit() and int(port) <= 65535):
+        raise LocalProtocolError(f"port must be 0..65535, got {port!r}")
+    return Endpoint(host, int(port))

@@ -30,12 +30,18 @@ from __future__ import annotations
 
 from typing import TYPE_CHECKING, Any
 
+from ._command_line import (
+    SimulateCommandLine,
+    SimulateOption,
+    SimulateSettings,
+)
 from ._endpoint import SimulatorEndpoint
 from ._faults import Faults
 from ._model import BusModel, LineCounters, Transmission
 from ._motion import RunState
 from ._pacing import LinePacing, PacedLine, PlausibleLine
 from ._precise_loop import precise_event_loop
+from ._tap import TapServer, serve_tap
 from ._tcp import SimulatorServer, serve_tcp
 
 if TYPE_CHECKING:
@@ -52,12 +58,17 @@ __all__ = [
     "PtyServer",
     "RunState",
     "SerialDeviceServer",
+    "SimulateCommandLine",
+    "SimulateOption",
+    "SimulateSettings",
     "SimulatorEndpoint",
     "SimulatorServer",
+    "TapServer",
     "Transmission",
     "open_pty_server",
     "precise_event_loop",
     "serve_serial_device",
+    "serve_tap",
     "serve_tcp",
 ]
 

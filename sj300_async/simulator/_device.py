@@ -23,7 +23,7 @@ import os
 import termios
 import tty
 
-from ..wire._errors import LocalProtocolError
+from ..wire import LocalProtocolError
 from ._fd_link import FdLink, FdServer
 from ._model import BusModel
 from ._pacing import LinePacing, PacedLine, server_line

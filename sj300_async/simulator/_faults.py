@@ -24,7 +24,7 @@ from collections import deque
 from collections.abc import Callable
 from dataclasses import dataclass
 
-from ..wire._errors import LocalProtocolError
+from ..wire import LocalProtocolError
 
 __all__ = ["FaultedReply", "Faults"]
 

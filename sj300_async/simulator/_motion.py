@@ -31,7 +31,7 @@ import enum
 import math
 from dataclasses import dataclass
 
-from ..wire._enums import Direction
+from ..wire import Direction
 
 __all__ = ["Output", "Ramp", "RunState", "advance", "classify", "goal_hz", "settled"]
 

@@ -13,8 +13,7 @@ from __future__ import annotations
 import math
 from typing import Final
 
-from ..wire._errors import LocalProtocolError
-from ..wire._line import LineSettings
+from ..wire import LineSettings, LocalProtocolError
 
 __all__ = ["PLAUSIBLE_PACING", "LinePacing", "PacedLine", "PlausibleLine", "server_line"]
 

@@ -14,7 +14,7 @@ selector costs nothing there. The library itself never needs this: a host
 waits for bytes (which wake any loop at once), not for sub-millisecond timers.
 
 Even a precise time-out is a sleep, and waking a sleeping process costs time
-(on a virtual machine, a few hundred microseconds at worst). With
+(the wire benchmark's notes show how late the line's deliveries come). With
 ``spin=True`` the loop never sleeps: it polls its descriptors until
 something is ready or the next timer is due. That keeps a CPU busy, so it
 is for a simulator standing in for hardware that never sleeps either (a

@@ -21,7 +21,7 @@ from collections.abc import Callable
 from types import TracebackType
 from typing import cast
 
-from ..transports._buffered import BufferedReads
+from ..transports import BufferedReads
 from ._endpoint import SimulatorEndpoint
 from ._model import BusModel
 from ._pacing import LinePacing, PacedLine, server_line

@@ -39,7 +39,8 @@ def xor_bytes(body: bytes | bytearray | memoryview) -> int:
     # The lengths a line carries most, folded without the loop: up to 16 bytes
     # (every request, ACK, NAK, status and parameter reply) and up to 128 (the
     # monitor block). A fold wider than needed only XORs in zeros. Unrolled,
-    # a 13-byte body costs 30 bytecodes instead of 63 (benchmarks.profile_tcp).
+    # a short body runs fewer bytecodes than the loop (benchmarks.profile_tcp
+    # counts them).
     if n <= 16:
         value ^= value >> 64
         value ^= value >> 32

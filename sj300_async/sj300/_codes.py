@@ -10,7 +10,7 @@ from __future__ import annotations
 
 import enum
 
-from ..wire._enums import TolerantIntEnum
+from ..wire import TolerantIntEnum
 
 __all__ = [
     "NakCode",

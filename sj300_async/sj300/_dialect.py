@@ -75,6 +75,7 @@ class SJ300Dialect:
     default_sim_nodes = "1-8"
     url_options: frozenset[str] = frozenset()
     simulator = "sj300_async.simulator.sj300:simulate"
+    profile = "sj300_async.sj300._profile:SJ300_PROFILE"
     capture_linktype = 147  # LINKTYPE_USER0 (docs/CAPTURE.md)
     acknowledges = False  # the host never answers an SJ300 reply
 

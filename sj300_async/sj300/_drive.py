@@ -11,9 +11,8 @@ from __future__ import annotations
 from collections.abc import Coroutine
 from typing import TYPE_CHECKING, Any
 
-from ..bus._stats import TransactionStats
-from ..wire import LocalProtocolError
-from ..wire._enums import Direction
+from ..bus import TransactionStats
+from ..wire import Direction, LocalProtocolError
 from . import _requests as rq
 from ._constants import BROADCAST
 from ._parameters import parameter_info

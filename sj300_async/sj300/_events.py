@@ -9,7 +9,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
-from ..wire._events import BadFrame, Discarded
+from ..wire import BadFrame, Discarded
 from ._codes import NakCode
 
 __all__ = [

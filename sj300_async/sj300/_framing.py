@@ -29,8 +29,7 @@ from __future__ import annotations
 import logging
 from typing import Generic, TypeVar
 
-from ..wire._events import BadFrame, Discarded, DiscardReason
-from ..wire._parser_stats import ParserStats
+from ..wire import BadFrame, Discarded, DiscardReason, ParserStats
 from ._constants import CR_BYTE, STX_BYTE
 
 __all__ = ["FrameSplitter"]
@@ -109,7 +108,8 @@ class FrameSplitter(Generic[FrameT]):
         if partial is None:
             # The commonest chunk on a TCP bridge or a fast line: one whole frame
             # and nothing else (its only CR last, an STX first and nowhere else).
-            # Decoded here, without splitting: 98 -> 40 bytecodes a reply.
+            # Decoded here, without splitting: fewer bytecodes a reply
+            # (benchmarks.profile_tcp counts them).
             # (`in` with an int: far cheaper than a method call such as find.)
             if data and data[-1] == _CR and data[0] == _STX:
                 whole = data[1:-1]

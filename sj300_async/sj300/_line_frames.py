@@ -22,8 +22,7 @@ from __future__ import annotations
 
 from typing import Final
 
-from ..wire._events import BadFrame, Discarded, DiscardReason
-from ..wire._frames import FrameRole, LineFrame
+from ..wire import BadFrame, Discarded, DiscardReason, FrameRole, LineFrame
 from ._commands import Command
 from ._constants import BROADCAST, CR_BYTE, MAX_REPLY_BODY, MAX_REQUEST_BODY, STX_BYTE
 from ._events import AckDataReply, AckReply, DataReply, NakReply, Reply

@@ -72,7 +72,7 @@ import re
 from dataclasses import dataclass, replace
 from typing import Final
 
-from ..wire._errors import LocalProtocolError
+from ..wire import LocalProtocolError
 
 __all__ = [
     "DEFAULT_SCALE",

@@ -9,7 +9,7 @@ from __future__ import annotations
 
 from collections.abc import Sequence
 
-from ..wire._errors import LocalProtocolError
+from ..wire import LocalProtocolError
 from ._bcc import bcc
 from ._constants import ACK_BYTE, CR_BYTE, MAX_NODE, MIN_NODE, NAK_BYTE, STX_BYTE
 from ._events import AckDataReply, AckReply, DataReply, NakReply, Reply

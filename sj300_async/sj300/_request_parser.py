@@ -14,7 +14,7 @@ import re
 from functools import lru_cache
 from typing import Final
 
-from ..wire._events import BadFrame, BadFrameReason
+from ..wire import BadFrame, BadFrameReason
 from ._bcc import xor_bytes
 from ._codes import NakCode
 from ._commands import Command, RequestData

@@ -12,8 +12,7 @@ import re
 from dataclasses import dataclass
 from typing import Final
 
-from ..wire._enums import Direction
-from ..wire._errors import LocalProtocolError
+from ..wire import Direction, LocalProtocolError
 from ._bcc import bcc
 from ._commands import Command, RequestData
 from ._constants import BROADCAST, CR_BYTE, MAX_NODE, MIN_NODE, STX_BYTE

@@ -6,14 +6,14 @@ copies the 14 bytes of a status reply into it, and the object is shrunk and
 later freed. On glibc an allocation that size is an ``mmap`` unless an
 earlier free happened to raise the allocator's threshold, so whether every
 read also costs ``mmap`` + ``mremap`` + ``munmap`` and a page fault depends
-on what the process did before: strace shows the three calls on every read
-of a fresh process, and the same bare client measured 26-28 µs or 37-42 µs
-of CPU per TCP round trip (docs/BENCHMARKS.md, issue 18).
+on what the process did before; a freshly started process pays them on
+every read. The tcp benchmark's two floors, a bare client on each read path
+(``benchmarks/_floor.py``), measure the difference.
 
 An :class:`asyncio.BufferedProtocol` lets the transport ``recv_into`` a
 buffer of ours instead, and this one keeps a single one for its life: the
 chunk is copied out as ``bytes`` (a small allocation from Python's own
-allocator, about 60 ns) and handed to :meth:`data_received` as usual. The
+allocator, no system call) and handed to :meth:`data_received` as usual. The
 class stays an :class:`asyncio.Protocol` as well: a transport that knows
 nothing of buffered protocols (pyserial-asyncio-fast, the RFC 2217 and
 loopback transports) calls :meth:`data_received` directly.

@@ -29,8 +29,7 @@ from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Any
 
-from ..wire._errors import TransportError
-from ..wire._pcapng import PacketDirection, PcapngCapture
+from ..wire import PacketDirection, PcapngCapture, TransportError
 from ._loopback import loopback_connector
 
 __all__ = ["ReplayMismatchError", "ReplayScript", "replay_connector"]

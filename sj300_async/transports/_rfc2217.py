@@ -38,8 +38,7 @@ import socket
 from collections.abc import Callable
 from typing import Any, Final
 
-from ..wire._errors import TransportError
-from ..wire._line import LineSettings
+from ..wire import LineSettings, TransportError
 from ._buffered import BufferedReads
 from ._telnet import (
     BINARY,
@@ -400,8 +399,8 @@ class Rfc2217Transport(asyncio.Transport):
         says ``tcp(nodelay)``, and it answers PURGE-DATA at once but the settings a
         moment later: Nagle then holds those until the purge's answer is
         acknowledged, which the kernel delays by 40 ms when the client has nothing
-        to send. Measured: 44 ms to connect, 2 ms with an immediate
-        acknowledgement. Quick-ack mode lapses by itself, hence once per chunk.
+        to send: the connection would wait that long for its settings. Quick-ack
+        mode lapses by itself, hence once per chunk.
         """
         sock = self._tcp.get_extra_info("socket") if self._tcp is not None else None
         if sock is not None and _TCP_QUICKACK is not None:

@@ -19,8 +19,7 @@ import functools
 from collections.abc import Callable
 from typing import Any
 
-from ..wire._errors import TransportError
-from ..wire._line import LineSettings
+from ..wire import LineSettings, TransportError
 
 __all__ = ["SerialSettingsError", "serial_connector"]
 

@@ -43,8 +43,7 @@ import enum
 from dataclasses import dataclass
 from typing import Final
 
-from ..wire._errors import RemoteProtocolError
-from ..wire._line import LineSettings
+from ..wire import LineSettings, RemoteProtocolError
 
 __all__ = [
     "BadSubnegotiation",

@@ -17,6 +17,7 @@ import pytest
 from toyproto import ToyDrive, ToySimulatedBus
 
 import sj300_async as sj
+import sj300_async.bus as sjbus
 from sj300_async.bus import protocol_names, register_protocol, unregister_protocol
 
 
@@ -42,7 +43,8 @@ def test_registering_is_checked() -> None:
 
 
 async def test_reads_writes_and_refusals_over_sim() -> None:
-    async with sj.open_bus("sim://?protocol=toy&nodes=1-2", timeout=0.05, retries=0) as bus:
+    # The neutral open_bus takes the protocol from the URL alone (a Bus[Any, Any]).
+    async with sjbus.open_bus("sim://?protocol=toy&nodes=1-2", timeout=0.05, retries=0) as bus:
         drive = bus.drive(2)
         assert isinstance(drive, ToyDrive)
         assert bus.description == "sim://(units 1-2)"
@@ -71,7 +73,11 @@ async def test_url_options_node_range_and_read_only() -> None:
             await bus.drive(1).write("set", 1)
         assert len(sim.received) == 1  # the refused write never reached the line
     with pytest.raises(sj.LocalProtocolError, match=r"nodes are 1\.\.9"):
-        async with sj.open_bus("sim://?protocol=toy&nodes=10"):
+        async with sj.open_bus("sim://?protocol=toy&nodes=10", protocol="toy"):
+            pass
+    # The user's open_bus is typed for SJ300 drives without protocol=: the URL must agree.
+    with pytest.raises(sj.LocalProtocolError, match="pass protocol='toy'"):
+        async with sj.open_bus("sim://?protocol=toy"):
             pass
     with pytest.raises(sj.LocalProtocolError, match="options of protocol toy"):
         async with sj.open_bus("sim://?upper=1"):

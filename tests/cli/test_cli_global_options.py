@@ -46,8 +46,9 @@ async def test_line_settings_and_the_protocol_before_the_subcommand() -> None:
         url = f"tcp://127.0.0.1:{server.port}"
         fine = await sj300("--baud", "9600", "--parity", "e", "status", "--url", url)
         assert fine.code == 0, fine.err
+        # The protocol before the subcommand holds: F002 is no FR-700 parameter (nothing sent).
         wrong = await sj300("--protocol", "fr700", "read", "F002", "--url", url)
-        wrong.assert_one_line_error(2, "SJ300 drives only, not fr700")
+        wrong.assert_one_line_error(2, "argument CODE: a parameter is a number 0..999")
     bad = await sj300("--parity", "X", "status")
     bad.assert_one_line_error(2, "sj300: error: argument --parity: invalid choice")
 

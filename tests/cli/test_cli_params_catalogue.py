@@ -200,7 +200,9 @@ async def test_fr700_buses_are_refused(tmp_path: Path) -> None:
         sj300("params", "backup", str(file), "--url", "sim://?protocol=fr700&nodes=0-1"),
     )
     for result in results:
-        result.assert_one_line_error(2, "params works with SJ300 drives only, not fr700")
+        result.assert_one_line_error(
+            2, "params backup needs a parameter backup format, which FR-700 drives"
+        )
     assert not file.exists()
 
 

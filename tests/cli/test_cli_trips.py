@@ -188,8 +188,8 @@ async def test_fr700_reset_waits_for_the_restart_and_names_the_fault(
     args = ("--protocol", "fr700", "--url", url, "--timeout", "0.1")
     result = await sj300("reset", "-n", "1", *args)
     assert result.code == 0, result.err
-    # The reference lists no FR-700 fault meanings: the number, as the drive reports it.
-    assert result.out == "node 01: reset, fault H10 cleared\n"
+    # No FR-700 fault meanings yet: the number, as the drive reports it; a station.
+    assert result.out == "station 01: reset, fault H10 cleared\n"
     assert not sim.drives[1].tripped
     assert sim.stats.resets == 1
     again = await sj300("reset", "-n", "1", "--json", *args)

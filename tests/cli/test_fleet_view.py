@@ -22,9 +22,8 @@ from typing import Any
 import pytest
 from mqtt_broker import Broker, running_broker
 
-from sj300_async.cli._errors import CliError
-from sj300_async.cli._fleet import Fleet, FleetUrl, parse_fleet_url
-from sj300_async.gateway._mqtt_topics import StateMessage, Topics
+from sj300_async.gateway.mqtt import Fleet, FleetUrl, StateMessage, Topics, parse_fleet_url
+from sj300_async.wire import LocalProtocolError
 
 from .clirun import TIMEOUT, Result, cli_env, closed_port, running, sj300, sj300_on_terminal
 
@@ -64,6 +63,7 @@ def _state(gateway: str, node: int, *, line: str = "hall", **values: Any) -> Sta
         "tripped": False,
         "status": {"a": "RUNNING", "b": "RUNNING", "c": "CONSTANT_SPEED"},
         "parameters": {"F001": 50.0},
+        "state": "running",
         **values,
     }
     return StateMessage(gateway, line, node, "sj300", time.time() - 60 + node, True, **fields)
@@ -75,12 +75,14 @@ def _fleet() -> list[StateMessage]:
         "tripped": True,
         "running": False,
         "trip": "E07",
+        "trip_meaning": "over-voltage",
         "direction": "stop",
         "status": {"a": "TRIP", "b": "TRIPPED", "c": "STOP"},
+        "state": "tripped",
     }
     fr700 = StateMessage(
         "gw-b", "line2", 0, "fr700", time.time() - 1, True, 25.0, 2.0, 200.0, "reverse",
-        True, False, status={"bits": 5},
+        True, False, status={"bits": 5}, state="running reverse",
     )  # fmt: skip
     return [
         _state("gw-a", 1),
@@ -323,7 +325,7 @@ def test_the_url_is_taken_apart() -> None:
     assert tls.broker == "mqtts://[::1]:8883"  # never the password
     assert tls.state_filter == "plant/north/+/+/+/state"
     for bad in ("mqtt://:1883", "mqtt://h:99999", "mqtt://h/a//b", "mqtt://h?x=1"):
-        with pytest.raises(CliError):
+        with pytest.raises(LocalProtocolError):
             parse_fleet_url(bad)
 
 

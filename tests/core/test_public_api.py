@@ -51,7 +51,8 @@ ROOT_NAMES = (
 MAX_ROOT_NAMES = 40
 
 SJ300_NAMES = (
-    "BROADCAST", "COMMAND_SPECS", "MAX_NODE", "MIN_NODE", "MUTATING_COMMANDS",
+    "ASSIGNED_INPUT_BITS", "BROADCAST", "COMMAND_SPECS", "MAX_NODE", "MIN_NODE",
+    "MUTATING_COMMANDS",
     "NAK_FOR_BAD_REQUEST", "PARAMETERS", "SJ300_DIALECT", "AckDataReply", "AckReply",
     "Broadcast", "Command", "CommandSpec", "DataReply", "Drive", "InputMonitor", "InputTerminal",
     "InverterStatus", "MonitorData", "NakCode", "NakReply", "OutputTerminal", "ParameterInfo",
@@ -62,11 +63,18 @@ SJ300_NAMES = (
     "encode_reply", "encode_request", "encode_status", "encode_trip_history",
     "motor_capacity_kw", "normalize_code", "parameter_info", "requests",
 )  # fmt: skip
+#: The package's names that load the async stack: not in its sans-IO face, ``sj300.codec``.
+SJ300_ASYNC_NAMES = ("Broadcast", "Drive", "MUTATING_COMMANDS", "SJ300Dialect", "SJ300_DIALECT")
+SJ300_CODEC_NAMES = tuple(n for n in SJ300_NAMES if n not in SJ300_ASYNC_NAMES)
 WIRE_NAMES = (
     "BadFrame", "BadFrameReason", "BusClosedError", "Direction", "DiscardReason", "Discarded",
     "LineSettings", "LocalProtocolError", "NakError", "ParserStats", "ProtocolError",
     "ReadOnlyError", "RemoteProtocolError", "ReplyTimeoutError", "SJ300Error",
     "TolerantIntEnum", "TransportError",
+    # the whole line's frames, captures (pcapng) and the decoders' speed tricks
+    "FrameRole", "LineFrame", "INSTANT_LINE", "CaptureFormatError", "CapturedPacket",
+    "FLAG_CHECK_ERROR", "FLAG_NOISE", "PacketDirection", "PcapngCapture", "PcapngInterface",
+    "PcapngWriter", "read_pcapng", "slot_setters", "unfrozen_twin",
 )  # fmt: skip
 BUS_NAMES = (
     "DEFAULT_PROTOCOL", "Bus", "BusAddress", "BusStats", "BusTiming", "Channel", "Dialect",
@@ -74,6 +82,12 @@ BUS_NAMES = (
     "TraceHook", "TraceRecord", "TransactionStats", "format_node_list", "get_dialect",
     "make_dialect", "open_bus", "parse_bus_url", "parse_flag", "parse_node_list",
     "protocol_names", "register_protocol", "unregister_protocol",
+    # a task's cap on its calls' retries (the poller's)
+    "cap_retries", "retries_at_most",
+    # open_bus's keyword arguments, the URL's protocol, the URL schemes' registry (sim://)
+    "BusOptions", "url_protocol", "SchemeConnection", "SchemeConnector", "load_object",
+    # the latency histogram's bucket bounds (the gateway's metrics)
+    "LATENCY_BUCKETS_S",
     # captures and the passive sniffer
     "CaptureFile", "LineFramer", "Anomaly", "LineSniffer", "SniffedFrame", "Sniffing",
     "Unanswered", "sniff",
@@ -83,20 +97,65 @@ SIMULATOR_NAMES = (
     "PtyServer", "RunState", "SerialDeviceServer", "SimulatorEndpoint", "SimulatorServer",
     "Transmission",
     "open_pty_server", "precise_event_loop", "serve_serial_device", "serve_tcp",
+    # the listen-only tap (sj300 simulate --tap); a protocol's part of sj300 simulate
+    "TapServer", "serve_tap", "SimulateCommandLine", "SimulateOption", "SimulateSettings",
 )  # fmt: skip
 SIMULATOR_SJ300_NAMES = (
     "DEFAULT_EEPROM_WRITE_S", "DEFAULT_PROCESSING_S", "Country", "SimulatedBus",
-    "SimulatedDrive", "SimulatorStats", "TripCode", "simulate",
+    "SimulatedDrive", "SimulatorStats", "TripCode", "simulate", "COMMAND_LINE",
+)  # fmt: skip
+#: The neutral drive model and the profile interface.
+PROFILES_NAMES = (
+    "Capabilities", "DriveReadings", "DriveSnapshot", "MonitorView", "NEVER",
+    "ParameterCatalogue", "ParameterReading", "ParameterSpec", "PollResult", "Profile",
+    "RegisterField", "RegisterLayout", "StatusView", "Trip", "TripLog", "build_snapshot",
+    "frame_text", "get_profile", "in_counts", "is_fresh", "profiled_protocols", "raw_value",
+    "read_time", "words",
+)  # fmt: skip
+#: The gateway's core, and each built-in northbound's face.
+GATEWAY_NAMES = (
+    "AuditLog", "COMMAND_LINE", "ConfigContext", "ConfigTable", "Controller", "DEFAULT_LEASE_S",
+    "DEFAULT_STALE_AFTER_S", "DriveView", "Endpoint", "Flag", "Gateway", "GatewayConfig",
+    "GatewayConfigError", "GatewayDrive", "GatewayLine", "GatewayView", "Heartbeat",
+    "LAPSE_ACTIONS", "POLL_READS", "LapseAction", "Lease", "LineConfig", "LineView", "Northbound",
+    "NorthboundSpec", "ParameterWrite", "PollRead", "Refusal", "RunCommand", "SectionContext",
+    "SetFrequency",
+    "UNIT_RANGE", "WriteGrant", "WriteRequest", "WriteResult", "busy_seconds",
+    "config_from_flags", "cumulative_buckets", "default_gateway_id", "drive_view", "excerpt",
+    "gateway_metrics", "get_northbound", "line_problems", "load_config", "northbound_names",
+    "parse_config", "parse_endpoint", "register_northbound", "unregister_northbound",
+    "valid_name",
+)  # fmt: skip
+GATEWAY_MODBUS_NAMES = (
+    "ClientCounters", "Exc", "Field", "MAX_CLIENTS", "ModbusConfig", "NORTHBOUND", "OTHER_CLIENT",
+    "REFUSAL_CODES", "RegisterMap", "client_families", "describe", "parameter_address",
+)  # fmt: skip
+GATEWAY_MQTT_NAMES = (
+    "AVAILABLE", "BridgeStats", "BrokerUnreachable", "COMMANDS", "COMMAND_DIRECTIONS",
+    "DEFAULT_PREFIX", "DISCOVERY_PREFIX", "FLEET_SCHEMES", "Fleet", "FleetUrl", "Malformed",
+    "MqttConfig", "NORTHBOUND", "SessionStats", "StateMessage", "SubscriptionRefused", "Topics",
+    "UNAVAILABLE", "backoff", "discovery", "error_text", "follow", "is_fleet_url",
+    "keep_connected", "mqtt_families", "node_id", "parse_command", "parse_fleet_url",
+    "parse_state_topic", "state_message",
+)  # fmt: skip
+GATEWAY_HTTP_NAMES = (
+    "MetricsConfig", "NORTHBOUND",
 )  # fmt: skip
 
 #: Every package's pinned ``__all__``.
 PINNED = {
     "sj300_async": ROOT_NAMES,
     "sj300_async.sj300": SJ300_NAMES,
+    "sj300_async.sj300.codec": SJ300_CODEC_NAMES,
     "sj300_async.wire": WIRE_NAMES,
     "sj300_async.bus": BUS_NAMES,
     "sj300_async.simulator": SIMULATOR_NAMES,
     "sj300_async.simulator.sj300": SIMULATOR_SJ300_NAMES,
+    "sj300_async.profiles": PROFILES_NAMES,
+    "sj300_async.gateway": GATEWAY_NAMES,
+    "sj300_async.gateway.modbus": GATEWAY_MODBUS_NAMES,
+    "sj300_async.gateway.mqtt": GATEWAY_MQTT_NAMES,
+    "sj300_async.gateway.http": GATEWAY_HTTP_NAMES,
 }
 
 CORE_NAMES = {
@@ -248,6 +307,15 @@ def test_every_pinned_name_is_importable_and_documented(package: str) -> None:
     for name in public_names(module):
         assert getattr(module, name) is not None, name
     assert undocumented(module) == []
+
+
+def test_the_codec_face_is_the_package_without_its_async_names() -> None:
+    # sj300.codec is what sans-IO code imports; the package adds the dialect and the drives.
+    import sj300_async.sj300.codec as codec
+
+    assert set(sj300.__all__) == set(codec.__all__) | set(SJ300_ASYNC_NAMES)
+    for name in codec.__all__:
+        assert getattr(sj300, name) is getattr(codec, name), name
 
 
 def test_the_root_is_the_users_api_only() -> None:

@@ -63,13 +63,39 @@ def test_monitor_plain_lines_for_fr700(capsys: pytest.CaptureFixture[str]) -> No
     assert "stop" in out
 
 
-def test_sj300_commands_refuse_fr700(capsys: pytest.CaptureFixture[str]) -> None:
-    code, _out, err = run(capsys, "status", "--protocol", "fr700")
-    assert code == 2
-    assert "SJ300 drives only" in err
-    code, _out, err = run(capsys, "status", "--url", "sim://?protocol=fr700")
-    assert code == 2
-    assert err.count("\n") == 1
+def test_the_commands_work_through_the_fr700_profile(
+    capsys: pytest.CaptureFixture[str],
+) -> None:
+    sim = ("--url", "sim://?protocol=fr700&nodes=0-2")
+    code, out, err = run(capsys, "status", "-n", "0", *sim)
+    assert code == 0, err
+    assert out.splitlines()[0] == "station 00"
+    assert "state             stopped" in out
+    code, out, err = run(capsys, "read", "Pr.7", "pr.1", "-n", "2", "--json", *sim)
+    assert code == 0, err
+    codes = [p["code"] for p in json.loads(out)["parameters"]]
+    assert codes == ["Pr.7", "Pr.1"]
+    code, out, err = run(capsys, "scan", "--json", *sim)
+    assert code == 0, err
+    assert json.loads(out)["answering"] == [0, 1, 2]
+    assert json.loads(out)["scanned"] == list(range(32))
+
+
+def test_what_fr700_drives_lack_is_refused_before_anything_is_sent(
+    capsys: pytest.CaptureFixture[str],
+) -> None:
+    for args, what in (
+        (("trips", "--protocol", "fr700", "--sim"), "a trip history"),
+        (("stop", "--all", "--protocol", "fr700", "--sim"), "a broadcast stop"),
+        (
+            ("write", "Pr.7", "5", "--store", "--protocol", "fr700", "--sim"),
+            "storing settings apart",
+        ),
+    ):
+        code, _out, err = run(capsys, *args)
+        assert code == 2, err
+        assert err.count("\n") == 1, err
+        assert f"needs {what}, which FR-700 drives (protocol fr700) do not have here" in err
 
 
 def test_sj300_monitor_still_refuses_node_0(capsys: pytest.CaptureFixture[str]) -> None:

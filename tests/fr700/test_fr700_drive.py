@@ -8,6 +8,7 @@ from contextlib import AbstractAsyncContextManager
 import pytest
 
 import sj300_async as sj
+import sj300_async.bus as sjbus
 from sj300_async.fr700 import (
     Fr700Drive,
     Fr700Monitor,
@@ -53,8 +54,9 @@ async def test_bus_hands_out_fr700_drives_on_stations_0_to_31() -> None:
         assert repr(drive) == "<Fr700Drive 00 on sim://(stations 0-3)>"
 
 
-async def test_url_alone_selects_the_protocol() -> None:
-    async with sj.open_bus("sim://?protocol=fr700&nodes=5") as bus:
+async def test_url_alone_selects_the_protocol_of_the_neutral_open_bus() -> None:
+    # sj300_async.bus.open_bus is typed Bus[Any, Any]: the URL may name the protocol alone.
+    async with sjbus.open_bus("sim://?protocol=fr700&nodes=5") as bus:
         drive = bus.drive(5)
         assert isinstance(drive, Fr700Drive)
         assert not (await drive.read_status()).running
@@ -295,13 +297,16 @@ async def test_absent_station_times_out() -> None:
 
 async def test_protocol_mismatch_is_refused() -> None:
     with pytest.raises(sj.LocalProtocolError, match="URL says"):
+        async with sjbus.open_bus("sim://?protocol=fr700", protocol="sj300"):
+            pass
+    with pytest.raises(sj.LocalProtocolError, match="pass protocol='fr700'"):
         async with sj.open_bus("sim://?protocol=fr700", protocol="sj300"):
             pass
     with pytest.raises(sj.LocalProtocolError, match="options of protocol fr700"):
         async with sj.open_bus("sim://?terminator=cr"):
             pass
     with pytest.raises(sj.LocalProtocolError, match="does not speak"):
-        async with sj.open_bus("sim://?protocol=fr700", simulator=SimulatedBus()):
+        async with sj.open_bus("sim://?protocol=fr700", protocol="fr700", simulator=SimulatedBus()):
             pass
 
 

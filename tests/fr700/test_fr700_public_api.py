@@ -11,6 +11,7 @@ from typing import cast
 import pytest
 
 import sj300_async.fr700 as fr700
+import sj300_async.fr700.codec as fr700_codec
 import sj300_async.simulator.fr700 as sim_fr700
 
 FR700_NAMES = {
@@ -23,11 +24,15 @@ FR700_NAMES = {
     "decode_multi_reply", "encode_ack", "encode_data_reply", "encode_host_ack", "encode_nak",
     "encode_reoutput_request", "encode_request", "fr700_parameter_info", "parameter_number",
     "parse_station", "requests", "sum_check",
+    # for the simulated drives: frame bytes, the terminator, the drives' request parser
+    "ETX", "STX", "terminator_bytes", "BadRequest", "HostAnswer", "HostRequest", "RequestParser",
 }  # fmt: skip
+#: The package's names that load the async stack: not in its sans-IO face, ``fr700.codec``.
+FR700_ASYNC_NAMES = {"Fr700Dialect", "Fr700Drive"}
 SIMULATOR_NAMES = {
     "DEFAULT_PROCESSING_S", "PARAMETERS", "BadRequest", "FaultCode", "Fr700SimulatedBus",
     "Fr700SimulatedDrive", "Fr700SimulatorStats", "HostAnswer", "HostRequest", "ParameterSpec",
-    "RequestParser", "corrupt", "simulate",
+    "RequestParser", "corrupt", "simulate", "COMMAND_LINE",
 }  # fmt: skip
 
 
@@ -58,7 +63,14 @@ def undocumented(module: ModuleType) -> list[str]:
     return missing
 
 
-@pytest.mark.parametrize(("module", "names"), [(fr700, FR700_NAMES), (sim_fr700, SIMULATOR_NAMES)])
+@pytest.mark.parametrize(
+    ("module", "names"),
+    [
+        (fr700, FR700_NAMES),
+        (fr700_codec, FR700_NAMES - FR700_ASYNC_NAMES),
+        (sim_fr700, SIMULATOR_NAMES),
+    ],
+)
 def test_all_is_pinned_importable_and_documented(module: ModuleType, names: set[str]) -> None:
     exported = public_names(module)
     assert len(exported) == len(set(exported))
@@ -78,6 +90,15 @@ def test_simulator_fr700_all_is_pinned_and_importable() -> None:
     assert set(sim_fr700.__all__) == SIMULATOR_NAMES
     for name in sim_fr700.__all__:
         assert getattr(sim_fr700, name) is not None
+
+
+def test_the_codec_face_is_the_package_without_its_async_names() -> None:
+    # fr700.codec is what sans-IO code imports; the package adds the dialect and the drive.
+    assert set(fr700_codec.__all__) == FR700_NAMES - FR700_ASYNC_NAMES
+    for name in fr700_codec.__all__:
+        assert getattr(fr700, name) is getattr(fr700_codec, name), name
+    for name in ("BadRequest", "HostAnswer", "HostRequest", "RequestParser"):
+        assert getattr(sim_fr700, name) is getattr(fr700, name), name
 
 
 def test_the_root_reexports_the_fr700_objects() -> None:

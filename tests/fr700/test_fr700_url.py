@@ -98,9 +98,8 @@ async def test_dialect_argument_must_match_the_protocol() -> None:
         async with sj.open_bus("sim://", dialect=Fr700Dialect()):
             pass
     async with sj.open_bus(
-        "sim://?protocol=fr700&nodes=1", dialect=Fr700Dialect(terminator="\r\n")
+        "sim://?protocol=fr700&nodes=1", protocol="fr700", dialect=Fr700Dialect(terminator="\r\n")
     ) as bus:
-        # Typed as SJ300's (the protocol is named in the URL only): narrow.
         drive = bus.drive(1)
         assert isinstance(drive, sj.Fr700Drive)
         assert not (await drive.read_status()).running

@@ -9,10 +9,12 @@ from dataclasses import dataclass, field
 
 import pytest
 from pymodbus.client import AsyncModbusTcpClient
+from waiting import wait_for
 
 from sj300_async import sj300 as sj3
-from sj300_async.gateway._config import parse_config
-from sj300_async.gateway._gateway import Gateway
+from sj300_async.gateway import Gateway, GatewayDrive, parse_config
+from sj300_async.gateway.http._northbound import HttpNorthbound
+from sj300_async.gateway.modbus._northbound import ModbusNorthbound
 from sj300_async.simulator import SimulatorServer, serve_tcp
 from sj300_async.simulator.sj300 import SimulatedBus
 from sj300_async.wire import BadFrame, Discarded
@@ -107,6 +109,34 @@ def gateway_toml(url: str, extra: str = "", line_extra: str = "") -> str:
     ) + textwrap.dedent(line_extra)
 
 
+def modbus_port(gateway: Gateway) -> int:
+    """The port of the gateway's running Modbus northbound."""
+    northbound = gateway.northbounds["modbus"]
+    assert isinstance(northbound, ModbusNorthbound)
+    return northbound.port
+
+
+def metrics_port(gateway: Gateway) -> int:
+    """The port of the gateway's running HTTP northbound (/metrics, /healthz)."""
+    northbound = gateway.northbounds["metrics"]
+    assert isinstance(northbound, HttpNorthbound)
+    return northbound.port
+
+
+def drive_of(gateway: Gateway, line: str, node: int) -> GatewayDrive:
+    """The gateway's drive *node* of *line* (it must have it)."""
+    drive = gateway.drive(line, node)
+    assert drive is not None, (line, node)
+    return drive
+
+
+async def polled(gateway: Gateway) -> None:
+    """Return once every drive of the gateway has had a first good sample."""
+    await wait_for(
+        lambda: all(d.readings.last_ok is not None for d in gateway.drives), "a first good sample"
+    )
+
+
 @contextlib.asynccontextmanager
 async def running_gateway(text: str) -> AsyncIterator[Gateway]:
     async with Gateway(parse_config(text, "test.toml")) as gateway:
@@ -117,9 +147,8 @@ async def running_gateway(text: str) -> AsyncIterator[Gateway]:
 async def modbus_client(
     gateway: Gateway, source: str = "127.0.0.1"
 ) -> AsyncIterator[AsyncModbusTcpClient]:
-    assert gateway.modbus is not None
     client = AsyncModbusTcpClient(
-        "127.0.0.1", port=gateway.modbus.port, source_address=(source, 0), timeout=5, retries=0
+        "127.0.0.1", port=modbus_port(gateway), source_address=(source, 0), timeout=5, retries=0
     )
     assert await client.connect()
     try:

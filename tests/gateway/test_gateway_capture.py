@@ -7,8 +7,7 @@ from pathlib import Path
 
 from waiting import wait_for
 
-from sj300_async.gateway._config import parse_config
-from sj300_async.gateway._gateway import Gateway
+from sj300_async.gateway import Gateway, parse_config
 from sj300_async.wire._pcapng import PacketDirection, read_pcapng
 
 
@@ -34,7 +33,7 @@ async def test_the_gateway_captures_each_line_on_its_own_interface(tmp_path: Pat
     path = tmp_path / "plant.pcapng"
     async with Gateway(config, capture=str(path)) as gateway:
         await wait_for(
-            lambda: all(s.online for line in gateway.lines for s in line.states.values()),
+            lambda: all(drive.readings.online for drive in gateway.drives),
             "every drive polled",
         )
     capture = read_pcapng(path.read_bytes())

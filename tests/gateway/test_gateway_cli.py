@@ -183,6 +183,10 @@ async def test_a_lease_held_at_sigterm_sends_one_stop(sim_line: SimLine, tmp_pat
                 response = await client.write_register(register, value, device_id=1)
                 assert not response.isError(), (register, response)
             assert sim_line.sim.drives[1].parameters["F001"] == 1000
+            # Node 2 is not granted control: refused, and audited as such.
+            refused = await client.write_register(1002, 1, device_id=2)
+            assert refused.isError(), refused
+            assert refused.exception_code == 0x01, refused
             run = sim_line.sim.drives[1].state(asyncio.get_running_loop().time())
             assert run.outputting
             result = await stop(proc)  # the client is still connected, its lease held
@@ -203,11 +207,17 @@ async def test_a_lease_held_at_sigterm_sends_one_stop(sim_line: SimLine, tmp_pat
     state = sim_line.sim.drives[1].state(asyncio.get_running_loop().time())
     assert state in (RunState.DECELERATING, RunState.STOPPED)
     audit = [json.loads(line) for line in (tmp_path / "audit.jsonl").read_text().splitlines()]
-    assert [(a["what"], a["result"]) for a in audit] == [
-        ("set frequency (Hz)", "ok"),
-        ("command", "ok"),
-        ("lease lapsed", "stop: ok"),
+    assert [(a["node"], a["what"], a["result"]) for a in audit] == [
+        (1, "set frequency (Hz)", "ok"),
+        (1, "command", "ok"),
+        (2, "command", "refused"),
+        (1, "lease lapsed", "stop: ok"),
     ]
+    assert (audit[2]["reason"], audit[2]["detail"]) == (
+        "not_allowed",
+        "the configuration does not allow control of this drive",
+    )
+    assert "reason" not in audit[0]
     assert sim_line.log.interleaved() == []
 
 

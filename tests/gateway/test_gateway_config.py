@@ -9,21 +9,21 @@ from pathlib import Path
 
 import pytest
 
-from sj300_async.gateway._config import (
+from sj300_async.gateway import (
+    Endpoint,
+    GatewayConfig,
     GatewayConfigError,
+    LineConfig,
+    WriteGrant,
     config_from_flags,
+    default_gateway_id,
     load_config,
     parse_config,
     parse_endpoint,
 )
-from sj300_async.gateway._model import (
-    Endpoint,
-    GatewayConfig,
-    LineConfig,
-    MqttConfig,
-    WriteGrant,
-    default_gateway_id,
-)
+from sj300_async.gateway.http import MetricsConfig
+from sj300_async.gateway.modbus import ModbusConfig
+from sj300_async.gateway.mqtt import MqttConfig
 from sj300_async.wire import LocalProtocolError
 
 FULL = """\
@@ -75,6 +75,13 @@ def parse(text: str) -> GatewayConfig:
     return parse_config(textwrap.dedent(text), "gateway.toml")
 
 
+def mqtt_of(config: GatewayConfig) -> MqttConfig:
+    """The configuration of the MQTT northbound (its ``[mqtt]`` section)."""
+    mqtt = config.northbounds["mqtt"]
+    assert isinstance(mqtt, MqttConfig)
+    return mqtt
+
+
 def refusal(text: str) -> str:
     with pytest.raises(GatewayConfigError) as caught:
         parse(text)
@@ -122,8 +129,10 @@ def test_a_full_file_reaches_every_field(tmp_path: Path) -> None:
                 on_lapse="hold",
             ),
         ),
-        modbus=Endpoint("0.0.0.0", 1502),
-        metrics=Endpoint("::1", 9300),
+        northbounds={
+            "modbus": ModbusConfig(Endpoint("0.0.0.0", 1502)),
+            "metrics": MetricsConfig(Endpoint("::1", 9300)),
+        },
         stale_after_s=3.0,
         audit_log=tmp_path / "logs" / "audit.log",
     )
@@ -159,7 +168,7 @@ def test_defaults_of_a_minimal_file() -> None:
             ),
         )
     )
-    assert (config.modbus, config.metrics, config.audit_log) == (None, None, None)
+    assert (dict(config.northbounds), config.audit_log) == ({}, None)
     assert config.source == "gateway.toml"
     assert [config.lines[1].unit(node) for node in (0, 1)] == [100, 101]
 
@@ -184,9 +193,9 @@ def test_mqtt_defaults_follow_the_gateway_id_and_the_scheme() -> None:
     config = parse('[gateway]\nid = "gw1"\n[mqtt]\nurl = "mqtt://10.0.0.9"\n' + LINE)
 
     assert config.gateway_id == "gw1"
-    assert config.mqtt == MqttConfig(host="10.0.0.9", port=1883, client_id="sj300-gw1")
-    assert config.mqtt.url == "mqtt://10.0.0.9:1883"
-    assert parse('[mqtt]\nurl = "mqtts://[::1]"\n' + LINE).mqtt == MqttConfig(
+    assert mqtt_of(config) == MqttConfig(host="10.0.0.9", port=1883, client_id="sj300-gw1")
+    assert mqtt_of(config).url == "mqtt://10.0.0.9:1883"
+    assert mqtt_of(parse('[mqtt]\nurl = "mqtts://[::1]"\n' + LINE)) == MqttConfig(
         host="::1", port=8883, tls=True, client_id=f"sj300-{default_gateway_id()}"
     )
 
@@ -211,7 +220,7 @@ def test_mqtt_every_key(tmp_path: Path) -> None:
     config = parse_config(textwrap.dedent(text), str(tmp_path / "g.toml"))
 
     assert config.gateway_id == "hall-a.gw"
-    assert config.mqtt == MqttConfig(
+    assert mqtt_of(config) == MqttConfig(
         host="broker.plant",
         port=1884,
         tls=True,  # a CA means TLS, whatever the scheme
@@ -225,8 +234,8 @@ def test_mqtt_every_key(tmp_path: Path) -> None:
         discovery_prefix="ha",
         keepalive_s=5,
     )
-    assert "secret" not in repr(config.mqtt)
-    assert parse('[mqtt]\nurl = "mqtt://b"\ntls_ca = "/etc/hostname"\n' + LINE).mqtt == (
+    assert "secret" not in repr(config.northbounds)
+    assert mqtt_of(parse('[mqtt]\nurl = "mqtt://b"\ntls_ca = "/etc/hostname"\n' + LINE)) == (
         MqttConfig(
             host="b",
             port=8883,  # the TLS port: a CA implies TLS
@@ -334,7 +343,8 @@ REFUSALS = [
     ),
     pytest.param(
         '[modbus]\nlisten = ":502"\n[metrics]\nlisten = "127.0.0.1:502"\n',
-        "gateway.toml:4: metrics.listen: the Modbus server already listens on 0.0.0.0:502",
+        "gateway.toml:4: metrics.listen: the modbus section's listen (0.0.0.0:502) already "
+        "listens on 0.0.0.0:502",
         id="metrics-on-the-modbus-port",
     ),
     pytest.param(
@@ -873,8 +883,7 @@ def test_flags_build_one_read_only_line() -> None:
         url="sim://?nodes=1-4",
         nodes="1-4",
         protocol=None,
-        modbus=":0",
-        metrics="127.0.0.1:0",
+        northbounds={"modbus": ":0", "metrics": "127.0.0.1:0"},
         stale_after_s=2.0,
         interval_s=0.2,
     )
@@ -889,8 +898,10 @@ def test_flags_build_one_read_only_line() -> None:
                 interval_s=0.2,
             ),
         ),
-        modbus=Endpoint("0.0.0.0", 0),
-        metrics=Endpoint("127.0.0.1", 0),
+        northbounds={
+            "modbus": ModbusConfig(Endpoint("0.0.0.0", 0)),
+            "metrics": MetricsConfig(Endpoint("127.0.0.1", 0)),
+        },
         stale_after_s=2.0,
     )
     assert config.source == "<command line>"
@@ -902,31 +913,26 @@ def test_flags_with_mqtt_and_an_id() -> None:
         url="sim://",
         nodes="1",
         protocol=None,
-        modbus=None,
-        metrics=None,
-        mqtt="mqtt://127.0.0.1:1884",
+        northbounds={"mqtt": "mqtt://127.0.0.1:1884"},
         gateway_id="gw1",
     )
 
-    assert config.mqtt == MqttConfig(host="127.0.0.1", port=1884, client_id="sj300-gw1")
+    assert mqtt_of(config) == MqttConfig(host="127.0.0.1", port=1884, client_id="sj300-gw1")
     assert config.gateway_id == "gw1"
 
 
 def test_flags_with_fr700() -> None:
-    config = config_from_flags(
-        url="tcp://10.0.0.5:4001", nodes="0-2", protocol="fr700", modbus=None, metrics=None
-    )
+    config = config_from_flags(url="tcp://10.0.0.5:4001", nodes="0-2", protocol="fr700")
 
     assert (config.lines[0].protocol, config.lines[0].unit_offset) == ("fr700", 100)
-    assert (config.modbus, config.metrics) == (None, None)
+    assert dict(config.northbounds) == {}
 
 
 FLAG_DEFAULTS: dict[str, object] = {
     "url": "tcp://10.0.0.5:4001",
     "nodes": "1-8",
     "protocol": None,
-    "modbus": ":502",
-    "metrics": None,
+    "northbounds": {"modbus": ":502"},
 }
 
 
@@ -950,13 +956,14 @@ FLAG_DEFAULTS: dict[str, object] = {
             id="protocol",
         ),
         pytest.param(
-            {"modbus": "502"},
+            {"northbounds": {"modbus": "502"}},
             "<command line>: --modbus: expected HOST:PORT, got '502'",
             id="modbus",
         ),
         pytest.param(
-            {"metrics": "0.0.0.0:502"},
-            "<command line>: --metrics: the Modbus server already listens on 0.0.0.0:502",
+            {"northbounds": {"modbus": ":502", "metrics": "0.0.0.0:502"}},
+            "<command line>: --metrics: the modbus section's listen (0.0.0.0:502) already "
+            "listens on 0.0.0.0:502",
             id="metrics",
         ),
         pytest.param(
@@ -970,7 +977,7 @@ FLAG_DEFAULTS: dict[str, object] = {
             id="interval",
         ),
         pytest.param(
-            {"mqtt": "http://broker"},
+            {"northbounds": {"modbus": ":502", "mqtt": "http://broker"}},
             "<command line>: --mqtt: expected mqtt://HOST[:PORT] or mqtts://HOST[:PORT], "
             "got 'http://broker'",
             id="mqtt",

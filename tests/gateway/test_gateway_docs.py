@@ -7,7 +7,8 @@ from pathlib import Path
 
 import pytest
 
-from sj300_async.gateway._registers import PARAMETER_BASES, describe
+from sj300_async.gateway.modbus import describe
+from sj300_async.profiles import get_profile
 
 DOC = (Path(__file__).parents[2] / "docs" / "GATEWAY.md").read_text(encoding="utf-8")
 #: The typography of the document: an en dash in a register range, a multiplication sign.
@@ -26,7 +27,7 @@ def _rows(heading: str) -> dict[str, tuple[str, str]]:
 def test_every_fixed_register_is_documented_with_its_step(protocol: str) -> None:
     rows = _rows("### Both protocols") | _rows(SECTIONS[protocol])
     served = set()
-    for address, width, _name, step, writable in describe(protocol):
+    for address, width, _name, step, writable in describe(get_profile(protocol)):
         if 302 <= address < 362:
             continue  # the six trip records: documented as one pattern
         key = str(address) if width == 1 else f"{address}{DASH}{address + width - 1}"
@@ -36,7 +37,7 @@ def test_every_fixed_register_is_documented_with_its_step(protocol: str) -> None
     assert set(rows) == served, "docs/GATEWAY.md lists registers the gateway does not serve"
 
 
-def test_every_parameter_base_is_documented() -> None:
-    for bases in PARAMETER_BASES.values():
-        for base in bases.values():
-            assert f"| {base} + 2 {TIMES} number" in DOC
+@pytest.mark.parametrize("protocol", ["sj300", "fr700"])
+def test_every_parameter_base_is_documented(protocol: str) -> None:
+    for base in get_profile(protocol).registers.parameter_bases.values():
+        assert f"| {base} + 2 {TIMES} number" in DOC

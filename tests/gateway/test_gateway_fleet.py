@@ -51,7 +51,7 @@ from cli.clirun import TIMEOUT, Result, cli_env, sj300
 from mqtt_broker import Broker, running_broker
 from waiting import wait_for
 
-from sj300_async.gateway._mqtt_topics import AVAILABLE, UNAVAILABLE, StateMessage
+from sj300_async.gateway.mqtt import AVAILABLE, UNAVAILABLE, StateMessage
 from sj300_async.simulator import SimulatorServer, serve_tcp
 from sj300_async.simulator.sj300 import SimulatedBus
 
@@ -210,8 +210,10 @@ def assert_plausible(shown: dict[str, Any], gateway: str, node: int) -> None:
     assert (shown["running"], shown["direction"]) == (False, "stop")
     if node == TRIPPED:
         assert (shown["tripped"], shown["trip"], shown["status"]["b"]) == (True, "E07", "TRIPPED")
+        assert (shown["state"], shown["trip_meaning"]) == ("tripped", "over-voltage")
     else:
         assert (shown["tripped"], shown["trip"], shown["status"]["b"]) == (False, None, "STOPPED")
+        assert (shown["state"], shown["trip_meaning"]) == ("stopped", None)
     # Polled a moment ago, on this machine's clock.
     assert 0 <= shown["age_s"] < 10, shown["age_s"]
 

@@ -17,12 +17,11 @@ from pymodbus.pdu import ModbusPDU
 from waiting import wait_for
 
 from sj300_async.fr700 import Fr700Monitor, Fr700StatusBits
-from sj300_async.gateway._config import GatewayConfigError, parse_config
-from sj300_async.gateway._gateway import Gateway
+from sj300_async.gateway import Gateway, GatewayConfigError, parse_config
 from sj300_async.simulator import RunState
 from sj300_async.simulator.fr700 import Fr700SimulatedBus
 
-from .conftest import modbus_client, running_gateway
+from .conftest import drive_of, modbus_client, polled, running_gateway
 
 URL = "sim://?nodes=0-3&protocol=fr700"
 CONFIG = textwrap.dedent(
@@ -65,15 +64,10 @@ def _simulator(gateway: Gateway) -> Fr700SimulatedBus:
     return simulator
 
 
-async def _polled(gateway: Gateway) -> None:
-    states = list(gateway.lines[0].states.values())
-    await wait_for(lambda: all(s.last_ok is not None for s in states), "a first good sample")
-
-
 async def test_fr700_stations_are_units_100_up_with_their_identity_and_data() -> None:
     async with running_gateway(CONFIG) as gateway:
-        assert sorted(gateway.units) == [100, 101, 102, 103]
-        await _polled(gateway)
+        assert sorted(drive.unit for drive in gateway.drives) == [100, 101, 102, 103]
+        await polled(gateway)
         async with modbus_client(gateway) as client:
             for station in range(4):
                 ident = await _read(client, 100 + station, 0, 4)
@@ -91,10 +85,10 @@ async def test_fr700_stations_are_units_100_up_with_their_identity_and_data() ->
 
 async def test_fr700_control_with_the_lease_and_read_back() -> None:
     async with running_gateway(CONFIG) as gateway:
-        await _polled(gateway)
+        await polled(gateway)
         sim = _simulator(gateway)
         drive = sim.drives[1]
-        state = gateway.state("press", 1)
+        state = drive_of(gateway, "press", 1).readings
         async with modbus_client(gateway) as client:
             # Not granted: station 2; without the lease: station 1's control registers.
             assert _code(await client.write_register(1000, 1, device_id=102)) == 0x01
@@ -122,7 +116,10 @@ async def test_fr700_control_with_the_lease_and_read_back() -> None:
             assert (await _read(client, 101, 100, 4)).registers == [3000, 49, 1000, 1]
             running = Fr700StatusBits.RUN | Fr700StatusBits.FORWARD
             bits = running | Fr700StatusBits.SU | Fr700StatusBits.FU
-            await wait_for(lambda: state.running is True, "a status poll while running")
+            await wait_for(
+                lambda: state.status_view is not None and state.status_view.running,
+                "a status poll while running",
+            )
             assert (await _read(client, 101, 200, 3)).registers == [1, 0, int(bits)]
             await _ok(client, 101, 1002, 0)  # stop
             assert drive.state(loop.time()) is RunState.DECELERATING  # Pr.8 = 5.0 s

@@ -20,7 +20,7 @@ from waiting import wait_for
 from sj300_async import sj300 as sj3
 from sj300_async.simulator import RunState
 
-from .conftest import SimLine, gateway_toml, running_gateway
+from .conftest import SimLine, drive_of, gateway_toml, modbus_port, running_gateway
 
 LEASE_S = 1.0
 #: One transaction on the simulated line: a stop and its answer cross a
@@ -77,12 +77,11 @@ async def test_a_killed_controller_gets_its_drive_stopped_within_the_lease(
     loop = asyncio.get_running_loop()
     drive = sim_line.sim.drives[1]
     async with running_gateway(gateway_toml(sim_line.url, line_extra=WRITES)) as gateway:
-        assert gateway.modbus is not None
         scada = await asyncio.create_subprocess_exec(
             sys.executable,
             "-c",
             SCADA,
-            str(gateway.modbus.port),
+            str(modbus_port(gateway)),
             str(LEASE_S),
             stdout=asyncio.subprocess.PIPE,
         )
@@ -92,7 +91,7 @@ async def test_a_killed_controller_gets_its_drive_stopped_within_the_lease(
             await wait_for(
                 lambda: drive.state(loop.time()) is not RunState.STOPPED, "motor running"
             )
-            lease = gateway.state("hall", 1).lease
+            lease = drive_of(gateway, "hall", 1).lease
             # Let it keep the lease over a few heartbeats, then pull the plug.
             renewed = lease.expires_at
             await wait_for(lambda: lease.expires_at > renewed, "a heartbeat", timeout=LEASE_S)

@@ -33,9 +33,17 @@ from waiting import wait_for
 
 from sj300_async import Sample
 from sj300_async import sj300 as sj3
-from sj300_async.gateway._gateway import Gateway
+from sj300_async.gateway import Gateway
 
-from .conftest import SimLine, gateway_toml, modbus_client, running_gateway
+from .conftest import (
+    SimLine,
+    drive_of,
+    gateway_toml,
+    modbus_client,
+    modbus_port,
+    polled,
+    running_gateway,
+)
 
 WRITES = """
     [[lines.writes]]
@@ -113,16 +121,6 @@ async def mbpoll(
     return Mbpoll(tuple(args), proc.returncode, out.decode(), err.decode())
 
 
-def _port(gateway: Gateway) -> int:
-    assert gateway.modbus is not None
-    return gateway.modbus.port
-
-
-async def _polled(gateway: Gateway) -> None:
-    states = [s for line in gateway.lines for s in line.states.values()]
-    await wait_for(lambda: all(s.last_ok is not None for s in states), "a first good sample")
-
-
 async def _fresh_poll(gateway: Gateway, node: int) -> None:
     """Return once *node* has been polled from start to end since now (two of its samples).
 
@@ -147,8 +145,8 @@ async def test_mbpoll_reads_identity_monitor_and_parameters(sim_line: SimLine) -
     drive.set_parameter("F002", 1234)  # acceleration time 12.34 s
     drive.set_parameter("A004", 555)  # maximum frequency 55.5 Hz
     async with running_gateway(gateway_toml(sim_line.url)) as gateway:
-        await _polled(gateway)
-        port = _port(gateway)
+        await polled(gateway)
+        port = modbus_port(gateway)
         ident, f002, f002_32, a004, monitor, status = await asyncio.gather(
             mbpoll(port, 3, 0, count=4),
             mbpoll(port, 3, 10004, count=2),
@@ -189,9 +187,9 @@ async def test_mbpoll_writes_with_the_lease(sim_line: SimLine) -> None:
     drive = sim_line.sim.drives[1]
     drive.set_parameter("F002", 1)  # 0.01 s: at speed on the next poll
     async with running_gateway(gateway_toml(sim_line.url, line_extra=WRITES)) as gateway:
-        await _polled(gateway)
-        port = _port(gateway)
-        state = gateway.state("hall", 1)
+        await polled(gateway)
+        port = modbus_port(gateway)
+        state = drive_of(gateway, "hall", 1)
         (await mbpoll(port, 1, 1000, 1)).assert_written(1)  # heartbeat: the lease
         assert state.lease.holder == "127.0.0.1"
         (await mbpoll(port, 1, 1003, 2500)).assert_written(1)  # 25.00 Hz
@@ -204,7 +202,7 @@ async def test_mbpoll_writes_with_the_lease(sim_line: SimLine) -> None:
         loop = asyncio.get_running_loop()
         await wait_for(lambda: abs(drive.output_hz(loop.time()) - 25) < 1e-9, "25 Hz")
         await wait_for(
-            lambda: state.monitor is not None and state.monitor.output_frequency_hz == 25,
+            lambda: state.snapshot.output_frequency_hz == 25,
             "a poll at 25 Hz",
         )
         m = drive.monitor(loop.time())
@@ -227,8 +225,8 @@ async def test_mbpoll_writes_with_the_lease(sim_line: SimLine) -> None:
 async def test_mbpoll_reports_each_refusal(sim_line: SimLine) -> None:
     text = gateway_toml(sim_line.url, line_extra=WRITES)
     async with running_gateway(text) as gateway:
-        await _polled(gateway)
-        port = _port(gateway)
+        await polled(gateway)
+        port = modbus_port(gateway)
         # Another address takes unit 2's lease: mbpoll (127.0.0.1) finds it busy.
         async with modbus_client(gateway, "127.0.0.2") as hmi:
             assert not (await hmi.write_register(1000, 1, device_id=2)).isError()
@@ -266,8 +264,8 @@ async def test_mbpoll_reports_each_refusal(sim_line: SimLine) -> None:
 
 async def test_mbpoll_on_a_read_only_line_is_refused(sim_line: SimLine) -> None:
     async with running_gateway(gateway_toml(sim_line.url)) as gateway:
-        await _polled(gateway)
-        port = _port(gateway)
+        await polled(gateway)
+        port = modbus_port(gateway)
         results = await asyncio.gather(
             mbpoll(port, 1, 1000, 1),
             mbpoll(port, 1, 1003, 2500),
@@ -287,8 +285,8 @@ async def test_mbpoll_pymodbus_and_the_poller_at_once(
     caplog.set_level(logging.INFO, logger="sj300_async.gateway.audit")
     sim = sim_line.sim
     async with running_gateway(gateway_toml(sim_line.url, line_extra=WRITES)) as gateway:
-        await _polled(gateway)
-        port = _port(gateway)
+        await polled(gateway)
+        port = modbus_port(gateway)
         for unit in (1, 2):  # mbpoll's heartbeats: the lease of 127.0.0.1, pymodbus's too
             (await mbpoll(port, unit, 1000, 1)).assert_written(1)
         ran: Counter[str] = Counter()
@@ -394,8 +392,8 @@ async def test_an_older_poll_does_not_replace_a_write_read_back(sim_line: SimLin
     on serving the confirmed 2500 (the drive holds it), not the older poll's 0.
     """
     async with running_gateway(gateway_toml(sim_line.url, line_extra=WRITES)) as gateway:
-        await _polled(gateway)
-        port = _port(gateway)
+        await polled(gateway)
+        port = modbus_port(gateway)
         (await mbpoll(port, 1, 1000, 1)).assert_written(1)  # the lease of 127.0.0.1
         loop = asyncio.get_running_loop()
         parser = sj3.RequestParser()

@@ -12,32 +12,32 @@ from __future__ import annotations
 import asyncio
 import logging
 import math
-from collections.abc import AsyncIterator, Callable, Iterable
+from collections.abc import AsyncIterator, Callable, Iterable, Iterator
 from contextlib import asynccontextmanager
 from dataclasses import dataclass, field
 from typing import Any
 
 import pytest
 from prometheus_client import CONTENT_TYPE_LATEST, CollectorRegistry
+from prometheus_client.core import Metric
 from prometheus_client.parser import text_string_to_metric_families
 from prometheus_client.samples import Sample
 
 import sj300_async as sj
 from sj300_async.bus import Bus
 from sj300_async.bus._stats import LATENCY_BUCKETS_S
-from sj300_async.gateway import _http
-from sj300_async.gateway._http import MAX_HEAD_BYTES, serve_http
-from sj300_async.gateway._metrics import (
-    OTHER_CLIENT,
-    ClientCounters,
+from sj300_async.gateway import (
     DriveView,
+    Endpoint,
     LineView,
     busy_seconds,
     cumulative_buckets,
+    gateway_metrics,
     line_problems,
-    make_registry,
 )
-from sj300_async.gateway._model import Endpoint
+from sj300_async.gateway.http import _server
+from sj300_async.gateway.http._server import MAX_HEAD_BYTES, make_registry, serve_http
+from sj300_async.gateway.modbus import OTHER_CLIENT, ClientCounters, client_families
 from sj300_async.simulator import LinePacing, PlausibleLine, SimulatorEndpoint
 from sj300_async.simulator.sj300 import SimulatedBus
 from sj300_async.transports import loopback_connector
@@ -58,6 +58,17 @@ class Source:
 
     def drives(self) -> Iterable[DriveView]:
         return self.drive_views
+
+
+def registry_of(source: Source, clients: ClientCounters) -> CollectorRegistry:
+    """The registry the HTTP northbound serves: the lines' and drives' families, then the
+    Modbus northbound's (its clients'), built at each scrape."""
+
+    def collect() -> Iterator[Metric]:
+        yield from gateway_metrics(source.lines(), source.drives())
+        yield from client_families(clients)
+
+    return make_registry(collect)
 
 
 @dataclass(frozen=True)
@@ -150,7 +161,7 @@ async def test_line_counters_are_the_bus_counters() -> None:
         with pytest.raises(sj.ReplyTimeoutError):
             await bus.drive(2).read_status()
         source = Source([LineView("hall-a", bus)])
-        async with http_server(make_registry(source, ClientCounters())) as port:
+        async with http_server(registry_of(source, ClientCounters())) as port:
             samples = await scrape(port)
         totals, stats = bus.stats.transactions, bus.stats
         # The scenario did what it says: three attempts at node 2, two of them retries.
@@ -193,7 +204,7 @@ async def test_latency_histogram_is_cumulative_and_counts_the_replies() -> None:
         for _ in range(5):
             await bus.drive(1).read_status()
         async with http_server(
-            make_registry(Source([LineView("l1", bus)]), ClientCounters())
+            registry_of(Source([LineView("l1", bus)]), ClientCounters())
         ) as port:
             samples = await scrape(port)
     totals = bus.stats.transactions
@@ -227,7 +238,7 @@ async def test_busy_seconds_are_the_bytes_wire_time() -> None:
         await bus.drive(1).read_status()
         await bus.drive(1).read_parameter_raw("A004")
         async with http_server(
-            make_registry(Source([LineView("l1", bus)]), ClientCounters())
+            registry_of(Source([LineView("l1", bus)]), ClientCounters())
         ) as port:
             samples = await scrape(port)
     stats = bus.stats
@@ -286,8 +297,8 @@ async def test_a_closed_line_is_down_and_unhealthy() -> None:
         await down.drive(1).read_status()
         await down.aclose()  # its counters stay readable
         source = Source([LineView("hall-a", up), LineView("hall-b", down)])
-        registry = make_registry(source, ClientCounters())
-        async with http_server(registry, lambda: line_problems(source)) as port:
+        registry = registry_of(source, ClientCounters())
+        async with http_server(registry, lambda: line_problems(source.lines())) as port:
             samples = await scrape(port)
             health = await fetch(port, "/healthz")
         assert value(samples, "sj300_line_up", line="hall-a") == 1
@@ -309,7 +320,7 @@ async def test_drive_metrics_leave_out_what_is_not_known() -> None:
             DriveView("hall-b", 7, False, 12.0, None, 0.0),
         ]
     )
-    async with http_server(make_registry(source, ClientCounters())) as port:
+    async with http_server(registry_of(source, ClientCounters())) as port:
         samples = await scrape(port)
     one, two, seven = (
         {"line": "hall-a", "node": "1"},
@@ -343,7 +354,7 @@ async def test_client_counters() -> None:
     clients.exception("10.0.0.5", 2)
     clients.exception("10.0.0.5", 11)
     clients.exception("10.0.0.5", 11)
-    async with http_server(make_registry(Source(), clients)) as port:
+    async with http_server(registry_of(Source(), clients)) as port:
         samples = await scrape(port)
     assert value(samples, "sj300_modbus_requests_total", client="10.0.0.5") == 3
     assert value(samples, "sj300_modbus_requests_total", client="10.0.0.6") == 1
@@ -368,7 +379,7 @@ def test_client_addresses_past_the_cap_share_one_label(caplog: pytest.LogCapture
 
 
 async def test_an_empty_gateway_exports_its_families_without_samples() -> None:
-    async with http_server(make_registry(Source(), ClientCounters())) as port:
+    async with http_server(registry_of(Source(), ClientCounters())) as port:
         response = await fetch(port, "/metrics")
     text = response.body.decode()
     assert "# TYPE sj300_line_latency_seconds histogram" in text
@@ -380,7 +391,7 @@ async def test_an_empty_gateway_exports_its_families_without_samples() -> None:
 def test_the_registry_is_not_the_global_one() -> None:
     from prometheus_client import REGISTRY
 
-    registry = make_registry(Source(), ClientCounters())
+    registry = registry_of(Source(), ClientCounters())
     assert registry is not REGISTRY
     assert not any(family.name.startswith("sj300_") for family in REGISTRY.collect())
 
@@ -389,7 +400,7 @@ def test_the_registry_is_not_the_global_one() -> None:
 
 
 async def test_healthz_ok() -> None:
-    async with http_server(make_registry(Source(), ClientCounters()), list) as port:
+    async with http_server(registry_of(Source(), ClientCounters()), list) as port:
         response = await fetch(port, "/healthz")
     assert (response.status, response.body) == (200, b"ok\n")
     assert response.headers["connection"] == "close"
@@ -397,7 +408,7 @@ async def test_healthz_ok() -> None:
 
 async def test_healthz_lists_every_problem() -> None:
     problems = ["line hall-a: link down", "line hall-b: link down"]
-    async with http_server(make_registry(Source(), ClientCounters()), lambda: problems) as port:
+    async with http_server(registry_of(Source(), ClientCounters()), lambda: problems) as port:
         response = await fetch(port, "/healthz")
     assert response.status == 503
     assert response.body == b"line hall-a: link down\nline hall-b: link down\n"
@@ -405,7 +416,7 @@ async def test_healthz_lists_every_problem() -> None:
 
 @pytest.mark.parametrize("path", ["/metrics", "/healthz", "/nowhere"])
 async def test_head_is_get_without_the_body(path: str) -> None:
-    async with http_server(make_registry(Source(), ClientCounters()), lambda: ["x"]) as port:
+    async with http_server(registry_of(Source(), ClientCounters()), lambda: ["x"]) as port:
         got = await fetch(port, path)
         head = await fetch(port, path, "HEAD")
     assert head.status == got.status
@@ -415,7 +426,7 @@ async def test_head_is_get_without_the_body(path: str) -> None:
 
 
 async def test_a_query_string_is_ignored() -> None:
-    async with http_server(make_registry(Source(), ClientCounters())) as port:
+    async with http_server(registry_of(Source(), ClientCounters())) as port:
         response = await fetch(port, "/healthz?verbose=1")
     assert (response.status, response.body) == (200, b"ok\n")
 
@@ -439,7 +450,7 @@ async def test_refusals(
     request_bytes: bytes, status: int, caplog: pytest.LogCaptureFixture
 ) -> None:
     caplog.set_level(logging.DEBUG, logger="sj300_async.gateway.http")
-    async with http_server(make_registry(Source(), ClientCounters())) as port:
+    async with http_server(registry_of(Source(), ClientCounters())) as port:
         response = parse_response(await exchange(port, request_bytes))
     assert response.status == status
     assert response.headers["connection"] == "close"
@@ -451,7 +462,7 @@ async def test_refusals(
 
 
 async def test_bare_lf_line_ends_are_accepted() -> None:
-    async with http_server(make_registry(Source(), ClientCounters())) as port:
+    async with http_server(registry_of(Source(), ClientCounters())) as port:
         response = parse_response(await exchange(port, b"\r\nGET /healthz HTTP/1.0\n\n"))
     assert (response.status, response.body) == (200, b"ok\n")
 
@@ -463,7 +474,7 @@ async def test_an_oversized_head_is_closed_without_an_answer(
     filler = b"".join(b"X-Filler-%d: %s\r\n" % (n, b"a" * 100) for n in range(100))
     assert len(filler) > MAX_HEAD_BYTES
     one_long_line = b"X-Long: " + b"a" * (2 * MAX_HEAD_BYTES) + b"\r\n"
-    async with http_server(make_registry(Source(), ClientCounters())) as port:
+    async with http_server(registry_of(Source(), ClientCounters())) as port:
         for headers in (filler, one_long_line):
             request = b"GET /metrics HTTP/1.1\r\n" + headers + b"\r\n"
             assert await exchange(port, request) == b""
@@ -474,8 +485,8 @@ async def test_a_slow_head_is_closed_without_an_answer(
     monkeypatch: pytest.MonkeyPatch, caplog: pytest.LogCaptureFixture
 ) -> None:
     caplog.set_level(logging.DEBUG, logger="sj300_async.gateway.http")
-    monkeypatch.setattr(_http, "HEAD_TIMEOUT_S", 0.05)  # the real 5 s, shortened
-    async with http_server(make_registry(Source(), ClientCounters())) as port:
+    monkeypatch.setattr(_server, "HEAD_TIMEOUT_S", 0.05)  # the real 5 s, shortened
+    async with http_server(registry_of(Source(), ClientCounters())) as port:
         reader, writer = await asyncio.open_connection("127.0.0.1", port)
         writer.write(b"GET /metrics HTTP/1.1\r\nHost: x\r\n")  # and then nothing
         await writer.drain()
@@ -489,7 +500,7 @@ async def test_a_slow_head_is_closed_without_an_answer(
 
 async def test_a_client_that_leaves_early_is_logged(caplog: pytest.LogCaptureFixture) -> None:
     caplog.set_level(logging.DEBUG, logger="sj300_async.gateway.http")
-    async with http_server(make_registry(Source(), ClientCounters())) as port:
+    async with http_server(registry_of(Source(), ClientCounters())) as port:
         reader, writer = await asyncio.open_connection("127.0.0.1", port)
         writer.write(b"GET /metrics HTTP/1.1\r\n")
         writer.write_eof()  # half-closed: the head can never end
@@ -505,7 +516,7 @@ async def test_a_failing_health_check_is_a_500_with_its_traceback_logged(
     def broken() -> list[str]:
         raise RuntimeError("cache gone")
 
-    async with http_server(make_registry(Source(), ClientCounters()), broken) as port:
+    async with http_server(registry_of(Source(), ClientCounters()), broken) as port:
         response = await fetch(port, "/healthz")
         healthy_metrics = await fetch(port, "/metrics")
     assert response.status == 500
@@ -519,7 +530,7 @@ async def test_a_failing_health_check_is_a_500_with_its_traceback_logged(
 async def test_concurrent_scrapes() -> None:
     async with sj.open_bus("sim://?nodes=1") as bus:
         await bus.drive(1).read_status()
-        registry = make_registry(Source([LineView("l1", bus)]), ClientCounters())
+        registry = registry_of(Source([LineView("l1", bus)]), ClientCounters())
         async with http_server(registry) as port:
             responses = await asyncio.gather(*(fetch(port, "/metrics") for _ in range(20)))
     assert {r.status for r in responses} == {200}

@@ -29,15 +29,40 @@ from cli.clirun import cli_env
 from mqtt_broker import READY, Broker, publish, running_broker
 from waiting import wait_for
 
-from sj300_async.gateway._gateway import Gateway
-from sj300_async.gateway._model import LineConfig, MqttConfig
-from sj300_async.gateway._mqtt import _request, discovery, state_message
-from sj300_async.gateway._mqtt_topics import StateMessage, Topics
-from sj300_async.gateway._registers import Command, Exc, Heartbeat, ParameterWrite, SetFrequency
-from sj300_async.gateway._state import DriveState, Lease
+from sj300_async.gateway import (
+    Gateway,
+    GatewayDrive,
+    Heartbeat,
+    Lease,
+    LineConfig,
+    ParameterWrite,
+    Refusal,
+    RunCommand,
+    SetFrequency,
+    WriteResult,
+    excerpt,
+)
+from sj300_async.gateway.mqtt import (
+    MqttConfig,
+    StateMessage,
+    Topics,
+    discovery,
+    parse_command,
+    state_message,
+)
+from sj300_async.gateway.mqtt._bridge import MqttBridge
+from sj300_async.profiles import DriveSnapshot, get_profile
 from sj300_async.sj300 import InverterStatus, MonitorData, StatusA, StatusB, StatusC
+from sj300_async.wire import Direction
 
-from .conftest import SimLine, gateway_toml, modbus_client, running_gateway
+from .conftest import (
+    SimLine,
+    drive_of,
+    gateway_toml,
+    metrics_port,
+    modbus_client,
+    running_gateway,
+)
 
 GRANTS = """
     [[lines.writes]]
@@ -158,9 +183,10 @@ def errors(sub: Sub, node: int) -> list[dict[str, Any]]:
     return [m.json() for m in sub.topic(Topics("gw1").error("hall", node))]
 
 
-def bridge(gateway: Gateway) -> Any:
-    assert gateway.mqtt is not None
-    return gateway.mqtt
+def bridge(gateway: Gateway) -> MqttBridge:
+    northbound = gateway.northbounds["mqtt"]
+    assert isinstance(northbound, MqttBridge)
+    return northbound
 
 
 # -- discovery --------------------------------------------------------------------------------
@@ -211,6 +237,11 @@ async def test_discovery_configs_are_retained_json_with_every_required_key(
     assert frequency["value_template"] == "{{ value_json.output_frequency_hz }}"
     assert (frequency["unit_of_measurement"], frequency["device_class"]) == ("Hz", "frequency")
     assert frequency["state_class"] == "measurement"
+    # The status sensor shows the state in words, as the drive's profile words it.
+    status = found["homeassistant/sensor/sj300_gw1_hall_3/status/config"]
+    assert status["value_template"] == (
+        "{% if value_json.state is none %}None{% else %}{{ value_json.state }}{% endif %}"
+    )
     # Control only where the configuration grants it: nodes 1 and 2.
     controls = {(t.split("/")[2], t.split("/")[3]) for t in found if t.split("/")[1] != "sensor"}
     assert controls == {("sj300_gw1", "connectivity")} | {
@@ -280,6 +311,7 @@ async def test_a_state_message_per_drive_per_poll(sim_line: SimLine, broker: Bro
             assert message.output_frequency_hz == 0.0
             assert message.status is not None
             assert message.status["b"] == "STOPPED"
+            assert (message.state, message.trip_meaning) == ("stopped", None)
             assert message.parameters["A004"] == 50.0
         assert [m.payload for m in sub.topic(Topics("gw1").drive_availability("hall", node))] == [
             "online"
@@ -307,6 +339,9 @@ async def test_stale_values_are_null_and_a_trip_names_its_code(
         await wait_for(lambda: any(m.trip == "E07" for m in states(sub, 4)), "trip E07")
         first = next(m for m in states(sub, 4) if m.tripped)
         assert first.trip in (None, "E07")  # before the history is read after it: not guessed
+        assert first.state == "tripped"
+        named = next(m for m in states(sub, 4) if m.trip == "E07")
+        assert (named.state, named.trip_meaning) == ("tripped", "over-voltage")
         sim_line.sim.faults.silence(3)
         offline = Topics("gw1").drive_availability("hall", 3)
         await sub.until(lambda m: m.topic == offline and m.payload == "offline", "node 3 offline")
@@ -439,8 +474,14 @@ async def test_commands_reach_the_drive_and_refusals_are_answered(
             assert reply["topic"] == topics.command("hall", node, what)
             assert reply["payload"] == payload
             assert reply["error"].startswith(error), reply
+            assert reply["reason"] == error.split(":", 1)[0], reply
 
-        await refused(1, "frequency_hz", "25.5", "ILLEGAL_FUNCTION: take the control lease first")
+        await refused(
+            1,
+            "frequency_hz",
+            "25.5",
+            "no_lease: take the control lease first (publish to …/set/lease)",
+        )
         await publish(broker, topics.command("hall", 1, "lease"), "")
         await publish(broker, topics.command("hall", 1, "frequency_hz"), "25.5")
         await wait_for(lambda: drive.parameters["F001"] == 2550, "F001 = 25.50 Hz")
@@ -453,16 +494,32 @@ async def test_commands_reach_the_drive_and_refusals_are_answered(
         await wait_for(lambda: drive.state(asyncio.get_running_loop().time()).outputting, "run")
         await publish(broker, topics.command("hall", 1, "A004"), "55")
         await wait_for(lambda: drive.parameters["A004"] == 550, "A004 = 55.0 Hz")
-        await refused(1, "A004", "55.05", "ILLEGAL_VALUE: 55.05 is finer than A004's")
-        await refused(1, "frequency_hz", "fast", "ILLEGAL_VALUE: expected a number of Hz")
-        await refused(1, "frequency_hz", "500", "ILLEGAL_VALUE: 500 Hz is outside")
-        await refused(1, "command", "jog", "ILLEGAL_VALUE: expected run_forward, run_reverse")
-        await refused(1, "speed", "1", "ILLEGAL_ADDRESS: no such command or parameter")
-        await refused(1, "F002", "1", "ILLEGAL_FUNCTION: the configuration does not allow")
-        await refused(3, "lease", "", "ILLEGAL_FUNCTION: the configuration does not allow control")
+        await refused(1, "A004", "55.05", "invalid_value: 55.05 is finer than A004's")
+        await refused(1, "frequency_hz", "fast", "malformed: expected a number of Hz")
+        # The drive's own maximum: A004, polled, 55 Hz since the write above.
+        await refused(
+            1,
+            "frequency_hz",
+            "500",
+            "invalid_value: 500 Hz is outside 0..55 Hz (the drive's maximum)",
+        )
+        await refused(1, "command", "jog", "malformed: expected run_forward, run_reverse")
+        # An untrusted payload comes back as a short escaped excerpt, never whole.
+        long = "\x1b[2J" + "x" * 100
+        count = len(errors(sub, 1))
+        await publish(broker, topics.command("hall", 1, "command"), long)
+        await sub.until(lambda m: m.topic == topics.error("hall", 1), "the long one", count + 1)
+        reply = errors(sub, 1)[count]
+        assert (reply["reason"], reply["payload"]) == ("malformed", excerpt(long))
+        assert len(reply["payload"]) == 64
+        assert reply["payload"].startswith("\\x1b[2Jxxx")
+        assert reply["payload"].endswith("x…")
+        await refused(1, "speed", "1", "unknown_target: no such command or parameter")
+        await refused(1, "F002", "1", "not_allowed: the configuration does not allow writing F002")
+        await refused(3, "lease", "", "not_allowed: the configuration does not allow control")
         async with modbus_client(gateway) as scada:  # one lease per drive, whatever the protocol
             assert not (await scada.write_register(1000, 1, device_id=2)).isError()
-            await refused(2, "lease", "", "DEVICE_BUSY: another client (127.0.0.1)")
+            await refused(2, "lease", "", "lease_held: another client (127.0.0.1)")
             assert (await scada.write_register(1000, 1, device_id=1)).exception_code == 0x06
         await publish(broker, topics.command("hall", 1, "command"), "stop")
         await sub.until(lambda m: m.topic == topics.state("hall", 1)
@@ -473,8 +530,32 @@ async def test_commands_reach_the_drive_and_refusals_are_answered(
     written = "client mqtt line hall node 1 (unit 1): set frequency (Hz)"
     assert any(a.startswith(written) and a.endswith(" -> 25.5: ok") for a in audit), audit
     assert any("client mqtt line hall node 1" in a and "frequency_hz" in a and "fast" in a
-               for a in audit)  # fmt: skip
+               and "refused: malformed: " in a for a in audit)  # fmt: skip
     assert sim_line.log.interleaved() == []
+
+
+async def test_a_write_s_read_back_is_published_at_once(sim_line: SimLine, broker: Broker) -> None:
+    """Not at the next poll: the state after a write shows what the drive read back."""
+    topics = Topics("gw1")
+    text = mqtt_toml(sim_line.url, broker).replace("interval_s = 0.1", "interval_s = 30")
+    async with (
+        subscriber(broker) as sub,
+        running_gateway(text) as gateway,
+    ):
+        await sub.until(state_of(4), "the first poll cycle")  # the next one in 30 s
+        polls: list[int] = []
+        gateway.lines[0].poller.on_sample(lambda sample: polls.append(sample.node))
+        await wait_for(lambda: bridge(gateway).connected, "connected")
+        await publish(broker, topics.command("hall", 1, "lease"), "")
+        await publish(broker, topics.command("hall", 1, "frequency_hz"), "25.5")
+        read_back = await sub.until(
+            lambda m: m.topic == topics.state("hall", 1) and m.json()["set_frequency_hz"] == 25.5,
+            "the read-back on the state topic",
+        )
+        assert polls == []  # no poll since the first cycle: this is the write's own state
+        assert read_back[0].json()["online"] is True
+        # Every snapshot handed to the bridge counts: the first poll, then the read-back.
+        assert bridge(gateway).stats.samples["hall", 1] == 2
 
 
 async def test_a_retained_command_is_never_carried_out(sim_line: SimLine, broker: Broker) -> None:
@@ -488,9 +569,10 @@ async def test_a_retained_command_is_never_carried_out(sim_line: SimLine, broker
         ):
             replies = await sub.until(lambda m: m.topic == topics.error("hall", 1), "refusals", 2)
             assert {r.json()["topic"].rsplit("/", 1)[1] for r in replies} == {"lease", "command"}
-            assert all("ILLEGAL_FUNCTION: a retained command" in r.json()["error"] for r in replies)
+            assert all("not_allowed: a retained command" in r.json()["error"] for r in replies)
+            assert all(r.json()["reason"] == "not_allowed" for r in replies)
             assert bridge(gateway).stats.refused == 2
-            assert gateway.state("hall", 1).lease.holder is None
+            assert drive_of(gateway, "hall", 1).lease.holder is None
     finally:
         await publish(broker, topics.command("hall", 1, "lease"), None, retain=True)
         await publish(broker, topics.command("hall", 1, "command"), None, retain=True)
@@ -505,7 +587,7 @@ async def test_a_command_waiting_when_the_connection_breaks_is_never_carried_out
         mqtt = bridge(gateway)
         await wait_for(lambda: mqtt.connected, "connected")
         await publish(broker, topics.command("hall", 1, "lease"), "1")
-        await wait_for(lambda: gateway.state("hall", 1).lease.holder == "mqtt", "the lease")
+        await wait_for(lambda: drive_of(gateway, "hall", 1).lease.holder == "mqtt", "the lease")
         # Another write to node 1 under way (its lock held): MQTT's first command waits
         # for it, the second waits in the drive's queue.
         lock = gateway.lines[0].controller._locks.setdefault(1, asyncio.Lock())
@@ -525,27 +607,33 @@ async def test_a_command_waiting_when_the_connection_breaks_is_never_carried_out
 # -- the messages, without a broker ---------------------------------------------------------------
 
 
-def _drive_state() -> DriveState:
-    state = DriveState("hall", 2, 2, "sj300", Lease(5.0), online=True, last_ok=10.0)
-    state.status = InverterStatus(StatusA.RUNNING, StatusB.TRIPPED, StatusC.STOP)
-    state.status_at = 10.0
-    state.monitor = MonitorData(12.5, 3.2, 1, 0, 0, 0, 12.5, 40, 200.0, 1.5, 7, 9)  # type: ignore[arg-type]
-    state.monitor_at = 8.0
-    state.parameters, state.parameters_at = {"A004": 500}, {"A004": 10.0}
-    return state
+def _snapshot() -> DriveSnapshot:
+    profile = get_profile("sj300")
+    line = LineConfig("hall", "sim://", "sj300", (2,))
+    drive = GatewayDrive(line, 2, profile, Lease(5.0))
+    readings = drive.readings
+    readings.online, readings.last_ok = True, 10.0
+    readings.set_status(
+        InverterStatus(StatusA.RUNNING, StatusB.TRIPPED, StatusC.STOP), 10.0, profile
+    )
+    monitor = MonitorData(12.5, 3.2, 1, 0, 0, 0, 12.5, 40, 200.0, 1.5, 7, 9)  # type: ignore[arg-type]
+    readings.set_monitor(monitor, 8.0, profile)
+    readings.set_parameter("A004", 500, 10.0)
+    return drive.rebuild(10.0, wall=1e9)
 
 
 def test_a_state_message_leaves_stale_values_null() -> None:
-    state = _drive_state()
-    message = state_message("gw1", state, now=10.0, wall=1e9, stale_after_s=1.0)
+    snapshot = _snapshot()
+    message = state_message("gw1", snapshot, now=10.0, stale_after_s=1.0)
 
     assert message.time == 1e9
     assert (message.online, message.tripped, message.running) == (True, True, False)
     assert message.status == {"a": "RUNNING", "b": "TRIPPED", "c": "STOP"}
+    assert (message.state, message.trip_meaning) == ("tripped", None)  # the profile's words
     assert message.output_frequency_hz is None  # read at 8.0: 2 s old, 1 s allowed
     assert message.parameters == {"A004": 50.0}
     assert message.trip is None  # tripped, but no history read after the trip was seen
-    fresh = state_message("gw1", state, now=8.5, wall=1e9, stale_after_s=1.0)
+    fresh = state_message("gw1", snapshot, now=8.5, stale_after_s=1.0)
     assert (fresh.output_frequency_hz, fresh.power_kw, fresh.direction) == (12.5, 1.5, "forward")
     assert json.loads(fresh.to_json())["output_torque_percent"] == 40
 
@@ -569,21 +657,21 @@ def test_fr700_discovery_has_no_sj300_sensors() -> None:
     ("what", "payload", "request_or_refusal"),
     [
         ("lease", b"\xff anything", Heartbeat()),
-        ("command", b" run_reverse\n", Command(2)),
-        ("command", b"stop", Command(0)),
+        ("command", b" run_reverse\n", RunCommand(Direction.REVERSE)),
+        ("command", b"stop", RunCommand(Direction.STOP)),
         ("frequency_hz", b"12.34", SetFrequency(12.34)),
-        ("frequency_hz", b"nan", Exc.ILLEGAL_VALUE),
-        ("frequency_hz", b"12.345", Exc.ILLEGAL_VALUE),
-        ("frequency_hz", b"\xff", Exc.ILLEGAL_VALUE),
+        ("frequency_hz", b"nan", Refusal.MALFORMED),
+        ("frequency_hz", b"12.345", Refusal.INVALID_VALUE),
+        ("frequency_hz", b"\xff", Refusal.MALFORMED),
         ("a004", b"60", ParameterWrite("A004", 600)),
-        ("A004", b"1e400", Exc.ILLEGAL_VALUE),
-        ("A004", b"60.01", Exc.ILLEGAL_VALUE),
-        ("Pr.7", b"5", Exc.ILLEGAL_ADDRESS),  # an FR-700 code on an SJ300 line
+        ("A004", b"1e400", Refusal.MALFORMED),
+        ("A004", b"60.01", Refusal.INVALID_VALUE),
+        ("Pr.7", b"5", Refusal.UNKNOWN_TARGET),  # an FR-700 code on an SJ300 line
     ],
 )
 def test_command_payloads(what: str, payload: bytes, request_or_refusal: object) -> None:
-    result = _request("sj300", what, payload)
-    assert (result[0] if isinstance(result, tuple) else result) == request_or_refusal
+    result = parse_command(get_profile("sj300"), what, payload)
+    assert (result.refusal if isinstance(result, WriteResult) else result) == request_or_refusal
 
 
 async def test_the_bridge_counters_are_in_the_metrics(sim_line: SimLine, broker: Broker) -> None:
@@ -594,8 +682,7 @@ async def test_the_bridge_counters_are_in_the_metrics(sim_line: SimLine, broker:
     )
     async with subscriber(broker) as sub, running_gateway(text) as gateway:
         await sub.until(state_of(1), "two states of node 1", count=2)
-        assert gateway.http is not None
-        samples = await scrape(int(gateway.http.sockets[0].getsockname()[1]))
+        samples = await scrape(metrics_port(gateway))
         stats = bridge(gateway).stats
         values = {(s.name, tuple(sorted(s.labels.items()))): s.value for s in samples}
     assert values[("sj300_mqtt_connects_total", ())] == 1
@@ -605,8 +692,7 @@ async def test_the_bridge_counters_are_in_the_metrics(sim_line: SimLine, broker:
 
 
 async def test_a_stop_mid_batch_counts_what_it_could_not_confirm() -> None:
-    from sj300_async.gateway._model import MqttConfig
-    from sj300_async.gateway._mqtt import MqttBridge, _Out
+    from sj300_async.gateway.mqtt._bridge import _Out
 
     class Stuck:
         """A client whose publishes never complete (a broker that stopped answering)."""
@@ -614,7 +700,7 @@ async def test_a_stop_mid_batch_counts_what_it_could_not_confirm() -> None:
         async def publish(self, *args: object, **kwargs: object) -> None:
             await asyncio.Event().wait()
 
-    bridge = MqttBridge(MqttConfig("b", 1883), "gw1", [], 5.0)
+    bridge = MqttBridge(MqttConfig("b", 1883))
     for n in range(100):
         bridge._put(_Out(f"t/{n}", b"x", retain=True))
     sending = asyncio.create_task(bridge._send(Stuck()))  # type: ignore[arg-type]

@@ -13,7 +13,7 @@ import sys
 
 import pytest
 
-from sj300_async.gateway._mqtt import _cancel_and_wait
+from sj300_async.gateway.mqtt._bridge import _cancel_and_wait
 
 
 async def _loses_one_cancellation(ended: list[str]) -> None:

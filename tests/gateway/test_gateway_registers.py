@@ -6,21 +6,26 @@ import math
 
 import pytest
 
-from sj300_async.gateway._registers import (
-    Command,
-    Exc,
-    Field,
+from sj300_async.bus import register_protocol, unregister_protocol
+from sj300_async.gateway import (
+    GatewayDrive,
     Heartbeat,
+    Lease,
+    LineConfig,
     ParameterWrite,
-    RegisterMap,
+    RunCommand,
     SetFrequency,
-    parameter_address,
 )
-from sj300_async.gateway._state import DriveState, Lease
+from sj300_async.gateway.modbus import Exc, Field, RegisterMap, parameter_address
+from sj300_async.profiles import get_profile
+from sj300_async.wire import Direction
+
+SJ300, FR700 = get_profile("sj300"), get_profile("fr700")
 
 
-def _state(protocol: str = "sj300") -> DriveState:
-    return DriveState("l", 1, 1, protocol, Lease(5.0))
+def _state(protocol: str = "sj300") -> GatewayDrive:
+    line = LineConfig("l", "sim://", protocol, (1,), unit_offset=0)
+    return GatewayDrive(line, 1, get_profile(protocol), Lease(5.0))
 
 
 @pytest.mark.parametrize(
@@ -44,21 +49,26 @@ def test_values_are_encoded_high_word_first_and_saturate(
 
 
 def test_parameter_addresses_follow_the_group_bases() -> None:
-    assert parameter_address("sj300", "F002") == 10004
-    assert parameter_address("sj300", "A004") == 12008
-    assert parameter_address("sj300", "P049") == 20098
-    assert parameter_address("fr700", "Pr.7") == 30014
-    assert parameter_address("fr700", "Pr.999") == 31998
-    assert parameter_address("sj300", "Pr.7") is None
-    assert parameter_address("toy", "A004") is None
+    assert parameter_address(SJ300, "F002") == 10004
+    assert parameter_address(SJ300, "A004") == 12008
+    assert parameter_address(SJ300, "P049") == 20098
+    assert parameter_address(FR700, "Pr.7") == 30014
+    assert parameter_address(FR700, "Pr.999") == 31998
+    assert parameter_address(SJ300, "Pr.7") is None
+    register_protocol("toy", "toyproto:TOY_DIALECT")  # tests/toyproto: no parameter blocks
+    try:
+        assert parameter_address(get_profile("toy"), "A004") is None
+    finally:
+        unregister_protocol("toy")
 
 
 def test_a_read_is_whole_or_refused() -> None:
-    regs = RegisterMap("sj300", ["A004"])
+    regs = RegisterMap(SJ300, ["A004"])
     state = _state()
     now = 100.0
     assert regs.read(state, 12008, 2, now, 5.0) == Exc.TARGET_FAILED  # never read
-    state.parameters["A004"], state.parameters_at["A004"] = 500, 99.0
+    state.readings.set_parameter("A004", 500, 99.0)
+    state.rebuild(99.0)
     assert regs.read(state, 12008, 2, now, 5.0) == [0, 500]
     assert regs.read(state, 12009, 1, now, 5.0) == [500]  # half of it may be read
     assert regs.read(state, 12008, 3, now, 5.0) == Exc.ILLEGAL_ADDRESS
@@ -69,7 +79,7 @@ def test_a_read_is_whole_or_refused() -> None:
 
 
 def test_fr700_units_have_no_sj300_registers() -> None:
-    regs = RegisterMap("fr700", ["Pr.7"])
+    regs = RegisterMap(FR700, ["Pr.7"])
     state = _state("fr700")
     assert regs.read(state, 104, 1, 0.0, 5.0) == Exc.ILLEGAL_ADDRESS
     assert regs.read(state, 300, 2, 0.0, 5.0) == Exc.ILLEGAL_ADDRESS
@@ -77,9 +87,9 @@ def test_fr700_units_have_no_sj300_registers() -> None:
 
 
 def test_what_a_write_asks_for() -> None:
-    regs = RegisterMap("sj300", ["A004"])
+    regs = RegisterMap(SJ300, ["A004"])
     assert regs.decode_write(1000, [7]) == Heartbeat()
-    assert regs.decode_write(1002, [2]) == Command(2)
+    assert regs.decode_write(1002, [2]) == RunCommand(Direction.REVERSE)
     assert regs.decode_write(1002, [3]) == Exc.ILLEGAL_VALUE
     assert regs.decode_write(1003, [2550]) == SetFrequency(25.5)
     assert regs.decode_write(12008, [0, 600]) == ParameterWrite("A004", 600)
@@ -93,7 +103,7 @@ def test_what_a_write_asks_for() -> None:
 
 
 def test_the_lease_registers_show_the_lease() -> None:
-    regs = RegisterMap("sj300")
+    regs = RegisterMap(SJ300)
     state = _state()
     state.lease.holder, state.lease.expires_at = "10.0.0.9", 12.5
     assert regs.read(state, 1000, 2, 10.0, 5.0) == [1, 25]

@@ -5,9 +5,7 @@ from __future__ import annotations
 from prometheus_client.samples import Sample
 from waiting import wait_for
 
-from sj300_async.gateway._gateway import Gateway
-
-from .conftest import SimLine, gateway_toml, modbus_client, running_gateway
+from .conftest import SimLine, gateway_toml, metrics_port, modbus_client, running_gateway
 from .test_gateway_metrics import fetch, scrape
 
 
@@ -17,18 +15,15 @@ def _value(samples: list[Sample], name: str, **labels: str) -> float:
     return found[0]
 
 
-def _metrics_port(gateway: Gateway) -> int:
-    assert gateway.http is not None
-    return int(gateway.http.sockets[0].getsockname()[1])
-
-
 async def test_a_scrape_shows_lines_drives_and_clients(sim_line: SimLine) -> None:
     text = gateway_toml(sim_line.url, extra='[metrics]\nlisten = "127.0.0.1:0"\n')
     sim_line.sim.drives[2].set_parameter("F001", 1250)
     async with running_gateway(text) as gateway:
-        port = _metrics_port(gateway)
-        states = list(gateway.lines[0].states.values())
-        await wait_for(lambda: all(s.last_ok is not None for s in states), "a first sample")
+        port = metrics_port(gateway)
+        drives = gateway.drives
+        await wait_for(
+            lambda: all(d.readings.last_ok is not None for d in drives), "a first sample"
+        )
         async with modbus_client(gateway) as client:
             for _ in range(3):
                 assert not (await client.read_holding_registers(0, count=4, device_id=2)).isError()

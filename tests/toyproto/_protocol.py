@@ -191,6 +191,7 @@ class ToyDialect:
     default_sim_nodes = "1-3"
     url_options = frozenset(("upper",))
     simulator = "toyproto._protocol:simulate"
+    profile = "toyproto._profile:TOY_PROFILE"
     capture_linktype = 149  # LINKTYPE_USER2 (docs/CAPTURE.md: free for a third protocol)
 
     def __init__(self, *, upper: bool = False) -> None:

@@ -14,12 +14,14 @@ servers, baud pacing) serves it as it is::
 
 from __future__ import annotations
 
-from ...fr700._request_parser import BadRequest, HostAnswer, HostRequest, RequestParser
+from ...fr700.codec import BadRequest, HostAnswer, HostRequest, RequestParser
 from ._bus import Fr700SimulatedBus, Fr700SimulatorStats, corrupt, simulate
+from ._command_line import COMMAND_LINE
 from ._drive import DEFAULT_PROCESSING_S, FaultCode, Fr700SimulatedDrive
 from ._parameters import PARAMETERS, ParameterSpec
 
 __all__ = [
+    "COMMAND_LINE",
     "DEFAULT_PROCESSING_S",
     "PARAMETERS",
     "BadRequest",

@@ -29,19 +29,25 @@ from __future__ import annotations
 import logging
 from collections.abc import Iterable
 
-from ...fr700._codec import (
+from ...fr700.codec import (
+    ETX,
+    STX,
+    BadRequest,
+    Fr700Ack,
+    Fr700Data,
+    Fr700Instruction,
     Fr700LineOptions,
+    Fr700Nak,
+    Fr700Reply,
+    HostAnswer,
+    HostRequest,
+    RequestParser,
     encode_ack,
     encode_data_reply,
     encode_nak,
     terminator_bytes,
 )
-from ...fr700._codes import ETX, STX, Fr700Instruction
-from ...fr700._events import Fr700Ack, Fr700Data, Fr700Nak, Fr700Reply
-from ...fr700._request_parser import BadRequest, HostAnswer, HostRequest, RequestParser
-from ...wire._errors import LocalProtocolError
-from ...wire._events import Discarded
-from ...wire._parser_stats import ParserStats
+from ...wire import Discarded, LocalProtocolError, ParserStats
 from .._faults import Faults
 from .._model import LineCounters, Transmission
 from ._drive import DEFAULT_PROCESSING_S, Fr700SimulatedDrive

@@ -56,17 +56,19 @@ from collections.abc import Callable, Mapping
 from types import MappingProxyType
 from typing import Final
 
-from ...fr700._codes import (
+from ...fr700.codec import (
     RESET_DATA,
+    Fr700Ack,
+    Fr700Data,
     Fr700Instruction,
+    Fr700Nak,
     Fr700NakCode,
     Fr700OperationMode,
+    Fr700Reply,
     Fr700StatusBits,
+    HostRequest,
 )
-from ...fr700._events import Fr700Ack, Fr700Data, Fr700Nak, Fr700Reply
-from ...fr700._request_parser import HostRequest
-from ...wire._enums import Direction
-from ...wire._errors import LocalProtocolError
+from ...wire import Direction, LocalProtocolError
 from .._electrical import MotorRating, electrical
 from .._motion import Output, Ramp, RunState, advance, classify
 from ._parameters import COMMUNICATION, NOT_USED, PARAMETERS, factory_values

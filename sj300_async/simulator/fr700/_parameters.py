@@ -22,7 +22,7 @@ from dataclasses import dataclass
 from types import MappingProxyType
 from typing import Final
 
-from ...fr700._parameters import FR700_PARAMETERS
+from ...fr700.codec import FR700_PARAMETERS
 
 __all__ = ["COMMUNICATION", "PARAMETERS", "ParameterSpec", "factory_values"]
 

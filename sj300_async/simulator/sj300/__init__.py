@@ -2,12 +2,14 @@
 
 from __future__ import annotations
 
-from ...sj300._codes import TripCode
+from ...sj300.codec import TripCode
 from ._bus import SimulatedBus, SimulatorStats, simulate
+from ._command_line import COMMAND_LINE
 from ._drive import DEFAULT_EEPROM_WRITE_S, DEFAULT_PROCESSING_S, SimulatedDrive
 from ._parameters_table import Country
 
 __all__ = [
+    "COMMAND_LINE",
     "DEFAULT_EEPROM_WRITE_S",
     "DEFAULT_PROCESSING_S",
     "Country",

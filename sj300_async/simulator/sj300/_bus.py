@@ -28,14 +28,18 @@ from __future__ import annotations
 import logging
 from collections.abc import Iterable
 
-from ...sj300._constants import BROADCAST, MAX_NODE, MIN_NODE
-from ...sj300._events import NakReply, Reply
-from ...sj300._reply_encoding import encode_reply
-from ...sj300._request_parser import NAK_FOR_BAD_REQUEST, RequestParser
-from ...sj300._requests import Request
-from ...wire._errors import LocalProtocolError
-from ...wire._events import BadFrame, BadFrameReason, Discarded
-from ...wire._parser_stats import ParserStats
+from ...sj300.codec import (
+    BROADCAST,
+    MAX_NODE,
+    MIN_NODE,
+    NAK_FOR_BAD_REQUEST,
+    NakReply,
+    Reply,
+    Request,
+    RequestParser,
+    encode_reply,
+)
+from ...wire import BadFrame, BadFrameReason, Discarded, LocalProtocolError, ParserStats
 from .._faults import Faults
 from .._model import LineCounters, Transmission
 from .._pacing import LinePacing

@@ -42,17 +42,33 @@ import logging
 from collections.abc import Callable, Mapping
 from typing import Final
 
-from ...sj300._codes import NakCode, TripCode
-from ...sj300._commands import Command
-from ...sj300._constants import BROADCAST, MAX_NODE, MIN_NODE
-from ...sj300._events import AckDataReply, AckReply, DataReply, NakReply, Reply
-from ...sj300._parameters import motor_capacity_kw
-from ...sj300._payloads import InverterStatus, MonitorData, TripHistory, TripRecord
-from ...sj300._reply_encoding import encode_monitor, encode_status, encode_trip_history
-from ...sj300._requests import Request
-from ...sj300._terminals import ASSIGNED_INPUT_BITS, InputMonitor, InputTerminal, OutputTerminal
-from ...wire._enums import Direction
-from ...wire._errors import LocalProtocolError
+from ...sj300.codec import (
+    ASSIGNED_INPUT_BITS,
+    BROADCAST,
+    MAX_NODE,
+    MIN_NODE,
+    AckDataReply,
+    AckReply,
+    Command,
+    DataReply,
+    InputMonitor,
+    InputTerminal,
+    InverterStatus,
+    MonitorData,
+    NakCode,
+    NakReply,
+    OutputTerminal,
+    Reply,
+    Request,
+    TripCode,
+    TripHistory,
+    TripRecord,
+    encode_monitor,
+    encode_status,
+    encode_trip_history,
+    motor_capacity_kw,
+)
+from ...wire import Direction, LocalProtocolError
 from .._electrical import MotorRating, electrical
 from .._motion import Output, Ramp, RunState, advance, classify, settled
 from ._memory import ParameterMemory
@@ -79,8 +95,8 @@ DEFAULT_EEPROM_WRITE_S: Final = 0.05
 _HOUR_S: Final = 3600.0
 _RUN_MODES: Final = {b"0": Direction.STOP, b"1": Direction.FORWARD, b"2": Direction.REVERSE}
 
-# Terminal bits as plain ints: IntFlag arithmetic costs microseconds per operation,
-# and the run command is worked out several times per request.
+# Terminal bits as plain ints: IntFlag arithmetic runs enum's Python code on every
+# operation, and the run command is worked out several times per request.
 _FW: Final = InputTerminal.FW.value
 _RV: Final = InputTerminal.RV.value
 _FRS: Final = InputTerminal.FRS.value
@@ -90,7 +106,7 @@ _EXT: Final = InputTerminal.EXT.value
 # Bits 1..8 of monitor item 5 are the intelligent input terminals 1..8.
 _INPUT_TERMINAL_CODES: Final = tuple(f"C00{i}" for i in range(1, 9))
 
-# Making an IntFlag from an int costs about a microsecond; the monitor makes two per
+# Making an IntFlag from an int runs enum's Python code; the monitor makes two per
 # request. Both flags have few values (9 and 3 bits), so each is made once.
 _INPUT_MONITORS: Final[dict[int, InputMonitor]] = {}
 _AL: Final = OutputTerminal.AL.value

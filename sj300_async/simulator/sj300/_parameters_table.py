@@ -46,8 +46,7 @@ from __future__ import annotations
 import enum
 from typing import Final
 
-from ...sj300._parameters import PARAMETERS, motor_capacity_kw
-from ...sj300._terminals import InputTerminal
+from ...sj300.codec import PARAMETERS, InputTerminal, motor_capacity_kw
 from .._pacing import LinePacing
 
 __all__ = [

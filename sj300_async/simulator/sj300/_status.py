@@ -19,9 +19,8 @@ from __future__ import annotations
 
 from typing import Final
 
-from ...sj300._codes import StatusA, StatusB, StatusC, TripStatusC
-from ...sj300._payloads import InverterStatus
-from ...wire._enums import Direction
+from ...sj300.codec import InverterStatus, StatusA, StatusB, StatusC, TripStatusC
+from ...wire import Direction
 from .._motion import Output, RunState
 
 __all__ = ["inverter_status", "trip_status_a", "trip_status_c"]

@@ -12,8 +12,7 @@ from __future__ import annotations
 
 from typing import Final
 
-from ...sj300._codes import StatusA, TripCode, TripStatusB, TripStatusC
-from ...sj300._payloads import TripHistory, TripRecord
+from ...sj300.codec import StatusA, TripCode, TripHistory, TripRecord, TripStatusB, TripStatusC
 from .._motion import RunState
 
 __all__ = ["EMPTY_RECORD", "TripLog", "overcurrent_code", "trip_status_b"]

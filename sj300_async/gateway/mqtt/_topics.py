@@ -1,4 +1,4 @@
-"""The MQTT contract: topics and payloads, shared by the gateway's bridge and the fleet view.
+"""The MQTT contract: topics and payloads, shared by the gateway's bridge and the fleet subscriber.
 
 Sans-IO (no client here): what goes where, and how a drive's state is
 written as JSON and read back. docs/GATEWAY.md prints the same layout.
@@ -24,13 +24,15 @@ separators; the gateway's configuration refuses others); the state's keys
 carry their units (``output_frequency_hz``); a value not read yet, or stale,
 is ``null`` rather than left out, so that a consumer's template never
 fails on a missing key; ``time`` is Unix time in seconds (a consumer on
-another machine cannot use the gateway's event-loop clock).
+another machine cannot use the gateway's event-loop clock). The state in
+words (``state``) and the trip's meaning (``trip_meaning``) travel with
+the values, worked out once by the drive's profile: a consumer never
+decodes a protocol's status codes to show them.
 """
 
 from __future__ import annotations
 
 import json
-import re
 from collections.abc import Mapping
 from dataclasses import dataclass, field
 from typing import Any, Final
@@ -43,7 +45,6 @@ __all__ = [
     "StateMessage",
     "Topics",
     "parse_state_topic",
-    "valid_name",
 ]
 
 DEFAULT_PREFIX: Final = "sj300"
@@ -52,12 +53,6 @@ AVAILABLE: Final = "online"
 UNAVAILABLE: Final = "offline"
 #: The payloads of ``…/set/command``.
 COMMANDS: Final = ("run_forward", "run_reverse", "stop")
-_NAME = re.compile(r"[A-Za-z0-9_.-]+")
-
-
-def valid_name(name: str) -> bool:
-    """True when *name* may be a topic level (a gateway id, a line name)."""
-    return bool(_NAME.fullmatch(name))
 
 
 @dataclass(frozen=True, slots=True)
@@ -129,7 +124,8 @@ class StateMessage:
     direction: str | None = None
     running: bool | None = None
     tripped: bool | None = None
-    #: The latest trip's code as the drive's display shows it (``"E07"``), when tripped.
+    #: The present trip's code as the drive's display shows it (``"E07"``), when tripped
+    #: and known.
     trip: str | None = None
     set_frequency_hz: float | None = None
     output_torque_percent: float | None = None
@@ -138,6 +134,10 @@ class StateMessage:
     status: Mapping[str, Any] | None = None
     #: Polled parameters in their units, by code.
     parameters: Mapping[str, float] = field(default_factory=dict)
+    #: The state in words (``stopped``, ``accelerating``, ``tripped``), None when unknown.
+    state: str | None = None
+    #: What the present trip means (``"over-voltage"``), None when unknown or not tripped.
+    trip_meaning: str | None = None
 
     def to_json(self) -> bytes:
         """The payload."""

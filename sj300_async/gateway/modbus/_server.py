@@ -3,10 +3,10 @@
 pymodbus (the ``gateway`` extra) parses and frames Modbus TCP, calls its
 datastore for each request and answers. The datastore here is
 :class:`GatewayDatastore`: per unit id, the drive's
-:class:`~._registers.RegisterMap` over its :class:`~._state.DriveState`
-for reads (served from the poll cache: no read reaches the line), and the
-line's :class:`~._control.Controller` for writes (which do, through the
-line's arbiter).
+:class:`~._registers.RegisterMap` over its latest snapshot for reads
+(served from the gateway's cache: no read reaches the line), and the
+gateway's write path for writes (which do, through the line's arbiter);
+a refusal is answered with :data:`~._registers.REFUSAL_CODES`' exception.
 
 Coupling to pymodbus, on purpose and pinned (``pymodbus>=3.10,<4``): a
 ``ModbusServerContext`` subclass whose ``async_getValues`` /
@@ -33,11 +33,9 @@ from pymodbus.pdu import ExceptionResponse, ModbusPDU
 from pymodbus.server import ModbusTcpServer
 from pymodbus.server.requesthandler import ServerRequestHandler
 
-from ._control import Controller
-from ._metrics import ClientCounters
-from ._model import Endpoint
-from ._registers import Exc, RegisterMap
-from ._state import DriveState
+from .. import Endpoint, GatewayDrive, GatewayView
+from ._clients import ClientCounters
+from ._registers import REFUSAL_CODES, EncodingCache, Exc, RegisterMap
 
 __all__ = ["GatewayDatastore", "ModbusGatewayServer", "Unit", "serve_modbus"]
 
@@ -58,20 +56,21 @@ _WRITE_FUNCTIONS = frozenset((6, 16, 23))
 
 @dataclass(frozen=True, slots=True)
 class Unit:
-    """What a unit id stands for: a drive, its map, and its line's controller."""
+    """What a unit id stands for: a drive, its line's map, and its encodings."""
 
-    state: DriveState
+    drive: GatewayDrive
     registers: RegisterMap
-    controller: Controller
+    cache: EncodingCache
 
 
 class GatewayDatastore(ModbusServerContext):
     """pymodbus's datastore interface over the gateway's units (see the module docstring)."""
 
-    def __init__(self, units: dict[int, Unit], stale_after_s: float) -> None:
+    def __init__(self, units: dict[int, Unit], gateway: GatewayView) -> None:
         # No super().__init__(): that builds pymodbus's own register blocks.
         self.units = units
-        self.stale_after_s = stale_after_s
+        self.gateway = gateway
+        self.stale_after_s = gateway.config.stale_after_s
         self.old_simulator = True  # pymodbus: "call my async_getValues / async_setValues"
         self.simdevices = []
 
@@ -89,7 +88,9 @@ class GatewayDatastore(ModbusServerContext):
         if func_code not in _READ_FUNCTIONS:
             return ExcCodes.ILLEGAL_FUNCTION  # coils and discrete inputs: none here
         now = asyncio.get_running_loop().time()
-        result = unit.registers.read(unit.state, address, count, now, self.stale_after_s)
+        result = unit.registers.read(
+            unit.drive, address, count, now, self.stale_after_s, unit.cache
+        )
         return ExcCodes(int(result)) if isinstance(result, Exc) else result
 
     async def async_setValues(
@@ -107,11 +108,10 @@ class GatewayDatastore(ModbusServerContext):
         words = [int(v) for v in values]
         request = unit.registers.decode_write(address, words)
         if isinstance(request, Exc):
-            refusal: Exc | None = request
-        else:
-            refusal = await unit.controller.write(_CLIENT.get(), unit.state, request)
-        if refusal is not None:
-            return ExcCodes(int(refusal))
+            return ExcCodes(int(request))
+        result = await self.gateway.write(_CLIENT.get(), unit.drive, request)
+        if result.refusal is not None:
+            return ExcCodes(int(REFUSAL_CODES[result.refusal]))
         if func_code == 6:
             _ECHO.set(words)
         return None
@@ -168,10 +168,10 @@ class ModbusGatewayServer(ModbusTcpServer):
 
 
 async def serve_modbus(
-    units: dict[int, Unit], endpoint: Endpoint, stale_after_s: float, counters: ClientCounters
+    units: dict[int, Unit], gateway: GatewayView, endpoint: Endpoint, counters: ClientCounters
 ) -> ModbusGatewayServer:
     """Start serving *units* on *endpoint*; the server runs until its ``shutdown()``."""
-    server = ModbusGatewayServer(GatewayDatastore(units, stale_after_s), endpoint, counters)
+    server = ModbusGatewayServer(GatewayDatastore(units, gateway), endpoint, counters)
     await server.serve_forever(background=True)
     _log.info("Modbus TCP on %s:%d, units %s", endpoint.host, server.port, sorted(units))
     return server

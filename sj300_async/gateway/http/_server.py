@@ -6,8 +6,9 @@ Decisions:
   resources do not justify a dependency, and prometheus_client's own
   server runs in a thread, where it would read the buses' live counters
   while the event loop updates them. Here the scrape runs on the loop
-  (:func:`prometheus_client.generate_latest` is synchronous and cheap: see
-  :mod:`._metrics`), so it sees one consistent state.
+  (:func:`prometheus_client.generate_latest` is synchronous and cheap: the
+  families are built from counters the gateway keeps anyway), so it sees
+  one consistent state.
 - ``/metrics`` is always the classic text format (``CONTENT_TYPE_LATEST``),
   whatever the scraper's ``Accept`` says: Prometheus reads it, and nothing
   exported here needs what OpenMetrics adds (exemplars, ``_created``).
@@ -33,15 +34,16 @@ from __future__ import annotations
 import asyncio
 import logging
 import re
-from collections.abc import Callable
+from collections.abc import Callable, Iterable
 from dataclasses import dataclass
 from typing import Final
 
 from prometheus_client import CONTENT_TYPE_LATEST, CollectorRegistry, generate_latest
+from prometheus_client.core import Metric
 
-from ._model import Endpoint
+from .. import Endpoint
 
-__all__ = ["HEAD_TIMEOUT_S", "MAX_HEAD_BYTES", "serve_http"]
+__all__ = ["HEAD_TIMEOUT_S", "MAX_HEAD_BYTES", "make_registry", "serve_http"]
 
 _log = logging.getLogger("sj300_async.gateway.http")
 
@@ -84,6 +86,27 @@ class _Response:
         ]
         head = ("\r\n".join(lines) + "\r\n\r\n").encode("ascii")
         return head if head_only else head + self.body
+
+
+class _Collector:
+    """A prometheus_client collector calling *collect* at each scrape."""
+
+    def __init__(self, collect: Callable[[], Iterable[Metric]]) -> None:
+        self._collect = collect
+
+    def collect(self) -> Iterable[Metric]:
+        return self._collect()
+
+
+def make_registry(collect: Callable[[], Iterable[Metric]]) -> CollectorRegistry:
+    """A new registry whose one collector is *collect* (not the global default registry).
+
+    Two gateways in one process (tests) do not collide, and no process or
+    platform collector sneaks in.
+    """
+    registry = CollectorRegistry()
+    registry.register(_Collector(collect))
+    return registry
 
 
 class _BadRequest(Exception):

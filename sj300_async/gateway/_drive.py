@@ -1,0 +1,92 @@
+"""One drive while the gateway serves it: its readings, its latest snapshot, its lease.
+
+The gateway keeps one :class:`GatewayDrive` per configured drive. Samples
+and the read-backs of writes go into its
+:class:`~sj300_async.profiles.DriveReadings`; after each, the gateway
+builds a new :class:`~sj300_async.profiles.DriveSnapshot` (:meth:`rebuild`)
+and hands it to every northbound. Northbounds read a drive through this
+object: ``snapshot`` (the latest), ``lease`` (live: a Modbus read of the
+lease registers sees it change between samples), ``line`` (its line's
+configuration: write grants), ``profile`` and ``unit``. They never write
+to it: writes go through the gateway (:meth:`~._northbound.GatewayView.write`).
+
+The lease (:class:`Lease`) is plain state here; :mod:`._control` takes and
+renews it and runs the lapse action.
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from dataclasses import dataclass, field
+
+from ..profiles import DriveReadings, DriveSnapshot, Profile, build_snapshot
+from ._model import LineConfig
+
+__all__ = ["GatewayDrive", "Lease"]
+
+
+@dataclass(slots=True)
+class Lease:
+    """Who may send run and frequency commands to one drive, and until when."""
+
+    #: How long a heartbeat keeps the lease, in seconds.
+    duration_s: float
+    #: The client holding it (its IP address, ``"mqtt"``), or None.
+    holder: str | None = None
+    #: Event-loop time at which it lapses (meaningless without a holder).
+    expires_at: float = -math.inf
+
+    def held_by(self, client: str, now: float) -> bool:
+        """True when *client* holds the lease at *now*."""
+        return self.holder == client and now < self.expires_at
+
+    def held(self, now: float) -> bool:
+        """True when someone holds the lease at *now*."""
+        return self.holder is not None and now < self.expires_at
+
+    def seconds_left(self, now: float) -> float:
+        """Seconds until the lease lapses (0 when nobody holds it)."""
+        return max(0.0, self.expires_at - now) if self.holder is not None else 0.0
+
+
+@dataclass(slots=True, eq=False)
+class GatewayDrive:
+    """One drive of the gateway (see the module docstring)."""
+
+    line: LineConfig
+    node: int
+    profile: Profile
+    lease: Lease
+    readings: DriveReadings = field(default_factory=DriveReadings)
+    #: The latest snapshot (one with nothing read before the first sample).
+    snapshot: DriveSnapshot = field(init=False)
+
+    def __post_init__(self) -> None:
+        self.snapshot = self._build(now=-math.inf, wall=0.0)
+
+    @property
+    def unit(self) -> int:
+        """The drive's unit id (Modbus unit; docs/GATEWAY.md)."""
+        return self.line.unit(self.node)
+
+    @property
+    def key(self) -> tuple[str, int]:
+        """``(line name, node)``: the drive's name in the gateway."""
+        return self.line.name, self.node
+
+    def rebuild(self, now: float, wall: float | None = None) -> DriveSnapshot:
+        """A new snapshot from the readings at loop time *now* (Unix time *wall*, default now)."""
+        self.snapshot = self._build(now, time.time() if wall is None else wall)
+        return self.snapshot
+
+    def _build(self, now: float, wall: float) -> DriveSnapshot:
+        return build_snapshot(
+            self.profile,
+            self.readings,
+            line=self.line.name,
+            node=self.node,
+            unit=self.unit,
+            now=now,
+            wall=wall,
+        )

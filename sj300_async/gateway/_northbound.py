@@ -1,0 +1,223 @@
+"""The northbound seam: how the gateway serves its drives, one small interface per way.
+
+A northbound is one way of serving the drives to the outside: Modbus TCP,
+MQTT, HTTP (metrics and health), and whatever comes next. Each is one
+package that registers a :class:`NorthboundSpec` under the name of its
+configuration section; the gateway knows none of them by name:
+
+- the configuration: the spec owns its section (its keys, their parsing
+  and validation through :class:`~._toml.ConfigTable`, so its errors name
+  the file, line and key like every other) and, optionally, one command
+  line flag (:class:`Flag`: ``--modbus HOST:PORT`` sets ``modbus.listen``);
+- the running part, a :class:`Northbound` the spec creates: ``start`` (given
+  a :class:`GatewayView`), ``publish`` (a drive's new snapshot: it must
+  never block, since it runs on the poller's sample), ``metrics`` (its own
+  Prometheus families, e.g. its clients' counters), ``close``.
+
+Writes arrive from a northbound's clients and go through
+:meth:`GatewayView.write` as neutral :data:`~._writes.WriteRequest` values;
+the answer is a neutral :class:`~._writes.WriteResult` that each northbound
+words its own way. A northbound that refuses a request before it reaches
+the gateway (it could not parse it) records that through
+:meth:`GatewayView.refused`, so the audit log has every refusal.
+
+Adding a northbound is one package plus one :func:`register_northbound`
+call (the tests define one of their own: a JSON-lines writer). The built-in
+ones are listed in :data:`_BUILT_IN`, imported on first use; a spec module
+must import nothing heavy (the command line loads every spec to build the
+``sj300 gateway`` flags): the server libraries are imported by ``create``.
+"""
+
+from __future__ import annotations
+
+import re
+from collections.abc import Iterable, Sequence
+from dataclasses import dataclass
+from pathlib import Path
+from typing import TYPE_CHECKING, Final, Protocol
+
+from ..bus import load_object
+from ..profiles import DriveSnapshot
+from ..wire import LocalProtocolError
+from ._drive import GatewayDrive
+from ._model import Endpoint, GatewayConfig
+from ._toml import ConfigTable
+from ._writes import WriteRequest, WriteResult
+
+if TYPE_CHECKING:
+    from prometheus_client.core import Metric
+
+__all__ = [
+    "Flag",
+    "GatewayView",
+    "Northbound",
+    "NorthboundSpec",
+    "SectionContext",
+    "get_northbound",
+    "northbound_names",
+    "register_northbound",
+    "unregister_northbound",
+]
+
+
+class GatewayView(Protocol):
+    """What a northbound sees of the gateway (the :class:`~._gateway.Gateway` itself)."""
+
+    @property
+    def config(self) -> GatewayConfig: ...
+
+    @property
+    def drives(self) -> Sequence[GatewayDrive]:
+        """Every drive, lines in the configuration's order, nodes ascending."""
+
+    def drive(self, line: str, node: int) -> GatewayDrive | None:
+        """The drive *node* of line *line*, None when the gateway has no such drive."""
+
+    async def write(self, client: str, drive: GatewayDrive, request: WriteRequest) -> WriteResult:
+        """Judge and carry out *client*'s write (audited); never raises for a refusal."""
+
+    def refused(
+        self, client: str, drive: GatewayDrive, what: str, value: object, result: WriteResult
+    ) -> None:
+        """Audit a request the northbound refused before handing it over."""
+
+    def metrics(self) -> Iterable[Metric]:
+        """Every metric family of the gateway, every northbound's included, built now."""
+
+    def problems(self) -> list[str]:
+        """Why the gateway is not healthy now, one line each (empty: healthy)."""
+
+
+class Northbound(Protocol):
+    """One way of serving the drives, running (see the module docstring)."""
+
+    async def start(self, gateway: GatewayView) -> None:
+        """Start serving (listen, connect); raise if it cannot (nothing is left running)."""
+
+    def announce(self) -> str | None:
+        """One line saying where it serves, once started (``modbus on 127.0.0.1:1502``)."""
+
+    def publish(self, snapshot: DriveSnapshot) -> None:
+        """A drive's new snapshot (after each sample and write). Must not block."""
+
+    def metrics(self) -> Iterable[Metric]:
+        """Its own metric families (its clients, its connection), built now."""
+
+    async def close(self) -> None:
+        """Stop serving: no client request starts any more once this returns."""
+
+
+@dataclass(frozen=True, slots=True)
+class Flag:
+    """A northbound's command-line flag: ``--modbus HOST:PORT`` sets ``modbus.listen``."""
+
+    #: The option, ``"--modbus"``.
+    option: str
+    #: The key of the northbound's section the flag's value sets.
+    key: str
+    metavar: str
+    help: str
+
+
+@dataclass(frozen=True, slots=True)
+class SectionContext:
+    """What a section's parser may need of the rest of the configuration."""
+
+    #: The gateway's id (``[gateway] id``, else the host name's).
+    gateway_id: str
+    #: Relative paths in the file are relative to this (the file's directory).
+    base_dir: Path
+
+
+class NorthboundSpec(Protocol):
+    """A registered northbound: its section, its flag, and how to make it run."""
+
+    #: The name it is registered under, and its configuration section's.
+    @property
+    def section(self) -> str: ...
+
+    #: The keys its section may hold.
+    @property
+    def keys(self) -> Sequence[str]: ...
+
+    @property
+    def flag(self) -> Flag | None: ...
+
+    #: Modules it needs that an extra brings (``("pymodbus",)``), checked before it starts.
+    @property
+    def requires(self) -> Sequence[str]: ...
+
+    def parse(self, table: ConfigTable, context: SectionContext) -> object:
+        """Its configuration from its section.
+
+        Raises:
+            GatewayConfigError: through *table*'s getters and ``table.error``.
+        """
+
+    def endpoints(self, config: object) -> Sequence[tuple[str, Endpoint]]:
+        """The sockets it listens on, with the key that names each (two may not collide)."""
+
+    def create(self, config: object) -> Northbound:
+        """The northbound for *config*, not started."""
+
+
+#: The library's northbounds, in the order they start (and announce themselves).
+_BUILT_IN: Final = {
+    "modbus": "sj300_async.gateway.modbus:NORTHBOUND",
+    "metrics": "sj300_async.gateway.http:NORTHBOUND",
+    "mqtt": "sj300_async.gateway.mqtt:NORTHBOUND",
+}
+_NAME: Final = re.compile(r"[a-z][a-z0-9_]*\Z")
+_entries: dict[str, str | NorthboundSpec] = dict(_BUILT_IN)
+_loaded: dict[str, NorthboundSpec] = {}
+#: Sections the gateway's own schema uses: no northbound may take them.
+RESERVED_SECTIONS: Final = frozenset({"gateway", "lines"})
+
+
+def register_northbound(name: str, spec: str | NorthboundSpec) -> None:
+    """Make *name* a northbound the gateway can be configured with (section ``[name]``).
+
+    Args:
+        name: lower-case letters, digits and ``_``: its section's name.
+        spec: ``"module:attribute"`` of a :class:`NorthboundSpec`, imported on
+            first use, or the spec itself.
+
+    Raises:
+        LocalProtocolError: a bad name, a reserved one, or one already registered.
+    """
+    if not isinstance(name, str) or not _NAME.match(name) or name in RESERVED_SECTIONS:
+        raise LocalProtocolError(f"a northbound name is a free section name, got {name!r}")
+    if name in _entries:
+        raise LocalProtocolError(f"northbound {name!r} is already registered")
+    _entries[name] = spec
+
+
+def unregister_northbound(name: str) -> None:
+    """Forget a northbound added with :func:`register_northbound` (the built-in ones stay)."""
+    if name not in _BUILT_IN:
+        _entries.pop(name, None)
+        _loaded.pop(name, None)
+
+
+def northbound_names() -> tuple[str, ...]:
+    """Every registered northbound, in the order they start."""
+    return tuple(_entries)
+
+
+def get_northbound(name: str) -> NorthboundSpec:
+    """The spec of northbound *name*.
+
+    Raises:
+        LocalProtocolError: no such northbound, or it names another section.
+    """
+    spec = _loaded.get(name)
+    if spec is not None:
+        return spec
+    entry = _entries.get(name)
+    if entry is None:
+        raise LocalProtocolError(f"unknown northbound {name!r} (use {', '.join(_entries)})")
+    loaded: NorthboundSpec = load_object(entry) if isinstance(entry, str) else entry
+    if loaded.section != name:
+        raise LocalProtocolError(f"northbound {name!r} is registered to section {loaded.section!r}")
+    _loaded[name] = loaded
+    return loaded

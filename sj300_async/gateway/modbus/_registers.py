@@ -1,0 +1,355 @@
+"""The Modbus register map: what each holding register of a drive's unit holds.
+
+Sans-IO: :class:`RegisterMap` turns a read of ``count`` registers at
+``address`` into register values from a drive's latest snapshot (or a
+Modbus exception code), and a write into a neutral
+:data:`~sj300_async.gateway.WriteRequest` for the gateway to judge and
+carry out. docs/GATEWAY.md prints the map; :func:`describe` generates it,
+so the two cannot drift.
+
+The map is one common block (identity, state, output, the lease and
+commands), the drive's protocol's own block and parameter bases (its
+profile's :class:`~sj300_async.profiles.RegisterLayout`: a third
+protocol brings its own), and a block per polled parameter.
+
+Decisions:
+
+- One map, read with function 3 (holding registers) or 4 (input registers),
+  written with 6 or 16; addresses are the PDU's, 0-based.
+- Every value is an integer count of a documented step (0.01 Hz, 0.1 A...).
+  Two-register values are 32-bit, high word first (big-endian word order,
+  "ABCD"); signed values are two's complement; a value too large for its
+  registers saturates (never wraps into a plausible wrong number).
+- A read succeeds whole or not at all: any register of it unknown (0x02),
+  any data in it older than the staleness limit or never read (0x0B,
+  "gateway target device failed to respond"). The identity block
+  (online, sample age) is always served, so a SCADA can see why.
+- A parameter is served at ``base(group) + 2 * number`` (A004 at 12008,
+  Pr.7 at 30014) when the line polls it; it is counted in its own setting
+  increment (F002 = 30.00 s reads 3000), 32-bit. A parameter is written
+  whole: both registers in one function-16 request.
+- One write request changes one thing (a heartbeat, a command, the set
+  frequency, or one parameter); a write spanning several is refused (0x03).
+- A neutral refusal becomes the exception its meaning is closest to
+  (:data:`REFUSAL_CODES`).
+"""
+
+from __future__ import annotations
+
+import enum
+import math
+from collections.abc import Callable, Iterable, Iterator
+from dataclasses import dataclass
+from typing import Final
+
+from ...profiles import NEVER, DriveSnapshot, Profile, RegisterField, in_counts, read_time
+from ...wire import Direction
+from .. import (
+    GatewayDrive,
+    Heartbeat,
+    ParameterWrite,
+    Refusal,
+    RunCommand,
+    SetFrequency,
+    WriteRequest,
+)
+
+__all__ = [
+    "REFUSAL_CODES",
+    "Exc",
+    "Field",
+    "RegisterMap",
+    "describe",
+    "parameter_address",
+]
+
+
+class Exc(enum.IntEnum):
+    """The Modbus exception codes the gateway answers with."""
+
+    ILLEGAL_FUNCTION = 0x01  #: not allowed: read-only, not allow-listed, no lease
+    ILLEGAL_ADDRESS = 0x02  #: no such register for this unit
+    ILLEGAL_VALUE = 0x03  #: a value the drive must not get, or a malformed write
+    DEVICE_FAILURE = 0x04  #: the drive refused (NAK) or read back something else
+    DEVICE_BUSY = 0x06  #: another client holds the control lease
+    PATH_UNAVAILABLE = 0x0A  #: no drive behind this unit id
+    TARGET_FAILED = 0x0B  #: stale or missing data, or the drive did not answer
+
+
+#: The exception each neutral refusal is answered with.
+REFUSAL_CODES: Final = {
+    Refusal.NOT_ALLOWED: Exc.ILLEGAL_FUNCTION,
+    Refusal.NO_LEASE: Exc.ILLEGAL_FUNCTION,
+    Refusal.LEASE_HELD: Exc.DEVICE_BUSY,
+    Refusal.INVALID_VALUE: Exc.ILLEGAL_VALUE,
+    Refusal.MALFORMED: Exc.ILLEGAL_VALUE,
+    Refusal.UNKNOWN_TARGET: Exc.ILLEGAL_ADDRESS,
+    Refusal.BUSY: Exc.DEVICE_BUSY,
+    Refusal.DRIVE_REFUSED: Exc.DEVICE_FAILURE,
+    Refusal.NOT_CONFIRMED: Exc.DEVICE_FAILURE,
+    Refusal.NO_ANSWER: Exc.TARGET_FAILED,
+}
+
+HEARTBEAT: Final = 1000
+LEASE_LEFT: Final = 1001
+COMMAND: Final = 1002
+SET_FREQUENCY: Final = 1003
+
+
+def parameter_address(profile: Profile, code: str) -> int | None:
+    """The first register of parameter *code* (normalised), or None if it has none."""
+    for prefix, base in profile.registers.parameter_bases.items():
+        if code.startswith(prefix) and code[len(prefix) :].isdigit():
+            number = int(code[len(prefix) :])
+            return base + 2 * number if number < 1000 else None
+    return None
+
+
+# -- the fields -------------------------------------------------------------------
+
+#: A field's value in counts from a drive at a loop time (None: not known).
+Getter = Callable[[GatewayDrive, float], "int | None"]
+#: When a field's data was read (None: live, never stale).
+Stamp = Callable[[DriveSnapshot], float]
+
+
+@dataclass(frozen=True, slots=True)
+class Field:
+    """One value of the map: where, how wide, in what step, and from what."""
+
+    address: int
+    name: str
+    #: The step one count stands for, for the documentation ("0.01 Hz", "bit field").
+    unit: str
+    value: Getter
+    stamp: Stamp | None = None
+    width: int = 1
+    signed: bool = False
+    #: True for the registers a write may target (the gateway judges the writes).
+    writable: bool = False
+
+    def words(self, drive: GatewayDrive, now: float) -> list[int] | None:
+        """The field's registers, or None when its value is unknown."""
+        value = self.value(drive, now)
+        if value is None:
+            return None
+        if self.width == 1 and not self.signed:  # most fields: one unsigned register
+            return [0 if value < 0 else 0xFFFF if value > 0xFFFF else value]
+        bits = 16 * self.width
+        if self.signed:
+            low, high = -(1 << (bits - 1)), (1 << (bits - 1)) - 1
+        else:
+            low, high = 0, (1 << bits) - 1
+        value = min(max(value, low), high) & ((1 << bits) - 1)  # saturate, then two's complement
+        return [(value >> (16 * (self.width - 1 - i))) & 0xFFFF for i in range(self.width)]
+
+
+def _snapshot(get: Callable[[DriveSnapshot], float | None], per_unit: float = 1) -> Getter:
+    def read(drive: GatewayDrive, now: float) -> int | None:
+        return in_counts(get(drive.snapshot), per_unit)
+
+    return read
+
+
+def _flag(get: Callable[[DriveSnapshot], bool | None]) -> Getter:
+    def read(drive: GatewayDrive, now: float) -> int | None:
+        value = get(drive.snapshot)
+        return None if value is None else int(value)
+
+    return read
+
+
+def _direction(drive: GatewayDrive, now: float) -> int | None:
+    direction = drive.snapshot.direction
+    return None if direction is None else int(direction)
+
+
+def _age(drive: GatewayDrive, now: float) -> int:
+    age = drive.snapshot.sample_age_s(now)
+    return 65535 if age is None else math.floor(age)
+
+
+_status_at = read_time("status")
+_monitor_at = read_time("monitor")
+_direction_at = read_time("direction")
+
+
+def _common(protocol_id: int) -> list[Field]:
+    m = _monitor_at
+    return [
+        Field(0, "drive online (poller's verdict)", "0/1", lambda d, now: int(d.snapshot.online)),
+        Field(1, "seconds since the last good sample (65535: never)", "1 s", _age),
+        Field(2, "protocol (1 SJ300, 2 FR-700)", "code", lambda d, now: protocol_id),
+        Field(3, "node (FR-700: station)", "address", lambda d, now: d.node),
+        Field(200, "running", "0/1", _flag(lambda s: s.running), _status_at),
+        Field(201, "tripped", "0/1", _flag(lambda s: s.tripped), _status_at),
+        Field(100, "output frequency", "0.01 Hz", _snapshot(lambda s: s.output_frequency_hz, 100),
+              m),
+        Field(101, "output current", "0.1 A", _snapshot(lambda s: s.output_current_a, 10), m),
+        Field(102, "output voltage", "0.1 V", _snapshot(lambda s: s.output_voltage_v, 10), m),
+        Field(103, "direction (0 stop, 1 forward, 2 reverse)", "code", _direction, _direction_at),
+        Field(
+            HEARTBEAT,
+            "control lease: write any value to take or renew it; reads 1 while held",
+            "0/1",
+            lambda d, now: int(d.lease.held(now)),
+            writable=True,
+        ),
+        Field(
+            LEASE_LEFT,
+            "control lease: time left",
+            "0.1 s",
+            lambda d, now: round(d.lease.seconds_left(now) * 10),
+        ),
+        Field(
+            COMMAND,
+            "run command: write 0 stop, 1 forward, 2 reverse; reads the direction",
+            "code",
+            _direction,
+            _direction_at,
+            writable=True,
+        ),
+        Field(
+            SET_FREQUENCY,
+            "set frequency (as last read back)",
+            "0.01 Hz",
+            _snapshot(lambda s: s.set_frequency_hz, 100),
+            read_time("set_frequency"),
+            writable=True,
+        ),
+    ]  # fmt: skip
+
+
+def _protocol_field(field: RegisterField) -> Field:
+    """A profile's own register, read from the drive's snapshot."""
+    get = field.value
+
+    def read(drive: GatewayDrive, now: float) -> int | None:
+        return get(drive.snapshot)
+
+    return Field(
+        field.address, field.name, field.step, read, field.stamp, field.width, field.signed
+    )
+
+
+def _parameter_field(code: str, address: int) -> Field:
+    def read(drive: GatewayDrive, now: float) -> int | None:
+        reading = drive.snapshot.parameters.get(code)
+        return None if reading is None else reading.raw
+
+    def stamp(snapshot: DriveSnapshot) -> float:
+        reading = snapshot.parameters.get(code)
+        return NEVER if reading is None else reading.at
+
+    return Field(
+        address,
+        f"parameter {code}",
+        "its setting increment",
+        read,
+        stamp,
+        width=2,
+        signed=True,
+        writable=True,
+    )
+
+
+#: Encoded fields by address, with the read time each was encoded for (see RegisterMap.read).
+EncodingCache = dict[int, tuple[float, "list[int] | None"]]
+
+
+class RegisterMap:
+    """The registers of every drive of one line (its protocol's profile and polled parameters)."""
+
+    def __init__(self, profile: Profile, parameters: Iterable[str] = ()) -> None:
+        layout = profile.registers
+        fields = _common(layout.protocol_id) + [_protocol_field(f) for f in layout.fields]
+        self.parameters: dict[int, str] = {}
+        for code in parameters:
+            address = parameter_address(profile, code)
+            if address is not None:
+                fields.append(_parameter_field(code, address))
+                self.parameters[address] = code
+        self.profile = profile
+        self.fields = sorted(fields, key=lambda f: f.address)
+        #: address -> (field, index of the word within the field)
+        self._at: dict[int, tuple[Field, int]] = {}
+        for f in self.fields:
+            for word in range(f.width):
+                if f.address + word in self._at:
+                    raise AssertionError(f"register {f.address + word} defined twice")
+                self._at[f.address + word] = (f, word)
+
+    def __iter__(self) -> Iterator[Field]:
+        return iter(self.fields)
+
+    def read(
+        self,
+        drive: GatewayDrive,
+        address: int,
+        count: int,
+        now: float,
+        stale_after_s: float,
+        cache: EncodingCache | None = None,
+    ) -> list[int] | Exc:
+        """*count* registers from *address*, or the exception that refuses the whole read.
+
+        *cache*, kept per drive by the caller, holds each field's encoding
+        with the read time it was encoded for: a SCADA reads far more often
+        than the line polls, and a value is encoded once per read of it.
+        """
+        out: list[int] = []
+        at, end = address, address + count
+        snapshot = drive.snapshot
+        while at < end:  # field by field (a two-register field is read once)
+            found = self._at.get(at)
+            if found is None:
+                return Exc.ILLEGAL_ADDRESS
+            f, word = found
+            stamp = f.stamp
+            if stamp is None:  # live: computed every time
+                words = f.words(drive, now)
+            else:
+                read_at = stamp(snapshot)
+                if now - read_at > stale_after_s:
+                    return Exc.TARGET_FAILED
+                cached = None if cache is None else cache.get(f.address)
+                if cached is not None and cached[0] == read_at:
+                    words = cached[1]
+                else:
+                    words = f.words(drive, now)
+                    if cache is not None:
+                        cache[f.address] = (read_at, words)
+            if words is None:
+                return Exc.TARGET_FAILED
+            taken = words[word : word + end - at]
+            out += taken
+            at += len(taken)
+        return out
+
+    def decode_write(self, address: int, values: list[int]) -> WriteRequest | Exc:
+        """What a write of *values* at *address* asks for (not yet judged)."""
+        found = self._at.get(address)
+        if found is None or any(a not in self._at for a in range(address, address + len(values))):
+            return Exc.ILLEGAL_ADDRESS
+        f, word = found
+        if not f.writable:
+            return Exc.ILLEGAL_FUNCTION
+        if word != 0 or len(values) != f.width:
+            return Exc.ILLEGAL_VALUE  # part of a value, or more than one target
+        if address == HEARTBEAT:
+            return Heartbeat()
+        if address == COMMAND:
+            if values[0] not in (0, 1, 2):
+                return Exc.ILLEGAL_VALUE
+            return RunCommand(Direction(values[0]))
+        if address == SET_FREQUENCY:
+            return SetFrequency(values[0] / 100)
+        raw = (values[0] << 16) | values[1]
+        if raw >= 1 << 31:
+            raw -= 1 << 32
+        return ParameterWrite(self.parameters[address], raw)
+
+
+def describe(profile: Profile) -> list[tuple[int, int, str, str, bool]]:
+    """(address, registers, name, unit, writable) of every fixed field, for the documentation."""
+    return [(f.address, f.width, f.name, f.unit, f.writable) for f in RegisterMap(profile)]

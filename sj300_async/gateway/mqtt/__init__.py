@@ -1,0 +1,109 @@
+"""The MQTT northbound, and the fleet subscriber that reads what gateways publish.
+
+- The northbound (``[mqtt] url = "mqtt://HOST[:PORT]"`` or ``--mqtt URL``):
+  each drive's state and availability, Home Assistant discovery, and
+  commands (:mod:`._bridge`, :mod:`._messages`, :mod:`._discovery`,
+  :mod:`._commands`), on one connection kept up by :mod:`._session`.
+- The contract both sides share: topics and the state message
+  (:mod:`._topics`).
+- The fleet (:mod:`._fleet`): every drive of every gateway on a broker,
+  read-only; ``sj300 monitor --url mqtt://…`` renders it.
+
+aiomqtt (the ``gateway`` extra) is imported only when a connection is made:
+this package's face is light, for the command line builds its flags from it.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from typing import Final
+
+from .. import ConfigTable, Endpoint, Flag, Northbound, SectionContext
+from ._commands import COMMAND_DIRECTIONS, error_text, parse_command
+from ._config import MQTT_KEYS, MqttConfig, parse_mqtt_section
+from ._discovery import discovery, node_id
+from ._fleet import (
+    FLEET_SCHEMES,
+    Fleet,
+    FleetUrl,
+    Malformed,
+    SubscriptionRefused,
+    follow,
+    is_fleet_url,
+    parse_fleet_url,
+)
+from ._messages import state_message
+from ._session import BrokerUnreachable, SessionStats, backoff, keep_connected
+from ._stats import BridgeStats, mqtt_families
+from ._topics import (
+    AVAILABLE,
+    COMMANDS,
+    DEFAULT_PREFIX,
+    DISCOVERY_PREFIX,
+    UNAVAILABLE,
+    StateMessage,
+    Topics,
+    parse_state_topic,
+)
+
+__all__ = [
+    "AVAILABLE",
+    "COMMANDS",
+    "COMMAND_DIRECTIONS",
+    "DEFAULT_PREFIX",
+    "DISCOVERY_PREFIX",
+    "FLEET_SCHEMES",
+    "NORTHBOUND",
+    "UNAVAILABLE",
+    "BridgeStats",
+    "BrokerUnreachable",
+    "Fleet",
+    "FleetUrl",
+    "Malformed",
+    "MqttConfig",
+    "SessionStats",
+    "StateMessage",
+    "SubscriptionRefused",
+    "Topics",
+    "backoff",
+    "discovery",
+    "error_text",
+    "follow",
+    "is_fleet_url",
+    "keep_connected",
+    "mqtt_families",
+    "node_id",
+    "parse_command",
+    "parse_fleet_url",
+    "parse_state_topic",
+    "state_message",
+]
+
+
+class _Spec:
+    section = "mqtt"
+    keys = MQTT_KEYS
+    flag = Flag(
+        "--mqtt",
+        "url",
+        "URL",
+        "publish to this MQTT broker (mqtt://HOST[:PORT] or mqtts://): state, "
+        "availability, Home Assistant discovery",
+    )
+    requires = ("aiomqtt",)
+
+    def parse(self, table: ConfigTable, context: SectionContext) -> MqttConfig:
+        return parse_mqtt_section(table, context)
+
+    def endpoints(self, config: object) -> Sequence[tuple[str, Endpoint]]:
+        return ()  # a client: it listens on nothing
+
+    def create(self, config: object) -> Northbound:
+        from ._bridge import MqttBridge
+
+        assert isinstance(config, MqttConfig)
+        return MqttBridge(config)
+
+
+#: The registry's entry (``sj300_async.gateway.mqtt:NORTHBOUND``).
+NORTHBOUND: Final = _Spec()

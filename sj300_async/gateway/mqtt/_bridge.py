@@ -1,0 +1,540 @@
+"""The gateway on MQTT: each drive's state and availability, Home Assistant discovery, commands.
+
+:class:`MqttBridge` is the MQTT northbound, started by the gateway when the
+configuration has ``[mqtt]``. It publishes what :mod:`._topics` (the
+contract, shared with the fleet subscriber) lays out:
+
+- ``<prefix>/<gw>/availability``: ``online`` (retained) once connected; the
+  last will says ``offline`` when the broker loses the gateway (a crash: at
+  once; a frozen process, a cut cable: 1.5 ``keepalive_s`` later, plus the
+  broker's own check interval); a clean stop says
+  ``offline`` itself before disconnecting: the drives are no longer served.
+- ``…/<line>/<node>/state``: one retained :class:`~._topics.StateMessage`
+  per drive snapshot (every poll, and every write's read-back)
+  (:mod:`._messages`).
+- ``…/<line>/<node>/availability``: ``online`` while the poller hears the
+  drive (and it has answered at least once), published when that changes.
+- Home Assistant discovery (``discovery = true``, :mod:`._discovery`).
+- ``…/<line>/<node>/set/<what>``: commands (:mod:`._commands`), judged and
+  carried out by the gateway exactly like Modbus writes (allow-list,
+  lease, validation, read-back, audit). A refusal is answered on
+  ``…/<line>/<node>/error`` (JSON, not retained: the topic, an excerpt of
+  the payload, the neutral ``reason`` and a sentence in ``error``).
+
+Decisions:
+
+- **One identity for MQTT.** MQTT carries no client identity a gateway can
+  trust, so every command comes from client ``"mqtt"``: whoever may publish
+  to the ``set`` topics (the broker's ACL decides) shares one control lease,
+  and a Modbus client holding a drive's lease makes MQTT commands to it
+  refused (lease held), and the other way round.
+- **Never a stale command.** A message with the retain flag is refused: the
+  broker stored it, nobody sent it now (a retained "run_forward" would
+  start a motor at every reconnect). Commands are taken only while
+  connected, with a clean session (nothing queued for the gateway while it
+  was away); one received but not started before the connection broke is
+  discarded, counted, never carried out later.
+- **Never block the poller.** :meth:`MqttBridge.publish` only builds the
+  message and leaves it in the outbox, which holds at most one state and
+  one availability per drive: a newer one replaces the one not sent yet
+  (counted in ``BridgeStats.replaced``), so a broker that is down or slow
+  costs memory bounded by the number of drives, and the state that reaches
+  it is always the latest. The bridge's task drains the outbox.
+- **Reconnecting** (:mod:`._session`): back off 0.5 s doubling to 30 s,
+  then republish availability, discovery and every drive's latest state
+  (the broker may have restarted without its retained messages). The
+  Modbus side does not depend on the broker.
+- Commands to one drive are carried out in order (a lease, then a
+  frequency); each drive has its own queue, so a drive that does not
+  answer delays only its own commands, never another drive's heartbeat.
+- The bridge publishes with the configured QoS and waits for each batch's
+  acknowledgements (at most ``MAX_IN_FLIGHT`` at once) before the next: a
+  slow broker makes the outbox coalesce, never grow.
+
+Nothing is dropped silently: every replaced, lost or discarded message and
+every refused command is counted in :attr:`MqttBridge.stats` and logged at
+DEBUG (refusals also in the audit log).
+"""
+
+from __future__ import annotations
+
+import asyncio
+import collections
+import json
+import logging
+import math
+import time
+from collections.abc import Callable, Iterator
+from dataclasses import dataclass
+from typing import TYPE_CHECKING, Final
+
+import aiomqtt
+
+from ...profiles import DriveSnapshot
+from .. import GatewayDrive, GatewayView, Refusal, WriteResult, excerpt
+from ._commands import error_text, parse_command
+from ._config import MqttConfig
+from ._discovery import discovery
+from ._messages import state_message
+from ._session import keep_connected
+from ._stats import BridgeStats, mqtt_families
+from ._topics import AVAILABLE, UNAVAILABLE, Topics
+
+if TYPE_CHECKING:
+    from prometheus_client.core import Metric
+
+__all__ = ["CLIENT", "MqttBridge"]
+
+_log = logging.getLogger("sj300_async.gateway.mqtt")
+
+#: The client every MQTT command comes from (see the module docstring).
+CLIENT: Final = "mqtt"
+#: The reconnection back-off's ceiling.
+BACKOFF_MAX_S: Final = 30.0
+#: Error replies waiting to be sent, at most (the oldest is dropped, counted).
+MAX_ERRORS: Final = 100
+#: Commands waiting for one drive, at most (more are refused: busy).
+MAX_COMMANDS: Final = 16
+#: Publishes in flight at once (paho queues the rest; aiomqtt warns past its threshold).
+MAX_IN_FLIGHT: Final = 32
+#: Messages paho may hold for a socket that does not take them.
+MAX_QUEUED: Final = 1000
+#: How long a clean stop waits for a write under way, and for its last publishes.
+CLOSE_TIMEOUT_S: Final = 3.0
+#: How often a task that lost its cancellation is cancelled again (see _cancel_and_wait).
+CANCEL_AGAIN_S: Final = 0.1
+
+Key = tuple[str, int]
+
+
+@dataclass(frozen=True, slots=True)
+class _Out:
+    """One message to publish."""
+
+    topic: str
+    payload: bytes
+    retain: bool
+    #: The drive of a state message (counted per drive), else None.
+    drive: Key | None = None
+
+
+async def _cancel_and_wait(tasks: set[asyncio.Task[None]]) -> None:
+    """Cancel *tasks* and wait until each has ended, cancelling again any still running.
+
+    Once is not always enough on Python 3.11: a task inside ``asyncio.wait_for``
+    (aiomqtt's publish and subscribe) can lose a cancellation that arrives as
+    the awaited result does (gh-86296), and run on.
+    """
+    pending = {task for task in tasks if not task.done()}
+    while pending:
+        for task in pending:
+            task.cancel()
+        _, pending = await asyncio.wait(pending, timeout=CANCEL_AGAIN_S)
+    for task in tasks:
+        if not task.cancelled():
+            task.exception()  # retrieved: the caller has the connection's error already
+
+
+class MqttBridge:
+    """The gateway's MQTT client (see the module docstring); a northbound."""
+
+    def __init__(self, config: MqttConfig) -> None:
+        self.config = config
+        self.stats = BridgeStats()
+        self.topics = Topics("", config.prefix)  # the gateway's id is known at start
+        self.stale_after_s = math.inf
+        self._gateway: GatewayView | None = None
+        self._birth = f"{config.discovery_prefix}/status"
+        #: Waiting to be published: the latest per topic (state, availability, discovery).
+        self._pending: dict[str, _Out] = {}
+        #: Error replies, in order (each is an answer: never coalesced).
+        self._errors: collections.deque[_Out] = collections.deque()
+        self._wake = asyncio.Event()
+        #: The latest state message of each drive (republished on every connect).
+        self._latest: dict[Key, _Out] = {}
+        #: The availability last put in the outbox, per drive.
+        self._availability: dict[Key, bool] = {}
+        self._client: aiomqtt.Client | None = None
+        #: Changes on every connect and loss: a command of an older epoch is stale.
+        self._epoch = 0
+        self._commands: dict[Key, asyncio.Queue[tuple[int, str, bytes, str]]] = {}
+        self._workers: dict[Key, asyncio.Task[None]] = {}
+        self._busy: set[Key] = set()
+        self._task: asyncio.Task[None] | None = None
+        self._closing = False
+        #: Loop time by which a closing connection stops flushing and says "offline".
+        self._close_by = math.inf
+
+    @property
+    def connected(self) -> bool:
+        return self._client is not None
+
+    # -- the northbound --------------------------------------------------------------
+
+    async def start(self, gateway: GatewayView) -> None:
+        """Connect (and keep reconnecting) in the background."""
+        self._gateway = gateway
+        self.topics = Topics(gateway.config.gateway_id, self.config.prefix)
+        self.stale_after_s = gateway.config.stale_after_s
+        if self._task is None:
+            self._task = asyncio.get_running_loop().create_task(self._run(), name="mqtt bridge")
+
+    def announce(self) -> str | None:
+        return f"mqtt to {self.config.url} as {self.topics.gateway}"
+
+    def publish(self, snapshot: DriveSnapshot) -> None:
+        """A drive's new snapshot: publish its state (and availability when it changed).
+
+        Never blocks: the message waits in the outbox (see the module docstring).
+        """
+        if self._closing:
+            return
+        key = (snapshot.line, snapshot.node)
+        self.stats.samples[key] += 1
+        now = asyncio.get_running_loop().time()
+        message = state_message(
+            self.topics.gateway, snapshot, now=now, stale_after_s=self.stale_after_s
+        )
+        out = _Out(self.topics.state(*key), message.to_json(), retain=True, drive=key)
+        self._latest[key] = out
+        self._put(out)
+        available = snapshot.available
+        if self._availability.get(key) != available:
+            self._availability[key] = available
+            self._put(self._availability_out(key))
+
+    def metrics(self) -> Iterator[Metric]:
+        return mqtt_families(self.stats)
+
+    def _availability_out(self, key: Key) -> _Out:
+        payload = AVAILABLE if self._availability.get(key) else UNAVAILABLE
+        return _Out(self.topics.drive_availability(*key), payload.encode(), retain=True)
+
+    # -- the outbox ----------------------------------------------------------------------
+
+    def _put(self, out: _Out) -> None:
+        old = self._pending.pop(out.topic, None)
+        if old is not None and old is not out and old.drive is not None:
+            self.stats.replaced[old.drive] += 1
+            _log.debug("%s: replaced by a newer state before it was sent", out.topic)
+        self._pending[out.topic] = out
+        self._wake.set()
+
+    def _put_error(self, out: _Out) -> None:
+        if len(self._errors) >= MAX_ERRORS:
+            dropped = self._errors.popleft()
+            self.stats.errors_dropped += 1
+            _log.debug("error reply on %s dropped: %d waiting", dropped.topic, MAX_ERRORS)
+        self._errors.append(out)
+        self._wake.set()
+
+    def _announce(self) -> None:
+        """Everything retained, again: discovery, availability, the latest states."""
+        if self.config.discovery and self._gateway is not None:
+            configs = list(dict.fromkeys(d.line for d in self._gateway.drives))
+            for topic, body in discovery(self.config, self.topics, configs):
+                payload = json.dumps(body, separators=(",", ":")).encode()
+                self._put(_Out(topic, payload, retain=True))
+        # Only the drives polled already: "offline" for a drive not polled yet
+        # would be a guess (it follows its first poll).
+        for key in self._availability:
+            self._put(self._availability_out(key))
+        for out in self._latest.values():
+            self._put(out)
+
+    async def _send(self, client: aiomqtt.Client) -> None:
+        """Publish everything waiting; raise the connection's error after counting what it cost."""
+        while self._pending or self._errors:
+            batch = list(self._pending.values())
+            self._pending.clear()
+            batch += self._errors
+            self._errors.clear()
+            for start in range(0, len(batch), MAX_IN_FLIGHT):
+                chunk = batch[start : start + MAX_IN_FLIGHT]
+                try:
+                    results = await self._publish(client, chunk)
+                except asyncio.CancelledError:
+                    # Stopped mid-batch: this chunk's fate is unknown (it may have
+                    # reached the broker), the rest was never sent. Counted as lost,
+                    # since none is confirmed; never silently.
+                    self.stats.lost += len(batch) - start
+                    _log.debug("MQTT: stopped with %d messages unconfirmed", len(batch) - start)
+                    raise
+                failure: BaseException | None = None
+                for out, result in zip(chunk, results, strict=True):
+                    if isinstance(result, BaseException):
+                        failure = failure or result
+                        self.stats.lost += 1
+                        _log.debug("%s: not published: %s", out.topic, result)
+                        continue
+                    self.stats.published += 1
+                    if out.drive is not None:
+                        self.stats.states[out.drive] += 1
+                if failure is not None:
+                    self.stats.lost += len(batch) - start - len(chunk)
+                    raise failure
+
+    async def _publish(
+        self, client: aiomqtt.Client, chunk: list[_Out]
+    ) -> list[BaseException | None]:
+        """Publish *chunk* at once; each message's error, or None."""
+        qos = self.config.qos
+        if len(chunk) == 1:  # the usual case on a real line, one poll at a time: no task
+            out = chunk[0]
+            try:
+                await client.publish(out.topic, out.payload, qos=qos, retain=out.retain)
+            except Exception as exc:  # as gather(return_exceptions=True) would have it
+                return [exc]
+            return [None]
+        results = await asyncio.gather(
+            *(client.publish(o.topic, o.payload, qos=qos, retain=o.retain) for o in chunk),
+            return_exceptions=True,
+        )
+        return [r if isinstance(r, BaseException) else None for r in results]
+
+    async def _publisher(self, client: aiomqtt.Client) -> None:
+        task = asyncio.current_task()
+        assert task is not None
+        while True:
+            await self._wake.wait()
+            self._wake.clear()
+            await self._send(client)
+            if task.cancelling():
+                # aiomqtt's publish awaits asyncio.wait_for, which on Python 3.11 returns
+                # the result and drops a cancellation that arrives as the broker's
+                # acknowledgement does (gh-86296). This task then waited on _wake for
+                # good, and the gateway's stop with it (seen in the MQTT benchmark's
+                # child). The cancellation is not lost: raise it here.
+                raise asyncio.CancelledError
+
+    # -- the connection ------------------------------------------------------------------
+
+    def _make_client(self) -> aiomqtt.Client:
+        config = self.config
+        tls = None
+        if config.tls:
+            tls = aiomqtt.TLSParameters(
+                ca_certs=None if config.tls_ca is None else str(config.tls_ca)
+            )
+        client = aiomqtt.Client(
+            config.host,
+            config.port,
+            identifier=config.client_id,
+            username=config.username,
+            password=config.password,
+            tls_params=tls,
+            will=aiomqtt.Will(self.topics.availability, UNAVAILABLE, config.qos, retain=True),
+            clean_session=True,  # nothing the broker kept for us: no stale command
+            keepalive=config.keepalive_s,
+            # A broker that stops reading: paho's queue (QoS 0 publishes return at
+            # once) is bounded too; past it, publish fails and the bridge reconnects.
+            max_queued_outgoing_messages=MAX_QUEUED,
+        )
+        client.pending_calls_threshold = 2 * MAX_IN_FLIGHT
+        return client
+
+    async def _run(self) -> None:
+        await keep_connected(
+            self._make_client,
+            self._connection,
+            url=self.config.url,
+            log=_log,
+            ceiling_s=BACKOFF_MAX_S,
+            stats=self.stats,
+            who=f" as {self.topics.gateway}",
+        )
+
+    async def _connection(self, client: aiomqtt.Client, connected: Callable[[], None]) -> None:
+        """One connection: set up, then publish and receive until it fails."""
+        try:
+            await self._setup(client)
+            connected()
+            await self._session(client)
+        except asyncio.CancelledError:
+            if self._closing:
+                await self._say_offline(client)
+            raise  # and the clean disconnect: the broker drops the will
+        finally:
+            self._client = None
+            self._epoch += 1  # commands received on that connection are stale now
+
+    async def _say_offline(self, client: aiomqtt.Client) -> None:
+        """A clean stop: what is waiting, then "offline" (a clean disconnect has no will)."""
+        loop = asyncio.get_running_loop()
+        try:
+            async with asyncio.timeout(max(0.1, self._close_by - loop.time())):
+                await self._send(client)
+                await client.publish(
+                    self.topics.availability, UNAVAILABLE, qos=self.config.qos, retain=True
+                )
+        except (aiomqtt.MqttError, TimeoutError) as exc:
+            # The disconnect that follows is clean, so the broker drops the will:
+            # "online" stays until the gateway connects again. Said loudly.
+            _log.warning("MQTT: could not say offline before stopping: %s", exc or "time-out")
+
+    async def _setup(self, client: aiomqtt.Client) -> None:
+        """Subscribe, say online, and queue everything retained again."""
+        qos = self.config.qos
+        await client.subscribe(self.topics.command_filter, qos=qos)
+        if self.config.discovery:
+            await client.subscribe(self._birth, qos=qos)
+        await client.publish(self.topics.availability, AVAILABLE, qos=qos, retain=True)
+        self._epoch += 1
+        self._client = client
+        self._announce()
+
+    async def _session(self, client: aiomqtt.Client) -> None:
+        """Publish and receive until the connection fails (raises its MqttError)."""
+        tasks = {
+            asyncio.create_task(self._publisher(client), name="mqtt publisher"),
+            asyncio.create_task(self._receiver(client), name="mqtt receiver"),
+        }
+        try:
+            done, _ = await asyncio.wait(tasks, return_when=asyncio.FIRST_COMPLETED)
+        finally:
+            await _cancel_and_wait(tasks)
+        for task in done:
+            task.result()  # the connection's error
+        raise aiomqtt.MqttError("the session ended")  # both loops run until an error
+
+    async def _receiver(self, client: aiomqtt.Client) -> None:
+        async for message in client.messages:
+            topic = message.topic.value
+            payload = message.payload if isinstance(message.payload, bytes) else b""
+            if topic == self._birth:
+                # Home Assistant (re)started: it needs the configs and states again. A
+                # retained birth is the one it sent before we connected: already covered.
+                if payload == AVAILABLE.encode() and not message.retain:
+                    _log.info("MQTT: Home Assistant is online: republishing discovery")
+                    self._announce()
+                continue
+            self._receive_command(topic, payload, retained=message.retain)
+
+    # -- commands ------------------------------------------------------------------------
+
+    def _drive(self, line: str, node: int) -> GatewayDrive | None:
+        return None if self._gateway is None else self._gateway.drive(line, node)
+
+    def _receive_command(self, topic: str, payload: bytes, *, retained: bool) -> None:
+        self.stats.commands += 1
+        parsed = self.topics.parse_command(topic)
+        drive = None if parsed is None else self._drive(*parsed[:2])
+        if parsed is None or drive is None:
+            self.stats.ignored += 1
+            _log.debug("MQTT: %s names no drive of this gateway: ignored", excerpt(topic))
+            return
+        line, node, what = parsed
+        if retained:
+            # Stored by the broker, not sent now: carrying it out would replay it.
+            self._refuse(
+                drive,
+                topic,
+                what,
+                payload,
+                WriteResult(
+                    Refusal.NOT_ALLOWED,
+                    "a retained command is never carried out (publish commands without retain)",
+                ),
+            )
+            return
+        queue = self._commands.get((line, node))
+        if queue is None:
+            queue = self._commands[line, node] = asyncio.Queue(MAX_COMMANDS)
+            self._workers[line, node] = asyncio.create_task(
+                self._worker((line, node), drive, queue), name=f"mqtt commands {line} {node}"
+            )
+        try:
+            queue.put_nowait((self._epoch, topic, payload, what))
+        except asyncio.QueueFull:
+            self._refuse(
+                drive,
+                topic,
+                what,
+                payload,
+                WriteResult(
+                    Refusal.BUSY, f"{MAX_COMMANDS} commands are already waiting for this drive"
+                ),
+            )
+
+    async def _worker(
+        self, key: Key, drive: GatewayDrive, queue: asyncio.Queue[tuple[int, str, bytes, str]]
+    ) -> None:
+        """Carry out one drive's commands, in order."""
+        while not self._closing:
+            epoch, topic, payload, what = await queue.get()
+            if epoch != self._epoch:
+                self.stats.discarded += 1
+                _log.debug("MQTT: %s %r discarded: received before the connection was lost",
+                           topic, excerpt(payload.decode("utf-8", "replace")))  # fmt: skip
+                continue
+            self._busy.add(key)
+            try:
+                await self._carry_out(drive, topic, what, payload)
+            finally:
+                self._busy.discard(key)
+
+    async def _carry_out(self, drive: GatewayDrive, topic: str, what: str, payload: bytes) -> None:
+        request = parse_command(drive.profile, what, payload)
+        if isinstance(request, WriteResult):
+            self._refuse(drive, topic, what, payload, request)
+            return
+        assert self._gateway is not None
+        result = await self._gateway.write(CLIENT, drive, request)  # audited there
+        if result.refusal is not None:
+            self._refuse(drive, topic, what, payload, result, audited=True)
+
+    def _refuse(
+        self,
+        drive: GatewayDrive,
+        topic: str,
+        what: str,
+        payload: bytes,
+        result: WriteResult,
+        *,
+        audited: bool = False,
+    ) -> None:
+        self.stats.refused += 1
+        text = excerpt(payload.decode("utf-8", errors="replace"))
+        error = error_text(result)
+        _log.debug("MQTT: %s %r refused: %s", topic, text, error)
+        if not audited and self._gateway is not None:
+            # The gateway audits what it judges; this was refused before it got there.
+            self._gateway.refused(CLIENT, drive, f"mqtt {what}", text, result)
+        reason = None if result.refusal is None else result.refusal.value
+        body = {"topic": topic, "payload": text, "error": error, "reason": reason,
+                "time": time.time()}  # fmt: skip
+        self._put_error(
+            _Out(self.topics.error(drive.line.name, drive.node), json.dumps(body).encode(), False)
+        )
+
+    # -- stopping ------------------------------------------------------------------------
+
+    async def close(self) -> None:
+        """Stop: finish the write under way, flush, say "offline", disconnect."""
+        if self._task is None:
+            return
+        self._closing = True
+        self._epoch += 1  # commands waiting are not carried out any more
+        loop = asyncio.get_running_loop()
+        # A write under way finishes (a write and its read-back stay together; its
+        # worker then sees _closing and ends); the idle workers end now.
+        busy = [task for key, task in self._workers.items() if key in self._busy]
+        for key, task in self._workers.items():
+            if key not in self._busy:
+                task.cancel()
+        if busy:
+            await asyncio.wait(busy, timeout=CLOSE_TIMEOUT_S)
+        await _cancel_and_wait(set(self._workers.values()))
+        waiting = sum(queue.qsize() for queue in self._commands.values())
+        if waiting:
+            self.stats.discarded += waiting
+            _log.debug("MQTT: %d commands discarded: the gateway is stopping", waiting)
+        # The connection's own task says "offline" as it ends (see _connection), after
+        # anything it was publishing: never before an "online" still on its way.
+        self._close_by = loop.time() + CLOSE_TIMEOUT_S
+        await _cancel_and_wait({self._task})
+        self._task = None
+        pending = len(self._pending) + len(self._errors)
+        if pending:
+            self.stats.lost += pending
+            _log.debug("MQTT: %d messages not published before stopping", pending)

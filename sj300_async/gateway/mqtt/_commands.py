@@ -1,0 +1,103 @@
+"""MQTT commands: ``…/<line>/<node>/set/<what>`` payloads -> the gateway's neutral writes.
+
+Sans-IO. ``<what>`` is ``lease`` (any payload: take or renew the control
+lease), ``command`` (``run_forward``, ``run_reverse``, ``stop``),
+``frequency_hz`` (a number) or a parameter code (``A004``, ``Pr.7``: a
+number in the parameter's unit, which must be exact at its setting
+increment: a number finer than that is refused, not rounded). What cannot
+be read is refused here with a neutral :class:`~sj300_async.gateway.Refusal`;
+the rest goes to the gateway, which judges it like any other write.
+:func:`error_text` words a refusal for the error topic.
+"""
+
+from __future__ import annotations
+
+import math
+from typing import Final
+
+from ...profiles import Profile, raw_value
+from ...wire import Direction
+from .. import (
+    Heartbeat,
+    ParameterWrite,
+    Refusal,
+    RunCommand,
+    SetFrequency,
+    WriteRequest,
+    WriteResult,
+)
+
+__all__ = ["COMMAND_DIRECTIONS", "error_text", "parse_command"]
+
+#: The payloads of ``…/set/command``.
+COMMAND_DIRECTIONS: Final = {
+    "stop": Direction.STOP,
+    "run_forward": Direction.FORWARD,
+    "run_reverse": Direction.REVERSE,
+}
+
+
+def _number(text: str) -> float | None:
+    """A finite number, else None."""
+    try:
+        value = float(text)
+    except ValueError:
+        return None
+    return value if math.isfinite(value) else None
+
+
+def parse_command(profile: Profile, what: str, payload: bytes) -> WriteRequest | WriteResult:
+    """The write a command asks for, or why it cannot be one (nothing judged yet)."""
+    if what == "lease":
+        return Heartbeat()  # any payload
+    try:
+        text = payload.decode("utf-8").strip()
+    except UnicodeDecodeError:
+        return WriteResult(Refusal.MALFORMED, "the payload is not UTF-8 text")
+    if what == "command":
+        direction = COMMAND_DIRECTIONS.get(text)
+        if direction is None:
+            return WriteResult(
+                Refusal.MALFORMED, f"expected run_forward, run_reverse or stop, got {text!r}"
+            )
+        return RunCommand(direction)
+    if what == "frequency_hz":
+        hz = _number(text)
+        if hz is None:
+            return WriteResult(Refusal.MALFORMED, f"expected a number of Hz, got {text!r}")
+        if abs(round(hz * 100) - hz * 100) > 1e-6:  # the set frequency's step, every protocol
+            return WriteResult(Refusal.INVALID_VALUE, f"{text} Hz is finer than 0.01 Hz")
+        return SetFrequency(hz)
+    code = profile.parameters.code(what)
+    if code is None:
+        return WriteResult(
+            Refusal.UNKNOWN_TARGET,
+            f"no such command or parameter {what!r} "
+            "(use lease, command, frequency_hz or a parameter code)",
+        )
+    value = _number(text)
+    if value is None:
+        return WriteResult(Refusal.MALFORMED, f"expected a number in {code}'s unit, got {text!r}")
+    spec = profile.parameters.spec(code)
+    try:
+        raw = raw_value(spec, value)
+    except (OverflowError, ValueError):
+        return WriteResult(Refusal.INVALID_VALUE, f"{text} is outside {code}'s range")
+    # raw_value rounds what its step cannot hold (Modbus cannot send it anyway);
+    # a number on MQTT can be finer, and is refused rather than rounded.
+    if abs(spec.from_raw(raw) - value) > 1e-9 * max(1.0, abs(value)):
+        return WriteResult(
+            Refusal.INVALID_VALUE, f"{text} is finer than {code}'s setting increment"
+        )
+    return ParameterWrite(code, raw)
+
+
+#: What a client on MQTT can do about a refusal, where the neutral sentence does not say.
+_HINTS: Final = {Refusal.NO_LEASE: "publish to …/set/lease"}
+
+
+def error_text(result: WriteResult) -> str:
+    """``no_lease: take the control lease first (publish to …/set/lease)``."""
+    text = str(result)
+    hint = None if result.refusal is None else _HINTS.get(result.refusal)
+    return f"{text} ({hint})" if hint else text

@@ -1,0 +1,211 @@
+"""Home Assistant's MQTT discovery: the configs that make each drive a device with entities.
+
+Sans-IO: :func:`discovery` yields ``(topic, payload)`` for every retained
+config (``homeassistant/<component>/<node_id>/<object_id>/config``). The
+gateway is a device of its own (a connectivity sensor); each drive is a
+device naming the gateway as ``via_device``, with sensors for what its
+profile measures, a status sensor (the state in words), a trip sensor when
+its profile reads trip histories, and, for a drive whose configuration
+grants control, a number (set frequency) and buttons (run forward, run
+reverse, stop, the lease heartbeat).
+
+Decisions: discovery uses ``default_entity_id``, not ``object_id`` (Home
+Assistant deprecated ``object_id`` in 2025.10 and stopped honouring it in
+2026.4). A discovery node id holds only ``[A-Za-z0-9_-]``, so a line
+name's ``.`` becomes ``_`` there: two lines named ``a.b`` and ``a_b`` would
+share their drives' node ids (name lines apart).
+"""
+
+from __future__ import annotations
+
+import functools
+import re
+from collections.abc import Iterator, Sequence
+from typing import Any, Final
+
+from ... import __version__
+from ...profiles import get_profile
+from .. import LineConfig
+from ._config import MqttConfig
+from ._topics import AVAILABLE, UNAVAILABLE, Topics
+
+__all__ = ["discovery", "node_id"]
+
+_NOT_IN_NODE_ID: Final = re.compile(r"[^A-Za-z0-9_-]")
+_NOT_IN_ENTITY_ID: Final = re.compile(r"[^a-z0-9_]")
+
+
+def node_id(*parts: object) -> str:
+    """A Home Assistant discovery node id: ``[A-Za-z0-9_-]`` only."""
+    return _NOT_IN_NODE_ID.sub("_", "_".join(map(str, parts)))
+
+
+#: The sensors of every drive: object id, name, state key, unit, device class.
+_SENSORS: Final = (
+    ("output_frequency", "Output frequency", "output_frequency_hz", "Hz", "frequency"),
+    ("output_current", "Output current", "output_current_a", "A", "current"),
+    ("output_voltage", "Output voltage", "output_voltage_v", "V", "voltage"),
+)
+#: The sensors of the optional values, for the drives whose profile measures them
+#: (``Capabilities.measures`` names the state key).
+_OPTIONAL_SENSORS: Final = (
+    ("power", "Power", "power_kw", "kW", "power"),
+    ("output_torque", "Output torque", "output_torque_percent", "%", None),
+)
+# Home Assistant's MQTT sensor takes the text "None" as "unknown": a stale
+# value (null) shows as unknown, not as 0 or as an error.
+_STATUS_TEMPLATE: Final = (
+    "{% if value_json.state is none %}None{% else %}{{ value_json.state }}{% endif %}"
+)
+_TRIP_TEMPLATE: Final = (
+    "{% if value_json.tripped is none %}None"
+    "{% elif value_json.tripped %}{{ value_json.trip or 'tripped' }}"
+    "{% else %}ok{% endif %}"
+)
+_BUTTONS: Final = (
+    ("run_forward", "Run forward", "command", "run_forward"),
+    ("run_reverse", "Run reverse", "command", "run_reverse"),
+    ("stop", "Stop", "command", "stop"),
+    ("lease", "Control lease heartbeat", "lease", "renew"),
+)
+
+
+def discovery(
+    config: MqttConfig, topics: Topics, lines: Sequence[LineConfig]
+) -> Iterator[tuple[str, dict[str, Any]]]:
+    """Every Home Assistant discovery config: ``(topic, payload)``.
+
+    The gateway is a device of its own (a connectivity sensor: what its
+    availability says), and each drive's device names it as ``via_device``.
+    Every drive entity is available when both the gateway and the drive are
+    (``availability_mode: all``).
+    """
+    prefix, gateway = config.discovery_prefix, topics.gateway
+    origin = {"name": "sj300-async", "sw_version": __version__}
+    gateway_device = node_id("sj300", gateway)
+    yield (
+        f"{prefix}/binary_sensor/{gateway_device}/connectivity/config",
+        {
+            "name": "Connectivity",
+            "unique_id": f"{gateway_device}_connectivity",
+            "default_entity_id": _entity_id("binary_sensor", f"{gateway_device}_connectivity"),
+            "device": {
+                "identifiers": [gateway_device],
+                "name": f"sj300 gateway {gateway}",
+                "model": "sj300 gateway",
+                "manufacturer": "sj300-async",
+                "sw_version": __version__,
+            },
+            "origin": origin,
+            "state_topic": topics.availability,
+            "payload_on": AVAILABLE,
+            "payload_off": UNAVAILABLE,
+            "device_class": "connectivity",
+            "entity_category": "diagnostic",
+            "qos": config.qos,
+        },
+    )
+    for line in lines:
+        profile = get_profile(line.protocol)
+        model, manufacturer, noun = profile.model, profile.manufacturer, profile.node_noun
+        measures = profile.capabilities.measures
+        sensors = _SENSORS + tuple(s for s in _OPTIONAL_SENSORS if s[2] in measures)
+        for node in line.nodes:
+            drive = node_id("sj300", gateway, line.name, node)
+            state_topic = topics.state(line.name, node)
+            common: dict[str, Any] = {
+                "device": {
+                    "identifiers": [drive],
+                    "name": f"{line.name} {noun} {node}",
+                    "model": model,
+                    "manufacturer": manufacturer,
+                    "via_device": gateway_device,
+                },
+                "origin": origin,
+                "availability": [
+                    {"topic": topics.availability},
+                    {"topic": topics.drive_availability(line.name, node)},
+                ],
+                "availability_mode": "all",
+                "payload_available": AVAILABLE,
+                "payload_not_available": UNAVAILABLE,
+                "qos": config.qos,
+            }
+
+            entity = functools.partial(_entity, prefix, drive, common)
+
+            for object_id, name, key, unit, device_class in sensors:
+                keys: dict[str, Any] = {
+                    "state_topic": state_topic,
+                    "value_template": f"{{{{ value_json.{key} }}}}",
+                    "unit_of_measurement": unit,
+                    "state_class": "measurement",
+                }
+                if device_class is not None:
+                    keys["device_class"] = device_class
+                yield entity("sensor", object_id, name, **keys)
+            yield entity(
+                "sensor",
+                "status",
+                "Status",
+                state_topic=state_topic,
+                value_template=_STATUS_TEMPLATE,
+                json_attributes_topic=state_topic,
+                json_attributes_template="{{ (value_json.status or {}) | tojson }}",
+            )
+            if profile.capabilities.trip_history:  # a trip is named only from the history
+                yield entity(
+                    "sensor", "trip", "Trip", state_topic=state_topic, value_template=_TRIP_TEMPLATE
+                )
+            if not line.control_allowed(node):
+                continue
+            yield entity(
+                "number",
+                "set_frequency",
+                "Set frequency",
+                command_topic=topics.command(line.name, node, "frequency_hz"),
+                state_topic=state_topic,
+                value_template="{{ value_json.set_frequency_hz }}",
+                min=0,
+                max=profile.max_frequency_hz,
+                step=0.01,
+                mode="box",
+                unit_of_measurement="Hz",
+                device_class="frequency",
+                retain=False,
+            )
+            for object_id, name, what, payload in _BUTTONS:
+                yield entity(
+                    "button",
+                    object_id,
+                    name,
+                    command_topic=topics.command(line.name, node, what),
+                    payload_press=payload,
+                    retain=False,
+                )
+
+
+def _entity(
+    prefix: str,
+    drive: str,
+    common: dict[str, Any],
+    component: str,
+    object_id: str,
+    name: str,
+    **keys: Any,
+) -> tuple[str, dict[str, Any]]:
+    """One discovery config of a drive's entity: its topic and payload."""
+    unique = f"{drive}_{object_id}"
+    body = {
+        "name": name,
+        "unique_id": unique,
+        "default_entity_id": _entity_id(component, unique),
+        **common,
+        **keys,
+    }
+    return f"{prefix}/{component}/{drive}/{object_id}/config", body
+
+
+def _entity_id(component: str, unique_id: str) -> str:
+    """``sensor.sj300_gw1_hall_a_3_power``: an entity id holds only ``[a-z0-9_]``."""
+    return f"{component}.{_NOT_IN_ENTITY_ID.sub('_', unique_id.lower())}"

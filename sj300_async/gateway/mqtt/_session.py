@@ -1,0 +1,149 @@
+"""One MQTT connection kept up: connect, run, and after a loss reconnect with a back-off.
+
+Both the gateway's bridge (:mod:`._bridge`) and the fleet subscriber
+(:mod:`._fleet`) keep their connection through :func:`keep_connected`: one
+reconnect loop, one back-off, one way of reporting outages.
+
+Decisions:
+
+- The back-off starts at :data:`BACKOFF_FIRST_S` and doubles at each
+  failed attempt up to the caller's ceiling (the bridge 30 s: a gateway
+  that retries every 30 s costs a broker nothing; a person watching the
+  fleet view 10 s, to see the fleet back soon). A connection that came up
+  resets it.
+- An outage is logged once, at the caller's level, when it starts (``lost
+  …; reconnecting`` or ``cannot connect to …; retrying``); the attempts
+  after it at DEBUG; the recovery at INFO. The fleet view logs outages at
+  INFO (its table's caption shows them: a WARNING would reach the terminal
+  under the table).
+- ``on_link`` hears every change: None when connected, else a sentence
+  saying what happened and when the next attempt comes.
+- A bug in the session body (any exception but aiomqtt's) is logged with
+  its traceback and treated as a lost connection, so it cannot end the
+  connection for good; a caller that must fail at once on an unreachable
+  broker (a command line) asks for it with ``fail_first``.
+- Cancellation ends the loop at once (whatever it was doing); the body's
+  own ``except CancelledError`` runs first, inside the connection (the
+  bridge says "offline" there).
+"""
+
+from __future__ import annotations
+
+import asyncio
+import logging
+from collections.abc import Awaitable, Callable
+from dataclasses import dataclass
+from typing import TYPE_CHECKING, Final
+
+if TYPE_CHECKING:
+    import aiomqtt
+
+__all__ = ["BACKOFF_FIRST_S", "BrokerUnreachable", "SessionStats", "backoff", "keep_connected"]
+
+BACKOFF_FIRST_S: Final = 0.5
+
+#: The body of a connection: runs with the connected client until the connection
+#: fails (raising aiomqtt's error) or its work is done (returning); it calls the
+#: given function once it is set up (subscribed), which counts as "connected".
+Body = Callable[["aiomqtt.Client", Callable[[], None]], Awaitable[None]]
+
+
+class BrokerUnreachable(Exception):
+    """The first connection failed and the caller asked to fail at once (``fail_first``)."""
+
+
+@dataclass
+class SessionStats:
+    """Connections made and lost."""
+
+    connects: int = 0
+    #: Connections lost after they were up (each logged once).
+    losses: int = 0
+
+
+def backoff(attempt: int, ceiling_s: float) -> float:
+    """The delay before reconnection *attempt* (0, 1, ...): 0.5 s doubling, at most *ceiling_s*."""
+    return min(BACKOFF_FIRST_S * 2.0 ** min(attempt, 16), ceiling_s)
+
+
+async def keep_connected(
+    connect: Callable[[], aiomqtt.Client],
+    body: Body,
+    *,
+    url: str,
+    log: logging.Logger,
+    ceiling_s: float,
+    stats: SessionStats | None = None,
+    outage_level: int = logging.WARNING,
+    fail_first: bool = False,
+    fatal: tuple[type[Exception], ...] = (),
+    on_link: Callable[[str | None], None] | None = None,
+    on_attempt: Callable[[int], None] | None = None,
+    who: str = "",
+) -> None:
+    """Run *body* on a connection to *url* until it returns (see the module docstring).
+
+    Args:
+        connect: makes a new (not yet entered) client for each attempt.
+        fatal: exceptions of the body that end it all (raised as they are).
+        on_attempt: told each reconnection attempt's number as it starts.
+        who: appended to the first "connected" log line (``" as gw1"``).
+
+    Raises:
+        BrokerUnreachable: with *fail_first*, the first connection failed.
+    """
+    import aiomqtt
+
+    stats = SessionStats() if stats is None else stats
+    attempt = 0  # failed attempts since the last good connection
+    outage = False  # an outage already logged (its next failed attempts are DEBUG)
+    ever = False  # connected at least once
+
+    def link(problem: str | None) -> None:
+        if on_link is not None:
+            on_link(problem)
+
+    while True:
+        up = False
+
+        def connected() -> None:
+            nonlocal up, ever, attempt, outage
+            up = True
+            stats.connects += 1
+            if outage:
+                log.info("MQTT: connected again to %s", url)
+            else:
+                log.info("MQTT: connected to %s%s", url, who)
+            ever, attempt, outage = True, 0, False
+            link(None)
+
+        try:
+            async with connect() as client:
+                await body(client, connected)
+            return
+        except aiomqtt.MqttError as exc:
+            reason = " ".join(str(exc).split()) or type(exc).__name__
+        except fatal:
+            raise
+        except Exception as exc:  # a bug of ours must not end the connection for good
+            log.exception("MQTT: unexpected error")
+            reason = f"{type(exc).__name__}: {exc}"
+        if fail_first and not ever:
+            raise BrokerUnreachable(reason)
+        delay = backoff(attempt, ceiling_s)
+        attempt += 1
+        if up:
+            stats.losses += 1
+            what = f"connection to {url} lost"
+            log.log(outage_level, "MQTT: lost %s (%s); reconnecting", url, reason)
+        elif not outage:
+            what = f"cannot connect to {url}" if not ever else f"cannot reconnect to {url}"
+            log.log(outage_level, "MQTT: cannot connect to %s (%s); retrying", url, reason)
+        else:
+            what = f"cannot reconnect to {url}" if ever else f"cannot connect to {url}"
+            log.debug("MQTT: %s still unreachable (%s)", url, reason)
+        outage = True
+        link(f"{what} ({reason}): next attempt in {delay:g} s")
+        await asyncio.sleep(delay)
+        if on_attempt is not None:
+            on_attempt(attempt)

@@ -1,0 +1,87 @@
+"""What the MQTT bridge counts, and the metric families it contributes to /metrics."""
+
+from __future__ import annotations
+
+import collections
+from collections.abc import Iterator
+from dataclasses import dataclass, field
+from typing import TYPE_CHECKING, Final
+
+from ._session import SessionStats
+
+if TYPE_CHECKING:
+    from prometheus_client.core import Metric
+
+__all__ = ["BridgeStats", "mqtt_families"]
+
+Key = tuple[str, int]
+
+
+@dataclass
+class BridgeStats(SessionStats):
+    """What the bridge did (see the module docstring: nothing is dropped silently)."""
+
+    #: Messages the broker took (QoS 1: acknowledged).
+    published: int = 0
+    #: Messages not confirmed: being sent when the connection broke or the
+    #: bridge stopped (some may have reached the broker), or still waiting at
+    #: the stop. States and availability are republished on reconnect; error
+    #: replies are not.
+    lost: int = 0
+    #: Snapshots handed to the bridge (each poll, each write's read-back), per drive.
+    samples: collections.Counter[Key] = field(default_factory=collections.Counter)
+    #: State messages published, per drive.
+    states: collections.Counter[Key] = field(default_factory=collections.Counter)
+    #: State messages replaced by a newer one before they were sent, per drive.
+    replaced: collections.Counter[Key] = field(default_factory=collections.Counter)
+    #: Error replies dropped: more than MAX_ERRORS were waiting.
+    errors_dropped: int = 0
+    #: Command messages received, refused, and discarded (received but not
+    #: started before the connection they came on was lost).
+    commands: int = 0
+    refused: int = 0
+    discarded: int = 0
+    #: Messages on the command topics that name no drive of this gateway.
+    ignored: int = 0
+
+
+#: The bridge's counters: (name, HELP, BridgeStats attribute).
+_COUNTERS: Final = (
+    ("sj300_mqtt_connects", "Connections to the broker made.", "connects"),
+    ("sj300_mqtt_losses", "Connections to the broker lost.", "losses"),
+    ("sj300_mqtt_published", "Messages the broker took.", "published"),
+    ("sj300_mqtt_lost", "Messages being sent when the connection broke.", "lost"),
+    ("sj300_mqtt_errors_dropped", "Error replies dropped (too many waiting).", "errors_dropped"),
+)
+#: Command messages by what became of them: (label, BridgeStats attribute).
+_COMMAND_RESULTS: Final = (
+    ("received", "commands"),
+    ("refused", "refused"),
+    ("discarded", "discarded"),
+    ("ignored", "ignored"),
+)
+
+
+def mqtt_families(stats: BridgeStats) -> Iterator[Metric]:
+    """The bridge's metric families, built now (prometheus-client imported here)."""
+    from prometheus_client.core import CounterMetricFamily
+
+    for name, help_text, attribute in _COUNTERS:
+        family = CounterMetricFamily(name, help_text)
+        family.add_metric([], getattr(stats, attribute))
+        yield family
+    commands = CounterMetricFamily(
+        "sj300_mqtt_commands",
+        "Command messages: received, refused (answered on the error topic), discarded "
+        "(the connection was lost first), ignored (no drive of this gateway).",
+        labels=["result"],
+    )
+    for label, attribute in _COMMAND_RESULTS:
+        commands.add_metric([label], getattr(stats, attribute))
+    yield commands
+    replaced = CounterMetricFamily(
+        "sj300_mqtt_states_replaced",
+        "State messages replaced by a newer one before the broker took them (coalesced).",
+    )
+    replaced.add_metric([], sum(stats.replaced.values()))
+    yield replaced
