@@ -122,6 +122,7 @@ SIMULATOR_SJ300: Final = (
             "_bus",
             "_command_line",
             "_drive",
+            "_drive_model",
             "_memory",
             "_parameters_table",
             "_status",
@@ -144,6 +145,7 @@ FR700_IO: Final = ("fr700", "fr700._dialect", "fr700._drive", "fr700._profile")
 BUS_IO: Final = (
     "bus",
     "bus._arbiter",
+    "bus._attempts",
     "bus._bus",
     "bus._capture",  # writes files
     "bus._channel",
@@ -153,6 +155,7 @@ BUS_IO: Final = (
     "bus._listen",
     "bus._open",
     "bus._protocol",
+    "bus._recovery",
     "bus._replay_open",  # reads files
     # The registry imports a protocol's dialect by name when asked for one (and with it
     # the protocol's drive and the async stack); the URL parser asks it for node ranges

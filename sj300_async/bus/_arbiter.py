@@ -47,14 +47,18 @@ each of which has its own test:
 10. A call's attempts: ``retries + 1`` at most, none started after the
     timing's ``call_deadline_s``; a call that ends in time-outs raises one
     :class:`ReplyTimeoutError` that states the attempts and the whole time.
+
+This module runs the attempts and listens to the line (the re-output
+request of rule 7 included). What the line needs once an attempt is over,
+the rest, the drain, the acknowledgement and the resync, is in
+:mod:`._recovery`; the records of attempts are in :mod:`._attempts`.
 """
 
 from __future__ import annotations
 
 import asyncio
 import logging
-from dataclasses import dataclass
-from typing import Any, Generic
+from typing import Any
 
 from ..wire import (
     BadFrame,
@@ -67,12 +71,14 @@ from ..wire import (
     SJ300Error,
     TransportError,
 )
+from ._attempts import Outstanding, Pending, SyncMissed
 from ._dialect import Dialect, ReplyT, RequestT
 from ._linequeue import LineQueue
 from ._link import Link
 from ._protocol import LineProtocol
+from ._recovery import LineRecovery
 from ._stats import BusStats, TransactionStats
-from ._timing import LATE_REPLY_HORIZON, BusTiming
+from ._timing import BusTiming
 
 __all__ = ["Arbiter"]
 
@@ -80,42 +86,14 @@ _log = logging.getLogger("sj300_async.arbiter")
 
 #: Distinct requests whose timing is remembered (see _request_timing).
 _TIMEOUT_CACHE_SIZE = 256
-#: Failed requests an unsynced node remembers at most (the oldest go first).
-_PENDING_MAX = 8
 
 
-@dataclass(slots=True)
-class _Outstanding(Generic[RequestT, ReplyT]):
-    """The transaction currently on the line."""
+class Arbiter(LineRecovery[RequestT, ReplyT]):
+    """Serializes transactions on one line and enforces the timing rules.
 
-    request: RequestT
-    #: Resolves to the answer, or to None when the deadline passes.
-    waiter: asyncio.Future[ReplyT | None]
-    stats: TransactionStats
-    #: The response time-out of this attempt, and the loop time it ends at.
-    timeout: float
-    deadline: float
-    #: The loop time before which no genuine answer can arrive (rule 8).
-    not_before: float
-    bad_frame: BadFrame | None = None
-    #: The scheduled re-output request (rule 7), at most one per attempt.
-    reoutput: asyncio.TimerHandle | None = None
-
-
-@dataclass(frozen=True, slots=True)
-class _Pending(Generic[RequestT]):
-    """A request whose reply may still come (rule 9), until the loop time *expires*."""
-
-    request: RequestT
-    expires: float
-
-
-class _SyncMissed(ReplyTimeoutError):
-    """An attempt that failed on its sync request (only ever seen inside the arbiter)."""
-
-
-class Arbiter(Generic[RequestT, ReplyT]):
-    """Serializes transactions on one line and enforces the timing rules."""
+    What happens to the line once an attempt is over (the rest, the drain,
+    the acknowledgement and the resync) is in :class:`~._recovery.LineRecovery`.
+    """
 
     def __init__(
         self,
@@ -140,13 +118,13 @@ class Arbiter(Generic[RequestT, ReplyT]):
         # of frames.
         self._timings: dict[tuple[bytes, float], tuple[float, float]] = {}
         # Nodes that missed an answer, with the requests whose replies may still come.
-        self._unsynced: dict[int, list[_Pending[RequestT]]] = {}
+        self._unsynced: dict[int, list[Pending[RequestT]]] = {}
         # The last chunk received (for the log of an early frame).
         self._last_chunk = b""
         self.stats = stats
         self.queue = LineQueue()
         self._loop = asyncio.get_running_loop()
-        self._outstanding: _Outstanding[RequestT, ReplyT] | None = None
+        self._outstanding: Outstanding[RequestT, ReplyT] | None = None
         # Loop time before which nothing may be written (guard interval).
         self._rest_until = 0.0
         # After a failure: how long the line must be quiet before the next write.
@@ -201,7 +179,7 @@ class Arbiter(Generic[RequestT, ReplyT]):
         out.stats.discarded_frames += 1
         _log.debug("stray frame while waiting for node %02d: %s", out.request.node, event)
 
-    def _early_frame(self, out: _Outstanding[RequestT, ReplyT], event: ReplyT, now: float) -> None:
+    def _early_frame(self, out: Outstanding[RequestT, ReplyT], event: ReplyT, now: float) -> None:
         """A frame shaped like the answer, sooner than the line allows (rule 8): discard it."""
         self.stats.early_frames += 1
         out.stats.discarded_frames += 1
@@ -216,7 +194,7 @@ class Arbiter(Generic[RequestT, ReplyT]):
             )
 
     def _request_reoutput(
-        self, out: _Outstanding[RequestT, ReplyT], bad_frame: BadFrame, now: float
+        self, out: Outstanding[RequestT, ReplyT], bad_frame: BadFrame, now: float
     ) -> None:
         frame = self.dialect.reoutput_request(out.request, bad_frame)
         if frame is None:
@@ -227,7 +205,7 @@ class Arbiter(Generic[RequestT, ReplyT]):
         # move later: the armed timer fires first and re-arms for this one.
         out.deadline = max(out.deadline, now + delay + out.timeout)
 
-    def _send_reoutput(self, out: _Outstanding[RequestT, ReplyT], frame: bytes) -> None:
+    def _send_reoutput(self, out: Outstanding[RequestT, ReplyT], frame: bytes) -> None:
         if self._outstanding is not out or out.waiter.done():
             return  # the attempt is over: nothing to ask for any more
         protocol = self.link.protocol
@@ -360,7 +338,7 @@ class Arbiter(Generic[RequestT, ReplyT]):
                     timing = self._request_timing(request, wait_s)
                 timeout = timeout_s if timeout_s else timing[0]
                 waiter: asyncio.Future[ReplyT | None] = loop.create_future()
-                out = _Outstanding(request, waiter, stats, timeout, now + timeout, now + timing[1])
+                out = Outstanding(request, waiter, stats, timeout, now + timeout, now + timing[1])
                 self._outstanding = out  # registered before the write: no answer goes unseen
                 if self._deadline_timer is None or self._deadline_due > out.deadline:
                     self._arm_deadline(out.deadline)
@@ -445,7 +423,7 @@ class Arbiter(Generic[RequestT, ReplyT]):
             for exc in failed
             if isinstance(exc, ReplyTimeoutError) and exc.timeout_s is not None
         ]
-        syncs = sum(isinstance(exc, _SyncMissed) for exc in failed)
+        syncs = sum(isinstance(exc, SyncMissed) for exc in failed)
         low, high = min(timeouts), max(timeouts)
         if attempts == 1:
             each = f"1 attempt of {high * 1000:.0f} ms"
@@ -531,216 +509,3 @@ class Arbiter(Generic[RequestT, ReplyT]):
                 ),
             )
         return timing
-
-    # -- resync (rule 9) -------------------------------------------------------------
-
-    def _missed(self, request: RequestT, timeout: float) -> None:
-        """*request* got no valid answer: its node is unsynced until a sync answers."""
-        expires = self._loop.time() + LATE_REPLY_HORIZON * timeout
-        pending = self._unsynced.setdefault(request.node, [])
-        for i, entry in enumerate(pending):
-            if entry.request.frame == request.frame:
-                pending[i] = _Pending(request, max(entry.expires, expires))
-                return
-        pending.append(_Pending(request, expires))
-        if len(pending) > _PENDING_MAX:
-            del pending[0]
-
-    async def _sync(
-        self, node: int, stats: TransactionStats, wait_s: float, timeout_s: float | None
-    ) -> None:
-        """Resynchronize *node* before its next request (rule 9), holding the line.
-
-        Raises:
-            ReplyTimeoutError: the sync got no positive answer in time (it joins
-                the pending requests; the attempt may be retried).
-            RemoteProtocolError: only a corrupted frame came.
-            TransportError: the link is down or dropped.
-        """
-        loop = self._loop
-        now = loop.time()
-        pending = [entry for entry in self._unsynced[node] if entry.expires > now]
-        if not pending:
-            del self._unsynced[node]  # every reply that might have come is past the horizon
-            return
-        self._unsynced[node] = pending
-        dialect = self.dialect
-        sync = dialect.sync_request(node, [entry.request for entry in pending])
-        if sync is None:
-            await self._wait_out(node, pending)
-            return
-        protocol = self.link.require()
-        if self._rest_until > now:
-            await asyncio.sleep(self._rest_until - now)
-            protocol = self.link.require()
-            now = loop.time()
-        if protocol.write_paused:
-            await protocol.wait_writable()
-            protocol = self.link.require()
-            now = loop.time()
-        timeout, floor = self._request_timing(sync, wait_s)
-        if timeout_s:
-            timeout = timeout_s
-        totals = self.stats.transactions
-        out: _Outstanding[RequestT, ReplyT] = _Outstanding(
-            sync, loop.create_future(), stats, timeout, now + timeout, now + floor
-        )
-        self._outstanding = out
-        self._arm_deadline(out.deadline)
-        answered = acknowledged = False
-        try:
-            protocol.write(sync.frame)
-            self.stats.resyncs += 1
-            stats.requests += 1
-            if stats is not totals:
-                totals.requests += 1
-            _log.debug("node %02d missed an answer: sync with %s", node, sync.label)
-            while True:
-                reply = await out.waiter
-                if reply is None:
-                    break  # the deadline passed
-                try:
-                    dialect.accept(sync, reply)
-                except NakError:
-                    # A NAK may be the late answer to any pending request: it
-                    # proves nothing. The sync's own answer must still come.
-                    self.stats.stray_frames += 1
-                    stats.discarded_frames += 1
-                    _log.debug("NAK while syncing node %02d: not the sync's answer", node)
-                    out.waiter = loop.create_future()
-                    continue
-                answered = True
-                break
-            if not answered:
-                self._failed_sent = now
-                raise self._no_answer(
-                    out, stats, totals, node, f"the sync request ({sync.label})", timeout,
-                    _SyncMissed,
-                )  # fmt: skip
-            del self._unsynced[node]  # in order: whatever was late is behind us
-            totals.record_answer(stats, self._last_rx - now)
-            assert reply is not None
-            ack = dialect.acknowledgement(sync, reply)
-            if ack is not None:
-                acknowledged = await self._acknowledge(protocol, ack)
-        except TransportError:
-            self._count(stats, totals, "transport_errors")
-            raise
-        except asyncio.CancelledError:
-            self._count(stats, totals, "cancelled")
-            raise
-        finally:
-            self._finish(out, answered, acknowledged)
-            if not answered:
-                self._missed(sync, timeout)
-
-    def _finish(
-        self, out: _Outstanding[RequestT, ReplyT], answered: bool, acknowledged: bool
-    ) -> None:
-        """The line after an attempt or a sync: rest after an answer, else drain next."""
-        if out.reoutput is not None:
-            out.reoutput.cancel()
-        self._outstanding = None
-        if answered:
-            # The guard runs from the answer's arrival: the time this task took
-            # to resume already counts towards it.
-            self._rest_until = self._last_rx + self._guard_s
-            if acknowledged:
-                self._rest_until = max(
-                    self._rest_until,
-                    self._loop.time() + self.dialect.rest_after_acknowledgement_s(),
-                )
-        else:
-            quiet = self._timing.drain_quiet(out.timeout, self._line)
-            self._drain_quiet = max(self._drain_quiet or 0.0, quiet)
-            self._failed_at = self._loop.time()
-
-    async def _wait_out(self, node: int, pending: list[_Pending[RequestT]]) -> None:
-        """No sync request of a shape of its own: wait until the late replies are past
-        the horizon (:data:`LATE_REPLY_HORIZON` time-outs after each failure),
-        discarding what arrives meanwhile."""
-        until = max(entry.expires for entry in pending)
-        self.stats.drains += 1
-        _log.debug(
-            "node %02d missed an answer and no sync request can tell its late replies "
-            "from an answer: waiting %.3f s",
-            node,
-            until - self._loop.time(),
-        )
-        delay = until - self._loop.time()
-        if delay > 0:
-            await asyncio.sleep(delay)
-        protocol = self.link.protocol
-        if protocol is not None:
-            protocol.reset_parser()
-        self._unsynced.pop(node, None)
-
-    async def _acknowledge(self, protocol: LineProtocol[Any], ack: bytes) -> bool:
-        """Send the host's acknowledgement after the answer delay; True when it went out.
-
-        The protocol makes it optional, so a link lost meanwhile only skips it.
-        """
-        delay = self.dialect.answer_delay_s()
-        if delay > 0:
-            await asyncio.sleep(delay)
-        if not protocol.connected:
-            return False
-        protocol.write(ack)
-        return True
-
-    async def _drain(self) -> None:
-        """Wait until the line has been quiet long enough; discard what arrives meanwhile."""
-        assert self._drain_quiet is not None
-        quiet = self._drain_quiet
-        start = self._loop.time()
-        give_up = start + self._timing.drain_max_s
-        self.stats.drains += 1
-        while True:
-            now = self._loop.time()
-            ready = max(self._last_rx, self._failed_at) + quiet
-            if now >= ready:
-                break
-            if now >= give_up:
-                _log.warning(
-                    "line did not go quiet for %.3f s (the failed request's time-out) "
-                    "within %.1f s (drain_max_s); going on",
-                    quiet,
-                    self._timing.drain_max_s,
-                )
-                break
-            await asyncio.sleep(min(ready, give_up) - now)
-        protocol = self.link.protocol
-        if protocol is not None:
-            protocol.reset_parser()
-        self._drain_quiet = None
-
-    def _no_answer(
-        self,
-        out: _Outstanding[RequestT, ReplyT],
-        stats: TransactionStats,
-        totals: TransactionStats,
-        node: int,
-        what: str,
-        timeout: float,
-        timed_out: type[ReplyTimeoutError],
-    ) -> SJ300Error:
-        """An attempt that got no valid answer, counted: corrupted frames only, or nothing."""
-        if out.bad_frame is not None:
-            self._count(stats, totals, "protocol_errors")
-            return RemoteProtocolError(
-                f"node {node:02d}: no valid answer to {what}, only a corrupted frame "
-                f"({out.bad_frame.reason.value}: {out.bad_frame.body!r})"
-            )
-        self._count(stats, totals, "timeouts")
-        return timed_out(
-            f"node {node:02d} did not answer {what} within {timeout * 1000:.0f} ms",
-            1,
-            None,
-            timeout,
-        )
-
-    @staticmethod
-    def _count(stats: TransactionStats, totals: TransactionStats, name: str) -> None:
-        setattr(stats, name, getattr(stats, name) + 1)
-        if stats is not totals:
-            setattr(totals, name, getattr(totals, name) + 1)

@@ -59,7 +59,6 @@ import importlib.util
 import sys
 import time
 from collections.abc import Iterator
-from dataclasses import dataclass
 from typing import Any, Final
 
 from ..gateway.mqtt import (
@@ -71,7 +70,8 @@ from ..gateway.mqtt import (
     parse_fleet_url,
 )
 from ._errors import FAILURE, USAGE, CliError
-from ._output import is_terminal, jsonable, print_json
+from ._fit import FitColumn, fit
+from ._output import Justify, is_terminal, jsonable, print_json
 
 __all__ = ["fleet_table", "plain_line", "state_json", "state_text", "watch_fleet"]
 
@@ -162,14 +162,11 @@ def cells(message: StateMessage, *, gateway_online: bool, now: float) -> dict[st
     }
 
 
-@dataclass(frozen=True, slots=True)
-class _Column:
-    header: str
-    key: str
-    justify: str = "left"
-    #: Takes the room the others leave, cut with … when short (never a number).
-    flexible: bool = False
-    min_width: int = 0
+def _Column(
+    header: str, key: str, justify: Justify = "left", *, flexible: bool = False, min_width: int = 0
+) -> FitColumn:
+    """A fleet column: left-aligned unless told otherwise (text, mostly)."""
+    return FitColumn(header, key, justify, flexible=flexible, min_width=min_width)
 
 
 _GATEWAY = _Column("gateway", "gateway", flexible=True, min_width=4)
@@ -206,33 +203,6 @@ _LAYOUTS: Final = (
 )
 
 
-def _layout(width: int, rows: list[dict[str, str]]) -> tuple[tuple[_Column, ...], dict[str, int]]:
-    """The first layout that fits *width* columns, and each of its columns' width.
-
-    A fixed column is as wide as its widest cell or header (numbers are never
-    cut); the flexible ones share the rest, each at least its ``min_width``.
-    """
-    from rich.cells import cell_len
-
-    def natural(column: _Column) -> int:
-        return max([cell_len(column.header), *(cell_len(row[column.key]) for row in rows)])
-
-    for columns in _LAYOUTS:
-        # Per column: one space of padding each side and a divider; the edges: 1 more.
-        left = width - (3 * len(columns) + 1)
-        fixed = {c.key: natural(c) for c in columns if not c.flexible}
-        flexible = [c for c in columns if c.flexible]
-        left -= sum(fixed.values())
-        if left >= sum(c.min_width for c in flexible):
-            break
-    widths = dict(fixed)
-    for i, column in enumerate(flexible):
-        later = sum(c.min_width for c in flexible[i + 1 :])
-        widths[column.key] = max(1, min(natural(column), left - later))
-        left -= widths[column.key]
-    return columns, widths
-
-
 def fleet_table(fleet: Fleet, width: int = 160, now: float | None = None) -> Any:
     """The rich table of every drive for *width* columns (Any: rich is imported when used)."""
     from rich import box
@@ -242,7 +212,7 @@ def fleet_table(fleet: Fleet, width: int = 160, now: float | None = None) -> Any
     now = time.time() if now is None else now
     drives = fleet.drives
     rows = [cells(m, gateway_online=fleet.gateway_online(m.gateway), now=now) for m in drives]
-    columns, widths = _layout(width, rows)
+    columns, widths = fit(_LAYOUTS, width, rows)
     table = Table(
         title=f"sj300 monitor — fleet on {fleet.url.broker} ({fleet.url.prefix}/…)",
         caption=_caption(fleet),
@@ -251,7 +221,7 @@ def fleet_table(fleet: Fleet, width: int = 160, now: float | None = None) -> Any
     for column in columns:
         table.add_column(
             column.header,
-            justify="right" if column.justify == "right" else "left",
+            justify=column.justify,
             no_wrap=True,
             min_width=widths[column.key],
             max_width=widths[column.key],

@@ -58,14 +58,12 @@ import signal
 import sys
 import time
 from collections.abc import AsyncIterator, Coroutine
-from dataclasses import dataclass
 from typing import Any, Final
 
 from .. import Poller, Sample
 from ..bus import Bus, parse_bus_url
-from ..profiles import DriveReadings, DriveSnapshot, Profile, Trip, build_snapshot
-from ..wire import SJ300Error
 from ._args import format_nodes, parse_any_nodes
+from ._board import Board
 from ._common import (
     add_bus_options,
     add_json_option,
@@ -76,11 +74,10 @@ from ._common import (
 )
 from ._demo import run_demo
 from ._errors import FAILURE, CliError
-from ._output import Justify, is_terminal, jsonable, print_json
+from ._output import is_terminal, jsonable, print_json
 from ._progress import progress
 from ._scan import probe
 from ._session import run_async
-from ._tripinfo import trip_or_none
 
 __all__ = ["add_parser"]
 
@@ -92,67 +89,6 @@ DEMO_URL: Final = "sim://?nodes=1-8"
 _DEFAULT_NODES: Final = tuple(range(1, 9))
 #: Exit status of Ctrl-C (SIGINT), as for every command.
 INTERRUPTED: Final = 130
-#: Below this many terminal columns the table takes its compact layout.
-COMPACT_BELOW: Final = 100
-
-
-@dataclass(frozen=True, slots=True)
-class _Field:
-    """A column of the live table: its header, how it lines up, the cell it shows."""
-
-    header: str
-    key: str  #: the cell's key in :meth:`_Board.cells`
-    justify: Justify = "right"
-    #: Takes the room the others leave, cut with … when short (never a number column).
-    flexible: bool = False
-    #: A flexible column's least width (and, for ``max_width``, its most).
-    min_width: int = 0
-    max_width: int | None = None
-
-
-_NODE = _Field("node", "node")
-_STATE = _Field("state", "state", "left", flexible=True, min_width=12)
-_SET_HZ = _Field("set Hz", "set_hz")
-_OUT_HZ = _Field("out Hz", "out_hz")
-_LINK = _Field("link", "link", "left")
-_ERROR = _Field("last error", "error", "left", flexible=True, min_width=10, max_width=40)
-
-#: The table's layouts, richest first: the first that fits the terminal is used
-#: (from :data:`COMPACT_BELOW` columns on; below, always the compact one).
-_LAYOUTS: Final = (
-    (
-        _NODE,
-        _STATE,
-        _SET_HZ,
-        _OUT_HZ,
-        _Field("current A", "amps"),
-        _Field("voltage V", "volts"),
-        _Field("torque %", "torque"),
-        _Field("power kW", "kw"),
-        _ERROR,
-        _Field("latency ms", "latency"),
-        _LINK,
-    ),
-    (
-        _NODE,
-        _STATE,
-        _SET_HZ,
-        _OUT_HZ,
-        _Field("current A", "amps"),
-        _Field("voltage V", "volts"),
-        _ERROR,
-        _LINK,
-    ),
-)
-_COMPACT: Final = (
-    _NODE,
-    _Field("state", "state", "left", flexible=True, min_width=7),
-    _SET_HZ,
-    _OUT_HZ,
-    _Field("A", "amps"),
-    _Field("V", "volts"),
-    _LINK,
-)
 
 
 def _positive_int(text: str) -> int:
@@ -232,7 +168,7 @@ async def _monitor(args: argparse.Namespace) -> int:
         # Unbounded, but printing is synchronous: the poller cannot run ahead of it.
         samples: asyncio.Queue[Sample] = asyncio.Queue()
         poller.on_sample(samples.put_nowait)
-        board = _Board(bus, profile, nodes, demo=url is None)
+        board = Board(bus, profile, nodes, demo=url is None)
         async with poller, _demo(bus, enabled=url is None):
             try:
                 with board.live(enabled=is_terminal() and not args.json):
@@ -348,7 +284,7 @@ async def _consume(
     poller: Poller,
     bus: Bus,
     samples: asyncio.Queue[Sample],
-    board: _Board,
+    board: Board,
 ) -> None:
     cycles = 0
     pending = set(board.nodes)  # the nodes not sampled yet this cycle
@@ -367,246 +303,3 @@ async def _consume(
                 if not any(poller.health(bus, node).online for node in pending):
                     cycles += 1
                     pending = set(board.nodes)
-
-
-class _TripNames:
-    """The trip each tripped drive is in, read once per trip from its history.
-
-    The status says only that a drive is tripped; the profile reads which
-    trip, in a task of its own (the poll goes on meanwhile). A read that
-    fails is tried again at the next tripped sample.
-    """
-
-    def __init__(self, bus: Bus, profile: Profile) -> None:
-        self._bus = bus
-        self._profile = profile
-        self._known: dict[int, Trip | None] = {}
-        self._reading: dict[int, asyncio.Task[None]] = {}
-
-    def update(self, snapshot: DriveSnapshot) -> None:
-        node = snapshot.node
-        if snapshot.tripped is None:  # no status this poll: nothing learnt
-            return
-        if not snapshot.tripped:
-            self._known.pop(node, None)
-            task = self._reading.pop(node, None)
-            if task is not None:
-                task.cancel()
-            return
-        if node not in self._known and node not in self._reading:
-            self._reading[node] = asyncio.create_task(self._read(node))
-
-    def get(self, node: int) -> Trip | None:
-        """The trip *node* is in, if known."""
-        return self._known.get(node)
-
-    async def _read(self, node: int) -> None:
-        try:
-            self._known[node] = await trip_or_none(self._profile, self._bus.drive(node))
-        except SJ300Error as exc:
-            _log.debug("node %02d: trip history not read: %s", node, exc)
-        finally:
-            self._reading.pop(node, None)
-
-    def close(self) -> None:
-        """Cancel the reads still under way."""
-        for task in self._reading.values():
-            task.cancel()
-        self._reading.clear()
-
-
-@dataclass(slots=True)
-class _LastError:
-    message: str
-    at: float  #: wall-clock time
-
-
-class _Board:
-    """The latest sample and the last error of every drive, rendered as a table or lines."""
-
-    def __init__(self, bus: Bus, profile: Profile, nodes: list[int], *, demo: bool) -> None:
-        self._bus = bus
-        self._profile = profile
-        self.nodes = nodes
-        self._demo = demo
-        self._samples: dict[int, Sample] = {}
-        self._snapshots: dict[int, DriveSnapshot] = {}
-        self._errors: dict[int, _LastError] = {}
-        self.trips = _TripNames(bus, profile)
-        self.is_live = False
-        self._console: Any = None
-
-    def update(self, sample: Sample) -> None:
-        self._samples[sample.node] = sample
-        snapshot = self.snapshot(sample)
-        self._snapshots[sample.node] = snapshot
-        self.trips.update(snapshot)
-        if sample.error is not None:
-            self._errors[sample.node] = _LastError(sample.error, time.time())
-
-    @contextlib.contextmanager
-    def live(self, *, enabled: bool) -> Any:
-        if not enabled:
-            yield
-            return
-        from rich.console import Console
-        from rich.live import Live
-
-        self._console = Console()
-        with Live(get_renderable=self.table, console=self._console, refresh_per_second=4):
-            self.is_live = True
-            try:
-                yield
-            finally:
-                self.is_live = False
-
-    def table(self, width: int | None = None) -> Any:
-        """The rich table of every drive, laid out for *width* columns (default: the console's)."""
-        from rich import box
-        from rich.table import Table
-        from rich.text import Text
-
-        if width is None:
-            width = self._console.width if self._console is not None else 160
-        rows = [self._row(node) for node in self.nodes]
-        fields, widths = _layout(width, rows)
-        what = "demo: 8 simulated drives" if self._demo else self._bus.description
-        table = Table(
-            title=f"sj300 monitor — {what}", caption="Ctrl-C to stop", box=box.SIMPLE_HEAD
-        )
-        for field in fields:
-            table.add_column(
-                field.header,
-                justify=field.justify,
-                no_wrap=True,
-                min_width=widths[field.key],
-                max_width=widths[field.key],
-                overflow="ellipsis",
-            )
-        for node, cells in zip(self.nodes, rows, strict=True):
-            sample = self._samples.get(node)
-            styled: dict[str, Any] = dict(cells)
-            if sample is not None:
-                styled["state"] = Text(cells["state"], style=self._state_style(node))
-                styled["error"] = Text(cells["error"], style="red" if sample.error else "dim")
-                styled["link"] = Text(cells["link"], style="green" if _up(sample) else "bold red")
-            table.add_row(*(styled[field.key] for field in fields))
-        return table
-
-    def _row(self, node: int) -> dict[str, str]:
-        sample = self._samples.get(node)
-        if sample is None:
-            return dict.fromkeys(_KEYS, "") | {"node": f"{node:02d}", "state": "…"}
-        return self.cells(sample) | {"error": self._error_text(sample)}
-
-    def _error_text(self, sample: Sample) -> str:
-        last = self._errors.get(sample.node)
-        if last is None:
-            return ""
-        if sample.error is not None:
-            return last.message
-        return f"{last.message} ({time.time() - last.at:.0f} s ago)"
-
-    def snapshot(self, sample: Sample) -> DriveSnapshot:
-        """*sample* alone as the profile sees it (a value not read this poll is unknown)."""
-        readings = DriveReadings()
-        readings.take(sample, self._profile)
-        return build_snapshot(
-            self._profile,
-            readings,
-            line=self._bus.description,
-            node=sample.node,
-            unit=None,
-            now=sample.timestamp,
-            wall=time.time(),
-        )
-
-    def cells(self, sample: Sample) -> dict[str, str]:
-        """Every cell of *sample*'s row as text, keyed as :class:`_Field` names them."""
-        s = self._snapshots.get(sample.node)
-        if s is None or s.taken_at != sample.timestamp:
-            s = self.snapshot(sample)
-        latency = "-" if sample.latency_s is None else f"{sample.latency_s * 1000:.1f}"
-        return {
-            "node": f"{sample.node:02d}",
-            "state": self._state(s),
-            "set_hz": _number(s.set_frequency_hz, 2),
-            "out_hz": _number(s.output_frequency_hz, 2),
-            "amps": _number(s.output_current_a, 1),
-            "volts": _number(s.output_voltage_v, 1),
-            "torque": _number(s.output_torque_percent, 0),
-            "kw": _number(s.power_kw, 1),
-            "error": sample.error or "",
-            "latency": latency,
-            "link": "online" if _up(sample) else "offline",
-        }
-
-    def _state(self, snapshot: DriveSnapshot) -> str:
-        if snapshot.state is None:
-            return "-"
-        if snapshot.tripped:
-            trip = self.trips.get(snapshot.node)
-            if trip is not None:
-                return f"{snapshot.state} {trip}"
-        return snapshot.state
-
-    def _state_style(self, node: int) -> str:
-        snapshot = self._snapshots.get(node)
-        if snapshot is None or snapshot.tripped is None:
-            return "dim"
-        if snapshot.tripped:
-            return "bold red"
-        return "green" if snapshot.running else ""
-
-    def plain_line(self, sample: Sample) -> str:
-        """One line for a log: time, node, link, state, values with units, then any error."""
-        c = self.cells(sample)
-        now = time.time()
-        clock = time.strftime("%H:%M:%S", time.localtime(now)) + f".{int(now % 1 * 1000):03d}"
-        line = (
-            f"{clock} node {c['node']} {c['link']:<7} {c['state']:<24}"
-            f" set {c['set_hz']:>6} Hz  out {c['out_hz']:>6} Hz  {c['amps']:>6} A"
-            f"  {c['volts']:>6} V  {c['torque']:>4} %  {c['kw']:>6} kW  {c['latency']:>6} ms"
-        )
-        return f"{line}  error: {c['error']}" if c["error"] else line
-
-
-_KEYS: Final = frozenset(f.key for layout in (*_LAYOUTS, _COMPACT) for f in layout)
-
-
-def _layout(width: int, rows: list[dict[str, str]]) -> tuple[tuple[_Field, ...], dict[str, int]]:
-    """The layout for *width* columns and each of its columns' width.
-
-    A fixed column is as wide as its widest cell or header; the flexible ones
-    (state, last error) share the rest, each at least its ``min_width``.
-    """
-    from rich.cells import cell_len
-
-    def natural(field: _Field) -> int:
-        return max([cell_len(field.header), *(cell_len(row[field.key]) for row in rows)])
-
-    candidates = (_COMPACT,) if width < COMPACT_BELOW else (*_LAYOUTS, _COMPACT)
-    for fields in candidates:
-        # Per column: one space of padding each side and a divider; the edges: 1 more.
-        room = width - (3 * len(fields) + 1)
-        fixed = {f.key: natural(f) for f in fields if not f.flexible}
-        flexible = [f for f in fields if f.flexible]
-        left = room - sum(fixed.values())
-        if left >= sum(f.min_width for f in flexible) or fields is _COMPACT:
-            break
-    widths = dict(fixed)
-    for i, field in enumerate(flexible):
-        later = sum(f.min_width for f in flexible[i + 1 :])
-        want = min(natural(field), field.max_width or natural(field))
-        widths[field.key] = max(1, min(want, left - later))
-        left -= widths[field.key]
-    return fields, widths
-
-
-def _number(value: float | None, digits: int) -> str:
-    return "-" if value is None else f"{value:.{digits}f}"
-
-
-def _up(sample: Sample) -> bool:
-    """Online and heard from: a drive that has never answered is offline."""
-    return sample.online and sample.answered

@@ -17,7 +17,7 @@ import pytest
 from rich.console import Console
 
 import sj300_async as sj
-from sj300_async.cli._monitor import _Board
+from sj300_async.cli._board import Board
 from sj300_async.profiles import get_profile
 
 from .clirun import TIMEOUT, TcpSim, cli_env, sj300, sj300_on_terminal
@@ -85,7 +85,7 @@ async def test_the_table_fits_the_console_width(width: int) -> None:
         sim.faults.silence(3, True)
         poller = sj.Poller(interval_s=0.01, parameters=["F001"])
         poller.add(bus, [1, 2, 3])
-        board = _Board(bus, get_profile("sj300"), [1, 2, 3], demo=False)
+        board = Board(bus, get_profile("sj300"), [1, 2, 3], demo=False)
         async with poller:
             async for sample in poller.samples():
                 board.update(sample)
