@@ -90,8 +90,12 @@ class BusAddress:
         return f"sim://({noun}s {format_node_list(self.nodes)})"
 
 
-def parse_node_list(text: str, *, low: int = 1, high: int = 32) -> tuple[int, ...]:
+def parse_node_list(
+    text: str, *, low: int = 1, high: int = 32, noun: str = "node"
+) -> tuple[int, ...]:
     """Parse ``"1-8,12,20-22"`` into sorted unique node numbers *low*..*high* (default 1..32).
+
+    *noun* is what the protocol calls an address, for the messages (``"station"``).
 
     Raises:
         LocalProtocolError: malformed, empty, or a node outside *low*..*high*.
@@ -110,11 +114,11 @@ def parse_node_list(text: str, *, low: int = 1, high: int = 32) -> tuple[int, ..
             raise LocalProtocolError(f"bad node list {text!r}: range {part!r} runs backwards")
         if not (lo >= low and hi <= high):
             raise LocalProtocolError(
-                f"bad node list {text!r}: nodes are {low}..{high}, got {part!r}"
+                f"bad {noun} list {text!r}: {noun}s are {low}..{high}, got {part!r}"
             )
         nodes.update(range(lo, hi + 1))
     if not nodes:
-        raise LocalProtocolError(f"bad node list {text!r}: no nodes")
+        raise LocalProtocolError(f"bad {noun} list {text!r}: no {noun}s")
     return tuple(sorted(nodes))
 
 
@@ -270,7 +274,9 @@ def parse_bus_url(url: str, *, protocol: str | None = None) -> BusAddress:
             protocol_options=protocol_options,
         )
     low, high = dialect.node_range
-    nodes = parse_node_list(query.pop("nodes", dialect.default_sim_nodes), low=low, high=high)
+    nodes = parse_node_list(
+        query.pop("nodes", dialect.default_sim_nodes), low=low, high=high, noun=dialect.node_noun
+    )
     return BusAddress(
         "sim",
         line=line,

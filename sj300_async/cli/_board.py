@@ -272,7 +272,7 @@ class Board:
         now = time.time()
         clock = time.strftime("%H:%M:%S", time.localtime(now)) + f".{int(now % 1 * 1000):03d}"
         line = (
-            f"{clock} node {c['node']} {c['link']:<7} {c['state']:<24}"
+            f"{clock} {self._profile.node_noun} {c['node']} {c['link']:<7} {c['state']:<24}"
             f" set {c['set_hz']:>6} Hz  out {c['out_hz']:>6} Hz  {c['amps']:>6} A"
             f"  {c['volts']:>6} V  {c['torque']:>4} %  {c['kw']:>6} kW  {c['latency']:>6} ms"
         )

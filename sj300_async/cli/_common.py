@@ -100,6 +100,7 @@ __all__ = [
     "open_cli_bus",
     "positive_float",
     "profile_of",
+    "require",
 ]
 
 #: The environment variable that gives the bus URL when ``--url`` does not.
@@ -430,7 +431,7 @@ def _profile_named(args: argparse.Namespace, url: str) -> Profile:
     )
 
 
-def _check(args: argparse.Namespace, profile: Profile, needs: str | None) -> None:
+def require(args: argparse.Namespace, profile: Profile, needs: str | None) -> None:
     """Refuse, before anything is sent, what *profile*'s drives cannot do or be.
 
     Raises:
@@ -465,7 +466,7 @@ async def open_cli_bus(
     """
     lent = lent_bus()
     if lent is not None:  # in `sj300 shell`: its bus, which stays open
-        _check(args, profile_of(lent), needs)
+        require(args, profile_of(lent), needs)
         with _tracing(lent, args, asyncio.get_running_loop().time()):
             yield lent
         return
@@ -473,7 +474,7 @@ async def open_cli_bus(
     command = command_name(args)
     implicit = implicit_bus(args)
     url = url or bus_url(args) or DEFAULT_URL
-    _check(args, _profile_named(args, url), needs)
+    require(args, _profile_named(args, url), needs)
     if implicit and command in CHANGES_DRIVES:
         raise CliError(
             f"{command} changes drives: say which bus with --url URL or ${ENV_URL}, "

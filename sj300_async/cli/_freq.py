@@ -49,6 +49,7 @@ def run(args: argparse.Namespace) -> int:
 
 async def _freq(args: argparse.Namespace) -> int:
     async with open_cli_bus(args) as bus:
+        noun = profile_of(bus).node_noun
         try:
             await bus.drive(args.node).set_frequency(args.hz)
         except NakError as exc:
@@ -59,5 +60,5 @@ async def _freq(args: argparse.Namespace) -> int:
     if args.json:
         print_json({"node": args.node, "frequency_hz": args.hz})
     else:
-        print(f"node {args.node:02d}: frequency set to {args.hz:.2f} Hz")
+        print(f"{noun} {args.node:02d}: frequency set to {args.hz:.2f} Hz")
     return 0

@@ -232,7 +232,7 @@ async def _backup(args: argparse.Namespace) -> int:
     else:
         absent = f"; absent: {', '.join(snapshot.absent)}" if snapshot.absent else ""
         print(
-            f"node {args.node:02d}: {len(snapshot.parameters)} parameters "
+            f"{profile.node_noun} {args.node:02d}: {len(snapshot.parameters)} parameters "
             f"saved to {args.file}{absent}"
         )
     return 0

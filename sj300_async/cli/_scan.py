@@ -73,13 +73,13 @@ async def probe(bus: Bus, node: int) -> bool:
 async def _scan(args: argparse.Namespace) -> int:
     profile = cli_profile(args)
     low, high = profile.node_range
+    noun = profile.node_noun
     nodes = list(range(low, high + 1))
     if args.nodes is not None:
         try:
-            nodes = list(parse_node_list(args.nodes, low=low, high=high))
+            nodes = list(parse_node_list(args.nodes, low=low, high=high, noun=noun))
         except LocalProtocolError as exc:
             raise CliError(f"argument --nodes: {exc}") from None
-    noun = profile.node_noun
     async with open_cli_bus(args) as bus:
         if is_terminal(sys.stderr):
             answering = await _with_progress_bar(bus, nodes, noun)

@@ -191,9 +191,12 @@ def run(args: argparse.Namespace) -> int:
     line_given = args.baud is not None or args.pace
     try:
         pacing = LinePacing(args.baud or 19200, args.bytesize, args.parity, args.stopbits)
-        command_line = _command_lines()[args.protocol]
+        command_lines = _command_lines()
+        command_line = command_lines[args.protocol]
+        _refuse_other_protocols_options(args, command_lines)
         low, high = get_dialect(args.protocol).node_range
-        nodes = parse_node_list(args.nodes or str(low), low=low, high=high)
+        noun = get_dialect(args.protocol).node_noun
+        nodes = parse_node_list(args.nodes or str(low), low=low, high=high, noun=noun)
         settings_of_line = SimulateSettings(
             nodes,
             factory_defaults=args.factory_defaults,
@@ -217,6 +220,21 @@ def run(args: argparse.Namespace) -> int:
         )
 
 
+def _refuse_other_protocols_options(
+    args: argparse.Namespace, command_lines: dict[str, SimulateCommandLine]
+) -> None:
+    """An option of another protocol's simulator, given: exit 2 rather than ignore it."""
+    for name, command_line in command_lines.items():
+        if name == args.protocol:
+            continue
+        for option in command_line.options:
+            if getattr(args, option.dest, None) not in (None, False, option.default):
+                raise CliError(
+                    f"{option.flag} is an option of {name} drives, not of {args.protocol} "
+                    f"drives (--protocol {name})"
+                )
+
+
 async def _serve(
     args: argparse.Namespace,
     command_line: SimulateCommandLine,
@@ -227,6 +245,7 @@ async def _serve(
     settings: LinePacing | None,
 ) -> int:
     loop = asyncio.get_running_loop()
+    noun = get_dialect(args.protocol).node_noun
     stop = asyncio.Event()
     for sig in (signal.SIGINT, signal.SIGTERM):
         loop.add_signal_handler(sig, stop.set)
@@ -276,13 +295,16 @@ async def _serve(
         mode = command_line.describe(bus, simulated)
         pace = f", paced at {line.pacing.baudrate} bps" if line else ""
         print(
-            f"simulating node(s) {format_nodes(sorted(bus.drives))} ({mode}{pace}); Ctrl-C to stop",
+            f"simulating {noun}(s) {format_nodes(sorted(bus.drives))} ({mode}{pace}); "
+            "Ctrl-C to stop",
             file=sys.stderr,
             flush=True,
         )
         if args.trip_every:
             tripper = asyncio.create_task(
-                _trip_periodically(bus, command_line, args.trip_every, random.Random(args.seed))
+                _trip_periodically(
+                    bus, command_line, noun, args.trip_every, random.Random(args.seed)
+                )
             )
         await stop.wait()
     finally:
@@ -305,7 +327,7 @@ async def _serve(
 
 
 async def _trip_periodically(
-    bus: Any, command_line: SimulateCommandLine, every_s: float, rng: random.Random
+    bus: Any, command_line: SimulateCommandLine, noun: str, every_s: float, rng: random.Random
 ) -> None:
     """Demo: every *every_s*, trip one running drive with the over-current code of its phase."""
     loop = asyncio.get_running_loop()
@@ -317,4 +339,5 @@ async def _trip_periodically(
             continue
         drive = rng.choice(running)
         if drive.trip(now=now):
-            print(f"node {drive.node:02d} tripped: {command_line.trip_name(drive)}", flush=True)
+            name = command_line.trip_name(drive)
+            print(f"{noun} {drive.node:02d} tripped: {name}", flush=True)

@@ -30,6 +30,7 @@ from ._common import (
     cli_profile,
     open_cli_bus,
     profile_of,
+    require,
 )
 from ._output import Column, jsonable, print_json, print_table
 from ._session import run_async
@@ -62,7 +63,9 @@ def run(args: argparse.Namespace) -> int:
 
 
 def _codes(args: argparse.Namespace) -> int:
-    trips = cli_profile(args).trip_codes()
+    profile = cli_profile(args)
+    require(args, profile, "trip_history")  # a protocol without a history names no codes here
+    trips = profile.trip_codes()
     if args.json:
         print_json({"codes": [trip.as_json() for trip in trips]})
     else:

@@ -116,5 +116,6 @@ async def _write(args: argparse.Namespace) -> int:
             (str(old), str(back)) if args.raw else (format_raw(info, old), format_raw(info, back))
         )
         stored = " (stored)" if args.store else ""
-        print(f"node {args.node:02d} {code} {info.name}: {before} -> {after}{stored}")
+        noun = profile.node_noun
+        print(f"{noun} {args.node:02d} {code} {info.name}: {before} -> {after}{stored}")
     return 0

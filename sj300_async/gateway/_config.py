@@ -347,7 +347,7 @@ def _nodes(table: ConfigTable, name: str, profile: Profile) -> tuple[int, ...]:
     low, high = profile.node_range
     if isinstance(value, str):
         try:
-            return parse_node_list(value, low=low, high=high)
+            return parse_node_list(value, low=low, high=high, noun=profile.node_noun)
         except LocalProtocolError as exc:
             raise table.error(name, str(exc)) from None
     if not isinstance(value, list):

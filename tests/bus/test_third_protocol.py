@@ -72,7 +72,7 @@ async def test_url_options_node_range_and_read_only() -> None:
         with pytest.raises(sj.ReadOnlyError):
             await bus.drive(1).write("set", 1)
         assert len(sim.received) == 1  # the refused write never reached the line
-    with pytest.raises(sj.LocalProtocolError, match=r"nodes are 1\.\.9"):
+    with pytest.raises(sj.LocalProtocolError, match=r"units are 1\.\.9"):
         async with sj.open_bus("sim://?protocol=toy&nodes=10", protocol="toy"):
             pass
     # The user's open_bus is typed for SJ300 drives without protocol=: the URL must agree.

@@ -43,7 +43,7 @@ def test_monitor_demo_runs_fr700_drives_with_the_protocol_option(
         capsys, "monitor", "--protocol", "fr700", "--duration", "1.0", "--interval", "0.05"
     )
     assert code == 0, err
-    lines = [line for line in out.splitlines() if " node " in line]
+    lines = [line for line in out.splitlines() if " station " in line]
     assert lines
     assert "Traceback" not in err
 
@@ -59,7 +59,7 @@ def test_monitor_plain_lines_for_fr700(capsys: pytest.CaptureFixture[str]) -> No
         "--count", "2",
     )  # fmt: skip
     assert code == 0, err
-    assert "node 00" in out
+    assert "station 00" in out
     assert "stop" in out
 
 

@@ -94,7 +94,7 @@ async def test_line_settings_are_configurable() -> None:
 @pytest.mark.parametrize(
     ("args", "message"),
     [
-        (["--nodes", "0-32"], "nodes are 0..31"),
+        (["--nodes", "0-32"], "stations are 0..31"),
         (["--wait-ms", "20"], "Pr.123 is 9999"),
         (["--no-wait-field", "--wait-ms", "200"], "0..150"),
         (["--terminator", "lf"], "invalid choice"),

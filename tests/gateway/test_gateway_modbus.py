@@ -126,6 +126,10 @@ async def test_parameter_writes_follow_the_allow_list(
     assert "client 127.0.0.1 line hall node 1 (unit 1): parameter A004 50.0 -> 60.0: ok" in audit
     assert any("node 3" in line and "refused: not_allowed: " in line for line in audit)
     assert any("999.9: refused: invalid_value: " in line for line in audit)
+    # What the Modbus server refuses itself (half a value) is audited too, neutrally.
+    half = [line for line in audit if "register 12009" in line]
+    assert len(half) == 1, audit
+    assert "[600]: refused: malformed: a write covers one value whole" in half[0]
 
 
 async def test_control_needs_the_lease_and_one_holder(sim_line: SimLine) -> None:

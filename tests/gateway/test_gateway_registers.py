@@ -13,14 +13,25 @@ from sj300_async.gateway import (
     Lease,
     LineConfig,
     ParameterWrite,
+    Refusal,
     RunCommand,
     SetFrequency,
+    WriteRequest,
+    WriteResult,
 )
-from sj300_async.gateway.modbus import Exc, Field, RegisterMap, parameter_address
+from sj300_async.gateway.modbus import REFUSAL_CODES, Exc, Field, RegisterMap, parameter_address
 from sj300_async.profiles import get_profile
 from sj300_async.wire import Direction
 
 SJ300, FR700 = get_profile("sj300"), get_profile("fr700")
+
+
+def refusal(decoded: WriteRequest | WriteResult) -> Refusal | None:
+    """The refusal of a decoded write (and a sentence saying why), None for a request."""
+    if not isinstance(decoded, WriteResult):
+        return None
+    assert decoded.detail
+    return decoded.refusal
 
 
 def _state(protocol: str = "sj300") -> GatewayDrive:
@@ -90,16 +101,23 @@ def test_what_a_write_asks_for() -> None:
     regs = RegisterMap(SJ300, ["A004"])
     assert regs.decode_write(1000, [7]) == Heartbeat()
     assert regs.decode_write(1002, [2]) == RunCommand(Direction.REVERSE)
-    assert regs.decode_write(1002, [3]) == Exc.ILLEGAL_VALUE
+    assert refusal(regs.decode_write(1002, [3])) == Refusal.INVALID_VALUE
     assert regs.decode_write(1003, [2550]) == SetFrequency(25.5)
     assert regs.decode_write(12008, [0, 600]) == ParameterWrite("A004", 600)
     assert regs.decode_write(12008, [65535, 65535]) == ParameterWrite("A004", -1)
-    assert regs.decode_write(12009, [600]) == Exc.ILLEGAL_VALUE  # half a value
-    assert regs.decode_write(1002, [1, 2500]) == Exc.ILLEGAL_VALUE  # two targets
-    assert regs.decode_write(1001, [1]) == Exc.ILLEGAL_FUNCTION  # read-only
-    assert regs.decode_write(100, [1]) == Exc.ILLEGAL_FUNCTION
-    assert regs.decode_write(999, [1]) == Exc.ILLEGAL_ADDRESS
-    assert regs.decode_write(1003, [1, 1]) == Exc.ILLEGAL_ADDRESS  # 1004 does not exist
+    assert refusal(regs.decode_write(12009, [600])) == Refusal.MALFORMED  # half a value
+    assert refusal(regs.decode_write(1002, [1, 2500])) == Refusal.MALFORMED  # two targets
+    assert refusal(regs.decode_write(1001, [1])) == Refusal.NOT_ALLOWED  # read-only
+    assert refusal(regs.decode_write(100, [1])) == Refusal.NOT_ALLOWED
+    assert refusal(regs.decode_write(999, [1])) == Refusal.UNKNOWN_TARGET
+    assert refusal(regs.decode_write(1003, [1, 1])) == Refusal.UNKNOWN_TARGET  # no 1004
+    # Each answered with the exception its meaning is closest to, as before.
+    assert [REFUSAL_CODES[r] for r in (Refusal.INVALID_VALUE, Refusal.MALFORMED)] == [
+        Exc.ILLEGAL_VALUE,
+        Exc.ILLEGAL_VALUE,
+    ]
+    assert REFUSAL_CODES[Refusal.NOT_ALLOWED] == Exc.ILLEGAL_FUNCTION
+    assert REFUSAL_CODES[Refusal.UNKNOWN_TARGET] == Exc.ILLEGAL_ADDRESS
 
 
 def test_the_lease_registers_show_the_lease() -> None:

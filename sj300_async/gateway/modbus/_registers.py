@@ -52,6 +52,7 @@ from .. import (
     RunCommand,
     SetFrequency,
     WriteRequest,
+    WriteResult,
 )
 
 __all__ = [
@@ -326,21 +327,36 @@ class RegisterMap:
             at += len(taken)
         return out
 
-    def decode_write(self, address: int, values: list[int]) -> WriteRequest | Exc:
-        """What a write of *values* at *address* asks for (not yet judged)."""
+    def decode_write(self, address: int, values: list[int]) -> WriteRequest | WriteResult:
+        """What a write of *values* at *address* asks for (not yet judged), or why it is none.
+
+        The refusals are neutral, as the gateway's are: the server answers
+        each with its exception (:data:`REFUSAL_CODES`) and audits it.
+        """
         found = self._at.get(address)
-        if found is None or any(a not in self._at for a in range(address, address + len(values))):
-            return Exc.ILLEGAL_ADDRESS
+        missing = next(
+            (a for a in range(address, address + len(values)) if a not in self._at), None
+        )
+        if found is None or missing is not None:
+            where = address if found is None else missing
+            return WriteResult(Refusal.UNKNOWN_TARGET, f"no register {where} for this unit")
         f, word = found
         if not f.writable:
-            return Exc.ILLEGAL_FUNCTION
-        if word != 0 or len(values) != f.width:
-            return Exc.ILLEGAL_VALUE  # part of a value, or more than one target
+            return WriteResult(Refusal.NOT_ALLOWED, f"register {address} ({f.name}) is read-only")
+        if word != 0 or len(values) != f.width:  # part of a value, or more than one target
+            return WriteResult(
+                Refusal.MALFORMED,
+                f"a write covers one value whole: {f.name} is registers {f.address}.."
+                f"{f.address + f.width - 1}",
+            )
         if address == HEARTBEAT:
             return Heartbeat()
         if address == COMMAND:
             if values[0] not in (0, 1, 2):
-                return Exc.ILLEGAL_VALUE
+                return WriteResult(
+                    Refusal.INVALID_VALUE,
+                    f"a run command is 0 stop, 1 forward or 2 reverse, got {values[0]}",
+                )
             return RunCommand(Direction(values[0]))
         if address == SET_FREQUENCY:
             return SetFrequency(values[0] / 100)

@@ -33,7 +33,7 @@ from pymodbus.pdu import ExceptionResponse, ModbusPDU
 from pymodbus.server import ModbusTcpServer
 from pymodbus.server.requesthandler import ServerRequestHandler
 
-from .. import Endpoint, GatewayDrive, GatewayView
+from .. import Endpoint, GatewayDrive, GatewayView, WriteResult
 from ._clients import ClientCounters
 from ._registers import REFUSAL_CODES, EncodingCache, Exc, RegisterMap
 
@@ -107,9 +107,11 @@ class GatewayDatastore(ModbusServerContext):
             return ExcCodes.ILLEGAL_FUNCTION
         words = [int(v) for v in values]
         request = unit.registers.decode_write(address, words)
-        if isinstance(request, Exc):
-            return ExcCodes(int(request))
-        result = await self.gateway.write(_CLIENT.get(), unit.drive, request)
+        if isinstance(request, WriteResult):  # no write at all: audited here, refused
+            self.gateway.refused(_CLIENT.get(), unit.drive, f"register {address}", words, request)
+            result = request
+        else:
+            result = await self.gateway.write(_CLIENT.get(), unit.drive, request)
         if result.refusal is not None:
             return ExcCodes(int(REFUSAL_CODES[result.refusal]))
         if func_code == 6:
