@@ -440,7 +440,8 @@ def require(args: argparse.Namespace, profile: Profile, needs: str | None) -> No
     node = getattr(args, "node", None)
     low, high = profile.node_range
     if isinstance(node, int) and not low <= node <= high:
-        raise CliError(f"argument -n/--node: a {profile.node_noun} is {low}..{high}, got '{node}'")
+        noun = profile.node_noun
+        raise CliError(f"argument -n/--node: a {noun} is {low}..{high}, got '{node}' (see --help)")
     if needs is not None and not getattr(profile.capabilities, needs):
         raise CliError(
             f"{command_name(args)} needs {NEEDS[needs]}, which {profile.model} drives "

@@ -131,11 +131,14 @@ def _status_words(message: StateMessage) -> str:
 
 
 def _trip_words(message: StateMessage) -> str:
-    """``E07 over-voltage``; ``fault H10`` when the gateway gives no meaning."""
+    """``E07 over-voltage``; ``fault H10`` when the profile knows no meaning; an older
+    gateway's (no ``state``: it sends no meaning either) the code alone."""
     code = message.trip
     if code is None:
         return ""
-    return f"{code} {message.trip_meaning}" if message.trip_meaning else f"fault {code}"
+    if message.trip_meaning:
+        return f"{code} {message.trip_meaning}"
+    return code if message.state is None else f"fault {code}"
 
 
 def _number(value: float | None, digits: int) -> str:

@@ -204,7 +204,7 @@ def _build(ctx: ConfigContext, data: object, *, base_dir: Path) -> GatewayConfig
             for other, where in listening.items():
                 if _same_socket(endpoint, other):
                     raise table.error(key, f"{where} already listens on {other}")
-            listening[endpoint] = f"the {section} section's {key} ({endpoint})"
+            listening[endpoint] = ctx.display(f"{section}.{key}")
     return GatewayConfig(
         lines=_lines(ctx, root),
         northbounds=northbounds,

@@ -21,7 +21,10 @@ gateway stops while a lease is held.
 
 Decisions: a command's read-back is a status read; after a run command the
 drive must report running (else "not confirmed"); after a stop it may still
-be decelerating, so the status read only has to succeed. The set frequency
+be decelerating, so the status read only has to succeed. The monitor is
+read back too (its failure does not fail the command): the state shown
+right after a command pairs its status with a direction and a frequency
+read after it, not before. The set frequency
 is read back the way the drive's profile says (SJ300: F001). A client is
 known by the name its northbound gives it (a Modbus client by its IP
 address: a SCADA that reconnects from a new port keeps its lease).
@@ -187,9 +190,18 @@ class Controller:
             }
             await calls[request.direction]()
             readings.set_status(await target.read_status(), loop.time(), profile)
-            self._changed(drive)
             view = readings.status_view
-            return request.direction == Direction.STOP or bool(view is not None and view.running)
+            confirmed = request.direction == Direction.STOP or bool(
+                view is not None and view.running
+            )
+            # The monitor too, so that the state published now does not pair the new
+            # status with the direction of a monitor read before the command (SJ300).
+            try:
+                readings.set_monitor(await target.read_monitor(), loop.time(), profile)
+            except SJ300Error as exc:  # the status confirmed it: the next poll catches up
+                _log.debug("line %s node %d: no monitor read-back: %s", *drive.key, exc)
+            self._changed(drive)
+            return confirmed
         if isinstance(request, SetFrequency):
             await target.set_frequency(request.hz)
             read_back = await profile.read_set_frequency(target)

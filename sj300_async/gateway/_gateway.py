@@ -17,6 +17,11 @@ says "offline"), the leases still held (their lapse action runs and is
 waited for: the one case a command is sent on the way out), the
 trip-history readers and the pollers, the lines, the audit log.
 
+A northbound's failure stays its own: an exception from its ``publish`` is
+logged (the first with its traceback, the next at DEBUG) and counted
+(``sj300_gateway_publish_errors_total``), and the other northbounds, the
+poller, the write that changed the drive and the trip reader go on.
+
 A trip history is not part of the poll cycle (an SJ300's is 446
 characters: most of a 19200-baud cycle). For a protocol whose profile
 reads one, each drive's is read every ``trips_interval_s`` and as soon as
@@ -36,7 +41,7 @@ from typing import TYPE_CHECKING, Any
 
 from .. import Poller, Sample
 from ..bus import Bus, CaptureFile, open_bus
-from ..profiles import Profile, get_profile
+from ..profiles import DriveSnapshot, Profile, get_profile
 from ..wire import SJ300Error
 from ._audit import AuditLog
 from ._control import Controller
@@ -81,6 +86,8 @@ class Gateway:
         self.northbounds: dict[str, Northbound] = {}
         self._drives: list[GatewayDrive] = []
         self._by_key: dict[tuple[str, int], GatewayDrive] = {}
+        #: Exceptions a northbound's ``publish`` raised, by its section.
+        self.publish_errors: dict[str, int] = {}
         self._stack = contextlib.AsyncExitStack()
         self._tasks: list[asyncio.Task[None]] = []
 
@@ -112,6 +119,16 @@ class Gateway:
         yield from gateway_metrics(
             self._line_views(), (drive_view(d.snapshot, now, stale) for d in self._drives)
         )
+        from prometheus_client.core import CounterMetricFamily
+
+        errors = CounterMetricFamily(
+            "sj300_gateway_publish_errors",
+            "Snapshots a northbound failed to take (its publish raised; logged).",
+            labels=["northbound"],
+        )
+        for section in self.northbounds:
+            errors.add_metric([section], self.publish_errors.get(section, 0))
+        yield errors
         for northbound in self.northbounds.values():
             yield from northbound.metrics()
 
@@ -192,12 +209,28 @@ class Gateway:
         self._publish(drive.rebuild(sample.timestamp, time.time() - (now - sample.timestamp)))
 
     def _changed(self, drive: GatewayDrive) -> None:
-        """A write's read-back or a trip history changed *drive*'s readings: show it now."""
-        self._publish(drive.rebuild(asyncio.get_running_loop().time()))
+        """A write's read-back or a trip history changed *drive*'s readings: show it now.
 
-    def _publish(self, snapshot: Any) -> None:
-        for northbound in self.northbounds.values():
-            northbound.publish(snapshot)
+        Never raises: the write or the trip read that called it goes on.
+        """
+        try:
+            snapshot = drive.rebuild(asyncio.get_running_loop().time())
+        except Exception:  # a profile's bug: the last snapshot stays, the caller goes on
+            _log.exception("line %s node %d: no snapshot after a change", *drive.key)
+            return
+        self._publish(snapshot)
+
+    def _publish(self, snapshot: DriveSnapshot) -> None:
+        for section, northbound in self.northbounds.items():
+            try:
+                northbound.publish(snapshot)
+            except Exception:  # its own failure: the others, and the caller, go on
+                count = self.publish_errors[section] = self.publish_errors.get(section, 0) + 1
+                if count == 1:
+                    _log.exception("the %s northbound failed to take a snapshot", section)
+                else:
+                    _log.debug("the %s northbound failed to take a snapshot (%d so far)",
+                               section, count, exc_info=True)  # fmt: skip
 
     async def _read_trips(self, line: GatewayLine) -> None:
         loop = asyncio.get_running_loop()

@@ -120,6 +120,10 @@ class ConfigContext:
         self._rename = rename or {}
         self._lines: dict[str, int] | None = None
 
+    def display(self, key: str) -> str:
+        """How messages name *key*: the flag it came from on the command line, else itself."""
+        return self._rename.get(key, key)
+
     def error(self, key: str, reason: str) -> GatewayConfigError:
         if self._lines is None:  # scanned on the first error only
             self._lines = _key_lines(self._text)

@@ -22,7 +22,14 @@ from typing import Any
 import pytest
 from mqtt_broker import Broker, running_broker
 
-from sj300_async.gateway.mqtt import Fleet, FleetUrl, StateMessage, Topics, parse_fleet_url
+from sj300_async.gateway.mqtt import (
+    Fleet,
+    FleetUrl,
+    StateMessage,
+    Topics,
+    follow,
+    parse_fleet_url,
+)
 from sj300_async.wire import LocalProtocolError
 
 from .clirun import TIMEOUT, Result, cli_env, closed_port, running, sj300, sj300_on_terminal
@@ -196,6 +203,42 @@ async def test_a_lost_broker_is_reconnected(broker: Broker) -> None:
         assert note.startswith(f"sj300 monitor: note: cannot reconnect to {broker.url} (")
         assert note.endswith(f"): next attempt in {delay} s")
     assert back == f"sj300 monitor: note: reconnected to {broker.url}"
+
+
+async def test_a_consumer_that_fails_ends_the_view_at_once(broker: Broker) -> None:
+    """A reader that went away (a closed pipe) ends the subscription; it is no lost broker."""
+    await publish_states(broker, [_state("gw-a", 1)])
+    fleet = Fleet(parse_fleet_url(broker.url))
+    links: list[str | None] = []
+
+    def on_state(message: StateMessage) -> bool:
+        raise BrokenPipeError("the reader went away")
+
+    with pytest.raises(BrokenPipeError):
+        async with asyncio.timeout(TIMEOUT):
+            await follow(fleet, on_state, on_link=links.append)
+    assert links == [None]  # connected once, never "lost" nor reconnected
+
+    # The command line: a gateway goes on publishing; the view's reader takes one line.
+    async def publishing() -> None:
+        for hz in range(10_000):
+            await publish_states(broker, [_state("gw-a", 1, output_frequency_hz=float(hz))])
+            await asyncio.sleep(0.05)
+
+    publisher = asyncio.create_task(publishing())
+    try:
+        piped = await asyncio.create_subprocess_shell(
+            f"{sys.executable} -m sj300_async monitor --url {broker.url} --json | head -n 1",
+            stdout=asyncio.subprocess.PIPE,
+            stderr=asyncio.subprocess.PIPE,
+            env=cli_env(),
+        )
+        out, err = await asyncio.wait_for(piped.communicate(), TIMEOUT)
+    finally:
+        publisher.cancel()
+    assert json.loads(out)["node"] == 1
+    assert b"Traceback" not in err, err
+    assert b"unexpected error" not in err, err
 
 
 async def test_on_a_terminal_a_table_of_every_drive(broker: Broker) -> None:

@@ -343,8 +343,7 @@ REFUSALS = [
     ),
     pytest.param(
         '[modbus]\nlisten = ":502"\n[metrics]\nlisten = "127.0.0.1:502"\n',
-        "gateway.toml:4: metrics.listen: the modbus section's listen (0.0.0.0:502) already "
-        "listens on 0.0.0.0:502",
+        "gateway.toml:4: metrics.listen: modbus.listen already listens on 0.0.0.0:502",
         id="metrics-on-the-modbus-port",
     ),
     pytest.param(
@@ -962,8 +961,7 @@ FLAG_DEFAULTS: dict[str, object] = {
         ),
         pytest.param(
             {"northbounds": {"modbus": ":502", "metrics": "0.0.0.0:502"}},
-            "<command line>: --metrics: the modbus section's listen (0.0.0.0:502) already "
-            "listens on 0.0.0.0:502",
+            "<command line>: --metrics: --modbus already listens on 0.0.0.0:502",
             id="metrics",
         ),
         pytest.param(

@@ -310,7 +310,8 @@ async def follow(
     Raises:
         ImportError: aiomqtt (the gateway extra) is missing.
         BrokerUnreachable: the broker cannot be reached at the start.
-        SubscriptionRefused: the broker refused a subscription at the start.
+        SubscriptionRefused: the broker refused a subscription.
+        Exception: whatever *on_state* or *on_link* raised (it ends the view).
     """
     import aiomqtt
 
@@ -355,7 +356,7 @@ async def follow(
         ceiling_s=BACKOFF_MAX_S,
         outage_level=logging.INFO,
         fail_first=True,
-        fatal=(SubscriptionRefused,),
+        survive_errors=False,  # the consumer's error (a closed pipe) ends the view
         on_link=link,
         on_attempt=lambda n: setattr(
             fleet, "link_problem", f"reconnecting to {url.broker} (attempt {n})"

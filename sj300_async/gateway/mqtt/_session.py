@@ -18,10 +18,13 @@ Decisions:
   under the table).
 - ``on_link`` hears every change: None when connected, else a sentence
   saying what happened and when the next attempt comes.
-- A bug in the session body (any exception but aiomqtt's) is logged with
-  its traceback and treated as a lost connection, so it cannot end the
-  connection for good; a caller that must fail at once on an unreachable
-  broker (a command line) asks for it with ``fail_first``.
+- A bug in the session body (any exception but aiomqtt's) is, for a
+  service (``survive_errors``: the gateway's bridge), logged with its
+  traceback and treated as a lost connection, so it cannot end the
+  connection for good; for a viewer it ends the session and is raised (the
+  fleet view whose reader went away must stop, not reconnect for ever). A
+  caller that must fail at once on an unreachable broker (a command line)
+  asks for it with ``fail_first``.
 - Cancellation ends the loop at once (whatever it was doing); the body's
   own ``except CancelledError`` runs first, inside the connection (the
   bridge says "offline" there).
@@ -76,7 +79,7 @@ async def keep_connected(
     stats: SessionStats | None = None,
     outage_level: int = logging.WARNING,
     fail_first: bool = False,
-    fatal: tuple[type[Exception], ...] = (),
+    survive_errors: bool = True,
     on_link: Callable[[str | None], None] | None = None,
     on_attempt: Callable[[int], None] | None = None,
     who: str = "",
@@ -85,7 +88,8 @@ async def keep_connected(
 
     Args:
         connect: makes a new (not yet entered) client for each attempt.
-        fatal: exceptions of the body that end it all (raised as they are).
+        survive_errors: treat the body's other exceptions as a lost connection
+            (logged); False: raise them.
         on_attempt: told each reconnection attempt's number as it starts.
         who: appended to the first "connected" log line (``" as gw1"``).
 
@@ -123,9 +127,9 @@ async def keep_connected(
             return
         except aiomqtt.MqttError as exc:
             reason = " ".join(str(exc).split()) or type(exc).__name__
-        except fatal:
-            raise
-        except Exception as exc:  # a bug of ours must not end the connection for good
+        except Exception as exc:  # a bug of ours must not end a service's connection for good
+            if not survive_errors:
+                raise
             log.exception("MQTT: unexpected error")
             reason = f"{type(exc).__name__}: {exc}"
         if fail_first and not ever:
