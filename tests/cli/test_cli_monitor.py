@@ -57,8 +57,10 @@ async def test_demo_json_lines_carry_the_sample_fields() -> None:
 async def test_a_url_is_polled_without_the_demo_and_a_silent_node_goes_offline(
     tcp_sim: TcpSim,
 ) -> None:
-    args = ("--url", tcp_sim.url, "--nodes", "3-5", "--interval", "0.05", "--timeout", "0.05")
-    result = await sj300("monitor", *args, "--json", "--retries", "0", "--duration", "1.2")
+    # A cycle count, not a duration, and a timeout the present nodes meet on
+    # a loaded machine: node 05 fails at least three polls whatever the timing.
+    args = ("--url", tcp_sim.url, "--nodes", "3-5", "--interval", "0.05", "--timeout", "0.3")
+    result = await sj300("monitor", *args, "--json", "--retries", "0", "--count", "4")
     assert result.code == 0, result.err
     samples = result.json_lines()
     by_node = {n: [s for s in samples if s["node"] == n] for n in (3, 4, 5)}
@@ -67,7 +69,7 @@ async def test_a_url_is_polled_without_the_demo_and_a_silent_node_goes_offline(
         assert all(s["online"] and s["error"] is None for s in by_node[node])
         assert all(s["status"]["b"] == "STOPPED" for s in by_node[node])  # no demo here
     absent = by_node[5]
-    assert len(absent) >= 3
+    assert len(absent) >= 3  # an offline node is probed less often
     assert all("node 05 did not answer" in s["error"] for s in absent)
     assert absent[0]["online"] is True
     assert absent[-1]["online"] is False  # offline after three failed polls
