@@ -103,7 +103,14 @@ class Controller:
 
     # -- writes ------------------------------------------------------------------
 
-    async def write(self, client: str, drive: GatewayDrive, request: WriteRequest) -> WriteResult:
+    async def write(
+        self,
+        client: str,
+        drive: GatewayDrive,
+        request: WriteRequest,
+        *,
+        connection: str | None = None,
+    ) -> WriteResult:
         """Judge and carry out one write; its result (audited)."""
         refused = self._judge(client, drive, request)
         if refused is not None:
@@ -217,6 +224,9 @@ class Controller:
         return raw == request.raw
 
     # -- the lease ---------------------------------------------------------------
+
+    def disconnected(self, connection: str) -> None:
+        """*connection* closed: its connection-scoped leases lapse now (not yet: see issue 26)."""
 
     def _renew(self, client: str, drive: GatewayDrive) -> None:
         loop = asyncio.get_running_loop()

@@ -102,9 +102,23 @@ class Gateway:
         """The drive *node* of line *line*, or None."""
         return self._by_key.get((line, node))
 
-    async def write(self, client: str, drive: GatewayDrive, request: WriteRequest) -> WriteResult:
+    async def write(
+        self,
+        client: str,
+        drive: GatewayDrive,
+        request: WriteRequest,
+        *,
+        connection: str | None = None,
+    ) -> WriteResult:
         """Judge and carry out *client*'s write through the drive's line (audited there)."""
-        return await self._line_of(drive).controller.write(client, drive, request)
+        return await self._line_of(drive).controller.write(
+            client, drive, request, connection=connection
+        )
+
+    def disconnected(self, connection: str) -> None:
+        """*connection* closed: the connection-scoped leases it holds lapse now."""
+        for line in self.lines:
+            line.controller.disconnected(connection)
 
     def refused(
         self, client: str, drive: GatewayDrive, what: str, value: object, result: WriteResult

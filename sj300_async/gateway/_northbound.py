@@ -73,8 +73,24 @@ class GatewayView(Protocol):
     def drive(self, line: str, node: int) -> GatewayDrive | None:
         """The drive *node* of line *line*, None when the gateway has no such drive."""
 
-    async def write(self, client: str, drive: GatewayDrive, request: WriteRequest) -> WriteResult:
-        """Judge and carry out *client*'s write (audited); never raises for a refusal."""
+    async def write(
+        self,
+        client: str,
+        drive: GatewayDrive,
+        request: WriteRequest,
+        *,
+        connection: str | None = None,
+    ) -> WriteResult:
+        """Judge and carry out *client*'s write (audited); never raises for a refusal.
+
+        *connection* names the client's connection (``"10.0.0.5:50123"``, an
+        MQTT session) when the northbound has one: a line whose lease is
+        connection-scoped (``lease_scope = "connection"``) lapses the lease
+        when that connection closes (:meth:`disconnected`).
+        """
+
+    def disconnected(self, connection: str) -> None:
+        """*connection* closed: the connection-scoped leases it holds lapse now."""
 
     def refused(
         self, client: str, drive: GatewayDrive, what: str, value: object, result: WriteResult
