@@ -20,6 +20,13 @@ from ._config import config_from_flags, load_config, parse_config, valid_name
 from ._control import Controller
 from ._drive import GatewayDrive, Lease
 from ._gateway import Gateway, GatewayLine
+from ._listeners import (
+    LIMIT_KEYS,
+    ConnectionLimit,
+    ListenerLimits,
+    RateLimitedLog,
+    listener_families,
+)
 from ._metrics import (
     DriveView,
     LineView,
@@ -71,11 +78,13 @@ __all__ = [
     "DEFAULT_LEASE_S",
     "DEFAULT_STALE_AFTER_S",
     "LAPSE_ACTIONS",
+    "LIMIT_KEYS",
     "POLL_READS",
     "UNIT_RANGE",
     "AuditLog",
     "ConfigContext",
     "ConfigTable",
+    "ConnectionLimit",
     "Controller",
     "DriveView",
     "Endpoint",
@@ -91,10 +100,12 @@ __all__ = [
     "Lease",
     "LineConfig",
     "LineView",
+    "ListenerLimits",
     "Northbound",
     "NorthboundSpec",
     "ParameterWrite",
     "PollRead",
+    "RateLimitedLog",
     "Refusal",
     "RunCommand",
     "SectionContext",
@@ -111,6 +122,7 @@ __all__ = [
     "gateway_metrics",
     "get_northbound",
     "line_problems",
+    "listener_families",
     "load_config",
     "northbound_names",
     "parse_config",

@@ -17,7 +17,13 @@ from typing import TYPE_CHECKING, Final
 if TYPE_CHECKING:
     from prometheus_client.core import Metric
 
-__all__ = ["MAX_CLIENTS", "OTHER_CLIENT", "ClientCounters", "client_families"]
+__all__ = [
+    "MAX_CLIENTS",
+    "OTHER_CLIENT",
+    "ClientCounters",
+    "bad_frames_family",
+    "client_families",
+]
 
 _log = logging.getLogger("sj300_async.gateway.metrics")
 
@@ -93,3 +99,16 @@ def client_families(clients: ClientCounters) -> Iterator[Metric]:
     for (client, code), count in sorted(clients.exceptions.items()):
         exceptions.add_metric([client, str(code)], count)
     yield exceptions
+
+
+def bad_frames_family(count: int) -> Metric:
+    """``sj300_modbus_bad_frames_total``: frames that could not be framed (each closed its
+    connection)."""
+    from prometheus_client.core import CounterMetricFamily
+
+    return CounterMetricFamily(
+        "sj300_modbus_bad_frames",
+        "Modbus TCP frames with a protocol id other than 0 or an impossible length "
+        "(each closed its connection).",
+        count,
+    )

@@ -7,15 +7,14 @@ from collections.abc import Iterator
 from typing import TYPE_CHECKING
 
 from ...profiles import DriveSnapshot
-from .. import GatewayView, LineConfig
+from .. import GatewayView, LineConfig, listener_families
 from . import ModbusConfig
-from ._clients import ClientCounters, client_families
+from ._clients import ClientCounters, bad_frames_family, client_families
 from ._registers import RegisterMap
+from ._server import ModbusServer, Unit
 
 if TYPE_CHECKING:
     from prometheus_client.core import Metric
-
-    from ._server import ModbusGatewayServer
 
 __all__ = ["ModbusNorthbound"]
 
@@ -29,11 +28,9 @@ class ModbusNorthbound:
         self.config = config
         #: Requests and exception replies per client, for the exporter.
         self.clients = ClientCounters()
-        self.server: ModbusGatewayServer | None = None
+        self.server: ModbusServer | None = None
 
     async def start(self, gateway: GatewayView) -> None:
-        from ._server import Unit, serve_modbus
-
         maps: dict[int, tuple[LineConfig, RegisterMap]] = {}
         units = {}
         for drive in gateway.drives:
@@ -41,7 +38,9 @@ class ModbusNorthbound:
             if id(line) not in maps:
                 maps[id(line)] = (line, RegisterMap(drive.profile, line.parameters))
             units[drive.unit] = Unit(drive, maps[id(line)][1], {})
-        self.server = await serve_modbus(units, gateway, self.config.listen, self.clients)
+        server = ModbusServer(units, gateway, self.config.limits, self.clients)
+        await server.start(self.config.listen)
+        self.server = server
 
     @property
     def port(self) -> int:
@@ -55,9 +54,12 @@ class ModbusNorthbound:
         """Nothing to do: reads are served from each drive's latest snapshot."""
 
     def metrics(self) -> Iterator[Metric]:
-        return client_families(self.clients)
+        yield from client_families(self.clients)
+        if self.server is not None:
+            yield from listener_families("sj300_modbus", self.server.limit)
+            yield bad_frames_family(self.server.bad_frames)
 
     async def close(self) -> None:
         if self.server is not None:
-            await self.server.shutdown()  # type: ignore[no-untyped-call]
+            await self.server.close()
             self.server = None

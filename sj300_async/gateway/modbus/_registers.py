@@ -36,7 +36,6 @@ Decisions:
 
 from __future__ import annotations
 
-import enum
 import math
 from collections.abc import Callable, Iterable, Iterator
 from dataclasses import dataclass
@@ -54,6 +53,7 @@ from .. import (
     WriteRequest,
     WriteResult,
 )
+from ._framing import Exc
 
 __all__ = [
     "REFUSAL_CODES",
@@ -63,18 +63,6 @@ __all__ = [
     "describe",
     "parameter_address",
 ]
-
-
-class Exc(enum.IntEnum):
-    """The Modbus exception codes the gateway answers with."""
-
-    ILLEGAL_FUNCTION = 0x01  #: not allowed: read-only, not allow-listed, no lease
-    ILLEGAL_ADDRESS = 0x02  #: no such register for this unit
-    ILLEGAL_VALUE = 0x03  #: a value the drive must not get, or a malformed write
-    DEVICE_FAILURE = 0x04  #: the drive refused (NAK) or read back something else
-    DEVICE_BUSY = 0x06  #: another client holds the control lease
-    PATH_UNAVAILABLE = 0x0A  #: no drive behind this unit id
-    TARGET_FAILED = 0x0B  #: stale or missing data, or the drive did not answer
 
 
 #: The exception each neutral refusal is answered with.

@@ -1,57 +1,83 @@
-"""Modbus TCP: pymodbus's server, with the gateway's register map as its datastore.
+"""Modbus TCP: an asyncio.Protocol per connection over the sans-IO framer (:mod:`._framing`).
 
-pymodbus (the ``gateway`` extra) parses and frames Modbus TCP, calls its
-datastore for each request and answers. The datastore here is
-:class:`GatewayDatastore`: per unit id, the drive's
-:class:`~._registers.RegisterMap` over its latest snapshot for reads
-(served from the gateway's cache: no read reaches the line), and the
-gateway's write path for writes (which do, through the line's arbiter);
-a refusal is answered with :data:`~._registers.REFUSAL_CODES`' exception.
+Reads are answered from the drive's :class:`~._registers.RegisterMap`
+over its latest snapshot (the gateway's cache: no read reaches a line),
+at once, in the callback that received them. Writes go through the
+gateway's write path (``gateway.write``, which does reach the line,
+through its arbiter), and a refusal is answered with
+:data:`~._registers.REFUSAL_CODES`' exception.
 
-Coupling to pymodbus, on purpose and pinned (``pymodbus>=3.10,<4``): a
-``ModbusServerContext`` subclass whose ``async_getValues`` /
-``async_setValues`` return a list or an ``ExcCodes`` (the 3.x datastore
-interface, which lets a datastore answer any exception code, 0x0B
-included), and a ``ServerRequestHandler`` subclass that knows the client
-it serves (its IP address: the audit log's "who", the lease holder, and
-the per-client metrics). tests/gateway checks both with pymodbus's client
-and with mbpoll.
+Decisions:
+
+- **Pipelining: strictly in order.** A connection's requests are answered
+  in the order they came, each with its own transaction id and unit id.
+  While a write is carried out, the requests behind it wait (reading pauses
+  once more than :data:`PAUSE_BYTES` are buffered) and are answered when it
+  is done. Answering a later read first would be allowed by the spec, but a
+  SCADA that writes a set point and then reads it expects to read it back.
+  Several reads in one segment get their answers in one ``write``.
+- **A broken frame closes the connection** (see :mod:`._framing`): one
+  WARNING line per :data:`~sj300_async.gateway.LOG_INTERVAL_S` for the
+  whole listener, the rest at DEBUG, with a bounded hex excerpt, and
+  counted (``sj300_modbus_bad_frames_total``). No input is logged with a
+  traceback.
+- **A unit id with no drive behind it gets 0x0A**, whatever its request
+  (the unit is judged first, as a gateway routes before the target
+  decodes): no data, and no other exception, for a unit that does not
+  exist. Unit 0 is no broadcast here: no drive has it.
+- **Limits**: ``max_connections`` (newcomers past it are accepted and
+  closed at once) and ``idle_timeout_s`` (a connection with no request for
+  that long, and no write of its own in progress, is closed). The
+  :class:`~sj300_async.gateway.ConnectionLimit` is the HTTP northbound's
+  too.
+- **A connection is a client**: its IP address is the audit log's "who",
+  the lease holder and the metrics' label; ``"IP:port"`` names the
+  connection, whose end lapses a connection-scoped lease
+  (``gateway.disconnected``), after any write of its still in progress.
 """
 
 from __future__ import annotations
 
 import asyncio
-import contextvars
 import logging
-from collections.abc import Sequence
+from collections.abc import Coroutine
 from dataclasses import dataclass
-from typing import Any
+from typing import Any, Final
 
-from pymodbus.constants import ExcCodes
-from pymodbus.datastore import ModbusServerContext
-from pymodbus.pdu import ExceptionResponse, ModbusPDU
-from pymodbus.server import ModbusTcpServer
-from pymodbus.server.requesthandler import ServerRequestHandler
-
-from .. import Endpoint, GatewayDrive, GatewayView, WriteResult
+from .. import (
+    ConnectionLimit,
+    Endpoint,
+    GatewayDrive,
+    GatewayView,
+    ListenerLimits,
+    RateLimitedLog,
+    WriteRequest,
+    WriteResult,
+)
 from ._clients import ClientCounters
-from ._registers import REFUSAL_CODES, EncodingCache, Exc, RegisterMap
+from ._framing import (
+    NEED_DATA,
+    Exc,
+    FrameError,
+    Framer,
+    ReadRegisters,
+    Refused,
+    WriteRegisters,
+    encode_exception,
+    encode_registers,
+    encode_written,
+    excerpt,
+)
+from ._registers import REFUSAL_CODES, EncodingCache, RegisterMap
 
-__all__ = ["GatewayDatastore", "ModbusGatewayServer", "Unit", "serve_modbus"]
+__all__ = ["PAUSE_BYTES", "ModbusServer", "Unit"]
 
 _log = logging.getLogger("sj300_async.gateway.modbus")
 
-#: The client the current request came from (set by the request handler).
-_CLIENT: contextvars.ContextVar[str] = contextvars.ContextVar("modbus_client", default="?")
-#: The values a function-6 write just set: pymodbus reads the register back
-#: to build its answer, which must echo the request (a heartbeat register
-#: reads 1, not what was written to it).
-_ECHO: contextvars.ContextVar[list[int] | None] = contextvars.ContextVar(
-    "modbus_echo", default=None
-)
+#: Bytes of requests buffered behind a write in progress before reading pauses.
+PAUSE_BYTES: Final = 4096
 
-_READ_FUNCTIONS = frozenset((3, 4, 23))
-_WRITE_FUNCTIONS = frozenset((6, 16, 23))
+_Answer = bytes | Coroutine[Any, Any, bytes]
 
 
 @dataclass(frozen=True, slots=True)
@@ -63,117 +89,251 @@ class Unit:
     cache: EncodingCache
 
 
-class GatewayDatastore(ModbusServerContext):
-    """pymodbus's datastore interface over the gateway's units (see the module docstring)."""
+class ModbusServer:
+    """The listener and its connections (see the module docstring)."""
 
-    def __init__(self, units: dict[int, Unit], gateway: GatewayView) -> None:
-        # No super().__init__(): that builds pymodbus's own register blocks.
+    def __init__(
+        self,
+        units: dict[int, Unit],
+        gateway: GatewayView,
+        limits: ListenerLimits,
+        counters: ClientCounters,
+    ) -> None:
         self.units = units
         self.gateway = gateway
         self.stale_after_s = gateway.config.stale_after_s
-        self.old_simulator = True  # pymodbus: "call my async_getValues / async_setValues"
-        self.simdevices = []
-
-    def device_ids(self) -> list[int]:
-        return sorted(self.units)
-
-    async def async_getValues(
-        self, device_id: int, func_code: int, address: int, count: int = 1
-    ) -> list[int] | list[bool] | ExcCodes:
-        unit = self.units.get(device_id)
-        if unit is None:
-            return ExcCodes.GATEWAY_PATH_UNAVIABLE
-        if func_code == 6 and (echo := _ECHO.get()) is not None:
-            return echo
-        if func_code not in _READ_FUNCTIONS:
-            return ExcCodes.ILLEGAL_FUNCTION  # coils and discrete inputs: none here
-        now = asyncio.get_running_loop().time()
-        result = unit.registers.read(
-            unit.drive, address, count, now, self.stale_after_s, unit.cache
-        )
-        return ExcCodes(int(result)) if isinstance(result, Exc) else result
-
-    async def async_setValues(
-        self,
-        device_id: int,
-        func_code: int,
-        address: int,
-        values: Sequence[int] | Sequence[bool],
-    ) -> ExcCodes | None:
-        unit = self.units.get(device_id)
-        if unit is None:
-            return ExcCodes.GATEWAY_PATH_UNAVIABLE
-        if func_code not in _WRITE_FUNCTIONS:
-            return ExcCodes.ILLEGAL_FUNCTION
-        words = [int(v) for v in values]
-        request = unit.registers.decode_write(address, words)
-        if isinstance(request, WriteResult):  # no write at all: audited here, refused
-            self.gateway.refused(_CLIENT.get(), unit.drive, f"register {address}", words, request)
-            result = request
-        else:
-            result = await self.gateway.write(_CLIENT.get(), unit.drive, request)
-        if result.refusal is not None:
-            return ExcCodes(int(REFUSAL_CODES[result.refusal]))
-        if func_code == 6:
-            _ECHO.set(words)
-        return None
-
-
-class _ClientHandler(ServerRequestHandler):
-    """pymodbus's per-connection handler, knowing its client (see the module docstring)."""
-
-    counters: ClientCounters
-
-    def _client(self) -> str:
-        transport = getattr(self, "transport", None)
-        peer = transport.get_extra_info("peername") if transport is not None else None
-        return str(peer[0]) if peer else "?"
-
-    async def handle_request(self) -> None:
-        client = self._client()
-        self.counters.request(client)
-        token = _CLIENT.set(client)
-        echo = _ECHO.set(None)
-        try:
-            await super().handle_request()  # type: ignore[no-untyped-call]
-        finally:
-            _ECHO.reset(echo)
-            _CLIENT.reset(token)
-
-    def server_send(self, pdu: ModbusPDU | None, addr: Any) -> None:
-        if isinstance(pdu, ExceptionResponse):
-            self.counters.exception(_CLIENT.get(), int(pdu.exception_code))
-        super().server_send(pdu, addr)  # type: ignore[no-untyped-call]
-
-
-class ModbusGatewayServer(ModbusTcpServer):
-    """pymodbus's TCP server with the client-aware handler."""
-
-    def __init__(
-        self, datastore: GatewayDatastore, endpoint: Endpoint, counters: ClientCounters
-    ) -> None:
-        super().__init__(datastore, address=(endpoint.host, endpoint.port))
+        self.idle_timeout_s = limits.idle_timeout_s
         self.counters = counters
+        self.limit = ConnectionLimit("modbus", limits.max_connections, _log)
+        #: Frames that could not be framed (each closed its connection).
+        self.bad_frames = 0
+        self._bad_frame_log = RateLimitedLog(_log)
+        self._connections: set[_Connection] = set()
+        self._server: asyncio.Server | None = None
 
-    def callback_new_connection(self) -> _ClientHandler:
-        handler = _ClientHandler(  # type: ignore[no-untyped-call]
-            self, self.trace_packet, self.trace_pdu, self.trace_connect
+    async def start(self, endpoint: Endpoint) -> None:
+        """Listen on *endpoint* (port 0: any free port, then read :attr:`port`)."""
+        loop = asyncio.get_running_loop()
+        self._server = await loop.create_server(
+            lambda: _Connection(self), endpoint.host, endpoint.port
         )
-        handler.counters = self.counters
-        return handler
+        _log.info("Modbus TCP on %s:%d, units %s", endpoint.host, self.port, sorted(self.units))
 
     @property
     def port(self) -> int:
         """The port it listens on (the real one when asked for port 0)."""
-        sockets = getattr(self.transport, "sockets", None)
+        sockets = self._server.sockets if self._server is not None else ()
         return int(sockets[0].getsockname()[1]) if sockets else 0
 
+    async def close(self) -> None:
+        """Stop listening, close every connection; return once their writes are done."""
+        if self._server is not None:
+            self._server.close()
+        writes = [c.pending for c in self._connections if c.pending is not None]
+        for connection in list(self._connections):
+            connection.close()
+        if self._server is not None:
+            await self._server.wait_closed()
+            self._server = None
+        # A write already handed to the gateway gets its outcome (and its audit line).
+        await asyncio.gather(*writes, return_exceptions=True)
 
-async def serve_modbus(
-    units: dict[int, Unit], gateway: GatewayView, endpoint: Endpoint, counters: ClientCounters
-) -> ModbusGatewayServer:
-    """Start serving *units* on *endpoint*; the server runs until its ``shutdown()``."""
-    server = ModbusGatewayServer(GatewayDatastore(units, gateway), endpoint, counters)
-    await server.serve_forever(background=True)
-    _log.info("Modbus TCP on %s:%d, units %s", endpoint.host, server.port, sorted(units))
-    return server
+    def bad_frame(self, connection: str, error: FrameError) -> None:
+        self.bad_frames += 1
+        self._bad_frame_log.log(
+            "modbus %s: %s; connection closed. First bytes: %s",
+            connection,
+            error.reason,
+            excerpt(error.data),
+        )
+
+
+class _Connection(asyncio.Protocol):
+    """One client connection: frames in, answers out, in order (module docstring)."""
+
+    def __init__(self, server: ModbusServer) -> None:
+        self.server = server
+        self.framer = Framer()
+        self.transport: asyncio.Transport | None = None
+        self.client = "?"
+        self.name = "?"
+        #: The write being carried out; the requests behind it wait.
+        self.pending: asyncio.Task[bytes] | None = None
+        self._loop = asyncio.get_running_loop()
+        self._last_active = 0.0
+        self._idle: asyncio.TimerHandle | None = None
+        self._writing_paused = False
+        self._reading_paused = False
+        self._lost = False
+
+    # -- asyncio's callbacks ---------------------------------------------------------
+
+    def connection_made(self, transport: asyncio.BaseTransport) -> None:
+        assert isinstance(transport, asyncio.Transport)
+        if not self.server.limit.admit(transport):
+            self._lost = True  # never admitted: nothing to release
+            return
+        self.transport = transport
+        peer = transport.get_extra_info("peername") or ("?", 0)
+        host, port = str(peer[0]), peer[1]
+        self.client = host
+        self.name = f"[{host}]:{port}" if ":" in host else f"{host}:{port}"
+        self.server._connections.add(self)
+        self._last_active = self._loop.time()
+        self._idle = self._loop.call_later(self.server.idle_timeout_s, self._check_idle)
+
+    def data_received(self, data: bytes) -> None:
+        if self._lost:
+            return
+        self.framer.receive_data(data)
+        self._last_active = self._loop.time()
+        if self.pending is None and not self._writing_paused:
+            self._serve()
+        self._update_reading()
+
+    def connection_lost(self, exc: Exception | None) -> None:
+        if self._lost:
+            return
+        self._lost = True
+        self.server.limit.release()
+        self.server._connections.discard(self)
+        if self._idle is not None:
+            self._idle.cancel()
+        if self.pending is None:  # else once the write is done (_written)
+            self.server.gateway.disconnected(self.name)
+
+    def pause_writing(self) -> None:
+        # The client does not read its answers: stop answering, and reading, until it does.
+        self._writing_paused = True
+        self._update_reading()
+
+    def resume_writing(self) -> None:
+        self._writing_paused = False
+        if self.pending is None:
+            self._serve()
+        self._update_reading()
+
+    # -- serving ---------------------------------------------------------------------
+
+    def close(self) -> None:
+        if self.transport is not None:
+            self.transport.close()
+
+    def _serve(self) -> None:
+        """Answer every whole request buffered, up to a write (which the rest then waits for)."""
+        answers: list[bytes] = []
+        while not self._writing_paused:
+            event = self.framer.next_event()
+            if event is NEED_DATA:
+                break
+            if isinstance(event, FrameError):
+                self._send(answers)  # what came before the bad frame was answered
+                self.server.bad_frame(self.name, event)
+                self.close()
+                return
+            answer = self._answer(event)
+            if isinstance(answer, bytes):
+                answers.append(answer)
+                continue
+            self.pending = self._loop.create_task(answer)
+            self.pending.add_done_callback(self._written)
+            break
+        self._send(answers)
+
+    def _send(self, answers: list[bytes]) -> None:
+        if answers and self.transport is not None:
+            self.transport.write(answers[0] if len(answers) == 1 else b"".join(answers))
+
+    def _answer(self, event: ReadRegisters | WriteRegisters | Refused) -> _Answer:
+        """The answer to *event*, or the coroutine that carries its write out and answers."""
+        server = self.server
+        server.counters.request(self.client)
+        unit = server.units.get(event.unit_id)
+        if unit is None:
+            return self._exception(event, Exc.PATH_UNAVAILABLE)
+        if type(event) is ReadRegisters:
+            result = unit.registers.read(
+                unit.drive,
+                event.address,
+                event.count,
+                self._loop.time(),
+                server.stale_after_s,
+                unit.cache,
+            )
+            if type(result) is list:
+                return encode_registers(event.transaction_id, event.unit_id, event.function, result)
+            assert isinstance(result, Exc)
+            return self._exception(event, result)
+        if isinstance(event, Refused):
+            _log.debug("modbus %s: refused with 0x%02x: %s", self.name, event.code, event.reason)
+            return self._exception(event, event.code)
+        assert isinstance(event, WriteRegisters)
+        words = list(event.values)
+        request = unit.registers.decode_write(event.address, words)
+        if isinstance(request, WriteResult):  # no write at all: audited here, refused
+            what = f"register {event.address}"
+            server.gateway.refused(self.client, unit.drive, what, words, request)
+            assert request.refusal is not None
+            return self._exception(event, REFUSAL_CODES[request.refusal])
+        return self._write(unit, event, request)
+
+    async def _write(self, unit: Unit, event: WriteRegisters, request: WriteRequest) -> bytes:
+        result = await self.server.gateway.write(
+            self.client, unit.drive, request, connection=self.name
+        )
+        if result.refusal is not None:
+            return self._exception(event, REFUSAL_CODES[result.refusal])
+        # Function 6 echoes the value written; 16 answers how many registers.
+        word = event.values[0] if event.function == 6 else len(event.values)
+        return encode_written(
+            event.transaction_id, event.unit_id, event.function, event.address, word
+        )
+
+    def _exception(self, event: ReadRegisters | WriteRegisters | Refused, code: Exc) -> bytes:
+        self.server.counters.exception(self.client, code)
+        return encode_exception(event.transaction_id, event.unit_id, event.function, code)
+
+    def _written(self, task: asyncio.Task[bytes]) -> None:
+        self.pending = None
+        if self._lost:
+            self.server.gateway.disconnected(self.name)
+            return
+        if task.cancelled():
+            self.close()
+            return
+        error = task.exception()
+        if error is not None:
+            # Not the client's input: the gateway's write path failed. One line; the
+            # connection cannot be answered in order any more.
+            _log.error("modbus %s: a write failed: %r; connection closed", self.name, error)
+            self.close()
+            return
+        self._send([task.result()])
+        self._last_active = self._loop.time()
+        if not self._writing_paused:
+            self._serve()
+        self._update_reading()
+
+    def _update_reading(self) -> None:
+        """Read while answering; pause while the client does not read, or too much waits."""
+        if self.transport is None or self._lost:
+            return
+        behind = self.pending is not None and self.framer.buffered > PAUSE_BYTES
+        pause = self._writing_paused or behind
+        if pause != self._reading_paused:
+            self._reading_paused = pause
+            if pause:
+                self.transport.pause_reading()
+            else:
+                self.transport.resume_reading()
+
+    def _check_idle(self) -> None:
+        timeout = self.server.idle_timeout_s
+        idle_s = self._loop.time() - self._last_active
+        if self.pending is not None or idle_s < timeout:  # a write of its own is no idling
+            wait = timeout if self.pending is not None else timeout - idle_s
+            self._idle = self._loop.call_later(wait, self._check_idle)
+            return
+        self.server.limit.timed_out += 1
+        _log.debug("modbus %s: idle for %g s: closed", self.name, timeout)
+        self.close()
