@@ -18,11 +18,12 @@ from __future__ import annotations
 
 import asyncio
 import logging
-from typing import Any, Generic, cast
+from typing import Any, Generic, Literal, cast
 
 from typing_extensions import TypeVar
 
-from ..wire import LineSettings, LocalProtocolError
+from ..transports import SerialSettingsError
+from ..wire import BusClosedError, LineSettings, LocalProtocolError, TransportError
 from ._arbiter import Arbiter
 from ._capture import combine
 from ._channel import Channel
@@ -34,7 +35,7 @@ from ._stats import BusStats
 from ._timing import BusTiming
 from ._trace import TraceHook
 
-__all__ = ["BroadcastT", "Bus", "DriveT"]
+__all__ = ["BroadcastT", "Bus", "ConnectMode", "DriveT"]
 
 #: The drive class a bus hands out (for type checkers).
 DriveT = TypeVar("DriveT", default=Any)
@@ -42,6 +43,10 @@ DriveT = TypeVar("DriveT", default=Any)
 BroadcastT = TypeVar("BroadcastT", default=Any)
 
 _log = logging.getLogger("sj300_async.bus")
+
+#: How :meth:`Bus.start` treats a first connection that fails: raise (``"now"``)
+#: or serve the line as down and reconnect in the background (``"background"``).
+ConnectMode = Literal["now", "background"]
 
 
 class Bus(Generic[DriveT, BroadcastT]):
@@ -182,8 +187,20 @@ class Bus(Generic[DriveT, BroadcastT]):
             raise LocalProtocolError(f"the {self.dialect.name} protocol has no broadcast")
         return self._broadcast
 
-    async def start(self) -> None:
+    async def start(self, *, connect: ConnectMode = "now") -> None:
         """Connect, and keep the link up from now on (``open_bus`` calls this).
+
+        Args:
+            connect: ``"now"`` (the default) raises when the first attempt
+                fails; ``"background"`` makes the same one attempt, and when
+                the line is down (refused, timed out, unreachable, a serial
+                device that is not there) returns with the link down and
+                leaves it to the reconnect supervisor, as for a link lost
+                later: requests fail at once with :class:`TransportError`
+                until it connects. :attr:`connected` and
+                :attr:`Link.last_error` tell which. A port that refuses the
+                line settings (:class:`~sj300_async.transports.SerialSettingsError`)
+                will refuse them every time: it raises either way.
 
         The reconnect supervisor is a plain task owned by the bus, not an anyio
         task group held across ``open_bus``'s yield: a task group would wrap
@@ -191,9 +208,20 @@ class Bus(Generic[DriveT, BroadcastT]):
         ExceptionGroup.
 
         Raises:
-            TransportError: the first connection failed.
+            TransportError: the first connection failed (``connect="now"``),
+                or the port refused the line settings.
+            LocalProtocolError: *connect* is neither mode.
         """
-        await self.link.connect()
+        if connect not in ("now", "background"):
+            raise LocalProtocolError(f'connect must be "now" or "background", got {connect!r}')
+        try:
+            await self.link.connect()
+        except (SerialSettingsError, BusClosedError):  # never better on a later attempt
+            raise
+        except TransportError as exc:
+            if connect == "now":
+                raise
+            _log.info("%s; retrying in the background", exc)
         self._supervisor = asyncio.create_task(
             self.link.supervise(), name=f"sj300 link {self.description}"
         )

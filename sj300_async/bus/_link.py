@@ -98,6 +98,14 @@ class Link:
         return self._closed
 
     @property
+    def last_error(self) -> BaseException | None:
+        """Why the link is down: the last failed attempt or the lost connection's error.
+
+        None while connected, and before the first attempt.
+        """
+        return None if self.connected else self._last_error
+
+    @property
     def protocol(self) -> LineProtocol[Any] | None:
         """The current protocol adapter, if connected."""
         return self._protocol if self.connected else None

@@ -18,7 +18,7 @@ from typing_extensions import Unpack
 
 from ..transports import LineFaults, replay_connector
 from ..wire import INSTANT_LINE, LineSettings, LocalProtocolError
-from ._bus import Bus
+from ._bus import Bus, ConnectMode
 from ._capture import CaptureFile, open_capture
 from ._dialect import Dialect
 from ._line_connector import line_connector
@@ -56,6 +56,7 @@ class BusOptions(TypedDict, total=False):
     simulator: Any
     dialect: Dialect[Any, Any] | None
     capture: str | PathLike[str] | CaptureFile | None
+    connect: ConnectMode
 
 
 #: A TCP bridge adds network latency on top of the line's wire time.
@@ -149,10 +150,20 @@ def open_bus(
         capture: write every frame that crosses the line to this pcapng file
             (a path: created, and closed with the bus), or into this open
             :class:`~._capture.CaptureFile` as one more line (left open).
+        connect: ``"now"`` (the default): the first connection must succeed,
+            or ``open_bus`` raises. ``"background"``: a line that is down at
+            start (connection refused, timed out, host unreachable or unknown,
+            a serial device that is not there) is opened anyway, down, and
+            reconnected by the ``reconnect`` policy exactly as a link lost
+            later (requests fail at once with :class:`TransportError` until
+            then; ``bus.connected`` and ``bus.link.last_error`` say so). A bad
+            URL or setting, and a port that refuses the line settings, still
+            raise (see :meth:`Bus.start`).
 
     Raises:
         LocalProtocolError: a bad URL or setting (nothing is opened).
-        TransportError: the first connection failed.
+        TransportError: the first connection failed (``connect="now"``), or
+            the serial port refused the line settings.
         TypeError: a keyword argument that is none of these (at once).
     """
     unknown = options.keys() - BusOptions.__optional_keys__
@@ -210,7 +221,7 @@ async def _open_bus(
     )
     bus.simulator = simulator
     try:
-        await bus.start()
+        await bus.start(connect=options.get("connect", "now"))
         yield bus
     finally:
         await bus.aclose()
