@@ -3,11 +3,12 @@
 from __future__ import annotations
 
 import asyncio
+import logging
 from collections.abc import Iterable
 from typing import TYPE_CHECKING
 
 from ...profiles import DriveSnapshot
-from .. import GatewayView
+from .. import ConnectionLimit, GatewayView, listener_families
 from . import MetricsConfig
 from ._server import make_registry, serve_http
 
@@ -16,6 +17,8 @@ if TYPE_CHECKING:
 
 __all__ = ["HttpNorthbound"]
 
+_log = logging.getLogger("sj300_async.gateway.http")
+
 
 class HttpNorthbound:
     """Serves /metrics and /healthz (a :class:`~sj300_async.gateway.Northbound`)."""
@@ -23,10 +26,17 @@ class HttpNorthbound:
     def __init__(self, config: MetricsConfig) -> None:
         self.config = config
         self.server: asyncio.Server | None = None
+        limits = config.limits
+        #: Open connections, and those refused at the cap or timed out.
+        self.limit = ConnectionLimit("http", limits.max_connections, _log)
 
     async def start(self, gateway: GatewayView) -> None:
         self.server = await serve_http(
-            self.config.listen, make_registry(gateway.metrics), gateway.problems
+            self.config.listen,
+            make_registry(gateway.metrics),
+            gateway.problems,
+            limit=self.limit,
+            timeout_s=self.config.limits.idle_timeout_s,
         )
 
     @property
@@ -41,7 +51,7 @@ class HttpNorthbound:
         """Nothing to do: a scrape reads the latest snapshots."""
 
     def metrics(self) -> Iterable[Metric]:
-        return ()
+        return listener_families("sj300_http", self.limit)
 
     async def close(self) -> None:
         if self.server is not None:

@@ -17,9 +17,13 @@ Decisions:
   one request per interval; keep-alive would only add state.
 - The request's header section is read and thrown away (nothing here
   depends on a header), within limits: more than :data:`MAX_HEAD_BYTES`
-  or slower than :data:`HEAD_TIMEOUT_S` and the connection is closed
-  without an answer, so a slow or endless client cannot hold a handler.
-  Writing the response has the same time limit.
+  or slower than the listener's ``idle_timeout_s`` (:data:`HEAD_TIMEOUT_S`
+  unless configured) and the connection is closed without an answer, so a
+  slow or endless client cannot hold a handler. Writing the response has
+  the same time limit. At most ``max_connections`` are open at once: past
+  it a newcomer is accepted and closed at once
+  (:class:`~sj300_async.gateway.ConnectionLimit`, the Modbus listener's
+  too).
 - A malformed request line gets 400, a path other than the two 404, a
   method other than GET and HEAD on them 405 (with ``Allow``). HEAD
   answers the GET's status and headers, without the body.
@@ -41,7 +45,7 @@ from typing import Final
 from prometheus_client import CONTENT_TYPE_LATEST, CollectorRegistry, generate_latest
 from prometheus_client.core import Metric
 
-from .. import Endpoint
+from .. import ConnectionLimit, Endpoint
 
 __all__ = ["HEAD_TIMEOUT_S", "MAX_HEAD_BYTES", "make_registry", "serve_http"]
 
@@ -112,13 +116,20 @@ def make_registry(collect: Callable[[], Iterable[Metric]]) -> CollectorRegistry:
 class _BadRequest(Exception):
     """The request head was too large, too slow, cut off or malformed."""
 
-    def __init__(self, reason: str, received: bytes) -> None:
+    def __init__(self, reason: str, received: bytes, *, timed_out: bool = False) -> None:
         super().__init__(reason)
         self.received = received
+        #: The client was too slow (counted as a time-out), rather than wrong.
+        self.timed_out = timed_out
 
 
 async def serve_http(
-    endpoint: Endpoint, registry: CollectorRegistry, health: Callable[[], list[str]]
+    endpoint: Endpoint,
+    registry: CollectorRegistry,
+    health: Callable[[], list[str]],
+    *,
+    limit: ConnectionLimit | None = None,
+    timeout_s: float | None = None,
 ) -> asyncio.Server:
     """Serve ``/metrics`` from *registry* and ``/healthz`` from *health* at *endpoint*.
 
@@ -127,6 +138,9 @@ async def serve_http(
             ``server.sockets[0].getsockname()``).
         health: returns the gateway's problems now, one line each; none
             means healthy (200 ``ok``), any means 503 with them as the body.
+        limit: admits each connection (None: no cap); counts the timed-out ones.
+        timeout_s: seconds a client has to send its request head, and to take
+            the response (None: :data:`HEAD_TIMEOUT_S`).
 
     Returns:
         The listening server; close it with ``close()`` and ``wait_closed()``.
@@ -135,9 +149,17 @@ async def serve_http(
         "/metrics": lambda: _Response(200, generate_latest(registry), CONTENT_TYPE_LATEST),
         "/healthz": lambda: _health_response(health()),
     }
+    timeout = HEAD_TIMEOUT_S if timeout_s is None else timeout_s
 
     async def handle(reader: asyncio.StreamReader, writer: asyncio.StreamWriter) -> None:
-        await _handle(reader, writer, routes)
+        if limit is None:
+            await _handle(reader, writer, routes, timeout)
+        elif limit.admit(writer.transport):
+            try:
+                if not await _handle(reader, writer, routes, timeout):
+                    limit.timed_out += 1
+            finally:
+                limit.release()
 
     # limit: a single line longer than the whole head allowance fails readline() at once.
     return await asyncio.start_server(handle, endpoint.host, endpoint.port, limit=MAX_HEAD_BYTES)
@@ -153,20 +175,25 @@ async def _handle(
     reader: asyncio.StreamReader,
     writer: asyncio.StreamWriter,
     routes: dict[str, Callable[[], _Response]],
-) -> None:
+    timeout_s: float,
+) -> bool:
+    """Serve one request; False when the client was too slow (closed for it)."""
     peer = writer.get_extra_info("peername")
     try:
         try:
-            request_line = await _read_head(reader)
+            request_line = await _read_head(reader, timeout_s)
         except _BadRequest as bad:
             _log.debug("http %s: %s, closed; received: %s", peer, bad, bad.received.hex(" "))
-            return
+            return not bad.timed_out
         response, head_only = _respond(request_line, routes, peer)
-        async with asyncio.timeout(HEAD_TIMEOUT_S):
+        async with asyncio.timeout(timeout_s):
             writer.write(response.encode(head_only=head_only))
             await writer.drain()
-    except (ConnectionError, TimeoutError) as exc:
-        # The client went away or stopped reading: nothing left to answer.
+    except TimeoutError:
+        _log.debug("http %s: the response not taken within %g s", peer, timeout_s)
+        return False
+    except ConnectionError as exc:
+        # The client went away: nothing left to answer.
         _log.debug("http %s: connection ended before the response was sent: %r", peer, exc)
     finally:
         writer.close()
@@ -174,9 +201,10 @@ async def _handle(
             await writer.wait_closed()
         except ConnectionError:
             pass  # reset by the peer while closing: it is closed either way
+    return True
 
 
-async def _read_head(reader: asyncio.StreamReader) -> bytes:
+async def _read_head(reader: asyncio.StreamReader, timeout_s: float) -> bytes:
     """Read the request line and the header section; return the request line.
 
     Raises:
@@ -184,11 +212,11 @@ async def _read_head(reader: asyncio.StreamReader) -> bytes:
     """
     received = bytearray()  # kept out here so that a refusal can log it
     try:
-        async with asyncio.timeout(HEAD_TIMEOUT_S):
+        async with asyncio.timeout(timeout_s):
             return await _read_lines(reader, received)
     except TimeoutError:
         raise _BadRequest(
-            f"request head not complete within {HEAD_TIMEOUT_S} s", bytes(received)
+            f"request head not complete within {timeout_s:g} s", bytes(received), timed_out=True
         ) from None
     except ValueError:
         # readline() found a line longer than the stream's limit, and dropped it.
