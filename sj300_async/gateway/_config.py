@@ -342,29 +342,43 @@ def _transport_id(address: BusAddress, url: str) -> str:
 
 
 def _nodes(table: ConfigTable, name: str, profile: Profile) -> tuple[int, ...]:
-    """A node list, ``"1-8,12"`` or ``[1, 2, 12]``, in the profile's range; sorted, unique."""
+    """A node list, ``"1-8,12"`` or ``[1, 2, 12]``, in the profile's range, each once; sorted."""
     value = table.required(name)
     low, high = profile.node_range
+    noun = profile.node_noun
     if isinstance(value, str):
         try:
-            return parse_node_list(value, low=low, high=high, noun=profile.node_noun)
+            nodes = parse_node_list(value, low=low, high=high, noun=noun)
+            # parse_node_list merges what overlaps; a node named twice is a typo here.
+            parts = [parse_node_list(p, low=low, high=high) for p in value.split(",") if p.strip()]
         except LocalProtocolError as exc:
             raise table.error(name, str(exc)) from None
+        _refuse_repeats(table, name, noun, [node for part in parts for node in part])
+        return nodes
     if not isinstance(value, list):
         raise table.error(
             name,
             f'expected a node list ("1-8,12") or an array of integers, got {type_name(value)}',
         )
     if not value:
-        raise table.error(name, f"no {profile.node_noun}s")
+        raise table.error(name, f"no {noun}s")
     for node in value:
         if isinstance(node, bool) or not isinstance(node, int):
             raise table.error(
                 name, f"expected an array of integers, got {type_name(node)} {node!r} in it"
             )
         if not low <= node <= high:
-            raise table.error(name, f"{profile.node_noun} {node} is outside {low}..{high}")
-    return tuple(sorted(set(value)))
+            raise table.error(name, f"{noun} {node} is outside {low}..{high}")
+    _refuse_repeats(table, name, noun, value)
+    return tuple(sorted(value))
+
+
+def _refuse_repeats(table: ConfigTable, name: str, noun: str, nodes: list[int]) -> None:
+    seen: set[int] = set()
+    for node in nodes:
+        if node in seen:
+            raise table.error(name, f"{noun} {node} is listed twice")
+        seen.add(node)
 
 
 def _reads(table: ConfigTable) -> tuple[PollRead, ...]:
@@ -380,9 +394,12 @@ def _reads(table: ConfigTable) -> tuple[PollRead, ...]:
 def _parameter_codes(table: ConfigTable, profile: Profile) -> tuple[str, ...]:
     """Parameter codes normalised by the profile (``"a004"`` -> ``"A004"``), without repeats."""
     codes: dict[str, None] = {}
+    catalogue = profile.parameters
+    known = frozenset(catalogue.codes())
     for text in or_default(table.strings("parameters"), ()):
-        code = profile.parameters.code(text.strip())
-        if code is None:
+        # code() reads the syntax ("F005" is an SJ300 code); the catalogue says what exists.
+        code = catalogue.code(text.strip())
+        if code is None or code not in known:
             raise table.error("parameters", f"unknown parameter {text!r} for {profile.name}")
         codes[code] = None
     return tuple(codes)

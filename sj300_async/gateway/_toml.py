@@ -180,7 +180,9 @@ def _key_lines(text: str) -> dict[str, int]:
             path = table
             for part in _dotted(key[1]):
                 path = _join(path, part)
-            found.setdefault(path, number)
+                # A dotted key also writes each table it names (``modbus.listen``
+                # writes ``modbus``): an error about one of them points here.
+                found.setdefault(path, number)
             depth = _balance(raw[key.end() :])
     return found
 

@@ -183,7 +183,7 @@ def test_audit_log_is_relative_to_the_file_unless_absolute(tmp_path: Path) -> No
 
 
 def test_a_line_can_be_an_inline_table() -> None:
-    config = parse('lines = [{ url = "sim://", nodes = [3, 1, 3], reads = [] }]\n')
+    config = parse('lines = [{ url = "sim://", nodes = [3, 1], reads = [] }]\n')
 
     assert config.lines[0].nodes == (1, 3)
     assert config.lines[0].reads == ()
@@ -278,7 +278,8 @@ REFUSALS = [
     ),
     pytest.param(
         "[metrics]\nport = 9300\n",
-        "gateway.toml:2: metrics.port: unknown key 'port' (use listen)",
+        "gateway.toml:2: metrics.port: unknown key 'port' "
+        "(use listen, max_connections, idle_timeout_s)",
         id="unknown-key-no-close-match",
     ),
     pytest.param(
@@ -480,6 +481,62 @@ REFUSALS = [
         '[[lines]]\nurl = "sim://?protocol=fr700"\nnodes = "1"\nparameters = ["A004"]\n',
         "gateway.toml:4: lines[0].parameters: unknown parameter 'A004' for fr700",
         id="unknown-parameter-fr700",
+    ),
+    pytest.param(
+        LINE + 'parameters = ["F001", "F005"]\n',
+        "gateway.toml:4: lines[0].parameters: unknown parameter 'F005' for sj300",
+        id="parameter-not-in-the-catalogue-sj300",  # a code SJ300 could spell, none it has
+    ),
+    pytest.param(
+        '[[lines]]\nurl = "sim://?protocol=fr700"\nnodes = "1"\nparameters = ["Pr.999"]\n',
+        "gateway.toml:4: lines[0].parameters: unknown parameter 'Pr.999' for fr700",
+        id="parameter-not-in-the-catalogue-fr700",
+    ),
+    pytest.param(
+        LINE + '[[lines.writes]]\nnodes = "1"\nparameters = ["F005"]\n',
+        "gateway.toml:6: lines[0].writes[0].parameters: unknown parameter 'F005' for sj300",
+        id="grant-parameter-not-in-the-catalogue",
+    ),
+    pytest.param(
+        '[[lines]]\nurl = "sim://"\n\nnodes = "1-4,3"\n',
+        "gateway.toml:4: lines[0].nodes: node 3 is listed twice",
+        id="nodes-repeated-in-a-list",
+    ),
+    pytest.param(
+        '[[lines]]\nurl = "sim://"\nnodes = [1, 2, 1]\n',
+        "gateway.toml:3: lines[0].nodes: node 1 is listed twice",
+        id="nodes-repeated-in-an-array",
+    ),
+    pytest.param(
+        '[[lines]]\nurl = "sim://?protocol=fr700"\nnodes = "0-3, 2-5"\n',
+        "gateway.toml:3: lines[0].nodes: station 2 is listed twice",
+        id="stations-repeated",
+    ),
+    pytest.param(
+        LINE + '[[lines.writes]]\nnodes = "1,1"\ncontrol = true\n',
+        "gateway.toml:5: lines[0].writes[0].nodes: node 1 is listed twice",
+        id="grant-nodes-repeated",
+    ),
+    pytest.param(
+        '[gateway]\nid = "gw1"\n\nmodbus.listen = ":502"\n' + LINE,
+        "gateway.toml:4: gateway.modbus: unknown key 'modbus' (use id, stale_after_s, audit_log)",
+        id="dotted-key-under-a-table",  # [gateway]'s, not the top level's: its own line
+    ),
+    pytest.param(
+        '# the plant\n\nmodbuss.listen = ":502"\n' + LINE,
+        "gateway.toml:3: modbuss: unknown key 'modbuss' (did you mean 'modbus'?)",
+        id="dotted-key-unknown-table",
+    ),
+    pytest.param(
+        '\n\nlines.hall.url = "sim://"\n',
+        "gateway.toml:3: lines: expected an array of tables ([[lines]]), got table",
+        id="dotted-key-makes-a-table",
+    ),
+    pytest.param(
+        LINE + "\nwrites.nodes = 1\n",
+        "gateway.toml:5: lines[0].writes: expected an array of tables ([[lines.writes]]), "
+        "got table",
+        id="dotted-key-in-an-array-of-tables",
     ),
     pytest.param(
         LINE + "trips_interval_s = -1\n",
