@@ -12,7 +12,8 @@ answer keep their pace while others fail:
 - A drive that answers is read with at most ``retries`` retries per read
   (default 0, never more than the bus's): the next cycle is the poll's
   retry, and a drive goes offline only after ``offline_after`` failed polls.
-  Its poll stops at the first failed read. (``retries=1`` rides out a lost
+  Its poll stops at the first failed read, but for a parameter the drive
+  refuses (below). (``retries=1`` rides out a lost
   reply within the poll, at the price of two more time-outs per failing
   drive in its first failed cycle.)
 - A drive whose last poll failed (failing, or offline) is first *probed*:
@@ -49,6 +50,14 @@ first reply (a refusal counts: the drive is there). ``online`` describes the
 polling (a drive starts online, is polled in full and goes offline after
 ``offline_after`` failures); a drive is up only when it is ``online`` *and*
 has ``answered``, which is how ``sj300 monitor`` shows it.
+
+A parameter the drive refuses (a NAK to its read: the drive is there, and
+has no such parameter, or will not give it) is *unavailable*, not a failed
+poll: it is named in the sample's ``unavailable``, left out of its
+``parameters``, and the poll goes on with the next read; the drive's health
+is not touched. The first refusal of a parameter is logged at WARNING, once
+per drive and parameter until it reads again (then at INFO). A NAK to the
+status or monitor read fails the poll as any other error does.
 
 Every protocol's drives are polled the same way: the poller calls the
 drive's ``read_status``, ``read_monitor`` and ``read_parameter``.
@@ -112,6 +121,9 @@ class Sample:
     #: and ``timestamp`` (a cache that also learns values elsewhere, like the
     #: gateway's write read-backs, keeps those learnt after this).
     started: float = 0.0
+    #: The parameters the drive refused to read this poll (a NAK): unavailable,
+    #: not in ``parameters``, and not a failure of the poll.
+    unavailable: frozenset[str] = frozenset()
 
 
 @dataclass(slots=True)
@@ -135,6 +147,8 @@ class DriveHealth:
     last_ok: float | None = None
     #: Loop time before which an offline drive is not probed again.
     next_probe: float = 0.0
+    #: The parameters the drive refused at their latest read (see the module docstring).
+    unavailable: set[str] = field(default_factory=set)
 
 
 @dataclass(slots=True)
@@ -159,8 +173,8 @@ class BusPollStats:
 
 #: A drive's poll, done and not yet published: the fields of its :class:`Sample`
 #: but the bus (node, timestamp, online, status, monitor, parameters, error,
-#: latency_s, answered, started). A tuple: it is built on the line's critical
-#: path, between a reply and the next request, where a class costs more.
+#: latency_s, answered, started, unavailable). A tuple: it is built on the line's
+#: critical path, between a reply and the next request, where a class costs more.
 _Poll = tuple[
     int,
     float,
@@ -172,7 +186,10 @@ _Poll = tuple[
     float | None,
     bool,
     float,
+    frozenset[str],
 ]
+#: The usual ``unavailable``: shared, so that a poll builds no set.
+_NONE_UNAVAILABLE: Final[frozenset[str]] = frozenset()
 
 
 @dataclass(slots=True)
@@ -445,6 +462,7 @@ class Poller:
         status: InverterStatus | Fr700Status | None = None
         monitor: MonitorData | Fr700Monitor | None = None
         parameters: dict[str, float] = {}
+        unavailable = _NONE_UNAVAILABLE
         error: str | None = None
         spent = 0.0
         ok_reads = 0
@@ -462,20 +480,49 @@ class Poller:
                         monitor = await drive.read_monitor()
                     else:
                         parameters[read] = await drive.read_parameter(read)
+                except NakError as exc:
+                    health.answered = True  # a refusal: the drive is there
+                    if read in _READS:
+                        error = f"{type(exc).__name__}: {exc}"
+                        break
+                    # A parameter it will not give: unavailable, and on to the next read.
+                    unavailable = unavailable | {read}
+                    continue
                 except SJ300Error as exc:
                     error = f"{type(exc).__name__}: {exc}"
-                    if isinstance(exc, NakError):  # a refusal: the drive is there
-                        health.answered = True
                     break  # a failing drive gets no more of the line this cycle
                 spent += clock() - begin
                 ok_reads += 1
                 health.answered = True
+            if health.unavailable or unavailable:
+                self._note_unavailable(target, node, health, unavailable, parameters)
         now = clock()
         self._update_health(target, node, health, error, now)
         latency_s = spent / ok_reads if ok_reads else None
         poll = (node, now, health.online, status, monitor, parameters, error, latency_s,
-                health.answered, started)  # fmt: skip
+                health.answered, started, unavailable)  # fmt: skip
         return poll, answered
+
+    @staticmethod
+    def _note_unavailable(
+        target: _Target,
+        node: int,
+        health: DriveHealth,
+        refused: frozenset[str],
+        read: Mapping[str, float],
+    ) -> None:
+        """Log each parameter the drive newly refuses, once, and each that reads again."""
+        bus = target.bus.description
+        for code in sorted(refused - health.unavailable):
+            _log.warning(
+                "%s node %02d: parameter %s unavailable (the drive refuses to read it); "
+                "the drive stays online",
+                bus, node, code,
+            )  # fmt: skip
+        back = {code for code in health.unavailable if code in read}
+        for code in sorted(back):
+            _log.info("%s node %02d: parameter %s reads again", bus, node, code)
+        health.unavailable = (health.unavailable - back) | refused
 
     async def _probe(
         self, target: _Target, node: int, health: DriveHealth, drive: Any
@@ -531,7 +578,8 @@ class Poller:
             self._publish(target, unpublished.pop(0))
 
     def _publish(self, target: _Target, poll: _Poll) -> None:
-        node, now, online, status, monitor, parameters, error, latency_s, answered, started = poll
+        (node, now, online, status, monitor, parameters, error, latency_s, answered, started,
+         unavailable) = poll  # fmt: skip
         sample = Sample(
             bus=target.bus.description,
             node=node,
@@ -544,6 +592,7 @@ class Poller:
             latency_s=latency_s,
             answered=answered,
             started=started,
+            unavailable=unavailable,
         )
         for callback in list(self._callbacks):
             try:

@@ -21,6 +21,8 @@ from ._snapshot import NEVER, DriveSnapshot, ParameterReading, Trip
 
 __all__ = ["build_snapshot"]
 
+_NONE: frozenset[str] = frozenset()
+
 
 def build_snapshot(
     profile: Profile,
@@ -67,6 +69,7 @@ def build_snapshot(
         trips=readings.trip_log,
         trips_at=readings.trips_at,
         parameters=_parameters(profile, readings),
+        unavailable_parameters=frozenset(readings.unavailable) if readings.unavailable else _NONE,
         extras=profile.extras(readings.status, readings.monitor, readings.trips),
     )
 

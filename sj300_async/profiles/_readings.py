@@ -14,6 +14,9 @@ Decisions:
   have read it before the write, and the newer one stays.
 - A failed read keeps the last good value and its old time: it goes stale,
   it is never replaced by a guess.
+- A parameter the drive refused to read (the poll's ``unavailable``) has no
+  value at all from then on, not a stale one, until it reads again: the
+  drive said it has none to give. It is kept in :attr:`DriveReadings.unavailable`.
 - Parameters are kept as the drive's integers (exact, what a register map
   serves); a poll gives values in their unit, turned back into integers
   by the catalogue (:func:`raw_value`).
@@ -24,6 +27,7 @@ Decisions:
 from __future__ import annotations
 
 from collections.abc import Mapping
+from collections.abc import Set as AbstractSet
 from dataclasses import dataclass, field
 from typing import Any, Protocol
 
@@ -51,6 +55,9 @@ class PollResult(Protocol):
     def monitor(self) -> Any: ...
     @property
     def parameters(self) -> Mapping[str, float]: ...
+    @property
+    def unavailable(self) -> AbstractSet[str]:
+        """The parameters the drive refused to read (none was read)."""
 
 
 def raw_value(spec: ParameterSpec, value: float) -> int:
@@ -82,6 +89,8 @@ class DriveReadings:
     #: Parameters as the drive's integers, and when each was read.
     parameters: dict[str, int] = field(default_factory=dict)
     parameters_at: dict[str, float] = field(default_factory=dict)
+    #: Polled parameters the drive refused at their latest read: no value.
+    unavailable: set[str] = field(default_factory=set)
     set_frequency_hz: float | None = None
     set_frequency_at: float = NEVER
     #: The trip history as the drive class read it, and its neutral form.
@@ -110,6 +119,11 @@ class DriveReadings:
             setpoint = profile.setpoint_parameter
             if setpoint is not None and setpoint in parameters and self.set_frequency_at <= began:
                 self.set_frequency(parameters[setpoint], now)
+        for code in poll.unavailable:
+            if self.parameters_at.get(code, NEVER) <= began:  # else read since: it stays
+                self.parameters.pop(code, None)
+                self.parameters_at.pop(code, None)
+                self.unavailable.add(code)
 
     def set_status(self, status: Any, at: float, profile: Profile) -> None:
         """A status read at loop time *at*."""
@@ -132,6 +146,7 @@ class DriveReadings:
         """A parameter's integer read at loop time *at*."""
         self.parameters[code] = raw
         self.parameters_at[code] = at
+        self.unavailable.discard(code)
 
     def set_frequency(self, hz: float, at: float) -> None:
         """The set frequency read back at loop time *at*."""

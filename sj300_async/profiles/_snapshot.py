@@ -199,6 +199,9 @@ class DriveSnapshot:
     # -- the rest -----------------------------------------------------------------------
     #: Polled parameters by code.
     parameters: Mapping[str, ParameterReading] = field(default_factory=lambda: _NO_READINGS)
+    #: Polled parameters the drive refused at their latest read (a NAK): they
+    #: have no value (not in ``parameters``), and the drive is not offline for it.
+    unavailable_parameters: frozenset[str] = frozenset()
     #: The protocol's own typed extras (its profile's class), or None.
     extras: object | None = None
 

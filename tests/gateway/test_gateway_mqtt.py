@@ -349,7 +349,7 @@ async def test_stale_values_are_null_and_a_trip_names_its_code(
         last = states(sub, 3)[-1]
         assert not last.online
         assert (last.status, last.running, last.set_frequency_hz, last.parameters) == (
-            None, None, None, {},
+            None, None, None, {"F001": None, "A004": None, "F002": None},  # null, not left out
         )  # fmt: skip
         assert bridge(gateway).stats.refused == 0
 

@@ -2,7 +2,9 @@
 
 Sans-IO. A value is published only when younger than ``stale_after_s`` at
 the moment of publishing (the rule of the Modbus reads), else it is null;
-the message's ``time`` is the sample's, in Unix time. The trip is the
+the message's ``time`` is the sample's, in Unix time. A polled parameter
+that is stale, or that the drive refused to read (unavailable), is null;
+one never read yet is left out (the gateway polls it before it knows). The trip is the
 snapshot's present trip (known only from a trip history read after the
 trip was seen), shown only while the drive's status is fresh.
 """
@@ -32,11 +34,12 @@ def state_message(
     monitor = is_fresh(snapshot.monitor_at, now, stale_after_s)
     direction = snapshot.direction
     trip = snapshot.trip if status and snapshot.tripped else None
-    parameters = {
-        code: reading.value
+    parameters: dict[str, float | None] = {
+        code: reading.value if is_fresh(reading.at, now, stale_after_s) else None
         for code, reading in snapshot.parameters.items()
-        if is_fresh(reading.at, now, stale_after_s)
     }
+    for code in snapshot.unavailable_parameters:
+        parameters[code] = None
     set_hz = snapshot.set_frequency_hz
     return StateMessage(
         gateway=gateway,

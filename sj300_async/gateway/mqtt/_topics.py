@@ -132,8 +132,8 @@ class StateMessage:
     power_kw: float | None = None
     #: Status as text: SJ300 ``{"a": "RUNNING", "b": ..., "c": ...}``, FR-700 ``{"bits": 11}``.
     status: Mapping[str, Any] | None = None
-    #: Polled parameters in their units, by code.
-    parameters: Mapping[str, float] = field(default_factory=dict)
+    #: Polled parameters in their units, by code; None when stale or unavailable.
+    parameters: Mapping[str, float | None] = field(default_factory=dict)
     #: The state in words (``stopped``, ``accelerating``, ``tripped``), None when unknown.
     state: str | None = None
     #: What the present trip means (``"over-voltage"``), None when unknown or not tripped.

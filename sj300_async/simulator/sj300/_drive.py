@@ -133,6 +133,10 @@ class SimulatedDrive(DriveModel):
         self.processing_s = processing_s
         #: How many times command 0B asked to recalculate the motor constants.
         self.recalculations = 0
+        #: Codes (upper case) this drive answers as it does a code it does not
+        #: know (NAK 16 to reads and writes), as a firmware without them would;
+        #: its model still uses their values. A test's hook: add to it at any time.
+        self.withheld_parameters: set[str] = set()
         self._history_reply: tuple[TripHistory, DataReply] | None = None
 
     def __repr__(self) -> str:
@@ -338,14 +342,15 @@ class SimulatedDrive(DriveModel):
 
     def _cmd_read_parameter(self, data: bytes, now: float) -> Result:
         code = data.decode("ascii").upper()
-        if code not in self._memory:
+        if code not in self._memory or code in self.withheld_parameters:
             return self._nak(NakCode.ABNORMAL_PARAMETER, data, "unknown parameter")
         return AckDataReply(self.node, b"%08d" % self._memory[code])
 
     def _cmd_write_parameter(self, data: bytes, now: float) -> Result:
         code = data[:4].decode("ascii").upper()
         raw = int(data[4:])
-        reason = self._memory.refusal(code, raw)
+        reason = "unknown parameter" if code in self.withheld_parameters else None
+        reason = reason or self._memory.refusal(code, raw)
         if reason is not None:
             return self._nak(NakCode.ABNORMAL_PARAMETER, data, reason)
         self._memory.write(code, raw)
