@@ -23,6 +23,7 @@ from ._gateway import Gateway, GatewayLine
 from ._listeners import (
     LIMIT_KEYS,
     ConnectionLimit,
+    Listener,
     ListenerLimits,
     RateLimitedLog,
     listener_families,
@@ -100,6 +101,7 @@ __all__ = [
     "Lease",
     "LineConfig",
     "LineView",
+    "Listener",
     "ListenerLimits",
     "Northbound",
     "NorthboundSpec",

@@ -11,14 +11,20 @@ or refuses each new connection.
 
 Decisions:
 
-- **At the cap, accept and close at once.** Not accepting would leave the
-  newcomers in the kernel's backlog, where they look connected to their
-  client and fill the queue that a legitimate client needs once a slot
-  frees. Accepting costs a descriptor for one loop turn.
+- **At the cap, accept and close at once**, in the accept itself
+  (:class:`Listener`: the descriptor is free before the next accept).
+  Not accepting would leave the newcomers in the kernel's backlog, where
+  they look connected to their client and fill the queue that a
+  legitimate client needs once a slot frees. asyncio's own server would
+  not do: it accepts up to its backlog (100) per loop turn and creates a
+  transport for each a turn or two later, so a flood holds a few hundred
+  descriptors before any protocol can refuse one.
 - **The defaults stay well under a small descriptor limit** (Modbus 64,
   HTTP 16, with the lines, the MQTT session and the interpreter's own: a
-  limit of 128 is not reached), so the process never meets EMFILE, where
-  asyncio's own accept loop logs a traceback per attempt.
+  limit of 128 is not reached), and an accept that fails all the same
+  (EMFILE, ENFILE, ENOBUFS) pauses that listener for
+  :data:`ACCEPT_RETRY_S` with one log line, where asyncio's loop logs a
+  traceback per attempt.
 - **Refusals are logged once per interval** (:class:`RateLimitedLog`: one
   WARNING per :data:`LOG_INTERVAL_S`, the others at DEBUG) and counted: a
   flood of connections must not become a flood of log lines.
@@ -28,6 +34,7 @@ from __future__ import annotations
 
 import asyncio
 import logging
+import socket
 import time
 from collections.abc import Callable, Iterator
 from dataclasses import dataclass
@@ -39,9 +46,11 @@ if TYPE_CHECKING:
     from prometheus_client.core import Metric
 
 __all__ = [
+    "ACCEPT_RETRY_S",
     "LIMIT_KEYS",
     "LOG_INTERVAL_S",
     "ConnectionLimit",
+    "Listener",
     "ListenerLimits",
     "RateLimitedLog",
     "listener_families",
@@ -51,6 +60,12 @@ __all__ = [
 LIMIT_KEYS: Final = ("max_connections", "idle_timeout_s")
 #: Seconds between two WARNING lines of one :class:`RateLimitedLog`.
 LOG_INTERVAL_S: Final = 10.0
+#: Seconds a listener stops accepting after an accept failed for want of resources.
+ACCEPT_RETRY_S: Final = 0.5
+#: Connections accepted per readiness of the listening socket (then other work runs).
+ACCEPT_BURST: Final = 16
+#: The kernel's queue of connections not yet accepted.
+BACKLOG: Final = 64
 
 
 @dataclass(frozen=True, slots=True)
@@ -125,26 +140,116 @@ class ConnectionLimit:
         #: Connections refused at the cap, and closed for idling, since the start.
         self.refused = 0
         self.timed_out = 0
-        self._log = RateLimitedLog(log)
+        self.log = RateLimitedLog(log)
 
-    def admit(self, transport: asyncio.BaseTransport) -> bool:
-        """Count a new connection in; at the cap, close it now and return False."""
+    def admit(self, peer: object) -> bool:
+        """Count a new connection from *peer* in; at the cap, count and log a refusal."""
         if self.open < self.max_connections:
             self.open += 1
             return True
         self.refused += 1
-        self._log.log(
+        self.log.log(
             "%s: %d connections open (max_connections): refused %s",
             self.listener,
             self.open,
-            transport.get_extra_info("peername"),
+            peer,
         )
-        transport.close()
         return False
 
     def release(self) -> None:
-        """An admitted connection closed."""
+        """An admitted connection closed (its protocol's ``connection_lost`` says so)."""
         self.open -= 1
+
+
+class Listener:
+    """Listening sockets with an accept loop that applies a :class:`ConnectionLimit`.
+
+    Each admitted connection gets a protocol from *factory* (through
+    ``loop.connect_accepted_socket``), whose ``connection_lost`` must call
+    ``limit.release()``; a refused one is closed in the accept. The
+    sockets, ``close()`` and ``wait_closed()`` are those of an
+    :class:`asyncio.Server`.
+    """
+
+    def __init__(self, factory: Callable[[], asyncio.BaseProtocol], limit: ConnectionLimit):
+        self._factory = factory
+        self.limit = limit
+        self.sockets: list[socket.socket] = []
+        self._loop = asyncio.get_running_loop()
+        self._closed = False
+
+    async def start(self, host: str, port: int) -> None:
+        """Bind every address of *host* on *port* and start accepting.
+
+        Raises:
+            OSError: an address cannot be bound (in use, not on this host).
+        """
+        infos = await self._loop.getaddrinfo(
+            host or None, port, type=socket.SOCK_STREAM, flags=socket.AI_PASSIVE
+        )
+        try:
+            for family, kind, proto, _, address in dict.fromkeys(infos):
+                sock = socket.socket(family, kind, proto)
+                self.sockets.append(sock)
+                sock.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
+                if family == socket.AF_INET6:  # the IPv4 address is bound on its own
+                    sock.setsockopt(socket.IPPROTO_IPV6, socket.IPV6_V6ONLY, 1)
+                try:
+                    sock.bind(address)
+                except OSError as exc:
+                    raise OSError(
+                        exc.errno, f"cannot listen on {address!r}: {exc.strerror}"
+                    ) from None
+                sock.listen(BACKLOG)
+                sock.setblocking(False)
+        except BaseException:
+            self.close()
+            raise
+        for sock in self.sockets:
+            self._loop.add_reader(sock.fileno(), self._accept, sock)
+
+    def _accept(self, sock: socket.socket) -> None:
+        for _ in range(ACCEPT_BURST):
+            try:
+                connection, peer = sock.accept()
+            except (BlockingIOError, InterruptedError, ConnectionAbortedError):
+                return
+            except OSError as exc:  # EMFILE, ENFILE, ENOBUFS, ENOMEM: out of resources
+                self.limit.log.log(
+                    "%s: cannot accept (%s): paused for %g s",
+                    self.limit.listener,
+                    exc.strerror,
+                    ACCEPT_RETRY_S,
+                )
+                self._loop.remove_reader(sock.fileno())
+                self._loop.call_later(ACCEPT_RETRY_S, self._resume, sock)
+                return
+            if not self.limit.admit(peer):
+                connection.close()  # now: the descriptor is free for the next accept
+                continue
+            connection.setblocking(False)
+            self._loop.create_task(self._connect(connection))
+
+    async def _connect(self, connection: socket.socket) -> None:
+        try:
+            await self._loop.connect_accepted_socket(self._factory, connection)
+        except OSError:  # reset before its transport was made: nothing to serve
+            connection.close()
+            self.limit.release()
+
+    def _resume(self, sock: socket.socket) -> None:
+        if not self._closed:
+            self._loop.add_reader(sock.fileno(), self._accept, sock)
+
+    def close(self) -> None:
+        """Stop listening (the connections already made are their protocols' to close)."""
+        self._closed = True
+        for sock in self.sockets:
+            self._loop.remove_reader(sock.fileno())
+            sock.close()
+
+    async def wait_closed(self) -> None:
+        """Nothing to wait for once :meth:`close` returned (for asyncio.Server's callers)."""
 
 
 def listener_families(prefix: str, limit: ConnectionLimit) -> Iterator[Metric]:

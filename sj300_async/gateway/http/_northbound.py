@@ -2,13 +2,12 @@
 
 from __future__ import annotations
 
-import asyncio
 import logging
 from collections.abc import Iterable
 from typing import TYPE_CHECKING
 
 from ...profiles import DriveSnapshot
-from .. import ConnectionLimit, GatewayView, listener_families
+from .. import ConnectionLimit, GatewayView, Listener, listener_families
 from . import MetricsConfig
 from ._server import make_registry, serve_http
 
@@ -25,7 +24,7 @@ class HttpNorthbound:
 
     def __init__(self, config: MetricsConfig) -> None:
         self.config = config
-        self.server: asyncio.Server | None = None
+        self.server: Listener | None = None
         limits = config.limits
         #: Open connections, and those refused at the cap or timed out.
         self.limit = ConnectionLimit("http", limits.max_connections, _log)

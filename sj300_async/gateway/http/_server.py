@@ -38,14 +38,14 @@ from __future__ import annotations
 import asyncio
 import logging
 import re
-from collections.abc import Callable, Iterable
+from collections.abc import Awaitable, Callable, Iterable
 from dataclasses import dataclass
 from typing import Final
 
 from prometheus_client import CONTENT_TYPE_LATEST, CollectorRegistry, generate_latest
 from prometheus_client.core import Metric
 
-from .. import ConnectionLimit, Endpoint
+from .. import ConnectionLimit, Endpoint, Listener
 
 __all__ = ["HEAD_TIMEOUT_S", "MAX_HEAD_BYTES", "make_registry", "serve_http"]
 
@@ -130,7 +130,7 @@ async def serve_http(
     *,
     limit: ConnectionLimit | None = None,
     timeout_s: float | None = None,
-) -> asyncio.Server:
+) -> Listener:
     """Serve ``/metrics`` from *registry* and ``/healthz`` from *health* at *endpoint*.
 
     Args:
@@ -138,7 +138,8 @@ async def serve_http(
             ``server.sockets[0].getsockname()``).
         health: returns the gateway's problems now, one line each; none
             means healthy (200 ``ok``), any means 503 with them as the body.
-        limit: admits each connection (None: no cap); counts the timed-out ones.
+        limit: admits each connection (None: no cap to speak of); counts the
+            timed-out ones.
         timeout_s: seconds a client has to send its request head, and to take
             the response (None: :data:`HEAD_TIMEOUT_S`).
 
@@ -150,19 +151,37 @@ async def serve_http(
         "/healthz": lambda: _health_response(health()),
     }
     timeout = HEAD_TIMEOUT_S if timeout_s is None else timeout_s
+    connections = ConnectionLimit("http", 1 << 30, _log) if limit is None else limit
 
     async def handle(reader: asyncio.StreamReader, writer: asyncio.StreamWriter) -> None:
-        if limit is None:
-            await _handle(reader, writer, routes, timeout)
-        elif limit.admit(writer.transport):
-            try:
-                if not await _handle(reader, writer, routes, timeout):
-                    limit.timed_out += 1
-            finally:
-                limit.release()
+        if not await _handle(reader, writer, routes, timeout):
+            connections.timed_out += 1
 
-    # limit: a single line longer than the whole head allowance fails readline() at once.
-    return await asyncio.start_server(handle, endpoint.host, endpoint.port, limit=MAX_HEAD_BYTES)
+    def protocol() -> asyncio.StreamReaderProtocol:
+        # limit: a single line longer than the whole head allowance fails readline() at once.
+        reader = asyncio.StreamReader(limit=MAX_HEAD_BYTES)
+        return _Counted(reader, handle, connections)
+
+    server = Listener(protocol, connections)
+    await server.start(endpoint.host, endpoint.port)
+    return server
+
+
+class _Counted(asyncio.StreamReaderProtocol):
+    """asyncio's stream protocol (what ``start_server`` makes), releasing its slot at the end."""
+
+    def __init__(
+        self,
+        reader: asyncio.StreamReader,
+        handle: Callable[[asyncio.StreamReader, asyncio.StreamWriter], Awaitable[None]],
+        limit: ConnectionLimit,
+    ) -> None:
+        super().__init__(reader, handle)
+        self._limit = limit
+
+    def connection_lost(self, exc: Exception | None) -> None:
+        super().connection_lost(exc)
+        self._limit.release()
 
 
 def _health_response(problems: list[str]) -> _Response:

@@ -146,7 +146,11 @@ class Refused:
 
 @dataclass(frozen=True, slots=True)
 class FrameError:
-    """The stream cannot be framed any more (*reason*); *data*: the bytes at fault, bounded."""
+    """The stream cannot be framed any more (*reason*).
+
+    *data*: the bytes at fault: the 7-byte header that broke, or the first
+    :data:`EXCERPT_BYTES` of an overflowing buffer.
+    """
 
     reason: str
     data: bytes
@@ -185,9 +189,10 @@ class Framer:
             return NEED_DATA
         tid, protocol, length, unit = _HEADER.unpack_from(buffer)
         if protocol != 0:
-            return self._fail(f"protocol id {protocol}, not 0", bytes(buffer))
+            return self._fail(f"protocol id {protocol}, not 0", bytes(buffer[:_HEADER_SIZE]))
         if not MIN_LENGTH <= length <= MAX_LENGTH:
-            return self._fail(f"length {length} outside {MIN_LENGTH}..{MAX_LENGTH}", bytes(buffer))
+            reason = f"length {length} outside {MIN_LENGTH}..{MAX_LENGTH}"
+            return self._fail(reason, bytes(buffer[:_HEADER_SIZE]))
         end = _HEADER_SIZE - 1 + length
         if len(buffer) < end:
             return NEED_DATA

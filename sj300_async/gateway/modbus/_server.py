@@ -26,10 +26,9 @@ Decisions:
   decodes): no data, and no other exception, for a unit that does not
   exist. Unit 0 is no broadcast here: no drive has it.
 - **Limits**: ``max_connections`` (newcomers past it are accepted and
-  closed at once) and ``idle_timeout_s`` (a connection with no request for
-  that long, and no write of its own in progress, is closed). The
-  :class:`~sj300_async.gateway.ConnectionLimit` is the HTTP northbound's
-  too.
+  closed at once, by the :class:`~sj300_async.gateway.Listener`, the HTTP
+  northbound's too) and ``idle_timeout_s`` (a connection with no request
+  for that long, and no write of its own in progress, is closed).
 - **A connection is a client**: its IP address is the audit log's "who",
   the lease holder and the metrics' label; ``"IP:port"`` names the
   connection, whose end lapses a connection-scoped lease
@@ -49,6 +48,7 @@ from .. import (
     Endpoint,
     GatewayDrive,
     GatewayView,
+    Listener,
     ListenerLimits,
     RateLimitedLog,
     WriteRequest,
@@ -109,14 +109,17 @@ class ModbusServer:
         self.bad_frames = 0
         self._bad_frame_log = RateLimitedLog(_log)
         self._connections: set[_Connection] = set()
-        self._server: asyncio.Server | None = None
+        self._server: Listener | None = None
 
     async def start(self, endpoint: Endpoint) -> None:
-        """Listen on *endpoint* (port 0: any free port, then read :attr:`port`)."""
-        loop = asyncio.get_running_loop()
-        self._server = await loop.create_server(
-            lambda: _Connection(self), endpoint.host, endpoint.port
-        )
+        """Listen on *endpoint* (port 0: any free port, then read :attr:`port`).
+
+        Raises:
+            OSError: the address cannot be bound.
+        """
+        server = Listener(lambda: _Connection(self), self.limit)
+        await server.start(endpoint.host, endpoint.port)
+        self._server = server
         _log.info("Modbus TCP on %s:%d, units %s", endpoint.host, self.port, sorted(self.units))
 
     @property
@@ -165,14 +168,12 @@ class _Connection(asyncio.Protocol):
         self._writing_paused = False
         self._reading_paused = False
         self._lost = False
+        self._eof = False
 
     # -- asyncio's callbacks ---------------------------------------------------------
 
     def connection_made(self, transport: asyncio.BaseTransport) -> None:
-        assert isinstance(transport, asyncio.Transport)
-        if not self.server.limit.admit(transport):
-            self._lost = True  # never admitted: nothing to release
-            return
+        assert isinstance(transport, asyncio.Transport)  # admitted by the Listener
         self.transport = transport
         peer = transport.get_extra_info("peername") or ("?", 0)
         host, port = str(peer[0]), peer[1]
@@ -190,6 +191,13 @@ class _Connection(asyncio.Protocol):
         if self.pending is None and not self._writing_paused:
             self._serve()
         self._update_reading()
+
+    def eof_received(self) -> bool:
+        # The client will send no more (``nc -N``, a script's shutdown): answer what it
+        # sent, a write in progress included, then close.
+        self._eof = True
+        self._finish_at_eof()
+        return True  # keep the transport open to answer
 
     def connection_lost(self, exc: Exception | None) -> None:
         if self._lost:
@@ -211,7 +219,8 @@ class _Connection(asyncio.Protocol):
         self._writing_paused = False
         if self.pending is None:
             self._serve()
-        self._update_reading()
+        if not self._finish_at_eof():
+            self._update_reading()
 
     # -- serving ---------------------------------------------------------------------
 
@@ -312,7 +321,15 @@ class _Connection(asyncio.Protocol):
         self._last_active = self._loop.time()
         if not self._writing_paused:
             self._serve()
-        self._update_reading()
+        if not self._finish_at_eof():
+            self._update_reading()
+
+    def _finish_at_eof(self) -> bool:
+        """After the client's end of stream, close once every request is answered."""
+        if self._eof and self.pending is None and not self._writing_paused:
+            self.close()
+            return True
+        return False
 
     def _update_reading(self) -> None:
         """Read while answering; pause while the client does not read, or too much waits."""
