@@ -7,8 +7,11 @@ it (flushed each time: an audit log that loses its last lines in a crash is
 not one). A refusal's ``result`` is ``refused``, with the neutral reason
 (:class:`~._writes.Refusal`'s value) and the sentence saying why.
 
-Untrusted text (an MQTT payload) reaches the log as a short escaped
-excerpt (:func:`excerpt`), never whole.
+Untrusted text (an MQTT payload, a topic) reaches a log, an error reply or
+this file only as a short escaped excerpt (:func:`excerpt`), never whole:
+every northbound uses it, and :meth:`AuditLog.record` applies it once more
+to every value it writes (a text ``old`` or ``new``, ``what``, the detail),
+so no client can make a log line longer than a few hundred characters.
 """
 
 from __future__ import annotations
@@ -16,6 +19,7 @@ from __future__ import annotations
 import json
 import logging
 import time
+from collections.abc import Sequence
 from pathlib import Path
 from typing import Final
 
@@ -28,12 +32,39 @@ _audit_log = logging.getLogger("sj300_async.gateway.audit")
 
 #: The longest excerpt of a client's text kept in a log line or an error reply.
 EXCERPT_CHARS: Final = 64
+#: The longest sentence (a refusal's detail) the audit log keeps: ours, but it
+#: may quote a client's text.
+_DETAIL_CHARS: Final = 256
+#: The most values of a sequence (a Modbus write's registers) the audit log keeps whole.
+_MAX_VALUES: Final = 125
 
 
-def excerpt(text: str, limit: int = EXCERPT_CHARS) -> str:
-    """*text* with unprintable characters escaped, cut to *limit* characters (``…`` marks a cut)."""
-    escaped = "".join(c if c.isprintable() else repr(c)[1:-1] for c in text[: limit + 1])
-    return escaped if len(escaped) <= limit else escaped[: limit - 1] + "…"
+def excerpt(text: str | bytes, limit: int = EXCERPT_CHARS) -> str:
+    """At most *limit* characters of a client's *text*, safe to log, show or store.
+
+    Unprintable characters are escaped (``\\x1b``, ``\\n``; bytes that are not
+    UTF-8 become U+FFFD), and a text that does not fit is cut where a
+    character starts, its size noted: ``run_forw…(1048576 bytes)`` (counted
+    in characters for a ``str``). Only the head of *text* is read, whatever
+    its size.
+    """
+    size = len(text)
+    head = text[: 4 * limit]  # enough for limit characters: UTF-8 takes at most 4 bytes each
+    if isinstance(head, bytes):
+        head, unit = head.decode("utf-8", errors="replace"), "bytes"
+    else:
+        unit = "characters"
+    shown = [c if c.isprintable() else repr(c)[1:-1] for c in head[: limit + 1]]
+    if size <= 4 * limit and len(head) <= limit and sum(map(len, shown)) <= limit:
+        return "".join(shown)
+    note = f"…({size} {unit})"
+    budget, out = limit - len(note), []
+    for piece in shown:
+        budget -= len(piece)
+        if budget < 0:
+            break
+        out.append(piece)
+    return "".join(out) + note
 
 
 class AuditLog:
@@ -85,6 +116,11 @@ class AuditLog:
         key = result if count_as is None else count_as
         self.counts[key] = self.counts.get(key, 0) + 1
         line, node, unit = drive.line.name, drive.node, drive.unit
+        # Whatever a caller passes, nothing a client sent is written whole (module docstring).
+        what, old, new = excerpt(what), _value(old), _value(new)
+        result = excerpt(result, _DETAIL_CHARS)
+        if fields is not None:
+            fields = {name: _value(value, _DETAIL_CHARS) for name, value in fields.items()}
         _audit_log.info(
             "client %s line %s node %d (unit %d): %s %s -> %s: %s",
             client, line, node, unit, what, old, new, result,
@@ -110,3 +146,17 @@ class AuditLog:
         if self._file is not None:
             self._file.close()
             self._file = None
+
+
+def _value(value: object, limit: int = EXCERPT_CHARS) -> object:
+    """*value* as the audit log keeps it: a number as it is, text (or anything else) excerpted."""
+    if value is None or isinstance(value, bool | int | float):
+        return value
+    if (
+        isinstance(value, Sequence)
+        and not isinstance(value, str | bytes)
+        and len(value) <= _MAX_VALUES
+        and all(isinstance(item, int | float) for item in value)
+    ):
+        return list(value)  # a Modbus write's registers: a JSON array
+    return excerpt(value if isinstance(value, str | bytes) else str(value), limit)

@@ -127,10 +127,12 @@ class Sub:
 
 
 @contextlib.asynccontextmanager
-async def subscriber(broker: Broker) -> AsyncIterator[Sub]:
-    """A subscriber to every topic; subscribed when this enters (it got the READY marker)."""
+async def subscriber(broker: Broker, *filters: str) -> AsyncIterator[Sub]:
+    """A subscriber to *filters* (default every topic); subscribed when this enters (it got
+    the READY marker)."""
+    topics = [arg for f in (filters or ("#",)) + (READY,) for arg in ("-t", f)]
     proc = await asyncio.create_subprocess_exec(
-        "mosquitto_sub", "-p", str(broker.port), "-q", "1", "-t", "#", "-F", "%r %t %p",
+        "mosquitto_sub", "-p", str(broker.port), "-q", "1", *topics, "-F", "%r %t %p",
         stdout=asyncio.subprocess.PIPE,
     )  # fmt: skip
     sub = Sub(broker)
@@ -510,10 +512,11 @@ async def test_commands_reach_the_drive_and_refusals_are_answered(
         await publish(broker, topics.command("hall", 1, "command"), long)
         await sub.until(lambda m: m.topic == topics.error("hall", 1), "the long one", count + 1)
         reply = errors(sub, 1)[count]
-        assert (reply["reason"], reply["payload"]) == ("malformed", excerpt(long))
+        assert (reply["reason"], reply["payload"]) == ("malformed", excerpt(long.encode()))
         assert len(reply["payload"]) == 64
         assert reply["payload"].startswith("\\x1b[2Jxxx")
-        assert reply["payload"].endswith("x…")
+        assert reply["payload"].endswith("x…(104 bytes)")
+        assert reply["error"].endswith(f"got '{excerpt(long)}'")  # the text, in characters
         await refused(1, "speed", "1", "unknown_target: no such command or parameter")
         await refused(1, "F002", "1", "not_allowed: the configuration does not allow writing F002")
         await refused(3, "lease", "", "not_allowed: the configuration does not allow control")
@@ -532,6 +535,63 @@ async def test_commands_reach_the_drive_and_refusals_are_answered(
     assert any("client mqtt line hall node 1" in a and "frequency_hz" in a and "fast" in a
                and "refused: malformed: " in a for a in audit)  # fmt: skip
     assert sim_line.log.interleaved() == []
+
+
+async def _publish_file(broker: Broker, topic: str, payload: bytes, directory: Path) -> None:
+    """``mosquitto_pub -f``: a payload too long for a command line's argument."""
+    path = directory / "payload"
+    path.write_bytes(payload)
+    args = ["-h", "127.0.0.1", "-p", str(broker.port), "-q", "1", "-t", topic, "-f", str(path)]
+    proc = await asyncio.create_subprocess_exec("mosquitto_pub", *args)
+    assert await asyncio.wait_for(proc.wait(), 10) == 0
+
+
+async def test_untrusted_payloads_are_capped_and_only_ever_excerpted(
+    sim_line: SimLine, broker: Broker, caplog: pytest.LogCaptureFixture, tmp_path: Path
+) -> None:
+    """A 1 MiB command is refused unread; nothing a client sent comes back or is logged whole."""
+    caplog.set_level(logging.DEBUG, logger="sj300_async.gateway")
+    topics = Topics("gw1")
+    audit_file = tmp_path / "audit.log"
+    text = mqtt_toml(sim_line.url, broker).replace(
+        "stale_after_s = 0.5\n", f"stale_after_s = 0.5\naudit_log = '{audit_file}'\n"
+    )
+    # Not "#": mosquitto_sub's line of the 1 MiB command would outgrow the reader's buffer.
+    async with (
+        subscriber(broker, topics.error("hall", 1)) as sub,
+        running_gateway(text) as gateway,
+    ):
+        await wait_for(lambda: bridge(gateway).connected, "connected")
+        huge = b"\x1b" + b"9" * (1 << 20)
+        await _publish_file(broker, topics.command("hall", 1, "frequency_hz"), huge, tmp_path)
+        # Under the cap: read, refused, quoted as an excerpt.
+        await publish(broker, topics.command("hall", 1, "command"), "r" * 4000)
+        # The topic's own part is the client's too.
+        await publish(broker, topics.command("hall", 1, "w" * 5000), "1")
+        await sub.until(lambda m: m.topic == topics.error("hall", 1), "three refusals", 3)
+        first, second, third = errors(sub, 1)
+        assert first["reason"] == "malformed"
+        assert first["error"] == "malformed: a command is at most 4096 bytes, got 1048577: not read"
+        assert first["payload"] == "\\x1b" + "9" * 44 + "…(1048577 bytes)"  # 64 characters
+        assert second["reason"] == "malformed"
+        assert second["payload"] == "r" * 51 + "…(4000 bytes)"
+        assert second["error"] == (
+            "malformed: expected run_forward, run_reverse or stop, got '"
+            + "r" * 46
+            + "…(4000 characters)'"
+        )
+        assert third["reason"] == "unknown_target"
+        assert third["topic"] == topics.command("hall", 1, "w" * 46 + "…(5000 characters)")
+        assert len(json.dumps([first, second, third])) < 2000
+        assert bridge(gateway).stats.oversized == 1
+        assert bridge(gateway).stats.refused == 3
+    assert sim_line.sim.drives[1].parameters["F001"] == 0  # nothing reached the drive
+    lines = audit_file.read_text().splitlines()
+    assert len(lines) == 3
+    assert all(len(line) < 500 for line in lines), [len(line) for line in lines]
+    assert json.loads(lines[0])["new"] == first["payload"]
+    logged = [r.getMessage() for r in caplog.records if r.name.startswith("sj300_async.gateway")]
+    assert max(len(message) for message in logged) < 500
 
 
 async def test_a_write_s_read_back_is_published_at_once(sim_line: SimLine, broker: Broker) -> None:

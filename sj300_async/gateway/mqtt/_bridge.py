@@ -34,6 +34,11 @@ Decisions:
   connected, with a clean session (nothing queued for the gateway while it
   was away); one received but not started before the connection broke is
   discarded, counted, never carried out later.
+- **A client's bytes are untrusted.** A payload longer than
+  ``MAX_PAYLOAD_BYTES`` (4 KiB) is refused unread (``malformed``, counted
+  in ``BridgeStats.oversized``) and never queued; what a client sent (the
+  payload, the end of the topic) reaches the error reply, the log and the
+  audit log only as a short escaped excerpt (:func:`~sj300_async.gateway.excerpt`).
 - **Never block the poller.** :meth:`MqttBridge.publish` only builds the
   message and leaves it in the outbox, which holds at most one state and
   one availability per drive: a newer one replaces the one not sent yet
@@ -72,7 +77,7 @@ import aiomqtt
 
 from ...profiles import DriveSnapshot
 from .. import GatewayDrive, GatewayView, Refusal, WriteResult, excerpt
-from ._commands import error_text, parse_command
+from ._commands import error_text, oversized, parse_command
 from ._config import MqttConfig
 from ._discovery import discovery
 from ._messages import state_message
@@ -424,6 +429,13 @@ class MqttBridge:
             _log.debug("MQTT: %s names no drive of this gateway: ignored", excerpt(topic))
             return
         line, node, what = parsed
+        # The topic as replies and logs show it: the client's part of it excerpted.
+        topic = topic[: len(topic) - len(what)] + excerpt(what)
+        too_long = oversized(payload)
+        if too_long is not None:
+            self.stats.oversized += 1
+            self._refuse(drive, topic, what, payload, too_long)
+            return
         if retained:
             # Stored by the broker, not sent now: carrying it out would replay it.
             self._refuse(
@@ -465,7 +477,7 @@ class MqttBridge:
             if epoch != self._epoch:
                 self.stats.discarded += 1
                 _log.debug("MQTT: %s %r discarded: received before the connection was lost",
-                           topic, excerpt(payload.decode("utf-8", "replace")))  # fmt: skip
+                           topic, excerpt(payload))  # fmt: skip
                 continue
             self._busy.add(key)
             try:
@@ -494,12 +506,12 @@ class MqttBridge:
         audited: bool = False,
     ) -> None:
         self.stats.refused += 1
-        text = excerpt(payload.decode("utf-8", errors="replace"))
+        text = excerpt(payload)
         error = error_text(result)
         _log.debug("MQTT: %s %r refused: %s", topic, text, error)
         if not audited and self._gateway is not None:
             # The gateway audits what it judges; this was refused before it got there.
-            self._gateway.refused(CLIENT, drive, f"mqtt {what}", text, result)
+            self._gateway.refused(CLIENT, drive, f"mqtt {excerpt(what)}", text, result)
         reason = None if result.refusal is None else result.refusal.value
         body = {"topic": topic, "payload": text, "error": error, "reason": reason,
                 "time": time.time()}  # fmt: skip

@@ -8,6 +8,10 @@ increment: a number finer than that is refused, not rounded). What cannot
 be read is refused here with a neutral :class:`~sj300_async.gateway.Refusal`;
 the rest goes to the gateway, which judges it like any other write.
 :func:`error_text` words a refusal for the error topic.
+
+A payload is untrusted: one longer than :data:`MAX_PAYLOAD_BYTES` is
+refused unread (:func:`oversized`), and a refusal quotes what it got as a
+short escaped excerpt (:func:`~sj300_async.gateway.excerpt`), never whole.
 """
 
 from __future__ import annotations
@@ -25,9 +29,14 @@ from .. import (
     SetFrequency,
     WriteRequest,
     WriteResult,
+    excerpt,
 )
 
-__all__ = ["COMMAND_DIRECTIONS", "error_text", "parse_command"]
+__all__ = ["COMMAND_DIRECTIONS", "MAX_PAYLOAD_BYTES", "error_text", "oversized", "parse_command"]
+
+#: The longest command payload read (the longest real one is a number or
+#: ``run_forward``): a longer one is refused unread, ``malformed``.
+MAX_PAYLOAD_BYTES: Final = 4096
 
 #: The payloads of ``…/set/command``.
 COMMAND_DIRECTIONS: Final = {
@@ -46,8 +55,25 @@ def _number(text: str) -> float | None:
     return value if math.isfinite(value) else None
 
 
+def oversized(payload: bytes) -> WriteResult | None:
+    """The refusal of a payload too long to read, None for one that is not."""
+    if len(payload) <= MAX_PAYLOAD_BYTES:
+        return None
+    return WriteResult(
+        Refusal.MALFORMED,
+        f"a command is at most {MAX_PAYLOAD_BYTES} bytes, got {len(payload)}: not read",
+    )
+
+
+def _quoted(text: str) -> str:
+    return f"'{excerpt(text)}'"
+
+
 def parse_command(profile: Profile, what: str, payload: bytes) -> WriteRequest | WriteResult:
     """The write a command asks for, or why it cannot be one (nothing judged yet)."""
+    too_long = oversized(payload)
+    if too_long is not None:
+        return too_long
     if what == "lease":
         return Heartbeat()  # any payload
     try:
@@ -58,36 +84,38 @@ def parse_command(profile: Profile, what: str, payload: bytes) -> WriteRequest |
         direction = COMMAND_DIRECTIONS.get(text)
         if direction is None:
             return WriteResult(
-                Refusal.MALFORMED, f"expected run_forward, run_reverse or stop, got {text!r}"
+                Refusal.MALFORMED, f"expected run_forward, run_reverse or stop, got {_quoted(text)}"
             )
         return RunCommand(direction)
     if what == "frequency_hz":
         hz = _number(text)
         if hz is None:
-            return WriteResult(Refusal.MALFORMED, f"expected a number of Hz, got {text!r}")
+            return WriteResult(Refusal.MALFORMED, f"expected a number of Hz, got {_quoted(text)}")
         if abs(round(hz * 100) - hz * 100) > 1e-6:  # the set frequency's step, every protocol
-            return WriteResult(Refusal.INVALID_VALUE, f"{text} Hz is finer than 0.01 Hz")
+            return WriteResult(Refusal.INVALID_VALUE, f"{excerpt(text)} Hz is finer than 0.01 Hz")
         return SetFrequency(hz)
     code = profile.parameters.code(what)
     if code is None:
         return WriteResult(
             Refusal.UNKNOWN_TARGET,
-            f"no such command or parameter {what!r} "
+            f"no such command or parameter {_quoted(what)} "
             "(use lease, command, frequency_hz or a parameter code)",
         )
     value = _number(text)
     if value is None:
-        return WriteResult(Refusal.MALFORMED, f"expected a number in {code}'s unit, got {text!r}")
+        return WriteResult(
+            Refusal.MALFORMED, f"expected a number in {code}'s unit, got {_quoted(text)}"
+        )
     spec = profile.parameters.spec(code)
     try:
         raw = raw_value(spec, value)
     except (OverflowError, ValueError):
-        return WriteResult(Refusal.INVALID_VALUE, f"{text} is outside {code}'s range")
+        return WriteResult(Refusal.INVALID_VALUE, f"{excerpt(text)} is outside {code}'s range")
     # raw_value rounds what its step cannot hold (Modbus cannot send it anyway);
     # a number on MQTT can be finer, and is refused rather than rounded.
     if abs(spec.from_raw(raw) - value) > 1e-9 * max(1.0, abs(value)):
         return WriteResult(
-            Refusal.INVALID_VALUE, f"{text} is finer than {code}'s setting increment"
+            Refusal.INVALID_VALUE, f"{excerpt(text)} is finer than {code}'s setting increment"
         )
     return ParameterWrite(code, raw)
 

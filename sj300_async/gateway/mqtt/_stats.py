@@ -43,6 +43,8 @@ class BridgeStats(SessionStats):
     discarded: int = 0
     #: Messages on the command topics that name no drive of this gateway.
     ignored: int = 0
+    #: Commands refused unread: longer than MAX_PAYLOAD_BYTES (also in ``refused``).
+    oversized: int = 0
 
 
 #: The bridge's counters: (name, HELP, BridgeStats attribute).
@@ -59,6 +61,7 @@ _COMMAND_RESULTS: Final = (
     ("refused", "refused"),
     ("discarded", "discarded"),
     ("ignored", "ignored"),
+    ("oversized", "oversized"),
 )
 
 
@@ -73,7 +76,8 @@ def mqtt_families(stats: BridgeStats) -> Iterator[Metric]:
     commands = CounterMetricFamily(
         "sj300_mqtt_commands",
         "Command messages: received, refused (answered on the error topic), discarded "
-        "(the connection was lost first), ignored (no drive of this gateway).",
+        "(the connection was lost first), ignored (no drive of this gateway), oversized "
+        "(refused unread: too long; also counted as refused).",
         labels=["result"],
     )
     for label, attribute in _COMMAND_RESULTS:
