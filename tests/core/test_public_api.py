@@ -120,6 +120,9 @@ GATEWAY_NAMES = (
     "LAPSE_ACTIONS", "POLL_READS", "LapseAction", "Lease", "LineConfig", "LineView", "Northbound",
     "NorthboundSpec", "ParameterWrite", "PollRead", "Refusal", "RunCommand", "SectionContext",
     "SetFrequency",
+    # the listeners' limits (Modbus and HTTP): issue 26
+    "ConnectionLimit", "LIMIT_KEYS", "Listener", "ListenerLimits", "RateLimitedLog",
+    "listener_families",
     "UNIT_RANGE", "WriteGrant", "WriteRequest", "WriteResult", "busy_seconds",
     "config_from_flags", "cumulative_buckets", "default_gateway_id", "drive_view", "excerpt",
     "gateway_metrics", "get_northbound", "line_problems", "load_config", "northbound_names",
@@ -127,8 +130,9 @@ GATEWAY_NAMES = (
     "valid_name",
 )  # fmt: skip
 GATEWAY_MODBUS_NAMES = (
-    "ClientCounters", "Exc", "Field", "MAX_CLIENTS", "ModbusConfig", "NORTHBOUND", "OTHER_CLIENT",
-    "REFUSAL_CODES", "RegisterMap", "client_families", "describe", "parameter_address",
+    "ClientCounters", "DEFAULT_LIMITS", "Exc", "Field", "MAX_CLIENTS", "ModbusConfig",
+    "NORTHBOUND", "OTHER_CLIENT", "REFUSAL_CODES", "RegisterMap", "client_families", "describe",
+    "parameter_address",
 )  # fmt: skip
 GATEWAY_MQTT_NAMES = (
     "AVAILABLE", "BridgeStats", "BrokerUnreachable", "COMMANDS", "COMMAND_DIRECTIONS",
@@ -139,7 +143,7 @@ GATEWAY_MQTT_NAMES = (
     "parse_state_topic", "state_message",
 )  # fmt: skip
 GATEWAY_HTTP_NAMES = (
-    "MetricsConfig", "NORTHBOUND",
+    "DEFAULT_LIMITS", "MetricsConfig", "NORTHBOUND",
 )  # fmt: skip
 
 #: Every package's pinned ``__all__``.
