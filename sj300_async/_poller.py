@@ -206,6 +206,10 @@ class _Target:
     drives: dict[int, Any] = field(default_factory=dict)
     #: Polls done and not yet published (see ``Poller._poll_bus``).
     unpublished: list[_Poll] = field(default_factory=list)
+    #: Holds on the bus's polls (:meth:`Poller.hold`); polls go on at 0.
+    holds: int = 0
+    #: Set while ``holds`` is 0.
+    resumed: asyncio.Event = field(default_factory=asyncio.Event)
 
 
 _END: Final = object()
@@ -309,6 +313,26 @@ class Poller:
                 target.drives[node] = drives[node]
         target.nodes.sort()
 
+    def hold(self, bus: Bus[Any] | str) -> None:
+        """Start no poll on *bus* until :meth:`release` (a poll under way ends first).
+
+        For a caller whose request must be the first on the line, e.g. the
+        gateway's pending stop when the link comes back. Holds nest: polls go
+        on once every hold is released.
+        """
+        target = self._target(bus)
+        target.holds += 1
+        target.resumed.clear()
+
+    def release(self, bus: Bus[Any] | str) -> None:
+        """Release one :meth:`hold` of *bus*."""
+        target = self._target(bus)
+        if target.holds <= 0:
+            raise LocalProtocolError("release() without a hold")
+        target.holds -= 1
+        if not target.holds:
+            target.resumed.set()
+
     def on_sample(self, callback: Callable[[Sample], None]) -> Callable[[], None]:
         """Call *callback* with every sample; returns a function that unregisters it."""
         self._callbacks.append(callback)
@@ -411,6 +435,8 @@ class Poller:
         while True:
             start = clock()
             for node in list(target.nodes):
+                if target.holds:
+                    await target.resumed.wait()
                 health = target.health.get(node)
                 if health is None or not health.online:
                     continue  # offline drives: probed below
@@ -431,6 +457,8 @@ class Poller:
                 if not h.online and now >= h.next_probe and node in target.nodes
             )
             for _, node in due:
+                if target.holds:
+                    await target.resumed.wait()
                 health = target.health[node]
                 poll, answered = await self._poll_drive(target, node, health, reads, clock)
                 self._publish(target, poll)

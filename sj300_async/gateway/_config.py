@@ -52,11 +52,13 @@ from ..wire import LocalProtocolError
 from ._model import (
     DEFAULT_STALE_AFTER_S,
     LAPSE_ACTIONS,
+    LEASE_SCOPES,
     POLL_READS,
     UNIT_RANGE,
     Endpoint,
     GatewayConfig,
     LapseAction,
+    LeaseScope,
     LineConfig,
     PollRead,
     WriteGrant,
@@ -97,10 +99,12 @@ _GATEWAY_KEYS: Final = ("id", "stale_after_s", "audit_log")
 _LINE_KEYS: Final = (
     *("name", "url", "protocol", "nodes", "interval_s", "reads", "parameters"),
     *("trips_interval_s", "unit_offset", "timeout_s", "lease_s", "on_lapse", "writes"),
+    "lease_scope",
 )
 _GRANT_KEYS: Final = ("nodes", "parameters", "control")
 _READS: Final[dict[str, PollRead]] = {read: read for read in POLL_READS}
 _LAPSE: Final[dict[str, LapseAction]] = {action: action for action in LAPSE_ACTIONS}
+_SCOPES: Final[dict[str, LeaseScope]] = {scope: scope for scope in LEASE_SCOPES}
 #: The shortest poll interval: a floor against a typo (milliseconds written
 #: as seconds) that would leave the line no time for anything but polls.
 _MIN_INTERVAL_S: Final = 0.05
@@ -299,6 +303,7 @@ def _line(ctx: ConfigContext, index: int, data: object, claims: _Claims) -> Line
         grants=grants,
         lease_s=or_default(lease_s, _DEFAULT_LINE.lease_s),
         on_lapse=on_lapse,
+        lease_scope=_lease_scope(table),
     )
 
 
@@ -426,6 +431,15 @@ def _unit_offset(
             )
     claims.units.update((node + offset, (name, f"{profile.node_noun} {node}")) for node in nodes)
     return offset
+
+
+def _lease_scope(table: ConfigTable) -> LeaseScope:
+    scope = table.string("lease_scope")
+    if scope is None:
+        return _DEFAULT_LINE.lease_scope
+    if scope not in _SCOPES:
+        raise table.error("lease_scope", unknown_choice("scope", scope, LEASE_SCOPES))
+    return _SCOPES[scope]
 
 
 def _on_lapse(table: ConfigTable, profile: Profile) -> LapseAction:

@@ -2,22 +2,34 @@
 
 A write reaches a drive only when the configuration allows it (the line's
 write grants: the parameter allow-list, ``control`` for run/stop/frequency)
-and, for control, when the writing client holds the drive's lease. Values
-are validated by the drive classes before anything reaches the wire. Every
-write goes through the same :class:`~sj300_async.Bus` as the polls, so the
-arbiter never interleaves it with them, and is confirmed by a read-back
-whose value also goes into the drive's readings (and so into its next
-snapshot, built at once). Every write but a granted heartbeat is one line
-of the audit log, with the neutral result (:class:`~._writes.WriteResult`).
+and, for run and frequency commands, when the writing client holds the
+drive's lease. A stop needs no lease: any client the configuration lets
+control the drive may stop it, even while another holds the lease (stop is
+the safe direction). Values are validated by the drive classes before
+anything reaches the wire. Every write goes through the same
+:class:`~sj300_async.Bus` as the polls, so the arbiter never interleaves it
+with them, and is confirmed by a read-back whose value also goes into the
+drive's readings (and so into its next snapshot, built at once). Every
+write, heartbeats included, is one line of the audit log with the neutral
+result (:class:`~._writes.WriteResult`: ``ok`` or a refusal's reason).
 
 The lease: a client takes a drive's lease by a heartbeat and keeps it by
 another within ``lease_s``. Another client's heartbeat is refused (lease
-held) while it is held. When it lapses, the line's ``on_lapse`` action runs
-at once: ``stop`` (the drive's stop, which jumps the line's queue),
-``broadcast_stop`` (every drive of the line), or ``hold`` (nothing is sent;
-logged). So a drive is stopped within the lease time plus one transaction
-of a controller's last heartbeat. The lapse action also runs when the
-gateway stops while a lease is held.
+held) while it is held. With ``lease_scope = "connection"`` the lease also
+lapses the moment the connection the last heartbeat came by closes
+(:meth:`Controller.disconnected`). When it lapses, the line's ``on_lapse``
+action runs (:mod:`._lapse`: retried until the drive is confirmed stopped).
+
+A command must not outlive its lease. The holder's run and frequency
+commands still waiting (for the drive's write lock, or for the line behind
+a poll) or under way when the lease lapses are cancelled at the lapse, and
+the lapse action waits for them to end before it takes the drive's write
+lock; every write to a drive holds that lock from its command to its
+read-back. So the last command a drive gets from a lapsed controller is the
+lapse action, whatever the timing. A lease whose time is up is lapsed
+as soon as any write to the drive sees it, even before its timer has run
+(a loaded loop runs timers late). While a lapse is pending, nobody can
+take the drive's lease (busy): the stop comes first.
 
 Decisions: a command's read-back is a status read; after a run command the
 drive must report running (else "not confirmed"); after a stop it may still
@@ -27,7 +39,8 @@ right after a command pairs its status with a direction and a frequency
 read after it, not before. The set frequency
 is read back the way the drive's profile says (SJ300: F001). A client is
 known by the name its northbound gives it (a Modbus client by its IP
-address: a SCADA that reconnects from a new port keeps its lease).
+address: a SCADA that reconnects from a new port keeps its lease, unless
+the lease is connection-scoped).
 """
 
 from __future__ import annotations
@@ -41,6 +54,7 @@ from ..bus import Bus
 from ..wire import Direction, LocalProtocolError, NakError, ReadOnlyError, SJ300Error
 from ._audit import AuditLog
 from ._drive import GatewayDrive
+from ._lapse import LapseRunner, PollHold
 from ._model import LineConfig
 from ._writes import (
     DONE,
@@ -56,8 +70,8 @@ from ._writes import (
 __all__ = ["Controller"]
 
 _log = logging.getLogger("sj300_async.gateway")
-#: How often a lapse action is tried before the gateway gives up (each try has the bus's retries).
-LAPSE_TRIES: Final = 3
+#: How long stopping the gateway waits for pending lapses to be confirmed.
+CLOSE_LAPSE_S: Final = 5.0
 _COMMAND_NAMES: Final = {
     Direction.STOP: "stop",
     Direction.FORWARD: "run forward",
@@ -82,6 +96,8 @@ class Controller:
     Args:
         changed: called with a drive whose readings a write's read-back
             changed (the gateway rebuilds and publishes its snapshot).
+        polls: what holds the line's polls while a lapse's stop waits for
+            the link (the line's poller).
     """
 
     def __init__(
@@ -90,6 +106,8 @@ class Controller:
         bus: Bus[Any, Any],
         audit: AuditLog,
         changed: Callable[[GatewayDrive], None] = lambda drive: None,
+        *,
+        polls: PollHold | None = None,
     ) -> None:
         self.config = config
         self.bus = bus
@@ -97,9 +115,21 @@ class Controller:
         self._changed = changed
         self._locks: dict[int, asyncio.Lock] = {}
         self._timers: dict[int, asyncio.TimerHandle] = {}
-        self._lapses: set[asyncio.Task[None]] = set()
-        #: Lapse actions run (each counted once, whatever its result).
-        self.lapses = 0
+        # Run and frequency commands under way, per node: cancelled when the lease lapses.
+        self._commands: dict[int, set[asyncio.Task[WriteResult]]] = {}
+        self._lapses: dict[int, asyncio.Task[None]] = {}
+        # The drive of each lease timer (a connection's close finds its leases here).
+        self._timer_drives: dict[int, GatewayDrive] = {}
+        self.lapse = LapseRunner(config, bus, audit, self._lock, changed, polls)
+
+    @property
+    def lapses(self) -> int:
+        """Lapse actions started (each counted once, whatever its result)."""
+        return self.lapse.lapses
+
+    def _lock(self, drive: GatewayDrive) -> asyncio.Lock:
+        """The drive's write lock: a write and its read-back, or a lapse's try, hold it."""
+        return self._locks.setdefault(drive.node, asyncio.Lock())
 
     # -- writes ------------------------------------------------------------------
 
@@ -112,31 +142,71 @@ class Controller:
         connection: str | None = None,
     ) -> WriteResult:
         """Judge and carry out one write; its result (audited)."""
-        refused = self._judge(client, drive, request)
+        now = asyncio.get_running_loop().time()
+        lease = drive.lease
+        if lease.holder is not None and now >= lease.expires_at:
+            self._expire(drive)  # its time is up: lapse it before judging (module docstring)
+        refused = self._judge(client, drive, request, now)
         if refused is not None:
             self.audit.write(client, drive, *self._describe(drive, request), refused)
             return refused
         if isinstance(request, Heartbeat):
-            self._renew(client, drive)
+            what, old, _ = self._describe(drive, request)
+            self._renew(client, drive, connection)
+            self.audit.write(client, drive, what, old, client, DONE)
             return DONE
-        lock = self._locks.setdefault(drive.node, asyncio.Lock())
-        async with lock:  # a write and its read-back stay together
+        if not _needs_lease(request):
+            return await self._carry_out_locked(client, drive, request)
+        # Its own task, so that the lapse can cancel it without cancelling the caller.
+        task = asyncio.get_running_loop().create_task(
+            self._carry_out_locked(client, drive, request, lease_bound=True)
+        )
+        commands = self._commands.setdefault(drive.node, set())
+        commands.add(task)
+        try:
+            return await task
+        except asyncio.CancelledError:
+            current = asyncio.current_task()
+            if not task.cancelled() or (current is not None and current.cancelling()):
+                raise  # the caller's own cancellation
+            result = WriteResult(
+                Refusal.NO_LEASE,
+                "the control lease lapsed before the command was confirmed; "
+                "the lapse action follows it",
+            )
+            self.audit.write(client, drive, *self._describe(drive, request), result)
+            return result
+        finally:
+            commands.discard(task)
+
+    async def _carry_out_locked(
+        self, client: str, drive: GatewayDrive, request: WriteRequest, *, lease_bound: bool = False
+    ) -> WriteResult:
+        async with self._lock(drive):  # a write and its read-back stay together
             what, old, new = self._describe(drive, request)
-            try:
-                confirmed = await self._carry_out(drive, request)
-            except SJ300Error as exc:
-                result = _failure(exc)
+            now = asyncio.get_running_loop().time()
+            if lease_bound and not drive.lease.held_by(client, now):
+                # It waited for the lock past the lease: the lapse owns the drive now.
+                result = WriteResult(Refusal.NO_LEASE, "the control lease lapsed while it waited")
             else:
-                result = (
-                    DONE
-                    if confirmed
-                    else WriteResult(Refusal.NOT_CONFIRMED, "the drive read back something else")
-                )
+                try:
+                    confirmed = await self._carry_out(drive, request)
+                except SJ300Error as exc:
+                    result = _failure(exc)
+                else:
+                    result = (
+                        DONE
+                        if confirmed
+                        else WriteResult(
+                            Refusal.NOT_CONFIRMED, "the drive read back something else"
+                        )
+                    )
             self.audit.write(client, drive, what, old, new, result)
             return result
 
-    def _judge(self, client: str, drive: GatewayDrive, request: WriteRequest) -> WriteResult | None:
-        now = asyncio.get_running_loop().time()
+    def _judge(
+        self, client: str, drive: GatewayDrive, request: WriteRequest, now: float
+    ) -> WriteResult | None:
         if isinstance(request, ParameterWrite):
             if request.code in self.config.writable_parameters(drive.node):
                 return None
@@ -148,12 +218,20 @@ class Controller:
             return WriteResult(
                 Refusal.NOT_ALLOWED, "the configuration does not allow control of this drive"
             )
+        if isinstance(request, RunCommand) and request.direction == Direction.STOP:
+            return None  # the safe direction: no lease needed (module docstring)
         lease = drive.lease
         if lease.held(now) and not lease.held_by(client, now):
             return WriteResult(
                 Refusal.LEASE_HELD, f"another client ({lease.holder}) holds the control lease"
             )
-        if not isinstance(request, Heartbeat) and not lease.held_by(client, now):
+        if isinstance(request, Heartbeat):
+            if drive.node in self._lapses or drive.lapse_pending:
+                return WriteResult(
+                    Refusal.BUSY, "the lapse of the last lease is not confirmed yet (its stop)"
+                )
+            return None
+        if not lease.held_by(client, now):
             return WriteResult(Refusal.NO_LEASE, "take the control lease first")
         if isinstance(request, SetFrequency):
             highest = self._max_hz(drive)
@@ -226,70 +304,93 @@ class Controller:
     # -- the lease ---------------------------------------------------------------
 
     def disconnected(self, connection: str) -> None:
-        """*connection* closed: its connection-scoped leases lapse now (not yet: see issue 26)."""
+        """*connection* closed: the connection-scoped leases it holds lapse now."""
+        if self.config.lease_scope != "connection":
+            return
+        for drive in list(self._timer_drives.values()):
+            if drive.lease.connection == connection:
+                _log.info("line %s node %d: the lease holder's connection %s closed",
+                          *drive.key, connection)  # fmt: skip
+                self._expire(drive)
 
-    def _renew(self, client: str, drive: GatewayDrive) -> None:
+    def _renew(self, client: str, drive: GatewayDrive, connection: str | None) -> None:
         loop = asyncio.get_running_loop()
         lease = drive.lease
         if lease.holder != client:
             _log.info("line %s node %d: %s takes the control lease", drive.line.name, drive.node,
                       client)  # fmt: skip
         lease.holder = client
+        lease.connection = connection
         lease.expires_at = loop.time() + lease.duration_s
         old = self._timers.pop(drive.node, None)
         if old is not None:
             old.cancel()
         self._timers[drive.node] = loop.call_at(lease.expires_at, self._expire, drive)
+        self._timer_drives[drive.node] = drive
 
     def _expire(self, drive: GatewayDrive) -> None:
-        self._timers.pop(drive.node, None)
+        timer = self._timers.pop(drive.node, None)
+        if timer is not None:
+            timer.cancel()
+        self._timer_drives.pop(drive.node, None)
         holder = drive.lease.holder
         if holder is None:
             return
         drive.lease.holder = None
+        drive.lease.connection = None
         _log.warning(
             "line %s node %d: the control lease of %s lapsed: %s",
             drive.line.name, drive.node, holder, self.config.on_lapse,
         )  # fmt: skip
-        task = asyncio.get_running_loop().create_task(self._lapse(holder, drive))
-        self._lapses.add(task)
-        task.add_done_callback(self._lapses.discard)
+        if self.config.on_lapse != "hold":
+            drive.lapse_pending = True  # from now: no new lease before its stop is confirmed
+        # The holder's commands end first (cancelled), then the lapse action runs.
+        commands = list(self._commands.get(drive.node, ()))
+        for command in commands:
+            command.cancel()
+        self._lapses[drive.node] = asyncio.get_running_loop().create_task(
+            self._lapse(holder, drive, commands)
+        )
 
-    async def _lapse(self, holder: str, drive: GatewayDrive) -> None:
-        self.lapses += 1
-        action = self.config.on_lapse
-        if action == "hold":
-            self.audit.record(holder, drive, "lease lapsed", holder, None, "hold: nothing sent")
-            return
-        result = f"{action} failed"
-        for attempt in range(1, LAPSE_TRIES + 1):
-            try:
-                if action == "broadcast_stop":
-                    await self.bus.broadcast.stop()
-                else:
-                    await self.bus.drive(drive.node).stop()
-            except SJ300Error as exc:
-                _log.error(
-                    "line %s node %d: lapse %s failed (try %d of %d): %s",
-                    drive.line.name, drive.node, action, attempt, LAPSE_TRIES, exc,
-                )  # fmt: skip
-                result = f"{action} failed: {exc}"
-                continue
-            result = f"{action}: ok"
-            break
-        self.audit.record(holder, drive, "lease lapsed", holder, None, result)
+    async def _lapse(
+        self, holder: str, drive: GatewayDrive, commands: list[asyncio.Task[WriteResult]]
+    ) -> None:
+        try:
+            if commands:
+                await asyncio.wait(commands)
+            await self.lapse.run(holder, drive)
+        finally:
+            if self._lapses.get(drive.node) is asyncio.current_task():
+                del self._lapses[drive.node]
 
     async def close(self, drives: list[GatewayDrive]) -> None:
-        """Stop: every lease still held lapses now (its action runs), then wait for all lapses."""
-        by_node = {drive.node: drive for drive in drives}
-        for node, timer in list(self._timers.items()):
-            timer.cancel()
-            self._expire(by_node[node])
-        self._timers.clear()
-        if self._lapses:
-            await asyncio.gather(*self._lapses, return_exceptions=True)
+        """Stop: every lease still held lapses now (its action runs), then wait for all lapses.
+
+        A lapse not confirmed within :data:`CLOSE_LAPSE_S` is given up (logged
+        at ERROR and audited): the gateway is stopping, nothing will retry it.
+        """
+        for drive in drives:
+            if drive.lease.holder is not None:
+                self._expire(drive)
+        pending = list(self._lapses.values())
+        if not pending:
+            return
+        _, late = await asyncio.wait(pending, timeout=CLOSE_LAPSE_S)
+        for task in late:
+            task.cancel()
+        if late:
+            _log.error("line %s: %d lapse stops not confirmed when the gateway stopped",
+                       self.config.name, len(late))  # fmt: skip
+            await asyncio.wait(late)
 
     @property
     def pending_lapses(self) -> int:
-        """Lapse actions still running."""
+        """Lapse actions not finished (their stop not confirmed yet)."""
         return len(self._lapses)
+
+
+def _needs_lease(request: WriteRequest) -> bool:
+    """Run and frequency commands need the lease (a stop and a parameter write do not)."""
+    if isinstance(request, RunCommand):
+        return request.direction != Direction.STOP
+    return isinstance(request, SetFrequency)

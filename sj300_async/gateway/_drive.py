@@ -10,8 +10,9 @@ lease registers sees it change between samples), ``line`` (its line's
 configuration: write grants), ``profile`` and ``unit``. They never write
 to it: writes go through the gateway (:meth:`~._northbound.GatewayView.write`).
 
-The lease (:class:`Lease`) is plain state here; :mod:`._control` takes and
-renews it and runs the lapse action.
+The lease (:class:`Lease`) and the lapse's progress are plain state here;
+:mod:`._control` takes and renews the lease and :mod:`._lapse` runs the
+lapse action.
 """
 
 from __future__ import annotations
@@ -36,6 +37,9 @@ class Lease:
     holder: str | None = None
     #: Event-loop time at which it lapses (meaningless without a holder).
     expires_at: float = -math.inf
+    #: The connection the holder's last heartbeat came by (its northbound's
+    #: name for it), or None: a connection-scoped lease lapses when it closes.
+    connection: str | None = None
 
     def held_by(self, client: str, now: float) -> bool:
         """True when *client* holds the lease at *now*."""
@@ -61,6 +65,12 @@ class GatewayDrive:
     readings: DriveReadings = field(default_factory=DriveReadings)
     #: The latest snapshot (one with nothing read before the first sample).
     snapshot: DriveSnapshot = field(init=False)
+    #: A lapsed lease's stop is not confirmed yet (it is being retried).
+    lapse_pending: bool = False
+    #: Why the pending lapse's last try failed ("" before the first failure).
+    lapse_error: str = ""
+    #: Tries of the pending lapse's stop so far.
+    lapse_tries: int = 0
 
     def __post_init__(self) -> None:
         self.snapshot = self._build(now=-math.inf, wall=0.0)

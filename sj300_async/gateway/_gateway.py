@@ -143,12 +143,47 @@ class Gateway:
         for section in self.northbounds:
             errors.add_metric([section], self.publish_errors.get(section, 0))
         yield errors
+        yield from self._lapse_metrics()
         for northbound in self.northbounds.values():
             yield from northbound.metrics()
 
+    def _lapse_metrics(self) -> Iterator[Metric]:
+        from prometheus_client.core import CounterMetricFamily, GaugeMetricFamily
+
+        lapses = CounterMetricFamily(
+            "sj300_gateway_lapses",
+            "Control leases that lapsed (their action ran).",
+            labels=["line"],
+        )
+        failed = CounterMetricFamily(
+            "sj300_gateway_lapse_failed_tries",
+            "Tries of a lapse's stop that failed (link down, NAK, time-out) and were retried.",
+            labels=["line"],
+        )
+        pending = GaugeMetricFamily(
+            "sj300_gateway_lapse_pending",
+            "1 while a lapsed lease's stop is not confirmed (being retried).",
+            labels=["line", "node"],
+        )
+        for line in self.lines:
+            name = line.config.name
+            lapses.add_metric([name], line.controller.lapse.lapses)
+            failed.add_metric([name], line.controller.lapse.failed_tries)
+            for node, drive in line.drives.items():
+                pending.add_metric([name, str(node)], int(drive.lapse_pending))
+        yield from (lapses, failed, pending)
+
     def problems(self) -> list[str]:
-        """Why the gateway is not healthy (empty: every line is up)."""
-        return line_problems(self._line_views())
+        """Why the gateway is not healthy (empty: every line is up, no lapse is pending)."""
+        problems = line_problems(self._line_views())
+        for drive in self._drives:
+            if drive.lapse_pending:
+                why = f": {drive.lapse_error}" if drive.lapse_error else ""
+                problems.append(
+                    f"line {drive.line.name} {drive.profile.node_noun} {drive.node}: the lapsed "
+                    f"lease's stop is not confirmed yet ({drive.lapse_tries} tries{why})"
+                )
+        return problems
 
     def _line_views(self) -> list[LineView]:
         return [LineView(line.config.name, line.bus) for line in self.lines]
@@ -194,8 +229,12 @@ class Gateway:
                 protocol=config.protocol,
                 timeout=config.timeout_s,
                 capture=self._capture,
+                connect="background",  # a line down at start is served as one lost later
             )
         )
+        if not bus.connected:
+            _log.warning("line %s: %s is down (%s): its drives are offline until it connects",
+                         config.name, config.url, bus.link.last_error)  # fmt: skip
         poller = Poller(
             interval_s=config.interval_s, reads=config.reads, parameters=config.parameters
         )
@@ -207,9 +246,8 @@ class Gateway:
         for drive in drives.values():
             self._drives.append(drive)
             self._by_key[drive.key] = drive
-        line = GatewayLine(
-            config, profile, bus, poller, Controller(config, bus, self.audit, self._changed), drives
-        )
+        controller = Controller(config, bus, self.audit, self._changed, polls=poller)
+        line = GatewayLine(config, profile, bus, poller, controller, drives)
         poller.on_sample(lambda sample: self._on_sample(line, sample))
         _log.info("line %s: %s, %s %s", config.name, config.url, profile.node_noun,
                   ",".join(map(str, config.nodes)))  # fmt: skip

@@ -39,10 +39,12 @@ __all__ = [
     "DEFAULT_LEASE_S",
     "DEFAULT_STALE_AFTER_S",
     "LAPSE_ACTIONS",
+    "LEASE_SCOPES",
     "UNIT_RANGE",
     "Endpoint",
     "GatewayConfig",
     "LapseAction",
+    "LeaseScope",
     "LineConfig",
     "WriteGrant",
     "default_gateway_id",
@@ -55,6 +57,9 @@ POLL_READS: Final[tuple[PollRead, ...]] = get_args(PollRead)
 #: What the gateway does when a control lease lapses.
 LapseAction = Literal["stop", "broadcast_stop", "hold"]
 LAPSE_ACTIONS: Final = get_args(LapseAction)
+#: What ends a control lease besides its time running out (see LineConfig.lease_scope).
+LeaseScope = Literal["client", "connection"]
+LEASE_SCOPES: Final = get_args(LeaseScope)
 #: Reads of data older than this fail with Modbus exception 0x0B.
 DEFAULT_STALE_AFTER_S: Final = 5.0
 DEFAULT_LEASE_S: Final = 5.0
@@ -122,6 +127,10 @@ class LineConfig:
     grants: tuple[WriteGrant, ...] = ()
     lease_s: float = DEFAULT_LEASE_S
     on_lapse: LapseAction = "stop"
+    #: ``"client"``: the lease lapses ``lease_s`` after the holder's last
+    #: heartbeat; ``"connection"``: also the moment the connection it came
+    #: by closes (docs/GATEWAY.md, "What the gateway guarantees").
+    lease_scope: LeaseScope = "client"
 
     def unit(self, node: int) -> int:
         """The Modbus unit id of *node*."""

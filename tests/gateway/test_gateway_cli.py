@@ -208,15 +208,17 @@ async def test_a_lease_held_at_sigterm_sends_one_stop(sim_line: SimLine, tmp_pat
     assert state in (RunState.DECELERATING, RunState.STOPPED)
     audit = [json.loads(line) for line in (tmp_path / "audit.jsonl").read_text().splitlines()]
     assert [(a["node"], a["what"], a["result"]) for a in audit] == [
+        (1, "heartbeat", "ok"),
         (1, "set frequency (Hz)", "ok"),
         (1, "command", "ok"),
         (2, "command", "refused"),
-        (1, "lease lapsed", "stop: ok"),
+        (1, "lease lapsed: stop", "ok"),
     ]
-    assert (audit[2]["reason"], audit[2]["detail"]) == (
+    assert (audit[3]["reason"], audit[3]["detail"]) == (
         "not_allowed",
         "the configuration does not allow control of this drive",
     )
+    assert audit[4]["new"].startswith("confirmed stopped")
     assert "reason" not in audit[0]
     assert sim_line.log.interleaved() == []
 
