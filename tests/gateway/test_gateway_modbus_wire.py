@@ -131,9 +131,9 @@ async def test_conformance_byte_for_byte(sim_line: SimLine) -> None:
             for request, expected in READ_ONLY:
                 assert (await ask(stream, h(request))).hex(" ") == h(expected).hex(" "), request
             for tid, function in enumerate(UNIMPLEMENTED, 0x100):
-                request = struct.pack(">HHHBB4x", tid, 0, 6, 2, function)
-                expected = struct.pack(">HHHBBB", tid, 0, 3, 2, function | 0x80, 0x01)
-                assert await ask(stream, request) == expected, function
+                unimplemented = struct.pack(">HHHBB4x", tid, 0, 6, 2, function)
+                refusal = struct.pack(">HHHBBB", tid, 0, 3, 2, function | 0x80, 0x01)
+                assert await ask(stream, unimplemented) == refusal, function
             # The connection is still in step after all of it.
             assert await ask(stream, h("7777 0000 0006 04 03 0003 0001")) == h(
                 "7777 0000 0005 04 03 02 0004"
