@@ -162,6 +162,9 @@ class MqttBridge:
         self._client: aiomqtt.Client | None = None
         #: Changes on every connect and loss: a command of an older epoch is stale.
         self._epoch = 0
+        #: The connection's name in the gateway (a connection-scoped lease's holder
+        #: connection), None while not connected.
+        self._session_name: str | None = None
         self._commands: dict[Key, asyncio.Queue[tuple[int, str, bytes, str]]] = {}
         self._workers: dict[Key, asyncio.Task[None]] = {}
         self._busy: set[Key] = set()
@@ -197,8 +200,13 @@ class MqttBridge:
         key = (snapshot.line, snapshot.node)
         self.stats.samples[key] += 1
         now = asyncio.get_running_loop().time()
+        drive = None if self._gateway is None else self._gateway.drive(*key)
         message = state_message(
-            self.topics.gateway, snapshot, now=now, stale_after_s=self.stale_after_s
+            self.topics.gateway,
+            snapshot,
+            now=now,
+            stale_after_s=self.stale_after_s,
+            lapse_pending=drive is not None and drive.lapse_pending,
         )
         out = _Out(self.topics.state(*key), message.to_json(), retain=True, drive=key)
         self._latest[key] = out
@@ -362,6 +370,9 @@ class MqttBridge:
         finally:
             self._client = None
             self._epoch += 1  # commands received on that connection are stale now
+            session, self._session_name = self._session_name, None
+            if session is not None and self._gateway is not None:
+                self._gateway.disconnected(session)  # its connection-scoped leases lapse
 
     async def _say_offline(self, client: aiomqtt.Client) -> None:
         """A clean stop: what is waiting, then "offline" (a clean disconnect has no will)."""
@@ -385,6 +396,7 @@ class MqttBridge:
             await client.subscribe(self._birth, qos=qos)
         await client.publish(self.topics.availability, AVAILABLE, qos=qos, retain=True)
         self._epoch += 1
+        self._session_name = f"mqtt session {self._epoch}"
         self._client = client
         self._announce()
 
@@ -491,7 +503,9 @@ class MqttBridge:
             self._refuse(drive, topic, what, payload, request)
             return
         assert self._gateway is not None
-        result = await self._gateway.write(CLIENT, drive, request)  # audited there
+        result = await self._gateway.write(
+            CLIENT, drive, request, connection=self._session_name
+        )  # audited there
         if result.refusal is not None:
             self._refuse(drive, topic, what, payload, result, audited=True)
 

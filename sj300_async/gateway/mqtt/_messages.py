@@ -27,9 +27,18 @@ _DIRECTIONS: Final = {
 
 
 def state_message(
-    gateway: str, snapshot: DriveSnapshot, *, now: float, stale_after_s: float
+    gateway: str,
+    snapshot: DriveSnapshot,
+    *,
+    now: float,
+    stale_after_s: float,
+    lapse_pending: bool = False,
 ) -> StateMessage:
-    """*snapshot* as published at loop time *now* (see the module docstring)."""
+    """*snapshot* as published at loop time *now* (see the module docstring).
+
+    *lapse_pending*: the gateway's word that a lapsed lease's stop is not
+    confirmed yet (not part of the snapshot: it is the gateway's, not the drive's).
+    """
     status = is_fresh(snapshot.status_at, now, stale_after_s)
     monitor = is_fresh(snapshot.monitor_at, now, stale_after_s)
     direction = snapshot.direction
@@ -68,4 +77,5 @@ def state_message(
         parameters=parameters,
         state=snapshot.state if status else None,
         trip_meaning=None if trip is None else trip.meaning,
+        lapse_pending=lapse_pending,
     )

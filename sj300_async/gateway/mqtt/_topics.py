@@ -138,6 +138,8 @@ class StateMessage:
     state: str | None = None
     #: What the present trip means (``"over-voltage"``), None when unknown or not tripped.
     trip_meaning: str | None = None
+    #: A lapsed control lease's stop is not confirmed yet (docs/GATEWAY.md, the control lease).
+    lapse_pending: bool = False
 
     def to_json(self) -> bytes:
         """The payload."""
