@@ -42,7 +42,7 @@ from sj300_async.simulator import LinePacing, RunState, serve_tcp
 from sj300_async.simulator.sj300 import SimulatedBus
 from sj300_async.wire import Direction
 
-from .conftest import LineLog, drive_of, polled, running_gateway
+from .conftest import LineLog, drive_of, modbus_client, polled, running_gateway
 
 SCADA = "10.0.0.5"
 OPERATOR = "10.0.0.6"
@@ -319,3 +319,36 @@ def test_a_lease_scope_is_client_or_connection() -> None:
         parse_config(text.replace("conection", "connection"), "plant.toml").lines[0].lease_scope
         == "connection"
     )
+
+
+async def test_over_modbus_a_second_operator_stops_and_a_closed_connection_lapses() -> None:
+    """Modbus end to end: another address may stop (not run); a connection-scoped lease
+    lapses when its TCP connection closes."""
+    loop = asyncio.get_running_loop()
+    extra = 'lease_scope = "connection"\n'
+    async with _paced_line(19200) as (sim, url, log):
+        text = '[modbus]\nlisten = "127.0.0.1:0"\n' + _toml(
+            url, lease_s=30.0, interval_s=0.1, extra=extra
+        )
+        async with running_gateway(text) as gateway:
+            await polled(gateway)
+            drive = drive_of(gateway, "hall", 1)
+            async with modbus_client(gateway, "127.0.0.1") as scada:
+                for register, value in ((1000, 1), (1003, 1500), (1002, 1)):
+                    reply = await scada.write_register(register, value, device_id=1)
+                    assert not reply.isError(), (register, reply)
+                await wait_for(lambda: sim.drives[1].state(loop.time()).outputting, "running")
+                async with modbus_client(gateway, "127.0.0.2") as operator:
+                    run = await operator.write_register(1002, 1, device_id=1)
+                    assert run.isError()
+                    assert run.exception_code == 0x06  # lease held: no run
+                    stop = await operator.write_register(1002, 0, device_id=1)
+                    assert not stop.isError(), stop  # stop: always
+                await wait_for(
+                    lambda: sim.drives[1].state(loop.time()) is RunState.STOPPED, "stopped"
+                )
+                assert drive.lease.holder == "127.0.0.1"
+            # The holder's connection closed: its lease lapses now, not 30 s later.
+            await wait_for(lambda: drive.lease.holder is None, "the lease lapsed", timeout=5)
+            await _settled(gateway, drive)
+            assert _run_requests(log, 1)[-1][1] == b"0"
