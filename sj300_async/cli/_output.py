@@ -77,6 +77,8 @@ def jsonable(value: Any) -> Any:
         return {str(k): jsonable(v) for k, v in value.items()}
     if isinstance(value, list | tuple):
         return [jsonable(v) for v in value]
+    if isinstance(value, set | frozenset):  # a sample's unavailable parameters: in order
+        return [jsonable(v) for v in sorted(value, key=str)]
     if isinstance(value, float) and not math.isfinite(value):
         return None
     return value
