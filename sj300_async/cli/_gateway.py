@@ -14,7 +14,11 @@ to mqtt://127.0.0.1:1883 as gw1``: the broker is connected to in the
 background, the line says where, not that it answered), flushed at once so
 that a script can read the real port when it asked for port 0. SIGINT and
 SIGTERM stop it cleanly (docs/GATEWAY.md: the order, and the one command it
-may send on the way out); exit status 0.
+may send on the way out), also while it is still starting; exit status 0
+after SIGTERM, 130 after SIGINT (Ctrl-C), as every other command. A line
+that cannot connect at start is served down and retried; a northbound that
+cannot listen (its port in use, an address not on this host) is one line
+naming it, exit status 2.
 """
 
 from __future__ import annotations
@@ -25,7 +29,7 @@ import importlib.util
 import logging
 import signal
 import sys
-from typing import Any
+from typing import Any, Final
 
 from ..bus import protocol_names
 from ..gateway import (
@@ -135,7 +139,7 @@ def _check_requirements(config: GatewayConfig) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    """Serve until SIGINT / SIGTERM; return 0."""
+    """Serve until SIGINT / SIGTERM; return 130 after SIGINT, 0 after SIGTERM."""
     if args.verbose:
         logging.basicConfig(
             level=logging.DEBUG if args.verbose > 1 else logging.INFO,
@@ -146,21 +150,50 @@ def run(args: argparse.Namespace) -> int:
     return asyncio.run(_serve(config, args.capture))
 
 
+#: The exit status after each stopping signal: Ctrl-C's as every command's, SIGTERM's a clean 0.
+_EXIT_ON: Final = {signal.SIGINT: 130, signal.SIGTERM: 0}
+
+
 async def _serve(config: GatewayConfig, capture: str | None) -> int:
-    from ..gateway import Gateway
+    from ..gateway import Gateway, GatewayStartError
 
     loop = asyncio.get_running_loop()
+    task = asyncio.current_task()
+    assert task is not None
     stop = asyncio.Event()
-    for sig in (signal.SIGINT, signal.SIGTERM):
-        loop.add_signal_handler(sig, stop.set)
+    status = 0
+    starting = True
+
+    def on_signal(sig: signal.Signals) -> None:
+        nonlocal status
+        if stop.is_set():  # a second signal: the first one's stop (and a lapse's stop) goes on
+            return
+        stop.set()
+        status = _EXIT_ON[sig]
+        if starting:  # a line's connection attempt may take seconds: give it up
+            task.cancel()
+
+    for sig in _EXIT_ON:
+        loop.add_signal_handler(sig, on_signal, sig)
     try:
         async with Gateway(config, capture=capture) as gateway:
+            starting = False
             for northbound in gateway.northbounds.values():
                 line = northbound.announce()
                 if line is not None:
                     print(line, flush=True)
             await stop.wait()
             print("stopping", file=sys.stderr, flush=True)
+    except asyncio.CancelledError:
+        if not (starting and stop.is_set()):
+            raise
+        task.uncancel()  # ours: stopped while starting (nothing served, nothing written)
+        print("stopping", file=sys.stderr, flush=True)
+    except GatewayStartError as exc:  # a northbound's port in use...: which, where, why
+        raise CliError(str(exc)) from None
     except OSError as exc:
         raise CliError(f"cannot serve: {exc.strerror or exc}") from None
-    return 0
+    finally:
+        for sig in _EXIT_ON:
+            loop.remove_signal_handler(sig)
+    return status

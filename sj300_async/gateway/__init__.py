@@ -19,6 +19,7 @@ from ._audit import AuditLog, excerpt
 from ._config import config_from_flags, load_config, parse_config, valid_name
 from ._control import Controller
 from ._drive import GatewayDrive, Lease
+from ._errors import GatewayStartError
 from ._gateway import Gateway, GatewayLine
 from ._listeners import (
     LIMIT_KEYS,
@@ -95,6 +96,7 @@ __all__ = [
     "GatewayConfigError",
     "GatewayDrive",
     "GatewayLine",
+    "GatewayStartError",
     "GatewayView",
     "Heartbeat",
     "LapseAction",

@@ -46,6 +46,7 @@ from ..wire import SJ300Error
 from ._audit import AuditLog
 from ._control import Controller
 from ._drive import GatewayDrive, Lease
+from ._errors import GatewayStartError
 from ._metrics import LineView, drive_view, gateway_metrics, line_problems
 from ._model import GatewayConfig, LineConfig
 from ._northbound import Northbound, get_northbound
@@ -201,8 +202,15 @@ class Gateway:
             for config in self.config.lines:
                 self.lines.append(await self._open_line(config))
             for section, settings in self.config.northbounds.items():
-                northbound = get_northbound(section).create(settings)
-                await northbound.start(self)
+                spec = get_northbound(section)
+                northbound = spec.create(settings)
+                try:
+                    await northbound.start(self)
+                except GatewayStartError:
+                    raise
+                except OSError as exc:  # a port in use, an address not on this host: one line
+                    endpoints = [endpoint for _, endpoint in spec.endpoints(settings)]
+                    raise GatewayStartError.of(section, endpoints, exc) from exc
                 self.northbounds[section] = northbound
             for line in self.lines:
                 await self._stack.enter_async_context(line.poller)

@@ -117,6 +117,8 @@ GATEWAY_NAMES = (
     "AuditLog", "COMMAND_LINE", "ConfigContext", "ConfigTable", "Controller", "DEFAULT_LEASE_S",
     "DEFAULT_STALE_AFTER_S", "DriveView", "Endpoint", "Flag", "Gateway", "GatewayConfig",
     "GatewayConfigError", "GatewayDrive", "GatewayLine", "GatewayView", "Heartbeat",
+    # a northbound that cannot start (its port in use...)
+    "GatewayStartError",
     "LAPSE_ACTIONS", "POLL_READS", "LapseAction", "Lease", "LineConfig", "LineView", "Northbound",
     "NorthboundSpec", "ParameterWrite", "PollRead", "Refusal", "RunCommand", "SectionContext",
     "SetFrequency",
