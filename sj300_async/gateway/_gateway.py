@@ -199,8 +199,9 @@ class Gateway:
             if self.capture_path is not None:
                 self._capture = CaptureFile(self.capture_path)
                 self._stack.callback(self._capture.close)
-            for config in self.config.lines:
-                self.lines.append(await self._open_line(config))
+            buses = await self._open_buses()
+            for config, bus in zip(self.config.lines, buses, strict=True):
+                self.lines.append(self._open_line(config, bus))
             for section, settings in self.config.northbounds.items():
                 spec = get_northbound(section)
                 northbound = spec.create(settings)
@@ -229,20 +230,40 @@ class Gateway:
     ) -> None:
         await self._shutdown()
 
-    async def _open_line(self, config: LineConfig) -> GatewayLine:
-        profile = get_profile(config.protocol)
-        bus: Bus[Any, Any] = await self._stack.enter_async_context(
-            open_bus(
-                config.url,
-                protocol=config.protocol,
-                timeout=config.timeout_s,
-                capture=self._capture,
-                connect="background",  # a line down at start is served as one lost later
+    async def _open_buses(self) -> list[Bus[Any, Any]]:
+        """Every line's bus, opened at once: N lines that are down cost one connect time-out.
+
+        A line that cannot connect is opened down (served offline, reconnected
+        with its back-off); one whose settings are wrong raises, and the
+        others are closed with the gateway.
+        """
+        buses: dict[int, Bus[Any, Any]] = {}
+
+        async def open_one(index: int, config: LineConfig) -> None:
+            bus: Bus[Any, Any] = await self._stack.enter_async_context(
+                open_bus(
+                    config.url,
+                    protocol=config.protocol,
+                    timeout=config.timeout_s,
+                    capture=self._capture,
+                    connect="background",  # a line down at start is served as one lost later
+                )
             )
-        )
-        if not bus.connected:
-            _log.warning("line %s: %s is down (%s): its drives are offline until it connects",
-                         config.name, config.url, bus.link.last_error)  # fmt: skip
+            buses[index] = bus
+            if not bus.connected:
+                _log.warning("line %s: %s is down (%s): its drives are offline until it "
+                             "connects", config.name, config.url, bus.link.last_error)  # fmt: skip
+
+        try:
+            async with asyncio.TaskGroup() as group:
+                for index, config in enumerate(self.config.lines):
+                    group.create_task(open_one(index, config))
+        except BaseExceptionGroup as failed:  # the first line's error, as the caller expects
+            raise failed.exceptions[0] from None
+        return [buses[index] for index in range(len(self.config.lines))]
+
+    def _open_line(self, config: LineConfig, bus: Bus[Any, Any]) -> GatewayLine:
+        profile = get_profile(config.protocol)
         poller = Poller(
             interval_s=config.interval_s, reads=config.reads, parameters=config.parameters
         )

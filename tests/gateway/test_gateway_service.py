@@ -28,6 +28,7 @@ from pathlib import Path
 import pytest
 from cli.clirun import TIMEOUT, Result, closed_port, running, sj300
 from mqtt_broker import running_broker
+from waiting import wait_for
 
 from sj300_async.simulator import serve_tcp
 from sj300_async.simulator.sj300 import SimulatedBus
@@ -221,14 +222,19 @@ async def test_a_signal_ends_a_serving_gateway_at_once(
 
 
 @contextlib.asynccontextmanager
-async def silent_servers(count: int) -> AsyncIterator[tuple[list[int], asyncio.Event]]:
+async def silent_servers(
+    count: int, log: list[str] | None = None
+) -> AsyncIterator[tuple[list[int], asyncio.Event]]:
     """*count* TCP servers that take connections and never answer (hung RFC 2217 servers):
-    their ports, and an event set at the first connection."""
+    their ports, and an event set at the first connection (*log* gets "open" and "closed")."""
     connected = asyncio.Event()
+    events = [] if log is None else log
 
     async def hold(reader: asyncio.StreamReader, writer: asyncio.StreamWriter) -> None:
         connected.set()
+        events.append("open")
         await reader.read()
+        events.append("closed")
         writer.close()
 
     async with contextlib.AsyncExitStack() as stack:
@@ -261,3 +267,21 @@ async def test_a_signal_ends_a_gateway_still_connecting_its_lines(
     assert result.code == code, result
     assert result.out == ""  # it never served
     assert result.err == "stopping\n", result.err
+
+
+async def test_the_lines_are_connected_together_at_start(tmp_path: Path) -> None:
+    # One after another, three silent lines would hold the start up for three
+    # attempts (2 s each); together, for one. Each attempt is open at once.
+    log: list[str] = []
+    async with silent_servers(3, log) as (ports, _):
+        lines = "".join(
+            f'[[lines]]\nname = "l{n}"\nurl = "rfc2217://127.0.0.1:{port}?baudrate=9600"\n'
+            f'nodes = "{n}"\n'
+            for n, port in enumerate(ports, 1)
+        )
+        config = tmp_path / "gateway.toml"
+        config.write_text(f'[modbus]\nlisten = "127.0.0.1:0"\n{lines}')
+        async with running("gateway", "--config", str(config)) as proc:
+            await wait_for(lambda: log.count("open") >= 3, "three attempts", timeout=TIMEOUT)
+            assert log == ["open", "open", "open"]  # no attempt ended before the last began
+            await stopped_by(proc, signal.SIGTERM)
