@@ -304,14 +304,16 @@ class Arbiter(LineRecovery[RequestT, ReplyT]):
         limit = self._call_deadline
         start = 0.0 if limit is None else loop.time()
         failed: list[SJ300Error] | None = None
+        protocol = link.require()  # fail promptly, before queueing, while the link is down
         while True:
-            protocol = link.require()  # fail promptly, before queueing, while the link is down
+            if failed is not None:  # a retry stays on its first attempt's connection
+                protocol = self._same_link(protocol)
             queued = not queue.take()
             if queued:
                 await queue.acquire(urgent)
             try:  # the line is ours from here: released in the finally, whatever happens
-                if queued:
-                    protocol = link.require()  # the link may have dropped while we queued
+                if queued:  # the link may have dropped (or come back anew) while we queued
+                    protocol = self._same_link(protocol)
                 now = loop.time()
                 if limit is not None and now - start >= limit:
                     break  # no attempt starts after the call's deadline
@@ -469,18 +471,35 @@ class Arbiter(LineRecovery[RequestT, ReplyT]):
         protocol = self.link.require()
         if self._drain_quiet is not None:
             await self._drain()
-            protocol = self.link.require()
+            protocol = self._same_link(protocol)
         if self._unsynced and request.expects_reply and request.node in self._unsynced:
             await self._sync(request.node, stats, wait_s, timeout_s)  # rule 9
-            protocol = self.link.require()
+            protocol = self._same_link(protocol)
         now = self._loop.time()
         if self._rest_until > now:
             await asyncio.sleep(self._rest_until - now)
-            protocol = self.link.require()
+            protocol = self._same_link(protocol)
         if protocol.write_paused:
             await protocol.wait_writable()
-            protocol = self.link.require()  # the link may have dropped while we waited
+            protocol = self._same_link(protocol)  # the link may have dropped while we waited
         return protocol
+
+    def _same_link(self, protocol: LineProtocol[Any]) -> LineProtocol[Any]:
+        """The link's protocol, if it is still *protocol*: a request never moves to a new
+        connection. One that waited (queued, draining, resting) while the link
+        dropped and came back fails as if it had dropped a moment later, and
+        the new connection's first request is one made for it (a pending stop
+        that must go before any poll: the gateway's lapse).
+
+        Raises:
+            TransportError: the link is down, or is another connection now.
+        """
+        current = self.link.require()
+        if current is not protocol:
+            raise TransportError(
+                f"{self.link.description} reconnected while the request waited; it was not sent"
+            )
+        return current
 
     def _request_timing(self, request: RequestT, wait_s: float) -> tuple[float, float]:
         """The computed response time-out of *request* with the device waiting *wait_s*,

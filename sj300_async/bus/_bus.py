@@ -18,6 +18,7 @@ from __future__ import annotations
 
 import asyncio
 import logging
+from collections.abc import Callable
 from typing import Any, Generic, Literal, cast
 
 from typing_extensions import TypeVar
@@ -136,6 +137,11 @@ class Bus(Generic[DriveT, BroadcastT]):
     def connected(self) -> bool:
         """True while the link is up."""
         return self.link.connected
+
+    def on_connected(self, callback: Callable[[], None]) -> Callable[[], None]:
+        """Call *callback* each time the link comes up, before any request can go; returns
+        what unregisters it (see :meth:`Link.on_connected <._link.Link.on_connected>`)."""
+        return self.link.on_connected(callback)
 
     @property
     def closed(self) -> bool:

@@ -86,6 +86,7 @@ class Link:
         self._last_error: BaseException | None = None
         self._next_attempt: float | None = None
         self._up = asyncio.Event()
+        self._on_connected: list[Callable[[], None]] = []
 
     @property
     def connected(self) -> bool:
@@ -132,6 +133,17 @@ class Link:
         """Return once the link is up (for callers that prefer to wait)."""
         await self._up.wait()
 
+    def on_connected(self, callback: Callable[[], None]) -> Callable[[], None]:
+        """Call *callback* each time the link comes up; returns what unregisters it.
+
+        It runs inside the connection's set-up, before any waiting task can
+        send: a caller whose request must be the first on a new connection
+        (the gateway's pending stop) holds the others back from here. A
+        callback that raises is logged; the connection stands.
+        """
+        self._on_connected.append(callback)
+        return lambda: self._on_connected.remove(callback)
+
     async def connect(self) -> None:
         """Open the connection once.
 
@@ -168,6 +180,11 @@ class Link:
         self._last_error = None
         self._next_attempt = None
         self._stats.connects += 1
+        for callback in list(self._on_connected):
+            try:
+                callback()
+            except Exception:  # a caller's bug must not undo the connection
+                _log.exception("an on_connected callback of %s failed", self.description)
         self._up.set()
         _log.info("connected to %s", self.description)
 

@@ -5,6 +5,7 @@ from __future__ import annotations
 import asyncio
 
 import pytest
+from waiting import wait_for
 
 import sj300_async as sj
 from sj300_async import sj300 as sj3
@@ -308,3 +309,29 @@ async def test_unsolicited_frames_between_transactions_are_counted(scripted: Mak
         await asyncio.sleep(0.001)
         assert rig.bus.stats.unsolicited_frames == 1
         assert (await rig.bus.drive(1).read_parameter_raw("F002")) == 1001
+
+
+async def test_a_request_that_waited_across_a_reconnect_is_not_sent_on_the_new_one(
+    scripted: MakeRig,
+) -> None:
+    """A transaction never moves to a new connection: the new one's first request is one
+    made for it (the gateway's pending stop relies on it, issue 26)."""
+
+    def respond(req: sj3.Request) -> Frames:
+        return [] if req.node == 1 else answer_all(req)  # node 1 is silent
+
+    policy = sj.ReconnectPolicy(initial_s=0.001, max_s=0.001)
+    timing = sj.BusTiming(margin_s=0.5)  # the drain below waits this out: time to reconnect
+    async with scripted(respond, reconnect=policy, retries=0, timing=timing) as rig:
+        with pytest.raises(sj.ReplyTimeoutError):
+            await rig.bus.drive(1).read_status()  # the next request drains the line first
+        waiting = asyncio.create_task(rig.bus.drive(2).read_status())
+        await wait_for(lambda: rig.bus.stats.drains == 1, "the request draining the line")
+        old = rig.peer
+        rig.bus.link.drop()
+        await wait_for(lambda: rig.bus.connected and rig.peer is not old, "reconnected")
+        with pytest.raises(sj.TransportError, match="reconnected while the request waited"):
+            await waiting
+        assert rig.peer.requests == []  # nothing of the old connection's went on the new one
+        await rig.bus.drive(2).read_status()
+        assert [r.node for r in rig.peer.requests] == [2]
