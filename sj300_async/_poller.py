@@ -314,10 +314,13 @@ class Poller:
         target.nodes.sort()
 
     def hold(self, bus: Bus[Any] | str) -> None:
-        """Start no poll on *bus* until :meth:`release` (a poll under way ends first).
+        """Start no drive's poll (or probe) on *bus* until :meth:`release`.
 
-        For a caller whose request must be the first on the line, e.g. the
-        gateway's pending stop when the link comes back. Holds nest: polls go
+        A drive's poll already under way goes on with its reads: a caller
+        whose request must be the first on the line holds before the line
+        can take requests, e.g. from :meth:`~sj300_async.Bus.on_connected`
+        (the gateway's pending stop when the link comes back). The drives'
+        health stands still while held: hold briefly. Holds nest: polls go
         on once every hold is released.
         """
         target = self._target(bus)

@@ -79,6 +79,22 @@ _COMMAND_NAMES: Final = {
 }
 
 
+_LAPSED: Final = WriteResult(
+    Refusal.NO_LEASE,
+    "the control lease lapsed before the command was confirmed; the lapse action follows it",
+)
+_NOT_CONFIRMED: Final = WriteResult(Refusal.NOT_CONFIRMED, "the drive read back something else")
+
+
+class _Audit:
+    """Whether a write's carrying out began (and so audits it, however it ends)."""
+
+    __slots__ = ("done",)
+
+    def __init__(self) -> None:
+        self.done = False
+
+
 def _failure(exc: SJ300Error) -> WriteResult:
     """The neutral result of a drive call that raised."""
     if isinstance(exc, ReadOnlyError):
@@ -156,53 +172,79 @@ class Controller:
             self.audit.write(client, drive, what, old, client, DONE)
             return DONE
         if not _needs_lease(request):
-            return await self._carry_out_locked(client, drive, request)
+            return await self._carry_out_locked(client, drive, request, _Audit())
         # Its own task, so that the lapse can cancel it without cancelling the caller.
+        audit = _Audit()
         task = asyncio.get_running_loop().create_task(
-            self._carry_out_locked(client, drive, request, lease_bound=True)
+            self._carry_out_locked(client, drive, request, audit, lease_bound=True)
         )
         commands = self._commands.setdefault(drive.node, set())
         commands.add(task)
         try:
             return await task
         except asyncio.CancelledError:
+            if not audit.done:  # cancelled before it started: audited here
+                self.audit.write(client, drive, *self._describe(drive, request),
+                                 self._cancelled(client, drive, lease_bound=True))  # fmt: skip
             current = asyncio.current_task()
             if not task.cancelled() or (current is not None and current.cancelling()):
                 raise  # the caller's own cancellation
-            result = WriteResult(
-                Refusal.NO_LEASE,
-                "the control lease lapsed before the command was confirmed; "
-                "the lapse action follows it",
-            )
-            self.audit.write(client, drive, *self._describe(drive, request), result)
-            return result
+            return _LAPSED
         finally:
             commands.discard(task)
 
     async def _carry_out_locked(
-        self, client: str, drive: GatewayDrive, request: WriteRequest, *, lease_bound: bool = False
+        self,
+        client: str,
+        drive: GatewayDrive,
+        request: WriteRequest,
+        audit: _Audit,
+        *,
+        lease_bound: bool = False,
     ) -> WriteResult:
-        async with self._lock(drive):  # a write and its read-back stay together
-            what, old, new = self._describe(drive, request)
-            now = asyncio.get_running_loop().time()
-            if lease_bound and not drive.lease.held_by(client, now):
-                # It waited for the lock past the lease: the lapse owns the drive now.
-                result = WriteResult(Refusal.NO_LEASE, "the control lease lapsed while it waited")
-            else:
+        """Carry out a judged write under the drive's write lock; audited however it ends.
+
+        Cancelled (the lease lapsed, or the caller went away) it is audited
+        too, before the cancellation goes on: the audit log has every write
+        that may have reached the drive.
+        """
+        audit.done = True
+        what, old, new = self._describe(drive, request)
+        result = _LAPSED
+        try:
+            async with self._lock(drive):  # a write and its read-back stay together
+                what, old, new = self._describe(drive, request)  # as it is now
+                now = asyncio.get_running_loop().time()
+                if lease_bound and not drive.lease.held_by(client, now):
+                    # It waited for the lock past the lease: the lapse owns the drive now.
+                    result = WriteResult(
+                        Refusal.NO_LEASE, "the control lease lapsed while it waited"
+                    )
+                    return result
                 try:
                     confirmed = await self._carry_out(drive, request)
                 except SJ300Error as exc:
                     result = _failure(exc)
-                else:
-                    result = (
-                        DONE
-                        if confirmed
-                        else WriteResult(
-                            Refusal.NOT_CONFIRMED, "the drive read back something else"
-                        )
-                    )
+                    return result
+                result = DONE if confirmed else _NOT_CONFIRMED
+                return result
+        except asyncio.CancelledError:
+            result = self._cancelled(client, drive, lease_bound=lease_bound)
+            raise
+        finally:
             self.audit.write(client, drive, what, old, new, result)
-            return result
+
+    @staticmethod
+    def _cancelled(client: str, drive: GatewayDrive, *, lease_bound: bool) -> WriteResult:
+        """The result of a write cancelled before it was confirmed."""
+        now = asyncio.get_running_loop().time()
+        if lease_bound and not drive.lease.held_by(client, now):
+            return _LAPSED
+        return WriteResult(
+            Refusal.NO_ANSWER,
+            "cancelled before the drive confirmed it (the client went away, or the gateway "
+            "stopped); it may have reached the drive",
+        )
 
     def _judge(
         self, client: str, drive: GatewayDrive, request: WriteRequest, now: float
@@ -356,9 +398,7 @@ class Controller:
         self, holder: str, drive: GatewayDrive, commands: list[asyncio.Task[WriteResult]]
     ) -> None:
         try:
-            if commands:
-                await asyncio.wait(commands)
-            await self.lapse.run(holder, drive)
+            await self.lapse.run(holder, drive, commands)
         finally:
             if self._lapses.get(drive.node) is asyncio.current_task():
                 del self._lapses[drive.node]

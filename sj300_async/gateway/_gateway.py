@@ -182,7 +182,7 @@ class Gateway:
                 why = f": {drive.lapse_error}" if drive.lapse_error else ""
                 problems.append(
                     f"line {drive.line.name} {drive.profile.node_noun} {drive.node}: the lapsed "
-                    f"lease's stop is not confirmed yet ({drive.lapse_tries} tries{why})"
+                    f"lease's stop is not confirmed yet (try {drive.lapse_tries}{why})"
                 )
         return problems
 
@@ -319,6 +319,8 @@ class Gateway:
         while True:
             await asyncio.sleep(max(line.config.interval_s, 0.05))
             for drive in line.drives.values():
+                if line.controller.pending_lapses:
+                    break  # a pending stop goes before everything else on the line
                 readings = drive.readings
                 if not readings.online:
                     continue

@@ -2,37 +2,44 @@
 
 When a control lease lapses (:mod:`._control`), the line's ``on_lapse``
 action runs here: ``stop`` (the drive's stop, which jumps the line's
-queue), ``broadcast_stop`` (every drive of the line, then the lapsed
-drive's status is checked), or ``hold`` (nothing is sent; audited).
+queue), ``broadcast_stop`` (a broadcast stop to every drive of the line,
+which no drive acknowledges, then the lapsed drive's own stop, which it
+does), or ``hold`` (nothing is sent; audited).
 
 A stop is *confirmed* when a status read after it shows the drive not
 running (stopped, or tripped). Until then the lapse is *pending*: the drive
 shows it (:attr:`~._drive.GatewayDrive.lapse_pending`, hence a metric,
 /healthz and the MQTT state), and the stop is tried again with a growing
 pause (:data:`RETRY_FIRST_S` doubling up to :data:`RETRY_MAX_S`), whatever
-went wrong: a NAK, a time-out, the link down. A drive that acknowledged the
-stop and still reports running is decelerating: it is read again until it
-stops, and sent the stop again only every :data:`RESEND_S` (one stop on the
-wire per lapse when all goes well).
+went wrong: a NAK, a time-out, the link down, even a bug of ours (logged
+with its traceback). A drive that acknowledged the stop and still reports
+running is decelerating: it is read again until it stops, and sent the stop
+again only every :data:`RESEND_S` (one stop on the wire per lapse when all
+goes well).
 
-While the link is down the line's polls are held (:class:`PollHold`), and
-the try waits for the link: when it comes back, the stop is the first
-request on the line, before any poll. Polls are released after that try,
-confirmed or not, so a drive that never confirms (powered off) does not
-stop the line's polling.
+The stop is the first request on a link that comes back. From the moment
+the link is up again (:meth:`~sj300_async.Bus.on_connected`, which runs
+before any waiting task can send) the line's polls are held
+(:class:`PollHold`) and the lapse tries at once, whatever pause it was in;
+the polls are released when that try ends, confirmed or not, so a drive
+that never confirms (powered off) does not stop the line's polling. While
+the link is down nothing is held: the polls fail, and the drives show
+offline as they should.
 
 Decisions: the log says the first failure at ERROR and later ones at
 DEBUG (a line down for an hour must not write a line per try); the audit
 log gets one record when the lapse ends (confirmed after N tries, or given
-up when the gateway stops). The runner never gives up on its own: a drive
-left running with nobody in control is the failure this exists to prevent.
+up when the gateway stops or the line is closed). The runner never gives
+up on its own: a drive left running with nobody in control is the failure
+this exists to prevent.
 """
 
 from __future__ import annotations
 
 import asyncio
+import contextlib
 import logging
-from collections.abc import Callable
+from collections.abc import Callable, Collection
 from typing import Any, Final, Protocol
 
 from ..bus import Bus
@@ -64,6 +71,39 @@ class PollHold(Protocol):
     def release(self, bus: Bus[Any, Any]) -> None: ...
 
 
+class _FirstOnReconnect:
+    """Holds a line's polls from the moment its link comes back until the lapse's next try ends."""
+
+    def __init__(self, bus: Bus[Any, Any], polls: PollHold | None) -> None:
+        self._bus = bus
+        self._polls = polls
+        self._held = False
+        #: Set when the link came back since the current try began.
+        self.back = asyncio.Event()
+        self._unregister = bus.on_connected(self._connected)
+
+    def _connected(self) -> None:
+        if self._polls is not None and not self._held:
+            self._polls.hold(self._bus)
+            self._held = True
+        self.back.set()
+
+    def try_ended(self) -> None:
+        """Release the polls, unless the link came back during the try (the next one goes first)."""
+        if not (self.back.is_set() and self._bus.connected):
+            self.release()
+
+    def release(self) -> None:
+        if self._held:
+            assert self._polls is not None
+            self._held = False
+            self._polls.release(self._bus)
+
+    def close(self) -> None:
+        self._unregister()
+        self.release()
+
+
 class LapseRunner:
     """Runs one line's lapse actions (see the module docstring)."""
 
@@ -87,59 +127,105 @@ class LapseRunner:
         #: Tries of a lapse's stop that failed (each pending lapse's, summed).
         self.failed_tries = 0
 
-    async def run(self, holder: str, drive: GatewayDrive) -> None:
-        """Carry out the line's lapse action for *drive*, whose lease *holder* held."""
+    async def run(
+        self, holder: str, drive: GatewayDrive, commands: Collection[asyncio.Task[Any]] = ()
+    ) -> None:
+        """Carry out the line's lapse action for *drive*, whose lease *holder* held.
+
+        *commands* (the holder's, cancelled) end first: the lapse action is
+        the last the drive gets from the lapsed controller.
+        """
         self.lapses += 1
         action = self.config.on_lapse
         if action == "hold":
             self.audit.write(holder, drive, "lease lapsed: hold (nothing sent)", holder, None, DONE)
             return
+        what = f"lease lapsed: {action}"
         drive.lapse_pending, drive.lapse_error, drive.lapse_tries = True, "", 0
         self._changed(drive)
+        gate = _FirstOnReconnect(self.bus, self._polls)
         try:
-            await self._until_confirmed(holder, drive, action)
+            if commands:
+                await asyncio.wait(commands)
+            given_up = await self._until_confirmed(holder, drive, action, gate)
+            if given_up is not None:
+                self._give_up(holder, drive, what, given_up)
         except asyncio.CancelledError:
-            self.audit.write(
-                holder, drive, f"lease lapsed: {action}", holder, None,
-                WriteResult(Refusal.NOT_CONFIRMED, f"given up after {drive.lapse_tries} tries "
-                            f"when the gateway stopped: {drive.lapse_error or 'no answer'}"),
-            )  # fmt: skip
+            self._give_up(holder, drive, what, "the gateway stopped")
             raise
         finally:
+            gate.close()
             drive.lapse_pending = False
             self._changed(drive)
 
-    async def _until_confirmed(self, holder: str, drive: GatewayDrive, action: str) -> None:
+    def _give_up(self, holder: str, drive: GatewayDrive, what: str, why: str) -> None:
+        result = WriteResult(
+            Refusal.NOT_CONFIRMED,
+            f"given up after {_tries(drive.lapse_tries)} when {why}: "
+            f"{drive.lapse_error or 'no answer'}",
+        )
+        _log.error("line %s node %d: %s %s", *drive.key, what, result.detail)
+        self.audit.write(holder, drive, what, holder, None, result)
+
+    async def _until_confirmed(
+        self, holder: str, drive: GatewayDrive, action: str, gate: _FirstOnReconnect
+    ) -> str | None:
+        """Try until confirmed (None), or until the line is closed (why it was given up)."""
         pause = RETRY_FIRST_S
         loop = asyncio.get_running_loop()
         stop_taken_at: float | None = None  # when the drive last acknowledged the stop
         failures = 0
         while True:
+            if self.bus.link.closed:
+                return "the line was closed"
             drive.lapse_tries += 1
-            if not self.bus.connected:  # _try waits for the link: show why meanwhile
+            gate.back.clear()
+            if not self.bus.connected:
                 failures += 1
                 self._failed(drive, action, failures, f"{self.bus.description} is not "
                              "connected; the stop goes first when it is back")  # fmt: skip
+                gate.release()  # nothing held while the link is down (module docstring)
+                await self._link_up()
+                continue  # the link is back and the polls held: the next try at once
             send = stop_taken_at is None or loop.time() - stop_taken_at >= RESEND_S
-            error, taken = await self._try(drive, action if send else None)
+            try:
+                error, taken = await self._try(drive, action if send else None)
+            except Exception as exc:  # a bug of ours must not end the lapse: logged, retried
+                _log.exception("line %s node %d: lapse %s try failed", *drive.key, action)
+                error, taken = f"{type(exc).__name__}: {exc}", False
+            finally:
+                gate.try_ended()
             if taken:
                 stop_taken_at = loop.time()
             if error is None:
-                detail = f" after {drive.lapse_tries} tries" if drive.lapse_tries > 1 else ""
+                detail = f" after {_tries(drive.lapse_tries)}" if drive.lapse_tries > 1 else ""
                 if failures:
                     _log.warning("line %s node %d: lapse %s confirmed%s",
                                  *drive.key, action, detail)  # fmt: skip
                 self.audit.write(holder, drive, f"lease lapsed: {action}", holder,
                                  f"confirmed stopped{detail}", DONE)  # fmt: skip
-                return
+                return None
             # A drive that took the stop and still runs is decelerating: not a failure.
             if error == _STILL_RUNNING and stop_taken_at is not None:
                 _log.debug("line %s node %d: lapse %s: decelerating", *drive.key, action)
             else:
                 failures += 1
                 self._failed(drive, action, failures, error)
-            await asyncio.sleep(pause)
+            if gate.back.is_set():
+                continue  # the link came back during the try: again at once, polls held
+            # The pause ends early when the link comes back in it (the polls are held).
+            with contextlib.suppress(TimeoutError):
+                await asyncio.wait_for(gate.back.wait(), pause)
             pause = min(pause * 2, RETRY_MAX_S)
+
+    async def _link_up(self) -> None:
+        """Wait for the link (or its close, which the next round of the loop sees)."""
+        up = asyncio.ensure_future(self.bus.link.wait_connected())
+        try:
+            while not up.done() and not self.bus.link.closed:
+                await asyncio.wait([up], timeout=RETRY_MAX_S)
+        finally:
+            up.cancel()
 
     def _failed(self, drive: GatewayDrive, action: str, failures: int, error: str) -> None:
         """Show a failed try: the drive's lapse error, the count, the log (ERROR the first time)."""
@@ -155,30 +241,22 @@ class LapseRunner:
 
         Returns (None when confirmed, else why not; whether the drive took the stop).
         """
-        held = False
+        target = self.bus.drive(drive.node)
         taken = False
         try:
-            if not self.bus.connected and self._polls is not None:
-                # Hold the polls before the link is back, so the stop is the first request.
-                self._polls.hold(self.bus)
-                held = True
-                await self.bus.link.wait_connected()
-            target = self.bus.drive(drive.node)
             async with self._lock(drive):
                 if action == "broadcast_stop":
-                    await self.bus.broadcast.stop()
-                elif action is not None:
+                    await self.bus.broadcast.stop()  # unacknowledged: the drive's own follows
+                if action is not None:
                     await target.stop()
-                taken = action is not None
+                    taken = True
                 status = await target.read_status()
         except SJ300Error as exc:
             return str(exc), taken
-        finally:
-            if held:
-                assert self._polls is not None
-                self._polls.release(self.bus)
         drive.readings.set_status(status, asyncio.get_running_loop().time(), drive.profile)
-        view = drive.readings.status_view
-        if view is not None and not view.running:
-            return None, taken
-        return (_STILL_RUNNING if view is not None else "no status in the answer"), taken
+        running = drive.profile.status_view(status).running
+        return (_STILL_RUNNING if running else None), taken
+
+
+def _tries(count: int) -> str:
+    return f"{count} try" if count == 1 else f"{count} tries"

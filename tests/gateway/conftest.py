@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import asyncio
 import contextlib
 import textwrap
 from collections.abc import AsyncIterator, Callable
@@ -83,8 +84,6 @@ class SimLine:
 @pytest.fixture
 async def sim_line() -> AsyncIterator[SimLine]:
     """Drives 1..4 served over TCP (replies as soon as a 19200-baud line allows)."""
-    import asyncio
-
     sim = SimulatedBus(range(1, 5))
     log = LineLog()
     server = await serve_tcp(sim, tap=log.record(asyncio.get_running_loop().time))
@@ -155,3 +154,53 @@ async def modbus_client(
         yield client
     finally:
         client.close()
+
+
+class CuttableProxy:
+    """A TCP proxy in front of the simulator that can cut the line and restore it."""
+
+    def __init__(self, upstream_port: int) -> None:
+        self.upstream_port = upstream_port
+        self.server: asyncio.Server | None = None
+        self.port = 0
+        self._writers: list[asyncio.StreamWriter] = []
+        #: Loop times at which an upstream connection was opened.
+        self.connected_at: list[float] = []
+
+    async def start(self) -> None:
+        self.server = await asyncio.start_server(self._serve, "127.0.0.1", self.port)
+        self.port = self.server.sockets[0].getsockname()[1]
+
+    async def cut(self) -> None:
+        """Close every connection and stop listening (reconnects are refused)."""
+        assert self.server is not None
+        self.server.close()
+        for writer in self._writers:
+            writer.transport.abort()
+        self._writers.clear()
+        await self.server.wait_closed()
+
+    async def _serve(self, reader: asyncio.StreamReader, writer: asyncio.StreamWriter) -> None:
+        up_reader, up_writer = await asyncio.open_connection("127.0.0.1", self.upstream_port)
+        self.connected_at.append(asyncio.get_running_loop().time())
+        self._writers += [writer, up_writer]
+
+        async def pump(src: asyncio.StreamReader, dst: asyncio.StreamWriter) -> None:
+            with contextlib.suppress(OSError):
+                while data := await src.read(4096):
+                    dst.write(data)
+            dst.transport.abort()
+
+        await asyncio.gather(pump(reader, up_writer), pump(up_reader, writer))
+
+
+@contextlib.asynccontextmanager
+async def cuttable_line() -> AsyncIterator[tuple[SimulatedBus, LineLog, CuttableProxy]]:
+    """Drives 1..4 over TCP behind a :class:`CuttableProxy`, with the line's log."""
+    sim = SimulatedBus(range(1, 5))
+    log = LineLog()
+    server = await serve_tcp(sim, tap=log.record(asyncio.get_running_loop().time))
+    async with server:
+        proxy = CuttableProxy(server.port)
+        await proxy.start()
+        yield sim, log, proxy

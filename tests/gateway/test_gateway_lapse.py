@@ -42,7 +42,7 @@ from sj300_async.simulator import LinePacing, RunState, serve_tcp
 from sj300_async.simulator.sj300 import SimulatedBus
 from sj300_async.wire import Direction
 
-from .conftest import LineLog, drive_of, modbus_client, polled, running_gateway
+from .conftest import LineLog, cuttable_line, drive_of, modbus_client, polled, running_gateway
 
 SCADA = "10.0.0.5"
 OPERATOR = "10.0.0.6"
@@ -164,52 +164,9 @@ async def test_no_run_command_reaches_a_drive_after_its_lease_lapsed() -> None:
     assert results["accepted, cut by the lapse"] > 0
 
 
-class _Proxy:
-    """A TCP proxy in front of the simulator that can cut the line and restore it."""
-
-    def __init__(self, upstream_port: int) -> None:
-        self.upstream_port = upstream_port
-        self.server: asyncio.Server | None = None
-        self.port = 0
-        self._writers: list[asyncio.StreamWriter] = []
-        #: Loop times at which an upstream connection was opened.
-        self.connected_at: list[float] = []
-
-    async def start(self) -> None:
-        self.server = await asyncio.start_server(self._serve, "127.0.0.1", self.port)
-        self.port = self.server.sockets[0].getsockname()[1]
-
-    async def cut(self) -> None:
-        """Close every connection and stop listening (reconnects are refused)."""
-        assert self.server is not None
-        self.server.close()
-        for writer in self._writers:
-            writer.transport.abort()
-        self._writers.clear()
-        await self.server.wait_closed()
-
-    async def _serve(self, reader: asyncio.StreamReader, writer: asyncio.StreamWriter) -> None:
-        up_reader, up_writer = await asyncio.open_connection("127.0.0.1", self.upstream_port)
-        self.connected_at.append(asyncio.get_running_loop().time())
-        self._writers += [writer, up_writer]
-
-        async def pump(src: asyncio.StreamReader, dst: asyncio.StreamWriter) -> None:
-            with contextlib.suppress(OSError):
-                while data := await src.read(4096):
-                    dst.write(data)
-            dst.transport.abort()
-
-        await asyncio.gather(pump(reader, up_writer), pump(up_reader, writer))
-
-
 async def test_a_lapse_behind_a_cut_link_stops_the_drive_first_thing_when_it_is_back() -> None:
     loop = asyncio.get_running_loop()
-    sim = SimulatedBus(range(1, 5))
-    log = LineLog()
-    server = await serve_tcp(sim, tap=log.record(loop.time))
-    async with server:
-        proxy = _Proxy(server.port)
-        await proxy.start()
+    async with cuttable_line() as (sim, log, proxy):
         text = _toml(f"tcp://127.0.0.1:{proxy.port}", lease_s=0.5, interval_s=0.05)
         async with running_gateway(text) as gateway:
             await polled(gateway)

@@ -182,3 +182,33 @@ def test_bad_configuration_is_refused() -> None:
         sj.Poller(offline_after=0)
     with pytest.raises(sj.LocalProtocolError):
         sj.Poller(parameters=["X123"])
+
+
+async def test_a_hold_starts_no_poll_until_every_hold_is_released() -> None:
+    async with _fast_bus("1-2") as bus:
+        poller = sj.Poller(interval_s=0.0)
+        poller.add(bus, [1, 2])
+        with pytest.raises(sj.LocalProtocolError, match="without a hold"):
+            poller.release(bus)
+        async with poller:
+            await wait_for(lambda: poller.health(bus, 2).polls >= 1, "a first poll")
+            poller.hold(bus)
+            poller.hold(bus.description)  # holds nest; a bus or its description
+            # A poll under way when the hold came goes on; after it, none starts.
+            polled = sum(poller.health(bus, n).polls for n in (1, 2))
+            for _ in range(20):  # our own requests get the line, turn after turn
+                await bus.drive(1).read_status()
+            held = sum(poller.health(bus, n).polls for n in (1, 2))
+            assert held - polled <= 1
+            for _ in range(20):
+                await bus.drive(2).read_status()
+            assert sum(poller.health(bus, n).polls for n in (1, 2)) == held
+            poller.release(bus)
+            for _ in range(20):
+                await bus.drive(1).read_status()
+            assert sum(poller.health(bus, n).polls for n in (1, 2)) == held  # one hold left
+            poller.release(bus)
+            await wait_for(
+                lambda: sum(poller.health(bus, n).polls for n in (1, 2)) >= held + 2,
+                "polls again",
+            )

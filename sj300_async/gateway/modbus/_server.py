@@ -32,7 +32,11 @@ Decisions:
 - **A connection is a client**: its IP address is the audit log's "who",
   the lease holder and the metrics' label; ``"IP:port"`` names the
   connection, whose end lapses a connection-scoped lease
-  (``gateway.disconnected``), after any write of its still in progress.
+  (``gateway.disconnected``) at once: a run or frequency command of its
+  still under way is cancelled by that lapse, and a heartbeat of its not
+  yet carried out is refused (the connection it would renew is gone). A
+  stop or parameter write still under way is carried out (and audited);
+  its answer has nowhere to go.
 """
 
 from __future__ import annotations
@@ -48,9 +52,11 @@ from .. import (
     Endpoint,
     GatewayDrive,
     GatewayView,
+    Heartbeat,
     Listener,
     ListenerLimits,
     RateLimitedLog,
+    Refusal,
     WriteRequest,
     WriteResult,
 )
@@ -207,8 +213,7 @@ class _Connection(asyncio.Protocol):
         self.server._connections.discard(self)
         if self._idle is not None:
             self._idle.cancel()
-        if self.pending is None:  # else once the write is done (_written)
-            self.server.gateway.disconnected(self.name)
+        self.server.gateway.disconnected(self.name)
 
     def pause_writing(self) -> None:
         # The client does not read its answers: stop answering, and reading, until it does.
@@ -287,9 +292,15 @@ class _Connection(asyncio.Protocol):
         return self._write(unit, event, request)
 
     async def _write(self, unit: Unit, event: WriteRegisters, request: WriteRequest) -> bytes:
-        result = await self.server.gateway.write(
-            self.client, unit.drive, request, connection=self.name
-        )
+        gateway = self.server.gateway
+        if self._lost and isinstance(request, Heartbeat):
+            # Its connection closed before it ran: it must not renew (or take) a lease.
+            result = WriteResult(
+                Refusal.NO_LEASE, "its connection closed before it was carried out"
+            )
+            gateway.refused(self.client, unit.drive, "heartbeat", None, result)
+            return self._exception(event, REFUSAL_CODES[Refusal.NO_LEASE])
+        result = await gateway.write(self.client, unit.drive, request, connection=self.name)
         if result.refusal is not None:
             return self._exception(event, REFUSAL_CODES[result.refusal])
         # Function 6 echoes the value written; 16 answers how many registers.
@@ -305,7 +316,6 @@ class _Connection(asyncio.Protocol):
     def _written(self, task: asyncio.Task[bytes]) -> None:
         self.pending = None
         if self._lost:
-            self.server.gateway.disconnected(self.name)
             return
         if task.cancelled():
             self.close()
