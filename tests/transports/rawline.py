@@ -47,6 +47,8 @@ class Recorder(asyncio.Protocol):
         self.events: list[str] = []
         self.lost_exc: BaseException | None = None
         self.lost = asyncio.Event()
+        #: The transport's write buffer size when connection_lost came (None: no buffer).
+        self.buffered_at_lost: int | None = None
 
     def connection_made(self, transport: asyncio.BaseTransport) -> None:
         self.transport = transport
@@ -59,6 +61,8 @@ class Recorder(asyncio.Protocol):
 
     def connection_lost(self, exc: BaseException | None) -> None:
         self.lost_exc = exc
+        if isinstance(self.transport, asyncio.WriteTransport):
+            self.buffered_at_lost = self.transport.get_write_buffer_size()
         self.events.append("lost")
         self.lost.set()
 

@@ -28,6 +28,8 @@ CHUNK = 64 * 1024
 CAP = 256 * 1024 * 1024  # a transport that has not backed up by then never will
 #: pyserial's transport has no is_reading().
 _HAS_IS_READING = ("loopback", "tcp", "rfc2217")
+#: Kinds whose far end is past ser2net (a TCP connection to it, a pty behind it).
+_BRIDGED = ("ser2net", "rfc2217")
 
 
 def _payload(size: int, seed: int = 0) -> bytes:
@@ -137,9 +139,18 @@ async def test_close_flushes_the_buffer_then_reports_none(raw: RawLine) -> None:
         raw.far.resume()
     await asyncio.wait_for(recorder.lost.wait(), 10)
     assert recorder.lost_exc is None
-    await wait_for(lambda: len(raw.far.received) >= len(sent), "every byte at the far end")
-    assert raw.far.received == sent  # flushed, and nothing after close
+    assert recorder.buffered_at_lost in (0, None)  # all of it handed on, then reported
     assert recorder.events[-1] == "lost"
+    if raw.kind in _BRIDGED:
+        # Past our socket the bytes are ser2net's: it closes its serial side when the
+        # TCP side has closed, and gives up what it has not written when its shutdown
+        # timer runs out (its maintainer, ser2net#59): on a loaded machine the far end
+        # got a prefix once in a full run. What reached it is in order, nothing after.
+        await wait_for(lambda: len(raw.far.received) > 0, "bytes at the far end")
+        assert bytes(raw.far.received) == sent[: len(raw.far.received)]
+    else:
+        await wait_for(lambda: len(raw.far.received) >= len(sent), "every byte at the far end")
+        assert raw.far.received == sent  # flushed, and nothing after close
     assert recorder.events.count("lost") == 1
 
 
