@@ -484,23 +484,6 @@ class Arbiter(LineRecovery[RequestT, ReplyT]):
             protocol = self._same_link(protocol)  # the link may have dropped while we waited
         return protocol
 
-    def _same_link(self, protocol: LineProtocol[Any]) -> LineProtocol[Any]:
-        """The link's protocol, if it is still *protocol*: a request never moves to a new
-        connection. One that waited (queued, draining, resting) while the link
-        dropped and came back fails as if it had dropped a moment later, and
-        the new connection's first request is one made for it (a pending stop
-        that must go before any poll: the gateway's lapse).
-
-        Raises:
-            TransportError: the link is down, or is another connection now.
-        """
-        current = self.link.require()
-        if current is not protocol:
-            raise TransportError(
-                f"{self.link.description} reconnected while the request waited; it was not sent"
-            )
-        return current
-
     def _request_timing(self, request: RequestT, wait_s: float) -> tuple[float, float]:
         """The computed response time-out of *request* with the device waiting *wait_s*,
         and its plausibility floor (rule 8), in seconds from the write.

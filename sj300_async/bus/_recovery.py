@@ -172,6 +172,23 @@ class LineRecovery(Generic[RequestT, ReplyT]):
         if len(pending) > _PENDING_MAX:
             del pending[0]
 
+    def _same_link(self, protocol: LineProtocol[Any]) -> LineProtocol[Any]:
+        """The link's protocol, if it is still *protocol*: a request never moves to a new
+        connection. One that waited (queued, draining, resting) while the link
+        dropped and came back fails as if it had dropped a moment later, and
+        the new connection's first request is one made for it (a pending stop
+        that must go before any poll: the gateway's lapse).
+
+        Raises:
+            TransportError: the link is down, or is another connection now.
+        """
+        current = self.link.require()
+        if current is not protocol:
+            raise TransportError(
+                f"{self.link.description} reconnected while the request waited; it was not sent"
+            )
+        return current
+
     async def _sync(
         self, node: int, stats: TransactionStats, wait_s: float, timeout_s: float | None
     ) -> None:
@@ -198,11 +215,11 @@ class LineRecovery(Generic[RequestT, ReplyT]):
         protocol = self.link.require()
         if self._rest_until > now:
             await asyncio.sleep(self._rest_until - now)
-            protocol = self.link.require()
+            protocol = self._same_link(protocol)
             now = loop.time()
         if protocol.write_paused:
             await protocol.wait_writable()
-            protocol = self.link.require()
+            protocol = self._same_link(protocol)
             now = loop.time()
         timeout, floor = self._request_timing(sync, wait_s)
         if timeout_s:
