@@ -54,7 +54,7 @@ from ..bus import Bus
 from ..wire import Direction, LocalProtocolError, NakError, ReadOnlyError, SJ300Error
 from ._audit import AuditLog
 from ._drive import GatewayDrive
-from ._lapse import LapseRunner, PollHold
+from ._lapse import LapseRunner, LineGate, PollHold
 from ._model import LineConfig
 from ._writes import (
     DONE,
@@ -136,7 +136,9 @@ class Controller:
         self._lapses: dict[int, asyncio.Task[None]] = {}
         # The drive of each lease timer (a connection's close finds its leases here).
         self._timer_drives: dict[int, GatewayDrive] = {}
-        self.lapse = LapseRunner(config, bus, audit, self._lock, changed, polls)
+        #: Held for a pending stop from a reconnect until its try ends: writes wait.
+        self.gate = LineGate(bus, polls)
+        self.lapse = LapseRunner(config, bus, audit, self._lock, changed, self.gate)
 
     @property
     def lapses(self) -> int:
@@ -210,8 +212,9 @@ class Controller:
         """
         audit.done = True
         what, old, new = self._describe(drive, request)
-        result = _LAPSED
+        result: WriteResult | None = None
         try:
+            await self.gate.wait_open()  # a pending stop has the line first
             async with self._lock(drive):  # a write and its read-back stay together
                 what, old, new = self._describe(drive, request)  # as it is now
                 now = asyncio.get_running_loop().time()
@@ -232,6 +235,8 @@ class Controller:
             result = self._cancelled(client, drive, lease_bound=lease_bound)
             raise
         finally:
+            if result is None:  # a bug of ours: the caller gets the exception, the log its line
+                result = WriteResult(Refusal.NO_ANSWER, "the gateway failed carrying it out")
             self.audit.write(client, drive, what, old, new, result)
 
     @staticmethod
@@ -416,12 +421,13 @@ class Controller:
         if not pending:
             return
         _, late = await asyncio.wait(pending, timeout=CLOSE_LAPSE_S)
-        for task in late:
-            task.cancel()
         if late:
             _log.error("line %s: %d lapse stops not confirmed when the gateway stopped",
                        self.config.name, len(late))  # fmt: skip
-            await asyncio.wait(late)
+        while late:  # cancelled until they end: a cancellation may be lost on the way
+            for task in late:
+                task.cancel()
+            _, late = await asyncio.wait(late, timeout=0.1)
 
     @property
     def pending_lapses(self) -> int:

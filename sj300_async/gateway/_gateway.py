@@ -319,8 +319,6 @@ class Gateway:
         while True:
             await asyncio.sleep(max(line.config.interval_s, 0.05))
             for drive in line.drives.values():
-                if line.controller.pending_lapses:
-                    break  # a pending stop goes before everything else on the line
                 readings = drive.readings
                 if not readings.online:
                     continue
@@ -329,6 +327,7 @@ class Gateway:
                 due = loop.time() - readings.trips_at >= line.config.trips_interval_s
                 if not (new_trip or due):
                     continue
+                await line.controller.gate.wait_open()  # a pending stop has the line first
                 try:
                     history = await line.profile.read_trips(line.bus.drive(drive.node))
                 except SJ300Error as exc:
@@ -346,8 +345,10 @@ class Gateway:
                 await northbound.close()
             except Exception:  # one northbound's failure must not leave the others running
                 _log.exception("the %s northbound failed to close", section)
-        for line in self.lines:
-            await line.controller.close(list(line.drives.values()))
+        # Every line's lapses at once: their waits for confirmation do not add up.
+        await asyncio.gather(
+            *(line.controller.close(list(line.drives.values())) for line in self.lines)
+        )
         for task in self._tasks:
             task.cancel()
         await asyncio.gather(*self._tasks, return_exceptions=True)

@@ -14,17 +14,18 @@ pause (:data:`RETRY_FIRST_S` doubling up to :data:`RETRY_MAX_S`), whatever
 went wrong: a NAK, a time-out, the link down, even a bug of ours (logged
 with its traceback). A drive that acknowledged the stop and still reports
 running is decelerating: it is read again until it stops, and sent the stop
-again only every :data:`RESEND_S` (one stop on the wire per lapse when all
-goes well).
+again only every :data:`RESEND_S`, and first thing on a new connection
+(one stop on the wire per lapse when all goes well).
 
 The stop is the first request on a link that comes back. From the moment
 the link is up again (:meth:`~sj300_async.Bus.on_connected`, which runs
-before any waiting task can send) the line's polls are held
-(:class:`PollHold`) and the lapse tries at once, whatever pause it was in;
-the polls are released when that try ends, confirmed or not, so a drive
-that never confirms (powered off) does not stop the line's polling. While
-the link is down nothing is held: the polls fail, and the drives show
-offline as they should.
+before any waiting task can send) the line is held (:class:`LineGate`: the
+polls, the clients' writes and the trip-history reads wait) and the lapse
+tries at once, whatever pause it was in; the line is released when that
+try ends, confirmed or not, so a drive that never confirms (powered off)
+does not stop the line's polling or its other drives' writes. While the
+link is down nothing is held: the polls fail, and the drives show offline
+as they should.
 
 Decisions: the log says the first failure at ERROR and later ones at
 DEBUG (a line down for an hour must not write a line per try); the audit
@@ -49,7 +50,7 @@ from ._drive import GatewayDrive
 from ._model import LineConfig
 from ._writes import DONE, Refusal, WriteResult
 
-__all__ = ["RETRY_FIRST_S", "RETRY_MAX_S", "LapseRunner", "PollHold"]
+__all__ = ["RETRY_FIRST_S", "RETRY_MAX_S", "LapseRunner", "LineGate", "PollHold"]
 
 _log = logging.getLogger("sj300_async.gateway")
 
@@ -71,33 +72,72 @@ class PollHold(Protocol):
     def release(self, bus: Bus[Any, Any]) -> None: ...
 
 
-class _FirstOnReconnect:
-    """Holds a line's polls from the moment its link comes back until the lapse's next try ends."""
+class LineGate:
+    """Keeps the line for a pending stop: while held, the polls are held and no other
+    request of the gateway's (a client's write, a trip-history read) starts.
+
+    Holds nest; each is released once. Requests already under way when it is
+    taken go on (on a new connection they fail: a request never moves to
+    one, see :meth:`~sj300_async.Bus.on_connected`).
+    """
 
     def __init__(self, bus: Bus[Any, Any], polls: PollHold | None) -> None:
         self._bus = bus
         self._polls = polls
+        self._holds = 0
+        self._open = asyncio.Event()
+        self._open.set()
+
+    @property
+    def held(self) -> bool:
+        return self._holds > 0
+
+    def hold(self) -> None:
+        self._holds += 1
+        self._open.clear()
+        if self._polls is not None:
+            self._polls.hold(self._bus)
+
+    def release(self) -> None:
+        assert self._holds > 0
+        self._holds -= 1
+        if self._polls is not None:
+            self._polls.release(self._bus)
+        if not self._holds:
+            self._open.set()
+
+    async def wait_open(self) -> None:
+        """Return when nothing holds the line (at once, nearly always)."""
+        while self._holds:
+            await self._open.wait()
+
+
+class _FirstOnReconnect:
+    """Holds the line from the moment its link comes back until the lapse's next try ends."""
+
+    def __init__(self, bus: Bus[Any, Any], gate: LineGate) -> None:
+        self._bus = bus
+        self._gate = gate
         self._held = False
         #: Set when the link came back since the current try began.
         self.back = asyncio.Event()
         self._unregister = bus.on_connected(self._connected)
 
     def _connected(self) -> None:
-        if self._polls is not None and not self._held:
-            self._polls.hold(self._bus)
+        if not self._held:
+            self._gate.hold()
             self._held = True
         self.back.set()
 
     def try_ended(self) -> None:
-        """Release the polls, unless the link came back during the try (the next one goes first)."""
+        """Release the line, unless the link came back during the try (the next one goes first)."""
         if not (self.back.is_set() and self._bus.connected):
             self.release()
 
     def release(self) -> None:
         if self._held:
-            assert self._polls is not None
             self._held = False
-            self._polls.release(self._bus)
+            self._gate.release()
 
     def close(self) -> None:
         self._unregister()
@@ -114,14 +154,14 @@ class LapseRunner:
         audit: AuditLog,
         lock: Callable[[GatewayDrive], asyncio.Lock],
         changed: Callable[[GatewayDrive], None],
-        polls: PollHold | None = None,
+        gate: LineGate,
     ) -> None:
         self.config = config
         self.bus = bus
         self.audit = audit
         self._lock = lock
         self._changed = changed
-        self._polls = polls
+        self._gate = gate
         #: Lapse actions started (each counted once, whatever its result).
         self.lapses = 0
         #: Tries of a lapse's stop that failed (each pending lapse's, summed).
@@ -143,7 +183,7 @@ class LapseRunner:
         what = f"lease lapsed: {action}"
         drive.lapse_pending, drive.lapse_error, drive.lapse_tries = True, "", 0
         self._changed(drive)
-        gate = _FirstOnReconnect(self.bus, self._polls)
+        gate = _FirstOnReconnect(self.bus, self._gate)
         try:
             if commands:
                 await asyncio.wait(commands)
@@ -179,6 +219,8 @@ class LapseRunner:
             if self.bus.link.closed:
                 return "the line was closed"
             drive.lapse_tries += 1
+            if gate.back.is_set():
+                stop_taken_at = None  # a new connection: the stop goes first, again
             gate.back.clear()
             if not self.bus.connected:
                 failures += 1
@@ -186,7 +228,7 @@ class LapseRunner:
                              "connected; the stop goes first when it is back")  # fmt: skip
                 gate.release()  # nothing held while the link is down (module docstring)
                 await self._link_up()
-                continue  # the link is back and the polls held: the next try at once
+                continue  # the link is back and the line held: the next try at once
             send = stop_taken_at is None or loop.time() - stop_taken_at >= RESEND_S
             try:
                 error, taken = await self._try(drive, action if send else None)
@@ -212,10 +254,13 @@ class LapseRunner:
                 failures += 1
                 self._failed(drive, action, failures, error)
             if gate.back.is_set():
-                continue  # the link came back during the try: again at once, polls held
-            # The pause ends early when the link comes back in it (the polls are held).
+                continue  # the link came back during the try: again at once, the line held
+            # The pause ends early when the link comes back in it (the line is held).
+            # asyncio.timeout, not wait_for: on 3.11 wait_for can lose a cancellation
+            # that lands as the event fires, and the gateway's stop cancels this task.
             with contextlib.suppress(TimeoutError):
-                await asyncio.wait_for(gate.back.wait(), pause)
+                async with asyncio.timeout(pause):
+                    await gate.back.wait()
             pause = min(pause * 2, RETRY_MAX_S)
 
     async def _link_up(self) -> None:

@@ -335,3 +335,32 @@ async def test_a_request_that_waited_across_a_reconnect_is_not_sent_on_the_new_o
         assert rig.peer.requests == []  # nothing of the old connection's went on the new one
         await rig.bus.drive(2).read_status()
         assert [r.node for r in rig.peer.requests] == [2]
+
+
+async def test_a_sync_that_rested_across_a_reconnect_is_not_sent_on_the_new_one(
+    scripted: MakeRig,
+) -> None:
+    """The same rule inside the sync a node that missed answers gets first: its rest
+    (the guard interval after a reply) spans the drop and the reconnect."""
+    silent = {2}
+
+    def respond(req: sj3.Request) -> Frames:
+        return [] if req.node in silent else answer_all(req)
+
+    policy = sj.ReconnectPolicy(initial_s=0.001, max_s=0.001)
+    line = sj.LineSettings(9600)
+    # A long guard (300 characters, 0.3 s at 9600 baud): time to reconnect in it.
+    timing = sj.BusTiming(margin_s=0.2, guard_chars=300)
+    async with scripted(respond, reconnect=policy, retries=0, timing=timing, line=line) as rig:
+        with pytest.raises(sj.ReplyTimeoutError):
+            await rig.bus.drive(2).read_status()  # node 2 must be synced before its next
+        silent.clear()
+        await rig.bus.drive(3).read_status()  # drains; its answer starts the guard rest
+        waiting = asyncio.create_task(rig.bus.drive(2).read_status())  # rests in its sync
+        await wait_for(lambda: rig.bus._arbiter.queue.busy, "the sync resting on the line")
+        old = rig.peer
+        rig.bus.link.drop()
+        await wait_for(lambda: rig.bus.connected and rig.peer is not old, "reconnected")
+        with pytest.raises(sj.TransportError, match="reconnected while the request waited"):
+            await waiting
+        assert rig.peer.requests == []

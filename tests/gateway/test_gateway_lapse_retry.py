@@ -5,6 +5,8 @@ at stop, and writes that end by cancellation are all audited (issue 26's review)
   still the first request on the new connection (nothing a poll had
   waiting on the old one moves over), and while the link is down the
   drives show offline (nothing holds the polls then).
+- After a reconnect, another client's write waits for the pending stop, and
+  a lapse that never confirms leaves the other drives' trip reads going.
 - ``broadcast_stop`` sends the broadcast, which no drive acknowledges, and
   then the lapsed drive's own stop, which it does.
 - A gateway that stops with a lapse still unconfirmed audits it as given up.
@@ -16,9 +18,11 @@ at stop, and writes that end by cancellation are all audited (issue 26's review)
 from __future__ import annotations
 
 import asyncio
+import contextlib
 import logging
 import socket
 import struct
+from collections.abc import AsyncIterator
 
 import pytest
 from waiting import wait_for
@@ -31,16 +35,26 @@ from sj300_async.gateway import (
     RunCommand,
     SetFrequency,
     WriteRequest,
+    WriteResult,
     _control,
 )
 from sj300_async.simulator import LinePacing, RunState, serve_tcp
 from sj300_async.simulator.sj300 import SimulatedBus
 from sj300_async.wire import Direction
 
-from .conftest import LineLog, cuttable_line, drive_of, modbus_port, polled, running_gateway
+from .conftest import (
+    CuttableProxy,
+    LineLog,
+    cuttable_line,
+    drive_of,
+    modbus_port,
+    polled,
+    running_gateway,
+)
 from .test_gateway_lapse import _run_requests, _settled, _toml
 
 SCADA = "10.0.0.5"
+OPERATOR = "10.0.0.6"
 
 
 def _requests_after(log: LineLog, since: float) -> list[sj3.Request]:
@@ -64,43 +78,89 @@ async def _running(gateway: Gateway, sim: SimulatedBus, node: int) -> None:
     await wait_for(lambda: sim.drives[node].state(loop.time()).outputting, "running")
 
 
+@contextlib.asynccontextmanager
+async def _running_behind_a_proxy(
+    trips_interval_s: float = 0,
+) -> AsyncIterator[tuple[SimulatedBus, LineLog, CuttableProxy, Gateway]]:
+    """A gateway over a line behind a proxy that can cut it, drive 1 running under a
+    0.5 s lease that is not renewed."""
+    async with cuttable_line() as (sim, log, proxy):
+        text = _toml(f"tcp://127.0.0.1:{proxy.port}", lease_s=0.5).replace(
+            "trips_interval_s = 0", f"trips_interval_s = {trips_interval_s}"
+        )
+        async with running_gateway(text) as gateway:
+            await polled(gateway)
+            await _running(gateway, sim, 1)
+            yield sim, log, proxy, gateway
+
+
 async def test_a_link_back_in_the_lapse_pause_gets_the_stop_first_and_down_it_shows_offline() -> (
     None
 ):
     loop = asyncio.get_running_loop()
-    async with cuttable_line() as (sim, log, proxy):
-        text = _toml(f"tcp://127.0.0.1:{proxy.port}", lease_s=0.5)
-        async with running_gateway(text) as gateway:
-            await polled(gateway)
-            line = gateway.lines[0]
-            drive = drive_of(gateway, "hall", 1)
-            await _running(gateway, sim, 1)
-            sim.faults.silence(1)  # the lapse's stops time out: it pauses between tries
-            await wait_for(lambda: line.controller.lapse.failed_tries >= 2, "2 failed tries")
-            sim.faults.silence(1, False)
-            await proxy.cut()
-            await wait_for(lambda: not line.bus.connected, "the link down")
-            # Down, nothing holds the polls: every drive goes offline, not frozen online.
-            await wait_for(
-                lambda: not any(line.poller.health(line.bus, n).online for n in range(1, 5)),
-                "every drive offline",
-            )
-            assert drive.lapse_pending
-            cut_at = loop.time()
-            await proxy.start()
-            await wait_for(lambda: not drive.lapse_pending, "the stop confirmed", timeout=15)
-            back = next(t for t in proxy.connected_at if t > cut_at)
-            after = _requests_after(log, back)
-            stop = next(
-                i for i, r in enumerate(after) if r.command == sj3.Command.RUN and r.node == 1
-            )
-            # Before the stop, at most the sync request the arbiter sends ahead of it
-            # (node 1 missed answers): one request, to node 1. Never a poll.
-            before = [(r.node, r.command) for r in after[:stop]]
-            assert len(before) <= 1, before
-            assert all(node == 1 for node, _ in before), before
-            assert after[stop].data == b"0"
+    async with _running_behind_a_proxy() as (sim, log, proxy, gateway):
+        line = gateway.lines[0]
+        drive = drive_of(gateway, "hall", 1)
+        sim.faults.silence(1)  # the lapse's stops time out: it pauses between tries
+        await wait_for(lambda: line.controller.lapse.failed_tries >= 2, "2 failed tries")
+        sim.faults.silence(1, False)
+        await proxy.cut()
+        await wait_for(lambda: not line.bus.connected, "the link down")
+        # Down, nothing holds the polls: every drive goes offline, not frozen online.
+        await wait_for(
+            lambda: not any(line.poller.health(line.bus, n).online for n in range(1, 5)),
+            "every drive offline",
+        )
+        assert drive.lapse_pending
+        cut_at = loop.time()
+        await proxy.start()
+        await wait_for(lambda: not drive.lapse_pending, "the stop confirmed", timeout=15)
+        back = next(t for t in proxy.connected_at if t > cut_at)
+        after = _requests_after(log, back)
+        stop = next(i for i, r in enumerate(after) if r.command == sj3.Command.RUN and r.node == 1)
+        # Before the stop, at most the sync request the arbiter sends ahead of it
+        # (node 1 missed answers): one request, to node 1. Never a poll.
+        before = [(r.node, r.command) for r in after[:stop]]
+        assert len(before) <= 1, before
+        assert all(node == 1 for node, _ in before), before
+        assert after[stop].data == b"0"
         await wait_for(lambda: sim.drives[1].state(loop.time()) is RunState.STOPPED, "stopped")
+
+
+async def test_after_a_reconnect_another_clients_write_waits_for_the_pending_stop() -> None:
+    loop = asyncio.get_running_loop()
+    async with _running_behind_a_proxy() as (_, log, proxy, gateway):
+        line = gateway.lines[0]
+        drive, other = drive_of(gateway, "hall", 1), drive_of(gateway, "hall", 2)
+        await proxy.cut()
+        await wait_for(lambda: drive.lapse_pending, "the lapse pending", timeout=10)
+        # An operator's stop of drive 2 asked the moment the link is back.
+        writes: list[asyncio.Future[WriteResult]] = []
+        line.bus.on_connected(
+            lambda: writes.append(
+                asyncio.ensure_future(gateway.write(OPERATOR, other, RunCommand(Direction.STOP)))
+            )
+        )
+        cut_at = loop.time()
+        await proxy.start()
+        await wait_for(lambda: not drive.lapse_pending, "the stop confirmed", timeout=15)
+        assert (await writes[0]).ok
+        back = next(t for t in proxy.connected_at if t > cut_at)
+        after = [(r.node, r.command, r.data) for r in _requests_after(log, back)]
+        stop = after.index((1, sj3.Command.RUN, b"0"))
+        assert all(node == 1 for node, _, _ in after[:stop]), after[: stop + 1]
+        assert (2, sj3.Command.RUN, b"0") in after[stop:]
+
+
+async def test_a_lapse_that_never_confirms_leaves_the_other_drives_trip_reads_going() -> None:
+    loop = asyncio.get_running_loop()
+    async with _running_behind_a_proxy(trips_interval_s=0.2) as (sim, _, _, gateway):
+        drive, other = drive_of(gateway, "hall", 1), drive_of(gateway, "hall", 2)
+        sim.faults.silence(1)  # gone for good: its lapse stays pending
+        await wait_for(lambda: drive.lapse_pending, "the lapse pending", timeout=10)
+        since = loop.time()
+        await wait_for(lambda: other.readings.trips_at > since, "drive 2's trips read")
+        assert drive.lapse_pending
 
 
 async def test_broadcast_stop_is_followed_by_the_lapsed_drives_own_acknowledged_stop() -> None:
