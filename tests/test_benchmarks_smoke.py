@@ -524,10 +524,11 @@ def test_mqtt_counts_every_state_and_times_every_change(harness: ModuleType) -> 
         assert window.on_polls > 0
         assert window.off_polls > 0
         assert window.messages > 0
-    # The fleet view got every state the gateway counted, and at most the batch in
-    # flight when it stopped besides; every floor message.
-    assert cpu.final.states <= cpu.received <= cpu.final.states + bench.MAX_IN_FLIGHT
-    assert cpu.final.lost == 0
+    # The fleet view got every state the gateway counted, and besides at most those of
+    # the batch its stop cancelled in flight, which it counts lost (some may reach the
+    # broker); nothing else is lost. Every floor message.
+    assert cpu.final.lost <= bench.MAX_IN_FLIGHT
+    assert cpu.final.states <= cpu.received <= cpu.final.states + cpu.final.lost
     assert len(cpu.floors) == 1
     assert cpu.floor_messages == bench.QUICK_FLOOR_MESSAGES
     sent = bench.FLOOR_WARM_UP + 2 * bench.QUICK_FLOOR_MESSAGES  # untimed, each way timed
