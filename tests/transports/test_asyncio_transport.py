@@ -133,13 +133,15 @@ async def test_close_flushes_the_buffer_then_reports_none(raw: RawLine) -> None:
         transport.write(b"after close")
     assert "lost" not in recorder.events  # never inside close()
     if raw.buffers_writes:
-        # The sleep is the test: with bytes still buffered, connection_lost waits.
-        await asyncio.sleep(0.05)
-        assert "lost" not in recorder.events
+        # Closed with bytes still buffered: connection_lost must wait until they are
+        # handed on. Seen at connection_lost (its buffer then), not by sleeping: the
+        # kernel may take the rest at any time (TCP autotuning grows its buffers).
+        assert transport.get_write_buffer_size() > HIGH
         raw.far.resume()
     await asyncio.wait_for(recorder.lost.wait(), 10)
     assert recorder.lost_exc is None
-    assert recorder.buffered_at_lost in (0, None)  # all of it handed on, then reported
+    if raw.buffers_writes:
+        assert recorder.buffered_at_lost == 0  # all of it handed on, then reported
     assert recorder.events[-1] == "lost"
     if raw.kind in _BRIDGED:
         # Past our socket the bytes are ser2net's: it closes its serial side when the
