@@ -360,9 +360,9 @@ class Sj300Profile:
         m = monitor
         return [
             ("state", sj300_state(status)),
-            ("state (A)", words(status.a)),
-            ("run (B)", words(status.b)),
-            ("output (C)", words(status.c)),
+            ("state (A)", _coded(status.a)),
+            ("run (B)", _coded(status.b)),
+            ("output (C)", _coded(status.c)),
             ("output frequency", f"{m.output_frequency_hz:.2f} Hz"),
             ("direction", words(m.direction)),
             ("output current", f"{m.output_current_a:.1f} A"),
@@ -392,3 +392,13 @@ class Sj300Profile:
 
 
 SJ300_PROFILE: Final = Sj300Profile()
+
+
+def _coded(member: StatusA | StatusB | StatusC) -> str:
+    """A status code in words and as the manual numbers it: ``stopped (02)``.
+
+    Status A 02, "on stopping" in the manual, is the stopped state (module
+    docstring): worded ``stopped``, as the state row and the monitor say.
+    """
+    word = "stopped" if member is StatusA.STOPPING else words(member)
+    return f"{word} ({int(member):02d})"

@@ -15,7 +15,8 @@ async def test_status_out_of_the_box_uses_the_in_memory_simulator() -> None:
     assert result.code == 0, result.err
     assert result.out.splitlines()[0] == "node 01"
     assert "output frequency      0.00 Hz" in result.out
-    assert "state (A)             stopping" in result.out
+    # Status A 02 ("on stopping" in the manual) is the stopped state: worded so.
+    assert "state (A)             stopped (02)" in result.out
 
 
 async def test_status_json_uses_the_dataclass_field_names() -> None:

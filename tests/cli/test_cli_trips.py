@@ -63,6 +63,17 @@ async def test_reset_clears_a_trip_the_simulator_injected(
     assert Command.RUN not in commands
 
 
+async def test_status_of_a_tripped_drive_names_its_trip(tcp_sim: TcpSim) -> None:
+    assert tcp_sim.bus.drives[2].trip(7, now=_now())
+    result = await sj300("status", "-n", "2", "--url", tcp_sim.url)
+    assert result.code == 0, result.err
+    assert result.out.splitlines()[1:4] == [
+        "state                 tripped",
+        "trip                  E07 over-voltage",
+        "state (A)             trip (08)",
+    ]
+
+
 async def test_reset_json_names_the_trip(tcp_sim: TcpSim) -> None:
     assert tcp_sim.bus.drives[3].trip(TripCode.THERMAL, now=_now())
     result = await sj300("reset", "-n", "3", "--json", "--url", tcp_sim.url)
