@@ -6,7 +6,12 @@ protocol's own status (SJ300 status A/B/C, FR-700 status bits) and the
 monitor values with their units. A tripped drive's trip is named
 (``trip  E07 over-voltage``), read from its history.
 
-JSON: ``{"node": 1, "state": "stopped", "trip": null, "status": {"a": "STOPPING",
+The set frequency (SJ300 F001, FR-700's set-frequency read) is shown
+beside the output frequency; a drive that refuses to give it shows none
+(``null`` in JSON).
+
+JSON: ``{"node": 1, "state": "stopped", "trip": null, "set_frequency_hz": 0.0,
+"status": {"a": "STOPPING",
 "b": "STOPPED", "c": "STOP"}, "monitor": {"output_frequency_hz": 50.0, ...}}``:
 ``status`` and ``monitor`` are the fields of the drive class's results
 (SJ300 :class:`~sj300_async.InverterStatus` and
@@ -20,6 +25,8 @@ from __future__ import annotations
 import argparse
 from typing import Any
 
+from ..profiles import Profile
+from ..wire import NakError
 from ._common import add_bus_options, add_json_option, add_node_option, open_cli_bus, profile_of
 from ._output import Column, print_json, print_table
 from ._session import run_async
@@ -55,12 +62,14 @@ async def _status(args: argparse.Namespace) -> int:
         monitor = await drive.read_monitor()
         view = profile.status_view(status)
         trip = await trip_or_none(profile, drive) if view.tripped else None
+        setpoint = await _set_frequency(profile, drive)
     if args.json:
         print_json(
             {
                 "node": args.node,
                 "state": view.state,
                 "trip": None if trip is None else trip.as_json(),
+                "set_frequency_hz": setpoint,
                 "status": status,
                 "monitor": monitor,
             }
@@ -69,6 +78,9 @@ async def _status(args: argparse.Namespace) -> int:
     rows = profile.status_rows(status, monitor)
     if trip is not None:
         rows.insert(1, ("trip", str(trip)))
+    if setpoint is not None:  # beside the output frequency, as a SCADA screen shows them
+        at = next((i for i, (item, _) in enumerate(rows) if item == "output frequency"), 1)
+        rows.insert(at, ("set frequency", f"{setpoint:.2f} Hz"))
     print_table(
         (Column("item"), Column("value")),
         rows,
@@ -76,3 +88,11 @@ async def _status(args: argparse.Namespace) -> int:
         show_header=False,
     )
     return 0
+
+
+async def _set_frequency(profile: Profile, drive: Any) -> float | None:
+    """The drive's set frequency, None when it refuses to give it (a NAK)."""
+    try:
+        return await profile.read_set_frequency(drive)
+    except NakError:
+        return None

@@ -98,7 +98,15 @@ _FLAGS: Final = {
 _GATEWAY_KEYS: Final = ("id", "stale_after_s", "audit_log")
 _LINE_KEYS: Final = (
     *("name", "url", "protocol", "nodes", "interval_s", "reads", "parameters"),
-    *("trips_interval_s", "unit_offset", "timeout_s", "lease_s", "on_lapse", "writes"),
+    *(
+        "trips_interval_s",
+        "setpoint_interval_s",
+        "unit_offset",
+        "timeout_s",
+        "lease_s",
+        "on_lapse",
+        "writes",
+    ),
     "lease_scope",
 )
 _GRANT_KEYS: Final = ("nodes", "parameters", "control")
@@ -281,6 +289,7 @@ def _line(ctx: ConfigContext, index: int, data: object, claims: _Claims) -> Line
     interval_s = table.number("interval_s", minimum=_MIN_INTERVAL_S, inclusive=True)
     parameters = _parameter_codes(table, profile)
     trips_interval_s = table.number("trips_interval_s", minimum=0, inclusive=True)
+    setpoint_interval_s = table.number("setpoint_interval_s", minimum=0, inclusive=True)
     unit_offset = _unit_offset(table, name, nodes, profile, claims)
     timeout_s = table.number("timeout_s", minimum=0, inclusive=False)
     lease_s = table.number("lease_s", minimum=0, inclusive=False)
@@ -298,6 +307,7 @@ def _line(ctx: ConfigContext, index: int, data: object, claims: _Claims) -> Line
         reads=reads,
         parameters=parameters,
         trips_interval_s=or_default(trips_interval_s, _DEFAULT_LINE.trips_interval_s),
+        setpoint_interval_s=or_default(setpoint_interval_s, _DEFAULT_LINE.setpoint_interval_s),
         unit_offset=unit_offset,
         timeout_s=timeout_s,
         grants=grants,

@@ -25,23 +25,29 @@ poller, the write that changed the drive and the trip reader go on.
 A trip history is not part of the poll cycle (an SJ300's is 446
 characters: most of a 19200-baud cycle). For a protocol whose profile
 reads one, each drive's is read every ``trips_interval_s`` and as soon as
-its status shows a trip.
+its status shows a trip. The set frequency is read beside the poll too,
+every ``setpoint_interval_s``, unless it is polled (SJ300 F001 in the
+line's parameters): SCADA shows the setpoint next to the actual
+frequency, so it is there without configuration, at a cadence that
+costs the line little. A failed read of either is counted
+(``sj300_gateway_read_errors_total``) and tried again when due.
 """
 
 from __future__ import annotations
 
 import asyncio
 import contextlib
+import functools
 import logging
 import time
-from collections.abc import Iterable, Iterator, Sequence
+from collections.abc import Awaitable, Callable, Iterable, Iterator, Sequence
 from dataclasses import dataclass
 from types import TracebackType
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING, Any, TypeVar
 
 from .. import Poller, Sample
 from ..bus import Bus, CaptureFile, open_bus
-from ..profiles import DriveSnapshot, Profile, get_profile
+from ..profiles import NEVER, DriveSnapshot, Profile, get_profile
 from ..wire import SJ300Error
 from ._audit import AuditLog
 from ._control import Controller
@@ -58,6 +64,7 @@ if TYPE_CHECKING:
 __all__ = ["Gateway", "GatewayLine"]
 
 _log = logging.getLogger("sj300_async.gateway")
+_T = TypeVar("_T")
 
 
 @dataclass(slots=True)
@@ -89,6 +96,8 @@ class Gateway:
         self._by_key: dict[tuple[str, int], GatewayDrive] = {}
         #: Exceptions a northbound's ``publish`` raised, by its section.
         self.publish_errors: dict[str, int] = {}
+        #: Reads beside the poll that failed, by (line, ``"trips"`` or ``"setpoint"``).
+        self.read_errors: dict[tuple[str, str], int] = {}
         self._stack = contextlib.AsyncExitStack()
         self._tasks: list[asyncio.Task[None]] = []
 
@@ -143,7 +152,17 @@ class Gateway:
         )
         for section in self.northbounds:
             errors.add_metric([section], self.publish_errors.get(section, 0))
+        read_errors = CounterMetricFamily(
+            "sj300_gateway_read_errors",
+            "Reads beside the poll (trip history, set frequency) that failed; tried again.",
+            labels=["line", "read"],
+        )
+        for line in self.lines:
+            for what in ("trips", "setpoint"):
+                count = self.read_errors.get((line.config.name, what), 0)
+                read_errors.add_metric([line.config.name, what], count)
         yield errors
+        yield read_errors
         yield from self._lapse_metrics()
         for northbound in self.northbounds.values():
             yield from northbound.metrics()
@@ -215,8 +234,7 @@ class Gateway:
                 self.northbounds[section] = northbound
             for line in self.lines:
                 await self._stack.enter_async_context(line.poller)
-                if line.profile.capabilities.trip_history and line.config.trips_interval_s > 0:
-                    self._tasks.append(asyncio.create_task(self._read_trips(line)))
+                self._tasks.append(asyncio.create_task(self._background_reads(line)))
         except BaseException:
             await self._shutdown()
             raise
@@ -313,30 +331,71 @@ class Gateway:
                     _log.debug("the %s northbound failed to take a snapshot (%d so far)",
                                section, count, exc_info=True)  # fmt: skip
 
-    async def _read_trips(self, line: GatewayLine) -> None:
+    async def _background_reads(self, line: GatewayLine) -> None:
+        """What is read beside the poll: each drive's trip history and set frequency, each
+        when due (module docstring); a failed read is counted and tried when due again."""
         loop = asyncio.get_running_loop()
+        config, profile = line.config, line.profile
+        trips = profile.capabilities.trip_history and config.trips_interval_s > 0
+        setpoint_polled = profile.setpoint_parameter in config.parameters
+        setpoints = config.setpoint_interval_s > 0 and not setpoint_polled
         seen_trip: dict[int, bool] = {}
+        # When each read last failed: a failure waits its interval too (no read per cycle).
+        failed_at: dict[tuple[str, int], float] = {}
+
+        def due(what: str, node: int, last_read: float, interval_s: float) -> bool:
+            last = max(last_read, failed_at.get((what, node), NEVER))
+            return loop.time() - last >= interval_s
+
         while True:
-            await asyncio.sleep(max(line.config.interval_s, 0.05))
+            await asyncio.sleep(max(config.interval_s, 0.05))
             for drive in line.drives.values():
                 readings = drive.readings
                 if not readings.online:
                     continue
+                target = line.bus.drive(drive.node)
                 tripped = bool(readings.status_view is not None and readings.status_view.tripped)
                 new_trip = tripped and not seen_trip.get(drive.node, False)
-                due = loop.time() - readings.trips_at >= line.config.trips_interval_s
-                if not (new_trip or due):
-                    continue
-                await line.controller.gate.wait_open()  # a pending stop has the line first
-                try:
-                    history = await line.profile.read_trips(line.bus.drive(drive.node))
-                except SJ300Error as exc:
-                    _log.debug("line %s node %d: trip history: %s", line.config.name, drive.node,
-                               exc)  # fmt: skip
-                    continue
-                readings.set_trips(history, loop.time(), line.profile)
-                seen_trip[drive.node] = tripped
-                self._changed(drive)
+                if trips and (
+                    new_trip or due("trips", drive.node, readings.trips_at, config.trips_interval_s)
+                ):
+                    history = await self._read_beside(
+                        line, drive, "trips", functools.partial(profile.read_trips, target)
+                    )
+                    seen_trip[drive.node] = tripped  # a failed read is tried when due
+                    if history is None:
+                        failed_at["trips", drive.node] = loop.time()
+                    else:
+                        readings.set_trips(history, loop.time(), profile)
+                        self._changed(drive)
+                if setpoints and due(
+                    "setpoint", drive.node, readings.set_frequency_at, config.setpoint_interval_s
+                ):
+                    hz = await self._read_beside(
+                        line,
+                        drive,
+                        "setpoint",
+                        functools.partial(profile.read_set_frequency, target),
+                    )
+                    if hz is None:
+                        failed_at["setpoint", drive.node] = loop.time()
+                    else:
+                        readings.set_frequency(hz, loop.time())
+                        self._changed(drive)
+
+    async def _read_beside(
+        self, line: GatewayLine, drive: GatewayDrive, what: str, read: Callable[[], Awaitable[_T]]
+    ) -> _T | None:
+        """One read beside the poll, after any pending stop; None (counted) if it failed."""
+        try:
+            await line.controller.gate.wait_open()  # a pending stop has the line first
+            return await read()
+        except SJ300Error as exc:
+            key = (line.config.name, what)
+            self.read_errors[key] = self.read_errors.get(key, 0) + 1
+            _log.debug("line %s node %d: %s read failed: %s", line.config.name, drive.node,
+                       what, exc)  # fmt: skip
+            return None
 
     async def _shutdown(self) -> None:
         for section in reversed(list(self.northbounds)):

@@ -120,6 +120,10 @@ class LineConfig:
     #: also read when the drive's status turns to tripped. Only for a protocol
     #: whose profile reads trip histories (others ignore it).
     trips_interval_s: float = 30.0
+    #: Seconds between two reads of a drive's set frequency (0: never), when it
+    #: is not polled as a parameter (SJ300 F001): SCADA shows the setpoint next
+    #: to the output frequency, so it is read by default, slower than the poll.
+    setpoint_interval_s: float = 5.0
     #: Unit id = node + unit_offset.
     unit_offset: int = 0
     #: The response time-out per attempt (None: the bus's computed one).

@@ -17,12 +17,15 @@ async def test_status_out_of_the_box_uses_the_in_memory_simulator() -> None:
     assert "output frequency      0.00 Hz" in result.out
     # Status A 02 ("on stopping" in the manual) is the stopped state: worded so.
     assert "state (A)             stopped (02)" in result.out
+    # The setpoint beside the output frequency, as a SCADA screen shows them.
+    assert "set frequency         0.00 Hz\noutput frequency      0.00 Hz" in result.out
 
 
 async def test_status_json_uses_the_dataclass_field_names() -> None:
     data = (await sj300("status", "-n", "3", "--json")).json()
     assert data["node"] == 3
     assert data["status"] == {"a": "STOPPING", "b": "STOPPED", "c": "STOP"}
+    assert data["set_frequency_hz"] == 0.0
     monitor = data["monitor"]
     assert monitor["output_frequency_hz"] == 0.0
     assert monitor["direction"] == "STOP"
