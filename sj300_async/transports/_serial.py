@@ -16,6 +16,7 @@ from __future__ import annotations
 
 import asyncio
 import functools
+import re
 from collections.abc import Callable
 from typing import Any
 
@@ -24,6 +25,9 @@ from ..wire import LineSettings, TransportError
 __all__ = ["SerialSettingsError", "serial_connector"]
 
 _PARITY = {"N": "N", "E": "E", "O": "O"}
+#: A host (name, IPv4, or IPv6 in brackets) and a port: a TCP bridge without its
+#: scheme. A device path has a slash (``/dev/ttyUSB0``) or no colon (``COM3``).
+_HOST_PORT = re.compile(r"(?:\[[0-9A-Fa-f:.]+\]|[A-Za-z0-9][A-Za-z0-9.-]*):[0-9]{1,5}")
 
 
 def serial_connector(
@@ -51,13 +55,13 @@ def serial_connector(
                     loop, protocol_factory, device, **settings
                 )
             except serial.SerialException as exc:
-                raise TransportError(f"cannot open serial port {device}: {exc}") from exc
+                raise TransportError(_open_failure(device, exc)) from exc
         else:
             opening = functools.partial(serial.serial_for_url, device, **settings)
             try:
                 port = await loop.run_in_executor(None, opening)
             except serial.SerialException as exc:
-                raise TransportError(f"cannot open serial port {device}: {exc}") from exc
+                raise TransportError(_open_failure(device, exc)) from exc
             except refused as exc:
                 raise SerialSettingsError(_refusal(device, line, exc)) from exc
             try:
@@ -91,6 +95,27 @@ def _tty_errors() -> tuple[type[Exception], ...]:
     except ImportError:  # Windows: pyserial raises SerialException or ValueError there
         return ()
     return (termios.error,)
+
+
+def _open_failure(device: str, exc: BaseException) -> str:
+    """``cannot open serial port /dev/ttyUSB9: No such file or directory (errno 2)``.
+
+    pyserial's message repeats the errno and the port
+    (``[Errno 2] could not open port X: [Errno 2] No such file...: 'X'``):
+    the operating system's error, which it was raised from, says it once.
+    A device that looks like ``HOST:PORT`` gets the URL it probably meant.
+    """
+    cause = exc.__cause__ or exc.__context__
+    if isinstance(cause, OSError) and cause.strerror:
+        why = f"{cause.strerror} (errno {cause.errno})" if cause.errno else cause.strerror
+    else:
+        why = " ".join(str(exc).split()) or type(exc).__name__
+    message = f"cannot open serial port {device}: {why}"
+    if _HOST_PORT.fullmatch(device):
+        message += (
+            f"; a URL without a scheme names a serial port: for a TCP bridge use tcp://{device}"
+        )
+    return message
 
 
 def _refusal(device: str, line: LineSettings, exc: BaseException) -> str:
