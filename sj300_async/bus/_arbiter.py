@@ -31,7 +31,10 @@ each of which has its own test:
    the write than the line could carry the request and the shortest reply
    (:meth:`~._timing.BusTiming.answer_floor`) is not the answer — a
    duplicate of the previous reply, or a stray — and is counted
-   (``early_frames``) and discarded; the wait goes on.
+   (``early_frames``) and discarded; the wait goes on. A call that then
+   fails on time-outs says so in its :class:`ReplyTimeoutError`, with the
+   URL's ways out (the peer is faster than the line: ``baudrate=0``, or the
+   line's real speed).
 9. Resync: after a time-out or a corrupted-only answer, the node's replies
    may still come, later than the drain waits. The node is *unsynced*: it
    remembers the requests that failed (for
@@ -121,6 +124,14 @@ class Arbiter(LineRecovery[RequestT, ReplyT]):
         self._unsynced: dict[int, list[Pending[RequestT]]] = {}
         # The last chunk received (for the log of an early frame).
         self._last_chunk = b""
+        # Early answers (rule 8): the attempt they came to, how many, and the most
+        # any came before the floor (seconds); a failed attempt's pair is handed
+        # to its call (_early_refused). Kept off the success path: only an early
+        # frame and a failure touch them.
+        self._early_out: Outstanding[RequestT, ReplyT] | None = None
+        self._early_count = 0
+        self._early_by = 0.0
+        self._early_refused: tuple[int, float] | None = None
         self.stats = stats
         self.queue = LineQueue()
         self._loop = asyncio.get_running_loop()
@@ -183,6 +194,10 @@ class Arbiter(LineRecovery[RequestT, ReplyT]):
         """A frame shaped like the answer, sooner than the line allows (rule 8): discard it."""
         self.stats.early_frames += 1
         out.stats.discarded_frames += 1
+        if self._early_out is not out:
+            self._early_out, self._early_count, self._early_by = out, 0, 0.0
+        self._early_count += 1
+        self._early_by = max(self._early_by, out.not_before - now)
         if _log.isEnabledFor(logging.DEBUG):
             _log.debug(
                 "early frame from node %02d discarded, %.1f ms sooner than the line "
@@ -304,6 +319,9 @@ class Arbiter(LineRecovery[RequestT, ReplyT]):
         limit = self._call_deadline
         start = 0.0 if limit is None else loop.time()
         failed: list[SJ300Error] | None = None
+        # (count, most seconds before the floor) of each failed attempt that
+        # refused early answers; made with *failed*, read only when it exists.
+        refusals: list[tuple[int, float]]
         protocol = link.require()  # fail promptly, before queueing, while the link is down
         while True:
             if failed is not None:  # a retry stays on its first attempt's connection
@@ -384,11 +402,15 @@ class Arbiter(LineRecovery[RequestT, ReplyT]):
             except (ReplyTimeoutError, RemoteProtocolError, NakError) as exc:
                 if failed is None:
                     failed = []
+                    refusals = []
                     if limit is None:
                         # Without a deadline the call counts from its first write.
                         refused = isinstance(exc, NakError)
                         start = loop.time() if refused else self._failed_sent
                 failed.append(exc)
+                if self._early_refused is not None:  # set by this attempt's _no_answer
+                    refusals.append(self._early_refused)
+                    self._early_refused = None
                 if (
                     len(failed) > retries
                     or not self.dialect.retryable(exc)
@@ -404,13 +426,21 @@ class Arbiter(LineRecovery[RequestT, ReplyT]):
         elapsed = loop.time() - start
         if failed and not isinstance(failed[-1], ReplyTimeoutError):
             raise failed[-1]  # the drive's NAK, a corrupted answer: as the last attempt got it
-        raise self._call_timed_out(request, failed or [], elapsed, limit)
+        if failed is None:
+            raise self._call_timed_out(request, [], elapsed, limit, [])
+        raise self._call_timed_out(request, failed, elapsed, limit, refusals)
 
     def _call_timed_out(
-        self, request: RequestT, failed: list[SJ300Error], elapsed: float, limit: float | None
+        self,
+        request: RequestT,
+        failed: list[SJ300Error],
+        elapsed: float,
+        limit: float | None,
+        refusals: list[tuple[int, float]],
     ) -> ReplyTimeoutError:
         """The error of a call whose attempts failed, the last by a time-out, or that its
-        deadline stopped before the first (*failed* empty)."""
+        deadline stopped before the first (*failed* empty); *refusals*: the early answers
+        (rule 8) its attempts refused, (count, most seconds before the floor) each."""
         who = f"{self.dialect.node_noun} {request.node:02d}"
         attempts = len(failed)
         if not attempts:
@@ -440,7 +470,23 @@ class Arbiter(LineRecovery[RequestT, ReplyT]):
             message += f" ({syncs} of them sync requests after a missed answer)"
         if limit is not None and elapsed >= limit:
             message += f"; call deadline {limit:g} s"
+        if refusals:
+            message += self._early_advice(refusals)
         return ReplyTimeoutError(message, attempts, elapsed, high)
+
+    def _early_advice(self, refusals: list[tuple[int, float]]) -> str:
+        """What a call that timed out says of the answers it refused as early (rule 8)."""
+        count = sum(n for n, _ in refusals)
+        most_ms = max(by for _, by in refusals) * 1000
+        baud = max(self._line.baudrate, self._timing.plausible_baudrate)
+        answers, verb = ("1 answer", "was") if count == 1 else (f"{count} answers", "were")
+        return (
+            f"; {answers} came up to {most_ms:.1f} ms sooner than a {baud}-baud line "
+            f"can carry request and answer, and {verb} refused as early: for a peer faster "
+            "than a real line (an emulator, a test double) add baudrate=0 to the URL, which "
+            f"turns the check off; for a line faster than {baud} baud give its speed "
+            "(baudrate=N)"
+        )
 
     async def send(
         self, request: RequestT, stats: TransactionStats, *, urgent: bool = False

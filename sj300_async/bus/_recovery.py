@@ -58,6 +58,10 @@ class LineRecovery(Generic[RequestT, ReplyT]):
     _failed_at: float
     _failed_sent: float
     _last_rx: float
+    _early_out: Outstanding[RequestT, ReplyT] | None
+    _early_count: int
+    _early_by: float
+    _early_refused: tuple[int, float] | None
 
     if TYPE_CHECKING:  # the arbiter's own methods that a sync uses as any attempt does
 
@@ -145,6 +149,9 @@ class LineRecovery(Generic[RequestT, ReplyT]):
                 f"({out.bad_frame.reason.value}: {out.bad_frame.body!r})"
             )
         self._count(stats, totals, "timeouts")
+        if self._early_out is out:  # it did answer, too soon (rule 8): the call's error says so
+            self._early_out = None
+            self._early_refused = (self._early_count, self._early_by)
         return timed_out(
             f"node {node:02d} did not answer {what} within {timeout * 1000:.0f} ms",
             1,
