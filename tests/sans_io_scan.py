@@ -98,6 +98,7 @@ FR700_CODEC: Final = tuple(
         "_codec",
         "_codes",
         "_events",
+        "_faults",
         "_line_frames",
         "_parameters",
         "_parser",

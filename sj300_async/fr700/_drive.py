@@ -34,6 +34,7 @@ from ..wire import Direction, LocalProtocolError
 from . import _requests as rq
 from ._codec import DEFAULT_LINE_OPTIONS, Fr700LineOptions
 from ._codes import Fr700Instruction, Fr700OperationMode, Fr700StatusBits
+from ._faults import Fr700FaultHistory, decode_fault_history
 from ._parameters import fr700_parameter_info
 from ._payloads import Fr700Monitor, Fr700MultiReply, Fr700Status, decode_hex, decode_multi_reply
 from ._requests import Fr700MultiReceive, Fr700Request
@@ -236,6 +237,14 @@ class Fr700Drive:
         await self._execute(
             rq.set_frequency(self._station, hz, eeprom=eeprom, options=self._options)
         )
+
+    async def read_fault_history(self) -> Fr700FaultHistory:
+        """H74..H77: the last eight trips, most recent first, each named (four reads).
+
+        Raises as :meth:`read_status`.
+        """
+        words = [await self._value(I.FAULT_HISTORY + i) for i in range(4)]
+        return decode_fault_history(words)
 
     async def read_set_frequency(self, *, eeprom: bool = False) -> float:
         """H6D (RAM) or, with *eeprom*, H6E (EEPROM): the set frequency in Hz.

@@ -46,6 +46,7 @@ from ._codes import (
     Fr700StatusBits,
 )
 from ._events import Fr700Ack, Fr700Data, Fr700Nak, Fr700ParserEvent, Fr700Reply
+from ._faults import FAULT_HISTORY_DEPTH, Fr700Fault, Fr700FaultHistory, decode_fault_history
 from ._parameters import (
     FR700_PARAMETERS,
     PARAMETER_RAW_MAX,
@@ -62,6 +63,7 @@ __all__ = [
     "A1_INSTRUCTIONS",
     "DEFAULT_LINE_OPTIONS",
     "ETX",
+    "FAULT_HISTORY_DEPTH",
     "FR700_PARAMETERS",
     "MAX_FRAME",
     "MAX_REPLY_DATA",
@@ -73,6 +75,8 @@ __all__ = [
     "BadRequest",
     "Fr700Ack",
     "Fr700Data",
+    "Fr700Fault",
+    "Fr700FaultHistory",
     "Fr700Instruction",
     "Fr700LineOptions",
     "Fr700Monitor",
@@ -92,6 +96,7 @@ __all__ = [
     "HostAnswer",
     "HostRequest",
     "RequestParser",
+    "decode_fault_history",
     "decode_frame",
     "decode_hex",
     "decode_multi_reply",

@@ -24,6 +24,8 @@ FR700_NAMES = {
     "decode_multi_reply", "encode_ack", "encode_data_reply", "encode_host_ack", "encode_nak",
     "encode_reoutput_request", "encode_request", "fr700_parameter_info", "parameter_number",
     "parse_station", "requests", "sum_check",
+    # the fault history (H74..H77)
+    "FAULT_HISTORY_DEPTH", "Fr700Fault", "Fr700FaultHistory", "decode_fault_history",
     # for the simulated drives: frame bytes, the terminator, the drives' request parser
     "ETX", "STX", "terminator_bytes", "BadRequest", "HostAnswer", "HostRequest", "RequestParser",
 }  # fmt: skip
@@ -112,6 +114,7 @@ def test_events_and_results_are_frozen_and_slotted() -> None:
     classes: tuple[type, ...] = (
         fr700.Fr700Ack, fr700.Fr700Nak, fr700.Fr700Data, fr700.Fr700Request,
         fr700.Fr700Status, fr700.Fr700Monitor, fr700.Fr700MultiReply, fr700.Fr700LineOptions,
+        fr700.Fr700Fault, fr700.Fr700FaultHistory,
         sim_fr700.HostRequest, sim_fr700.HostAnswer, sim_fr700.BadRequest,
     )  # fmt: skip
     for cls in classes:

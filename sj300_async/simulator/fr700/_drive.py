@@ -99,7 +99,7 @@ class FaultCode:
     OC2: Final = 0x11  #: E.OC2 over-current during constant speed
     OC3: Final = 0x12  #: E.OC3 over-current during deceleration or stop
     OV1: Final = 0x20  #: E.OV1 regenerative over-voltage during acceleration
-    THT: Final = 0x90  #: E.THT inverter overload
+    THT: Final = 0x30  #: E.THT inverter overload (0x90 is E.OHT, the external thermal relay)
     PUE: Final = 0xB1  #: E.PUE PU disconnection
 
 
@@ -340,7 +340,7 @@ class Fr700SimulatedDrive:
 
     def _read_fault_history(self, request: HostRequest, now: float) -> Result:
         pair = 2 * (request.instruction - I.FAULT_HISTORY)
-        faults = [*self._faults, 0, 0][pair : pair + 2]
+        faults = [*self._faults, *[0] * 8][pair : pair + 2]  # empty slots read 00
         return self._data(faults[1] << 8 | faults[0])
 
     def _read_extended_status(self, request: HostRequest, now: float) -> Result:
