@@ -605,7 +605,7 @@ async def test_sj300_simulate_tap_and_sj300_sniff_json_end_to_end(tmp_path: Path
         assert sim_url, listen_line
         started = time.time()
         async with running(
-            "sniff", tap_url[1], "--json", "--count", "4", "--capture", str(capture)
+            "sniff", tap_url[1], "--json", "--count", "6", "--capture", str(capture)
         ) as sniffer:
             assert sniffer.stdout is not None
             assert sniffer.stderr is not None
@@ -621,17 +621,20 @@ async def test_sj300_simulate_tap_and_sj300_sniff_json_end_to_end(tmp_path: Path
         assert simulate.returncode == 0
 
     rows = [json.loads(line) for line in out.decode().splitlines()]
-    assert [r["kind"] for r in rows] == ["frame"] * 4
-    assert [r["n"] for r in rows] == [1, 2, 3, 4]
-    assert [r["role"] for r in rows] == ["request", "reply", "request", "reply"]
-    assert [r["node"] for r in rows] == [2, 2, 2, 2]
+    # status reads the status, the monitor and the set frequency: six frames.
+    assert [r["kind"] for r in rows] == ["frame"] * 6
+    assert [r["n"] for r in rows] == [1, 2, 3, 4, 5, 6]
+    assert [r["role"] for r in rows] == ["request", "reply"] * 3
+    assert [r["node"] for r in rows] == [2] * 6
     assert rows[0]["hex"] == rq.read_status(2).frame.hex(" ")
     assert rows[2]["hex"] == rq.read_monitor(2).frame.hex(" ")
-    assert [r["answers"] for r in rows] == [None, 1, None, 3]
+    assert rows[4]["hex"] == rq.read_parameter(2, "F001").frame.hex(" ")
+    assert [r["answers"] for r in rows] == [None, 1, None, 3, None, 5]
     assert all(r["anomalies"] == [] for r in rows)
     assert all(r["check_ok"] is True for r in rows)
     assert rows[1]["latency_ms"] > 0
     assert rows[3]["latency_ms"] > 0
+    assert rows[5]["latency_ms"] > 0
     assert "read status" in rows[0]["summary"]
     # Times are Unix times, in order.
     times = [r["t"] for r in rows]
@@ -640,7 +643,7 @@ async def test_sj300_simulate_tap_and_sj300_sniff_json_end_to_end(tmp_path: Path
     assert times[-1] <= finished + 1
     summary = err.decode().splitlines()[-1]
     assert summary.startswith("sj300 sniff: "), summary
-    assert "paired 2" in summary, summary
+    assert "paired 3" in summary, summary
     assert "flagged: none" in summary
 
     # The capture holds the same frames, with their directions.
@@ -650,9 +653,7 @@ async def test_sj300_simulate_tap_and_sj300_sniff_json_end_to_end(tmp_path: Path
     assert [p.direction for p in parsed.packets] == [
         PacketDirection.OUTBOUND,
         PacketDirection.INBOUND,
-        PacketDirection.OUTBOUND,
-        PacketDirection.INBOUND,
-    ]
+    ] * 3
     stamps = [p.timestamp for p in parsed.packets]
     assert stamps == sorted(stamps)
     assert [round(s, 3) for s in stamps] == [round(t, 3) for t in times]

@@ -38,12 +38,13 @@ async def test_a_status_read_traces_both_requests_and_replies(tcp_sim: TcpSim) -
     assert [(m["hex"], m["meaning"]) for m in tx] == [
         (_hex(b"\x02020406\r"), "node 02 command 04 read status"),
         (_hex(b"\x02020301\r"), "node 02 command 03 read monitor"),
+        (_hex(b"\x020206F00173\r"), "node 02 command 06 read parameter F001"),
     ]
     rx = [m for m in found if m["dir"] == "← rx"]
     assert rx[0]["hex"].startswith("02 30 32 ")  # STX "02"
     completed = [m["meaning"] for m in rx if m["meaning"] != "…"]
-    assert len(completed) == 2
-    assert all(m.startswith("node 02 data ") for m in completed), completed
+    assert len(completed) == 3
+    assert [m.split(" data ")[0] for m in completed] == ["node 02"] * 2 + ["node 02 ACK +"]
 
 
 async def test_a_nak_and_options_before_the_command(tcp_sim: TcpSim) -> None:
