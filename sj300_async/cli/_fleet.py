@@ -131,7 +131,7 @@ def _status_words(message: StateMessage) -> str:
 
 
 def _trip_words(message: StateMessage) -> str:
-    """``E07 over-voltage``; ``fault H10`` when the profile knows no meaning; an older
+    """``E07 over-voltage``; ``fault H9A`` when the profile knows no meaning; an older
     gateway's (no ``state``: it sends no meaning either) the code alone."""
     code = message.trip
     if code is None:

@@ -31,8 +31,9 @@ the drive's profile, and the rows show the snapshot: states read as a person
 would (``stopped``, ``accelerating``, ``running``, ``tripped``), the set
 frequency where the profile names a parameter for it (SJ300 F001), torque
 and power where the protocol measures them. A tripped drive's row names its
-trip (``tripped E07 over-voltage``; an FR-700 ``tripped fault H10``), read
-once per trip from the drive's history by its profile. A drive that has never
+trip (``tripped E07 over-voltage``; an FR-700 ``tripped E.OC1 overcurrent
+trip during acceleration``, or ``tripped fault H9A`` for a byte its table
+lacks), read once per trip from the drive's history by its profile. A drive that has never
 answered is ``offline`` (:attr:`~sj300_async.Sample.answered`); one that
 stops answering turns offline and is probed every few seconds instead of
 being polled; the monitor itself never stops for a failing drive or a

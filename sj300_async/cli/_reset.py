@@ -11,8 +11,8 @@ The drive's profile sends the reset (:meth:`~sj300_async.profiles.Profile.reset`
 
 First the status is read: a drive that is not tripped gets nothing that
 changes it ("not tripped", exit 0). Otherwise the trip is named from the
-drive's history (SJ300 ``E07 over-voltage``; FR-700 ``fault H10``, the
-reference lists no meanings), the reset is sent, and the status is polled
+drive's history (SJ300 ``E07 over-voltage``; FR-700 ``E.OC1 overcurrent trip
+during acceleration``), the reset is sent, and the status is polled
 until the trip is gone or ``--wait`` seconds have passed. Exit 0 when the
 trip cleared, 1 when the drive is still tripped (or never answered again).
 

@@ -1,4 +1,4 @@
-"""Which trip a drive is in, as the commands name it: ``E07 over-voltage``, ``fault H10``.
+"""Which trip a drive is in, as the commands name it: ``E07 over-voltage``, ``fault H9A``.
 
 A drive's status says only *that* it is tripped; the trip itself is the
 newest entry of its history, read and named by the drive's profile

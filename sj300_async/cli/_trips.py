@@ -91,22 +91,34 @@ async def _trips(args: argparse.Namespace) -> int:
         records = [_record_json(trip) for trip in log.records]
         print_json({"node": args.node, "total_count": log.total_count, "records": records})
         return 0
-    count = "?" if log.total_count is None else str(log.total_count)
-    title = f"{profile.node_noun} {args.node:02d}: {count} trip(s) in total"
+    who = f"{profile.node_noun} {args.node:02d}"
+    if log.total_count is None:  # the drive counts none: what it keeps is all there is
+        title = f"{who}: {len(log.records)} trip(s) recorded"
+    else:
+        title = f"{who}: {log.total_count} trip(s) in total"
     if not log.records:
-        print(f"{title}, none recorded")
+        print(f"{title}, none recorded" if log.total_count is not None else title)
         return 0
     labels = [label for label, _ in log.records[0].details]
+    # The values at the trip, where the protocol's history records them (an FR-700's not).
+    valued = any(trip.output_frequency_hz is not None for trip in log.records)
+    values = (
+        (
+            Column("Hz", "right"),
+            Column("A", "right"),
+            Column("V", "right"),
+            Column("run h", "right"),
+            Column("on h", "right"),
+        )
+        if valued
+        else ()
+    )
     columns = (
         Column("#", "right"),
         Column("trip"),
         Column("meaning"),
         *(Column(label) for label in labels),
-        Column("Hz", "right"),
-        Column("A", "right"),
-        Column("V", "right"),
-        Column("run h", "right"),
-        Column("on h", "right"),
+        *values,
     )
     rows = [
         (
@@ -114,11 +126,17 @@ async def _trips(args: argparse.Namespace) -> int:
             trip.code,
             trip.meaning or "",
             *(text for _, text in trip.details),
-            _number(trip.output_frequency_hz, 1),
-            _number(trip.output_current_a, 1),
-            _number(trip.output_voltage_v, 1),
-            "-" if trip.run_time_h is None else str(trip.run_time_h),
-            "-" if trip.power_on_time_h is None else str(trip.power_on_time_h),
+            *(
+                (
+                    _number(trip.output_frequency_hz, 1),
+                    _number(trip.output_current_a, 1),
+                    _number(trip.output_voltage_v, 1),
+                    "-" if trip.run_time_h is None else str(trip.run_time_h),
+                    "-" if trip.power_on_time_h is None else str(trip.power_on_time_h),
+                )
+                if valued
+                else ()
+            ),
         )
         for i, trip in enumerate(log.records, 1)
     ]

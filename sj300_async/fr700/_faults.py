@@ -20,7 +20,13 @@ from typing import Final
 
 from ..wire import RemoteProtocolError
 
-__all__ = ["FAULT_HISTORY_DEPTH", "Fr700Fault", "Fr700FaultHistory", "decode_fault_history"]
+__all__ = [
+    "FAULT_HISTORY_DEPTH",
+    "Fr700Fault",
+    "Fr700FaultHistory",
+    "decode_fault_history",
+    "known_fault_codes",
+]
 
 #: Trips the drive keeps (H74..H77, two each).
 FAULT_HISTORY_DEPTH: Final = 8
@@ -121,3 +127,8 @@ def decode_fault_history(words: Sequence[int]) -> Fr700FaultHistory:
         raise RemoteProtocolError(f"a fault history is four 16-bit words, got {list(words)!r}")
     codes = [byte for word in words for byte in (word & 0xFF, word >> 8)]
     return Fr700FaultHistory(tuple(Fr700Fault.of(code) for code in codes if code))
+
+
+def known_fault_codes() -> tuple[int, ...]:
+    """The fault codes the table names, in order."""
+    return tuple(sorted(_FAULTS))

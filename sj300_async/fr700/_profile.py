@@ -13,10 +13,14 @@ Decisions:
 - Unit ids are station + 100 (station 0 exists, and unit 0 is Modbus's
   broadcast), so that an SJ300 line's and an FR-700 line's defaults never
   collide in one gateway.
-- No trip history yet, no intelligent terminals over the link, no
-  broadcast (the computer link has no broadcast station).
-- A fault is named by its code only (``fault H10``): the reference lists
-  no meanings.
+- The trip history is the fault history (H74..H77, four reads): the last
+  eight faults, newest first, named as the display shows them (``E.OC1``)
+  with their meaning from the reference's table; the drive counts no
+  trips (the trip count is unknown). A code the table does not list is
+  named by its byte (``fault HE9``). Its registers: 301 the trips
+  recorded (0..8), 302..309 each one's fault code, newest first.
+- No intelligent terminals over the link, no broadcast (the computer link
+  has no broadcast station).
 """
 
 from __future__ import annotations
@@ -39,11 +43,12 @@ from ..profiles import (
     read_time,
     words,
 )
-from ..wire import Direction, LocalProtocolError
+from ..wire import Direction
 from ._codec import MAX_STATION, MIN_STATION
 from ._codes import Fr700Instruction, Fr700NakCode, Fr700StatusBits
 from ._dialect import FR700_DIALECT, Fr700Dialect
 from ._drive import Fr700Drive
+from ._faults import FAULT_HISTORY_DEPTH, Fr700Fault, Fr700FaultHistory, known_fault_codes
 from ._parameters import FR700_PARAMETERS, PARAMETER_RAW_MAX, fr700_parameter_info
 from ._payloads import Fr700Monitor, Fr700Status
 from ._request_parser import BadRequest, HostAnswer, HostRequest, RequestParser
@@ -144,6 +149,32 @@ def _instruction(code: int) -> str:
     return name.lower().replace("_", " ")
 
 
+def _trip_fields() -> tuple[RegisterField, ...]:
+    """301 the trips recorded, 302.. each one's fault code, newest first (0: empty)."""
+    t = read_time("trips")
+
+    def recorded(snapshot: DriveSnapshot) -> int | None:
+        return None if snapshot.trips is None else len(snapshot.trips.records)
+
+    def code(index: int) -> Callable[[DriveSnapshot], int | None]:
+        def read(snapshot: DriveSnapshot) -> int | None:
+            if snapshot.trips is None:
+                return None
+            records = snapshot.trips.records
+            return records[index].number if index < len(records) else 0
+
+        return read
+
+    name = "trip {} (newest first): fault code (0: empty)"
+    return (
+        RegisterField(301, "trips recorded (0..8)", "1", recorded, t),
+        *(
+            RegisterField(302 + i, name.format(i + 1), "code", code(i), t)
+            for i in range(FAULT_HISTORY_DEPTH)
+        ),
+    )
+
+
 def _status_bits(snapshot: DriveSnapshot) -> int | None:
     extras = snapshot.extras
     status = extras.status if isinstance(extras, Fr700Extras) else None
@@ -158,7 +189,7 @@ class Fr700Profile:
     manufacturer = "Mitsubishi Electric"
     node_noun = "station"
     node_range = (MIN_STATION, MAX_STATION)
-    capabilities = Capabilities()
+    capabilities = Capabilities(trip_history=True)
     unit_offset = 100
     max_frequency_hz = 400.0
     max_frequency_parameter: str | None = "Pr.1"
@@ -175,6 +206,7 @@ class Fr700Profile:
                 RegisterField(
                     202, "status bits (H7A/H79)", "bit field", _status_bits, read_time("status")
                 ),
+                *_trip_fields(),
             ),
             parameter_bases={"Pr.": 30000},
         )
@@ -199,10 +231,13 @@ class Fr700Profile:
         )
 
     def trip(self, number: int) -> Trip:
-        return Trip(f"H{number:02X}", number, None, None)
+        fault = Fr700Fault.of(number)
+        if fault.meaning is None:  # not in the table: its byte
+            return Trip(f"H{number:02X}", number, None, None)
+        return Trip(fault.display, number, fault.display.removeprefix("E."), fault.meaning)
 
-    def trip_log(self, history: Any) -> TripLog:
-        raise LocalProtocolError("the FR-700 profile reads no trip history (yet)")
+    def trip_log(self, history: Fr700FaultHistory) -> TripLog:
+        return TripLog(None, tuple(self.trip(fault.code) for fault in history.faults))
 
     def extras(self, status: Fr700Status | None, monitor: Any, trips: Any) -> Fr700Extras:
         return Fr700Extras(status)
@@ -210,8 +245,8 @@ class Fr700Profile:
     async def read_set_frequency(self, drive: Fr700Drive) -> float:
         return float(await drive.read_set_frequency())
 
-    async def read_trips(self, drive: Fr700Drive) -> Any:
-        raise LocalProtocolError("the FR-700 profile reads no trip history (yet)")
+    async def read_trips(self, drive: Fr700Drive) -> Fr700FaultHistory:
+        return await drive.read_fault_history()
 
     async def read_latest_trip(self, drive: Fr700Drive) -> Trip | None:
         # H74's low byte is the most recent fault (00: none).
@@ -233,7 +268,7 @@ class Fr700Profile:
         ]
 
     def trip_codes(self) -> Sequence[Trip]:
-        return ()  # the fault table comes with the alarm history
+        return tuple(self.trip(code) for code in known_fault_codes())
 
     def nak_hint(self, code: int, command: str) -> str | None:
         return _HINTS.get((command, code))

@@ -59,7 +59,8 @@ def is_fresh(at: float, now: float, stale_after_s: float) -> bool:
 class Trip:
     """One trip (a fault that stopped the drive), as the drive and its manual name it."""
 
-    #: As the drive's display shows it: ``"E07"`` (SJ300), ``"H10"`` (an FR-700 fault).
+    #: As the drive's display shows it: ``"E07"`` (SJ300), ``"E.OC1"`` (FR-700;
+    #: ``"H9A"`` for a fault byte its table lacks).
     code: str
     #: The trip factor / fault code as a number.
     number: int
@@ -79,7 +80,7 @@ class Trip:
     record: object = field(default=None, compare=False)
 
     def __str__(self) -> str:
-        """``E07 over-voltage``; ``fault H10`` when the meaning is unknown."""
+        """``E07 over-voltage``; ``fault H9A`` when the meaning is unknown."""
         if self.meaning is None:
             return f"fault {self.code}"
         return f"{self.code} {self.meaning}"

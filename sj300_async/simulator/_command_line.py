@@ -74,4 +74,4 @@ class SimulateCommandLine(Protocol):
         """Its mode in a few words, for the summary line (``serial control``)."""
 
     def trip_name(self, drive: Any) -> str:
-        """A simulated drive's latest trip as the drive shows it (``E07``, ``fault H10``)."""
+        """A simulated drive's latest trip as the drive shows it (``E07``, ``E.OC1``)."""

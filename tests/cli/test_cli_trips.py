@@ -191,6 +191,30 @@ async def fr700_tcp() -> AsyncIterator[tuple[Fr700SimulatedBus, str]]:
         await server.wait_closed()
 
 
+async def test_fr700_trips_lists_the_fault_history_newest_first(
+    fr700_tcp: tuple[Fr700SimulatedBus, str],
+) -> None:
+    sim, url = fr700_tcp
+    args = ("--protocol", "fr700", "--url", url)
+    empty = await sj300("trips", "-n", "0", *args)
+    assert empty.out == "station 00: 0 trip(s) recorded\n", empty.err
+    drive = sim.drives[1]
+    assert drive.trip(0x30, now=_now())
+    drive.power_cycle(_now())  # the history survives it; the trip does not
+    assert drive.trip(0xA0, now=_now())
+    result = await sj300("trips", "-n", "1", *args)
+    assert result.code == 0, result.err
+    assert result.out.splitlines() == [
+        "station 01: 2 trip(s) recorded, newest first",
+        "#  trip   meaning",
+        "1  E.OPT  option fault",
+        "2  E.THT  inverter overload trip (electronic thermal relay)",
+    ]
+    data = (await sj300("trips", "-n", "1", "--json", *args)).json()
+    assert data["total_count"] is None  # an FR-700 counts no trips
+    assert [r["error_code"] for r in data["records"]] == ["E.OPT", "E.THT"]
+
+
 async def test_fr700_reset_waits_for_the_restart_and_names_the_fault(
     fr700_tcp: tuple[Fr700SimulatedBus, str],
 ) -> None:
@@ -199,8 +223,8 @@ async def test_fr700_reset_waits_for_the_restart_and_names_the_fault(
     args = ("--protocol", "fr700", "--url", url, "--timeout", "0.1")
     result = await sj300("reset", "-n", "1", *args)
     assert result.code == 0, result.err
-    # No FR-700 fault meanings yet: the number, as the drive reports it; a station.
-    assert result.out == "station 01: reset, fault H10 cleared\n"
+    # The fault as its display shows it, and its meaning (the reference's table); a station.
+    assert result.out == "station 01: reset, E.OC1 overcurrent trip during acceleration cleared\n"
     assert not sim.drives[1].tripped
     assert sim.stats.resets == 1
     again = await sj300("reset", "-n", "1", "--json", *args)

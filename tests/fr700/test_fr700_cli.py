@@ -85,7 +85,6 @@ def test_what_fr700_drives_lack_is_refused_before_anything_is_sent(
     capsys: pytest.CaptureFixture[str],
 ) -> None:
     for args, what in (
-        (("trips", "--protocol", "fr700", "--sim"), "a trip history"),
         (("stop", "--all", "--protocol", "fr700", "--sim"), "a broadcast stop"),
         (
             ("write", "Pr.7", "5", "--store", "--protocol", "fr700", "--sim"),

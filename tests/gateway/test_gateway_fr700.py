@@ -79,8 +79,30 @@ async def test_fr700_stations_are_units_100_up_with_their_identity_and_data() ->
             assert (await _read(client, 102, 30014, 2)).registers == [0, 50]  # Pr.7 = 5.0 s
             assert (await _read(client, 102, 30002, 2)).registers == [0, 12000]  # Pr.1 120 Hz
             assert _code(await _read(client, 102, 204)) == 0x02  # SJ300's status C: none here
-            assert _code(await _read(client, 102, 300, 2)) == 0x02  # nor its trip history
+            assert _code(await _read(client, 102, 300)) == 0x02  # nor its trip count
             assert _code(await _read(client, 102, 30016, 2)) == 0x02  # Pr.8: not polled
+
+
+async def test_fr700_fault_history_on_its_trip_registers_and_in_the_snapshot() -> None:
+    text = CONFIG.replace("interval_s = 0.05", "interval_s = 0.05\ntrips_interval_s = 0.2")
+    async with running_gateway(text) as gateway:
+        await polled(gateway)
+        drive = _simulator(gateway).drives[2]
+        assert drive.trip(0x30, now=asyncio.get_running_loop().time())  # E.THT
+        gateway_drive = drive_of(gateway, "press", 2)
+        await wait_for(
+            lambda: gateway_drive.snapshot.trip is not None, "the trip named from its history"
+        )
+        trip = gateway_drive.snapshot.trip
+        assert trip is not None
+        assert (trip.code, trip.meaning) == (
+            "E.THT",
+            "inverter overload trip (electronic thermal relay)",
+        )
+        async with modbus_client(gateway) as client:
+            # 301: trips recorded; 302..309: their fault codes, newest first (0: empty).
+            registers = (await _read(client, 102, 301, 9)).registers
+            assert registers == [1, 0x30, 0, 0, 0, 0, 0, 0, 0]
 
 
 async def test_fr700_control_with_the_lease_and_read_back() -> None:

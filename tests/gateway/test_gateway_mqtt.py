@@ -19,6 +19,7 @@ import logging
 import re
 import signal
 import sys
+import textwrap
 from collections.abc import AsyncIterator, Callable
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -52,6 +53,7 @@ from sj300_async.gateway.mqtt import (
 )
 from sj300_async.gateway.mqtt._bridge import MqttBridge
 from sj300_async.profiles import DriveSnapshot, get_profile
+from sj300_async.simulator.fr700 import Fr700SimulatedBus
 from sj300_async.sj300 import InverterStatus, MonitorData, StatusA, StatusB, StatusC
 from sj300_async.wire import Direction
 
@@ -698,14 +700,44 @@ def test_a_state_message_leaves_stale_values_null() -> None:
     assert json.loads(fresh.to_json())["output_torque_percent"] == 40
 
 
-def test_fr700_discovery_has_no_sj300_sensors() -> None:
+async def test_an_fr700_trip_is_named_from_its_fault_history(broker: Broker) -> None:
+    text = textwrap.dedent(
+        f"""
+        [gateway]
+        id = "gw1"
+        [mqtt]
+        url = "{broker.url}"
+        [[lines]]
+        name = "hall"
+        url = "sim://?nodes=2&protocol=fr700"
+        nodes = "2"
+        interval_s = 0.05
+        trips_interval_s = 0.2
+        """
+    )
+    async with subscriber(broker) as sub, running_gateway(text) as gateway:
+        await sub.until(state_of(2), "a state")
+        simulator = gateway.lines[0].bus.simulator
+        assert isinstance(simulator, Fr700SimulatedBus)
+        assert simulator.drives[2].trip(0x10, now=asyncio.get_running_loop().time())  # E.OC1
+        await wait_for(lambda: any(m.trip == "E.OC1" for m in states(sub, 2)), "trip E.OC1")
+        named = next(m for m in states(sub, 2) if m.trip == "E.OC1")
+        assert (named.state, named.tripped) == ("tripped", True)
+        assert named.trip_meaning == "overcurrent trip during acceleration"
+
+
+def test_fr700_discovery_has_its_own_sensors_and_the_trip() -> None:
     line = LineConfig("Hall-B.2", "sim://", "fr700", (0, 3), unit_offset=100)
     found = dict(discovery(MqttConfig("b", 1883, qos=0), Topics("gw1", "plant/sj300"), [line]))
 
     station = [b for t, b in found.items() if "/sj300_gw1_Hall-B_2_3/" in t]
     assert {b["name"] for b in station} == {
-        "Output frequency", "Output current", "Output voltage", "Status",
-    }  # fmt: skip
+        "Output frequency",
+        "Output current",
+        "Output voltage",
+        "Status",
+        "Trip",
+    }  # fmt: skip  (no torque or power: the FR-700's monitor read has neither)
     assert station[0]["device"]["name"] == "Hall-B.2 station 3"
     assert station[0]["default_entity_id"].startswith("sensor.sj300_gw1_hall_b_2_3_")
     assert station[0]["device"]["manufacturer"] == "Mitsubishi Electric"

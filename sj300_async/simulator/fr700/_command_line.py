@@ -9,6 +9,7 @@ from __future__ import annotations
 
 from typing import Final
 
+from ...fr700.codec import Fr700Fault
 from .._command_line import SimulateOption, SimulateSettings
 from ._bus import Fr700SimulatedBus
 from ._drive import Fr700SimulatedDrive
@@ -55,7 +56,7 @@ class _CommandLine:
         return mode + ("" if bus.wait_field else ", no waiting-time field")
 
     def trip_name(self, drive: Fr700SimulatedDrive) -> str:
-        return f"fault H{drive.fault_history[0]:02X}"
+        return Fr700Fault.of(drive.fault_history[0]).display
 
 
 #: Found by ``sj300 simulate`` next to this package's ``simulate`` (the dialect's entry).
