@@ -41,7 +41,7 @@ from .. import __version__
 from ..transports import SerialSettingsError
 from ..wire import LocalProtocolError, SJ300Error
 from ._common import GlobalOptionsOnParent, add_global_options, misplaced_option
-from ._errors import FAILURE, USAGE, CliError
+from ._errors import FAILURE, INTERRUPTED, USAGE, CliError
 
 __all__ = ["CliError", "main"]
 
@@ -156,7 +156,7 @@ def main(argv: list[str] | None = None) -> int:
     try:
         return int(run(args))
     except KeyboardInterrupt:
-        return 130
+        return INTERRUPTED
     except BrokenPipeError:
         # The reader went away (``sj300 monitor | head``): not worth a message.
         # Point stdout at /dev/null so the interpreter's final flush stays quiet.

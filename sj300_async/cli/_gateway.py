@@ -29,7 +29,7 @@ import importlib.util
 import logging
 import signal
 import sys
-from typing import Any, Final
+from typing import Any
 
 from ..bus import protocol_names
 from ..gateway import (
@@ -40,7 +40,7 @@ from ..gateway import (
     load_config,
     northbound_names,
 )
-from ._errors import USAGE, CliError
+from ._errors import EXIT_ON_SIGNAL, USAGE, CliError
 
 __all__ = ["add_parser"]
 
@@ -150,10 +150,6 @@ def run(args: argparse.Namespace) -> int:
     return asyncio.run(_serve(config, args.capture))
 
 
-#: The exit status after each stopping signal: Ctrl-C's as every command's, SIGTERM's a clean 0.
-_EXIT_ON: Final = {signal.SIGINT: 130, signal.SIGTERM: 0}
-
-
 async def _serve(config: GatewayConfig, capture: str | None) -> int:
     from ..gateway import Gateway, GatewayStartError
 
@@ -169,11 +165,11 @@ async def _serve(config: GatewayConfig, capture: str | None) -> int:
         if stop.is_set():  # a second signal: the first one's stop (and a lapse's stop) goes on
             return
         stop.set()
-        status = _EXIT_ON[sig]
+        status = EXIT_ON_SIGNAL[sig]
         if starting:  # a line's connection attempt may take seconds: give it up
             task.cancel()
 
-    for sig in _EXIT_ON:
+    for sig in EXIT_ON_SIGNAL:
         loop.add_signal_handler(sig, on_signal, sig)
     try:
         async with Gateway(config, capture=capture) as gateway:
@@ -194,6 +190,6 @@ async def _serve(config: GatewayConfig, capture: str | None) -> int:
     except OSError as exc:
         raise CliError(f"cannot serve: {exc.strerror or exc}") from None
     finally:
-        for sig in _EXIT_ON:
+        for sig in EXIT_ON_SIGNAL:
             loop.remove_signal_handler(sig)
     return status

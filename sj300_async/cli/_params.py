@@ -22,7 +22,11 @@ and the communication settings below come from the protocol's profile.
   is tried again after the others, since drives check some values against
   others (a base frequency above the maximum frequency is refused until
   the maximum is written). ``--store`` stores to EEPROM at the end if
-  everything matched. Absent codes are not written.
+  everything matched. Absent codes are not written. Ctrl-C stops it with
+  exit status 130, as every command, and one line on stderr saying how far
+  it got: ``interrupted after 112 of 330 parameters written; the drive
+  holds a mix of the file's values and its own`` (while verifying or
+  storing, what was done and what was not).
 - ``diff FILE`` compares the file with the drive code by code (the file's
   codes, absent ones included), showing values in their units: exit 0 when
   equal, 1 when different, 2 on trouble (diff(1)'s convention). Comparing
@@ -49,10 +53,13 @@ another's drive.
 from __future__ import annotations
 
 import argparse
+import asyncio
 import os
+import sys
 from collections.abc import Callable, Coroutine
+from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import Any, Literal
 
 from ..profiles import Profile
 from ..wire import NakError
@@ -162,15 +169,23 @@ async def _read_or_absent(profile: Profile, drive: Any, code: str) -> int | str:
 
 
 async def _read_all(
-    profile: Profile, drive: Any, codes: list[str], what: str
+    profile: Profile,
+    drive: Any,
+    codes: list[str],
+    what: str,
+    into: dict[str, int | str] | None = None,
 ) -> dict[str, int | str]:
-    """Each code's raw value, or the reason it is absent, with a progress bar on a terminal."""
-    values: dict[str, int | str] = {}
+    """Each code's raw value, or the reason it is absent, with a progress bar on a terminal.
+
+    Each goes into *into* (or a new dict) as it is read, so a caller sees how far it got
+    if it is interrupted; that dict is returned.
+    """
+    into = {} if into is None else into
     with progress(what, len(codes)) as advance:
         for code in codes:
-            values[code] = await _read_or_absent(profile, drive, code)
+            into[code] = await _read_or_absent(profile, drive, code)
             advance(code)
-    return values
+    return into
 
 
 def _raw_or_none(value: int | str) -> int | None:
@@ -241,8 +256,38 @@ async def _backup(args: argparse.Namespace) -> int:
 # -- restore --------------------------------------------------------------------
 
 
-async def _write_all(drive: Any, values: dict[str, int]) -> dict[str, str]:
-    """Write *values*; retry NAK'd ones while a pass makes progress. Returns code -> last error."""
+@dataclass
+class _Restored:
+    """How far a restore got: what the line on stderr says when Ctrl-C stops it."""
+
+    total: int
+    phase: Literal["writing", "verifying", "storing"] = "writing"
+    written: list[str] = field(default_factory=list)
+    verified: dict[str, int | str] = field(default_factory=dict)  # code -> raw read back
+
+    def interrupted(self) -> str:
+        """Where it stopped, and what the drive holds."""
+        if self.phase == "writing":
+            return (
+                f"interrupted after {len(self.written)} of {self.total} parameters written; "
+                "the drive holds a mix of the file's values and its own"
+            )
+        if self.phase == "verifying":
+            return (
+                f"interrupted while verifying, after {len(self.verified)} of {self.total} "
+                f"parameters read back ({len(self.written)} written): params diff checks them"
+            )
+        return (
+            f"interrupted while storing to EEPROM: the {self.total} parameters were written "
+            "and verified, whether they were stored is unknown (--store again)"
+        )
+
+
+async def _write_all(drive: Any, values: dict[str, int], restored: _Restored) -> dict[str, str]:
+    """Write *values*; retry NAK'd ones while a pass makes progress. Returns code -> last error.
+
+    Each code goes into ``restored.written`` as it is written.
+    """
     pending = list(values)
     errors: dict[str, str] = {}
     with progress("writing", len(pending)) as advance:
@@ -254,6 +299,7 @@ async def _write_all(drive: Any, values: dict[str, int]) -> dict[str, str]:
                 except NakError as exc:
                     errors[code] = str(exc)
                     continue
+                restored.written.append(code)
                 advance(code)
             if len(errors) == len(pending):  # no progress: the rest stays refused
                 break
@@ -275,17 +321,22 @@ async def _restore(args: argparse.Namespace) -> int:
     skipped = sorted([*address, *(() if args.include_comm else profile.line_parameters)])
     values = {c: raw for c, raw in snapshot.parameters.items() if c not in skipped}
     args.node = node  # for the range check
-    async with open_cli_bus(args, needs="parameter_backup") as bus:
-        drive = bus.drive(node)
-        errors = await _write_all(drive, values)
-        back = {
-            c: _raw_or_none(v)
-            for c, v in (await _read_all(profile, drive, list(values), "verifying")).items()
-        }
-        mismatches = [code for code, raw in values.items() if back[code] != raw]
-        stored = bool(args.store and not mismatches)
-        if stored:
-            await drive.store()
+    restored = _Restored(len(values))
+    try:
+        async with open_cli_bus(args, needs="parameter_backup") as bus:
+            drive = bus.drive(node)
+            errors = await _write_all(drive, values, restored)
+            restored.phase = "verifying"
+            read = await _read_all(profile, drive, list(values), "verifying", restored.verified)
+            back = {c: _raw_or_none(v) for c, v in read.items()}
+            mismatches = [code for code, raw in values.items() if back[code] != raw]
+            stored = bool(args.store and not mismatches)
+            if stored:
+                restored.phase = "storing"
+                await drive.store()
+    except (asyncio.CancelledError, KeyboardInterrupt):  # Ctrl-C: say how far, exit 130
+        print(f"sj300 {args.command_name}: {restored.interrupted()}", file=sys.stderr, flush=True)
+        raise
     skipped = [c for c in skipped if c in snapshot.parameters]
     if args.json:
         print_json(

@@ -18,6 +18,15 @@ A failing command prints the command line's one-line error and the session
 goes on. Ctrl-C at the prompt clears the line; during a command it stops
 that command (``monitor`` runs until then) and returns to the prompt.
 
+Exit status: an interactive session (stdin a terminal) ends with 0, as the
+person at it saw each error. A scripted one (stdin not a terminal:
+``sj300 shell < commands.txt``) runs every line too, then ends with 1 when
+any of them failed (a command's exit status other than 0, whatever it was,
+or a line the shell refused: an unknown command, bad quoting; ``help`` of
+an unknown command too), else 0. The error lines on stderr say which
+failed, and how; 1 says only that something did, so a script's ``set -e``
+or ``&&`` stops there.
+
 On a terminal, with :mod:`readline` (POSIX; imported here, only when it is
 used): line editing, history kept in ``$SJ300_HISTORY``, else
 ``~/.sj300_history`` (``SJ300_HISTORY=`` keeps none), and Tab completion of
@@ -51,7 +60,7 @@ from ._common import (
     open_cli_bus,
     profile_of,
 )
-from ._errors import USAGE, CliError
+from ._errors import FAILURE, USAGE, CliError
 from ._session import lending
 
 __all__ = ["add_parser"]
@@ -99,7 +108,10 @@ def add_parser(subparsers: Any) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    """Hold the bus and run commands until ``exit`` or end of input; return 0."""
+    """Hold the bus and run commands until ``exit`` or end of input; return the status.
+
+    0, or 1 when stdin is not a terminal and a line failed (the module's docstring).
+    """
     url = bus_url(args) or DEFAULT_URL
     with asyncio.Runner() as runner:
         stack = AsyncExitStack()
@@ -125,9 +137,10 @@ class _Shell:
         self._commands = _subcommands(self._parser)
         self._commands.pop("shell", None)
         self._interactive = sys.stdin.isatty()
+        self._failed = False  # a line failed: a scripted session's status is 1
 
     def loop(self) -> int:
-        """Read and run lines until ``exit`` or end of input; return 0."""
+        """Read and run lines until ``exit`` or end of input; return the session's status."""
         history = _History.open(self._completer()) if self._interactive else None
         prompt = PROMPT if self._interactive else ""
         if self._interactive:
@@ -144,12 +157,16 @@ class _Shell:
                 except EOFError:
                     if self._interactive:
                         print()
-                    return 0
+                    return self._status()
                 if not self.execute(line):
-                    return 0
+                    return self._status()
         finally:
             if history is not None:
                 history.save()
+
+    def _status(self) -> int:
+        """The session's exit status: 1 when a scripted session had a failure, else 0."""
+        return FAILURE if self._failed and not self._interactive else 0
 
     def execute(self, line: str) -> bool:
         """Run one line; False when it ends the session."""
@@ -169,8 +186,8 @@ class _Shell:
             self._error("this is the shell already")
         elif name not in self._commands and not name.startswith("-"):
             self._error(f"no command {name!r} (help lists them)")
-        else:  # a command, or global options before one
-            self._run(words)
+        elif self._run(words) != 0:  # a command, or global options before one
+            self._failed = True
         return True
 
     def _run(self, words: list[str]) -> int:
@@ -244,6 +261,8 @@ class _Shell:
         return None
 
     def _error(self, message: str) -> None:
+        """A line the shell itself refuses: one line on stderr, and the session has failed."""
+        self._failed = True
         print(f"sj300 shell: error: {message}", file=sys.stderr, flush=True)
 
     def _help(self, words: list[str]) -> None:

@@ -11,7 +11,8 @@ real port (when given port 0) or the pty path; demo trips are reported
 there too. Everything else (the summary, warnings) goes to stderr.
 
 SIGINT and SIGTERM stop it cleanly: listeners and client connections are
-closed, pending replies cancelled, exit status 0.
+closed, pending replies cancelled. The exit status is 130 after SIGINT
+(Ctrl-C, as every command) and 0 after SIGTERM (a service manager's stop).
 
 ``--protocol NAME`` serves another registered protocol's drives (FR-700:
 stations 0..31). The command knows no protocol: each protocol's simulator
@@ -50,7 +51,7 @@ from ..simulator import (
 from ..wire import LocalProtocolError
 from ._args import DEFAULT_PORT, LOOPBACK, ListenAddress, format_nodes, parse_listen
 from ._common import positive_float
-from ._errors import CliError
+from ._errors import EXIT_ON_SIGNAL, CliError
 
 if TYPE_CHECKING:  # POSIX-only (pty, termios): imported where used, so --help works without them
     from ..simulator import PtyServer, SerialDeviceServer
@@ -180,7 +181,7 @@ def add_parser(subparsers: Any) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    """Serve until SIGINT / SIGTERM; return 0."""
+    """Serve until SIGINT / SIGTERM; return 130 after SIGINT, 0 after SIGTERM."""
     if args.verbose:
         logging.basicConfig(
             level=logging.DEBUG if args.verbose > 1 else logging.INFO,
@@ -247,8 +248,14 @@ async def _serve(
     loop = asyncio.get_running_loop()
     noun = get_dialect(args.protocol).node_noun
     stop = asyncio.Event()
-    for sig in (signal.SIGINT, signal.SIGTERM):
-        loop.add_signal_handler(sig, stop.set)
+    stopped_by: list[signal.Signals] = []  # the first stopping signal sets the status
+
+    def on_signal(sig: signal.Signals) -> None:
+        stopped_by.append(sig)
+        stop.set()
+
+    for sig in EXIT_ON_SIGNAL:
+        loop.add_signal_handler(sig, on_signal, sig)
     servers: list[SimulatorServer] = []
     tap: TapServer | None = None
     ttys: list[PtyServer | SerialDeviceServer] = []
@@ -321,9 +328,9 @@ async def _serve(
             await tap.wait_closed()
         for tty in ttys:
             tty.close()
-        for sig in (signal.SIGINT, signal.SIGTERM):
+        for sig in EXIT_ON_SIGNAL:
             loop.remove_signal_handler(sig)
-    return 0
+    return EXIT_ON_SIGNAL[stopped_by[0]]
 
 
 async def _trip_periodically(

@@ -4,11 +4,15 @@ from __future__ import annotations
 
 import asyncio
 import json
+import re
+import signal
 from pathlib import Path
+
+from waiting import wait_for
 
 from sj300_async.sj300 import PARAMETERS
 
-from .clirun import TcpSim, sj300
+from .clirun import TIMEOUT, TcpSim, running, sj300
 
 
 async def test_backup_writes_the_documented_format(tcp_sim: TcpSim, tmp_path: Path) -> None:
@@ -191,3 +195,28 @@ async def test_diff_trouble_exits_2(tcp_sim: TcpSim, tmp_path: Path) -> None:
 async def test_backup_to_a_missing_directory_exits_2(tmp_path: Path) -> None:
     result = await sj300("params", "backup", str(tmp_path / "missing" / "b.json"))
     result.assert_one_line_error(2, "No such file or directory")
+
+
+async def test_ctrl_c_during_a_restore_says_how_far_it_got(tcp_sim: TcpSim, tmp_path: Path) -> None:
+    file = tmp_path / "backup.json"
+    assert (await sj300("params", "backup", str(file), "--url", tcp_sim.url)).code == 0
+    drive = tcp_sim.bus.drives[1]
+    drive.set_parameter("F002", 1250)  # among the first the restore writes
+    async with running("params", "restore", str(file), "--url", tcp_sim.url) as proc:
+        await wait_for(lambda: drive.parameters["F002"] == 3000, "F002 restored")
+        tcp_sim.bus.faults.silence(1)  # the next write waits for its answer: still writing
+        proc.send_signal(signal.SIGINT)
+        out, err = await asyncio.wait_for(proc.communicate(), TIMEOUT)
+    assert proc.returncode == 130
+    assert out == b""
+    lines = err.decode().splitlines()
+    assert len(lines) == 1, lines
+    said = re.fullmatch(
+        r"sj300 params restore: interrupted after (\d+) of (\d+) parameters written; "
+        r"the drive holds a mix of the file's values and its own",
+        lines[0],
+    )
+    assert said, lines
+    written, total = int(said[1]), int(said[2])
+    assert total == len(PARAMETERS) - 5  # the communication settings are skipped
+    assert 1 <= written < total

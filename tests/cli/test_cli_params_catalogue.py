@@ -76,7 +76,7 @@ async def simulate() -> AsyncIterator[str]:
         yield f"{match[1]}?baudrate={FAST_BAUD}"
         proc.send_signal(signal.SIGINT)
         await asyncio.wait_for(proc.communicate(), TIMEOUT)
-        assert proc.returncode == 0
+        assert proc.returncode == 130  # Ctrl-C
     finally:
         if proc.returncode is None:
             proc.kill()

@@ -309,10 +309,37 @@ def test_help_lists_the_commands_and_a_command_help(shell: Terminal) -> None:
 def test_commands_on_a_pipe_run_without_a_prompt(history: Path) -> None:
     commands = "freq 40 -n 2\nread F001 -n 2 --json\nbogus\nstatus -n 2 --json\n"
     done = _shell_on_a_pipe("shell", "--url", URL, commands=commands, history=history)
-    assert done.returncode == 0, done.stderr
+    assert done.returncode == 1, done.stderr  # bogus failed
     assert PROMPT not in done.stdout
     assert '"value": 40.0' in done.stdout
     assert done.stderr.splitlines() == ["sj300 shell: error: no command 'bogus' (help lists them)"]
+
+
+@pytest.mark.parametrize(
+    ("commands", "status"),
+    [
+        pytest.param("read F001 -n 1\nexit\n", 0, id="all-succeed"),
+        pytest.param("read F01\nread F001 -n 1\n", 1, id="usage-error"),  # 2 on its own
+        pytest.param("read F001 -n 9\nread F001 -n 1\n", 1, id="nobody-answers"),
+        pytest.param('read "F001\nread F001 -n 1\nexit\n', 1, id="refused-by-the-shell"),
+        pytest.param("help bogus\nread F001 -n 1\n", 1, id="help-of-no-command"),
+    ],
+)
+def test_a_scripted_session_exits_1_when_a_line_failed(
+    commands: str, status: int, history: Path
+) -> None:
+    done = _shell_on_a_pipe("shell", "--url", URL, commands=commands, history=history)
+    assert done.returncode == status, done.stderr
+    assert re.search(r"F001 +output frequency setting", done.stdout)  # the lines after ran
+    assert "Traceback" not in done.stderr
+    assert len(done.stderr.splitlines()) == status  # each failure is one line
+
+
+def test_an_interactive_session_exits_0_after_a_failed_command(shell: Terminal) -> None:
+    shell.line("read F01")
+    shell.expect(r"sj300 read: error: argument CODE")
+    shell.line("exit")
+    assert shell.wait() == 0
 
 
 def _shell_on_a_pipe(*args: str, commands: str, history: Path) -> subprocess.CompletedProcess[str]:
@@ -337,7 +364,7 @@ def test_global_options_of_the_shell_hold_for_its_commands(history: Path) -> Non
         "--url tcp://127.0.0.1:1 status\n"  # another bus, before the command too
     )
     done = _shell_on_a_pipe("--sim", "--json", "shell", commands=commands, history=history)
-    assert done.returncode == 0, done.stderr
+    assert done.returncode == 1, done.stderr  # the two refused
     lines = [json.loads(line) for line in done.stdout.splitlines()]
     assert [line.get("node") for line in lines] == [3, 3, 3, 3]
     assert lines[1]["parameters"][0]["value"] == 12.5

@@ -39,7 +39,7 @@ async def read_line(proc: Process) -> str:
     return (await asyncio.wait_for(proc.stdout.readline(), TIMEOUT)).decode()
 
 
-async def stop(proc: Process, sig: int = signal.SIGINT) -> tuple[int, str]:
+async def stop(proc: Process, sig: int = signal.SIGTERM) -> tuple[int, str]:
     proc.send_signal(sig)
     _out, err = await asyncio.wait_for(proc.communicate(), TIMEOUT)
     assert proc.returncode is not None
@@ -72,19 +72,19 @@ async def ask(port: int, raw: bytes, n: int) -> bytes:
         writer.close()
 
 
-async def test_simulate_over_tcp_then_sigint_exits_0(procs: list[Process]) -> None:
+async def test_simulate_over_tcp_then_sigint_exits_130(procs: list[Process]) -> None:
     proc = await start("--listen", "tcp://127.0.0.1:0", "--nodes", "1-2")
     procs.append(proc)
     port = await tcp_port(proc)
     assert port != 0  # the real bound port is printed
     assert await ask(port, bytes.fromhex("02 30 31 30 30 31 33 30 0D"), 7) == ack(b"01")
     assert await ask(port, request(b"02", b"06", b"C072"), 15) == ack_data(b"02", b"00000002")
-    code, err = await stop(proc)
-    assert code == 0
+    code, err = await stop(proc, signal.SIGINT)
+    assert code == 130  # Ctrl-C, as every command
     assert "Traceback" not in err
 
 
-async def test_sigterm_also_exits_0(procs: list[Process]) -> None:
+async def test_sigterm_exits_0(procs: list[Process]) -> None:
     proc = await start("--listen", "tcp://127.0.0.1:0")
     procs.append(proc)
     await tcp_port(proc)
