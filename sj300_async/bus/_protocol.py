@@ -190,7 +190,8 @@ class LineProtocol(BufferedReads, Generic[ReplyT]):
             data = self._remove_echo(data)
         events = self._parser.feed(data) if data else []
         if self.trace is not None:
-            self.trace(TraceRecord(now, "rx", arrived, tuple(events)))
+            self._traced(arrived, events, now, self.trace)
+            return
         listener = self._listener
         for event in events:
             # _account's test written out for the commonest event, a good frame.
@@ -199,6 +200,30 @@ class LineProtocol(BufferedReads, Generic[ReplyT]):
             elif _log.isEnabledFor(logging.DEBUG):
                 _log.debug("rx %s", event)
             listener.event_received(event, now)
+
+    def _traced(
+        self,
+        arrived: bytes,
+        events: list[ReplyT | BadFrame | Discarded],
+        now: float,
+        trace: TraceHook,
+    ) -> None:
+        """data_received's delivery with a trace: the record after the listener has
+        judged the events, so it can say which it refused as early (the arbiter's
+        early-frame count moved). Nothing the listener does writes at once (a
+        re-output request is scheduled), so this record still precedes the next tx."""
+        stats = self._stats
+        early = []
+        for event in events:
+            refused = stats.early_frames
+            if type(event) is Discarded or type(event) is BadFrame:
+                self._account(event)
+            elif _log.isEnabledFor(logging.DEBUG):
+                _log.debug("rx %s", event)
+            self._listener.event_received(event, now)
+            if stats.early_frames != refused:
+                early.append(event)
+        trace(TraceRecord(now, "rx", arrived, tuple(events), tuple(early)))
 
     def connection_lost(self, exc: Exception | None) -> None:
         self._transport = None

@@ -24,6 +24,11 @@ class TraceRecord:
     #: What the parser completed with this chunk (rx only): the protocol's
     #: replies, ``BadFrame`` and ``Discarded`` events, in order.
     events: tuple[object, ...] = ()
+    #: Those of :attr:`events` the bus refused as the answer they look like
+    #: because they came sooner than the line allows (rule 8 of
+    #: docs/RELIABILITY.md): a peer faster than its URL's baud rate. The same
+    #: objects, in order; empty on a healthy line.
+    early: tuple[object, ...] = ()
 
 
 #: A callable that receives every :class:`TraceRecord`. It must not block.

@@ -14,8 +14,13 @@ One line per record of the bus's trace hook (:class:`~sj300_async.bus.TraceRecor
 - the meaning. rx: every event the chunk completed, ``; ``-separated: a
   reply as the protocol's dialect describes it (:meth:`Dialect.describe
   <sj300_async.bus.Dialect.describe>`), a bad frame or discarded bytes
-  with the parser's reason. tx: the frame read back the way a drive reads
-  it, by what the protocol's profile provides
+  with the parser's reason. An answer the bus refused because it came
+  sooner than the URL's baud rate allows (a peer faster than the line it
+  claims: a test double, an emulator over TCP) is followed by
+  ``[refused: sooner than …; baudrate=0 in the URL turns the check off]``,
+  so the trace shows the answers the call's time-out says it refused. tx:
+  the frame read back the way a drive reads it, by what the protocol's
+  profile provides
   (:meth:`~sj300_async.profiles.Profile.request_describer`: SJ300's and
   FR-700's run their own request parser): node, command and its name,
   data. A parser, not the request object, because the hook sees bytes
@@ -41,6 +46,11 @@ from ..wire import BadFrame, Discarded, LocalProtocolError
 __all__ = ["FrameTracer", "describe_bytes", "request_describer"]
 
 _ARROWS: Final = {"tx": "→ tx", "rx": "← rx"}
+#: After an answer the bus refused as too early (TraceRecord.early): why, and the fix,
+#: as the call's ReplyTimeoutError says it.
+EARLY_MARK: Final = (
+    "[refused: sooner than the URL's baud rate allows; baudrate=0 in the URL turns the check off]"
+)
 
 
 class FrameTracer:
@@ -70,12 +80,18 @@ class FrameTracer:
             if record.direction == "tx":
                 meaning = self._describe_request(record.data)
             else:
-                meaning = "; ".join(self._event(e) for e in record.events) or "…"
+                meaning = "; ".join(self._rx_event(e, record.early) for e in record.events)
+                meaning = meaning or "…"
         except Exception as exc:  # a hook must not raise into the protocol
             meaning = f"(not decoded: {type(exc).__name__}: {exc})"
         elapsed = record.timestamp - self._origin
         arrow = _ARROWS.get(record.direction, record.direction)
         return f"{elapsed:8.3f} {arrow}  {record.data.hex(' ').upper()}  {meaning}"
+
+    def _rx_event(self, event: object, early: tuple[object, ...]) -> str:
+        if any(event is e for e in early):
+            return f"{self._event(event)} {EARLY_MARK}"
+        return self._event(event)
 
     def _event(self, event: object) -> str:
         if isinstance(event, BadFrame):

@@ -16,6 +16,7 @@ from collections.abc import AsyncIterator
 import pytest
 
 import sj300_async as sj
+from sj300_async.bus import TraceRecord
 from sj300_async.simulator import serve_tcp
 from sj300_async.simulator.sj300 import SimulatedBus
 from sj300_async.wire import INSTANT_LINE
@@ -74,3 +75,26 @@ async def test_a_silent_node_says_nothing_of_early_answers(instant_peer: str) ->
             await bus.drive(2).read_status()
     assert "early" not in str(caught.value)
     assert str(caught.value).startswith("node 02 did not answer command 04: 1 attempt")
+
+
+async def test_the_trace_record_names_the_answers_refused_as_early(instant_peer: str) -> None:
+    records: list[TraceRecord] = []
+    url = f"{instant_peer}?baudrate={SLOW}"
+    async with sj.open_bus(url, timing=TIMING, retries=0, trace=records.append) as bus:
+        with pytest.raises(sj.ReplyTimeoutError):
+            await bus.drive(1).read_status()
+    received = [r for r in records if r.direction == "rx" and r.events]
+    assert received, records
+    reply = received[0]
+    assert reply.early == reply.events  # the status answer: refused
+    assert all(e is f for e, f in zip(reply.early, reply.events, strict=True))  # the same objects
+
+
+async def test_a_timely_answer_is_not_marked_early(instant_peer: str) -> None:
+    records: list[TraceRecord] = []
+    url = f"{instant_peer}?baudrate=0"
+    async with sj.open_bus(url, timing=TIMING, retries=0, trace=records.append) as bus:
+        await bus.drive(1).read_status()
+    received = [r for r in records if r.direction == "rx" and r.events]
+    assert len(received) == 1, records
+    assert received[0].early == ()

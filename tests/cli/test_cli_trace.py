@@ -45,6 +45,7 @@ async def test_a_status_read_traces_both_requests_and_replies(tcp_sim: TcpSim) -
     completed = [m["meaning"] for m in rx if m["meaning"] != "…"]
     assert len(completed) == 3
     assert [m.split(" data ")[0] for m in completed] == ["node 02"] * 2 + ["node 02 ACK +"]
+    assert not any("refused" in m for m in completed)  # a healthy line: nothing marked early
 
 
 async def test_a_nak_and_options_before_the_command(tcp_sim: TcpSim) -> None:

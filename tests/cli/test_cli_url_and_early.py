@@ -4,7 +4,7 @@
   error names the errno once and suggests ``tcp://``.
 - A peer that answers sooner than the line allows (here the simulator over
   TCP answering at once, on a URL at the default 19200 baud): the time-out
-  says the answers came and were refused as early, with ``--trace`` too,
+  says the answers came and were refused as early, ``--trace`` marks them,
   and ``baudrate=0`` in the URL makes the same peer work.
 """
 
@@ -14,6 +14,7 @@ from collections.abc import AsyncIterator
 
 import pytest
 
+from sj300_async.cli._trace import EARLY_MARK
 from sj300_async.simulator import serve_tcp
 from sj300_async.simulator.sj300 import SimulatedBus
 from sj300_async.wire import INSTANT_LINE
@@ -71,6 +72,8 @@ async def test_trace_shows_the_answer_and_the_refusal(instant_peer: str) -> None
     assert "command 04 read status" in lines[0], lines
     assert "← rx" in lines[1], lines
     assert "node 01 data" in lines[1], lines  # it did answer
+    assert lines[1].endswith(f"node 01 data 02000100 {EARLY_MARK}"), lines  # and was refused
+    assert "baudrate=0" in EARLY_MARK
     assert lines[-1].startswith("sj300 status: error: node 01 did not answer"), lines
     assert "was refused as early" in lines[-1]
     assert "baudrate=0" in lines[-1]
