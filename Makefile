@@ -7,6 +7,9 @@ BIN := $(VENV)/bin
 DEV_STAMP := $(VENV)/.installed-dev
 # The package alone, without extras: what the demo runs on.
 RUN_STAMP := $(VENV)/.installed-run
+# The package with the gateway extra (aiomqtt, prometheus-client): `sj300 gateway` from a
+# checkout, whose package `pip install 'sj300-async[gateway]'` would not install.
+GATEWAY_STAMP := $(VENV)/.installed-gateway
 
 # Debian packages the tests need, as package:command (the command tells whether it is
 # installed): socat + ser2net for the serial-device-server bridge test, mbpoll as an
@@ -16,7 +19,7 @@ RUN_STAMP := $(VENV)/.installed-run
 SYSTEM_PACKAGES := socat:socat ser2net:ser2net mbpoll:mbpoll mosquitto:mosquitto \
 	mosquitto-clients:mosquitto_sub tshark:tshark
 
-.PHONY: demo examples test lint typecheck lint-imports docs system-packages pytest bench \
+.PHONY: demo gateway examples test lint typecheck lint-imports docs system-packages pytest bench \
 	bench-compare soak clean venv
 
 # No pip self-upgrade: the venv's pip installs the package (editable, PEP 660) as it
@@ -32,7 +35,14 @@ $(RUN_STAMP): pyproject.toml | $(BIN)/python
 	$(BIN)/python -m pip install --quiet -e .
 	touch $@
 
+$(GATEWAY_STAMP): pyproject.toml | $(BIN)/python
+	$(BIN)/python -m pip install --quiet -e '.[gateway]'
+	touch $@
+
 venv: $(DEV_STAMP)
+
+gateway: $(GATEWAY_STAMP)
+	@echo "the gateway's libraries are in $(VENV): $(BIN)/sj300 gateway --help (docs/GATEWAY.md)"
 
 demo: $(RUN_STAMP)
 	$(BIN)/sj300 monitor

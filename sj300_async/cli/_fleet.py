@@ -47,7 +47,8 @@ Decisions:
 - Broker unreachable at the start: one line, exit 1, as an unreachable
   bus; lost later: the caption says so, and without the table a note on
   stderr does. Without aiomqtt (the ``gateway`` extra) the view is one line
-  naming ``pip install 'sj300-async[gateway]'``, exit 2.
+  naming the command that installs it (``pip install 'sj300-async[gateway]'``;
+  ``make gateway`` in a checkout), exit 2.
 """
 
 from __future__ import annotations
@@ -71,6 +72,7 @@ from ..gateway.mqtt import (
 )
 from ._errors import FAILURE, USAGE, CliError
 from ._fit import FitColumn, fit
+from ._install import gateway_install_command
 from ._output import Justify, is_terminal, jsonable, print_json
 
 __all__ = ["fleet_table", "plain_line", "state_json", "state_text", "watch_fleet"]
@@ -307,7 +309,7 @@ def _need_aiomqtt() -> None:
     if importlib.util.find_spec("aiomqtt") is None:
         raise CliError(
             "the fleet view needs the gateway extra (aiomqtt is missing): "
-            "pip install 'sj300-async[gateway]'",
+            + gateway_install_command(),
             status=USAGE,
         )
 

@@ -41,6 +41,7 @@ from ..gateway import (
     northbound_names,
 )
 from ._errors import EXIT_ON_SIGNAL, USAGE, CliError
+from ._install import gateway_install_command
 
 __all__ = ["add_parser"]
 
@@ -128,13 +129,14 @@ def _config(args: argparse.Namespace) -> GatewayConfig:
 
 
 def _check_requirements(config: GatewayConfig) -> None:
-    """Exit 2 naming the extra when a configured northbound's library is missing."""
+    """Exit 2 naming the extra, and the command that installs it here, when a configured
+    northbound's library is missing (:mod:`._install`: a checkout's differs)."""
     for section in config.northbounds:
         for module in get_northbound(section).requires:
             if importlib.util.find_spec(module) is None:
                 raise CliError(
                     f"the gateway's {section} needs the gateway extra ({module} is missing): "
-                    "pip install 'sj300-async[gateway]'"
+                    + gateway_install_command()
                 )
 
 

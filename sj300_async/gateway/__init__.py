@@ -8,7 +8,8 @@ the configured northbounds. The built-in northbounds are packages of their
 own behind :class:`Northbound`: :mod:`.modbus` (Modbus TCP for SCADA),
 :mod:`.mqtt` (state, Home Assistant discovery, commands; and the fleet
 view's subscriber), :mod:`.http` (Prometheus metrics and a health check).
-Needs the ``gateway`` extra (``pip install 'sj300-async[gateway]'``). The
+Needs the ``gateway`` extra (``pip install 'sj300-async[gateway]'``; from
+a checkout, ``make gateway`` installs it into ``.venv``). The
 user's view is docs/GATEWAY.md; docs/ARCHITECTURE.md shows how to add a
 northbound.
 """

@@ -13,6 +13,7 @@ import contextlib
 import json
 import re
 import signal
+import sys
 import textwrap
 from collections.abc import AsyncIterator
 from contextlib import AbstractAsyncContextManager
@@ -23,6 +24,7 @@ from cli.clirun import TIMEOUT, Result, running, sj300
 from pymodbus.client import AsyncModbusTcpClient
 
 from sj300_async import sj300 as sj3
+from sj300_async.cli._install import gateway_install_command
 from sj300_async.simulator import RunState
 
 from .conftest import SimLine
@@ -260,3 +262,29 @@ async def test_config_and_line_flags_together_are_refused(
 async def test_no_arguments_is_a_usage_error() -> None:
     result = await sj300("gateway")
     result.assert_one_line_error(2, "sj300 gateway: error: give --config FILE, or --url URL")
+
+
+@pytest.mark.parametrize(
+    ("module", "flag"),
+    [
+        ("aiomqtt", ["--mqtt", "mqtt://127.0.0.1:1"]),
+        ("prometheus_client", ["--metrics", "127.0.0.1:0"]),
+    ],
+)
+async def test_a_missing_library_names_the_extra_and_how_to_install_it(
+    module: str, flag: list[str]
+) -> None:
+    args = ["gateway", "--url", "sim://?nodes=1", "--nodes", "1", *flag]
+    code = (
+        f"import sys; sys.modules[{module!r}] = None; from sj300_async.cli import main; "
+        f"sys.exit(main({args!r}))"
+    )
+    proc = await asyncio.create_subprocess_exec(
+        sys.executable, "-c", code, stdout=asyncio.subprocess.PIPE, stderr=asyncio.subprocess.PIPE
+    )
+    out, err = await asyncio.wait_for(proc.communicate(), TIMEOUT)
+    assert proc.returncode is not None
+    result = Result(proc.returncode, out.decode(), err.decode())
+    result.assert_one_line_error(2, f"needs the gateway extra ({module} is missing): ")
+    # In this checkout's .venv: make gateway (tests/cli/test_cli_install.py: each form).
+    assert result.err.endswith(f": {gateway_install_command()}\n"), result.err
