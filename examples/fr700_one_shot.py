@@ -38,7 +38,13 @@ async def main(url: str) -> None:
         except sj.NakError as exc:  # exc.code is an Fr700NakCode
             kind = "data range" if exc.code == Fr700NakCode.DATA_RANGE else "other"
             print(f"refused by the drive ({kind}): {exc}")
-        print(f"bus statistics: {bus.stats.transactions.snapshot()}")
+        stats = bus.stats.transactions.snapshot()
+        mean = "-" if stats.latency_mean_s is None else f"{stats.latency_mean_s * 1000:.1f} ms"
+        print(
+            f"bus statistics: requests {stats.requests}, replies {stats.replies}, "
+            f"time-outs {stats.timeouts}, retries {stats.retries}, "
+            f"NAKs {sum(stats.naks.values())}, mean round trip {mean}"
+        )
 
 
 if __name__ == "__main__":

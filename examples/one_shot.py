@@ -35,7 +35,13 @@ async def main(url: str) -> None:
             await bus.drive(1).read_parameter_raw("Z999")
         except sj.LocalProtocolError as exc:
             print(f"refused before sending: {exc}")
-        print(f"bus statistics: {bus.stats.transactions.snapshot()}")
+        stats = bus.stats.transactions.snapshot()
+        mean = "-" if stats.latency_mean_s is None else f"{stats.latency_mean_s * 1000:.1f} ms"
+        print(
+            f"bus statistics: requests {stats.requests}, replies {stats.replies}, "
+            f"time-outs {stats.timeouts}, retries {stats.retries}, "
+            f"NAKs {sum(stats.naks.values())}, mean round trip {mean}"
+        )
 
 
 if __name__ == "__main__":

@@ -20,6 +20,11 @@ import pytest
 from sj300_async.wire import Direction
 
 EXAMPLES = Path(__file__).resolve().parent.parent / "examples"
+#: The one-shot examples' last line, in words (not a dataclass's repr), with N NAKs.
+STATS = (
+    r"(?m)^bus statistics: requests \d+, replies \d+, time-outs 0, retries 0, "
+    r"NAKs %d, mean round trip \d+\.\d ms$"
+)
 
 
 def _run(*args: str, timeout: float = 60) -> str:
@@ -75,12 +80,14 @@ def test_one_shot() -> None:
     out = _run(str(EXAMPLES / "one_shot.py"), "sim://?nodes=1-2")
     assert re.search(r"node 1: RUNNING, \d+\.\d\d Hz", out)
     assert "refused before sending" in out
+    assert re.search(STATS % 0, out), out
 
 
 def test_fr700_one_shot() -> None:
     out = _run(str(EXAMPLES / "fr700_one_shot.py"))
     assert re.search(r"station 0: running, \d+\.\d\d Hz", out)
     assert "refused by the drive (data range)" in out
+    assert re.search(STATS % 1, out), out  # the refusal above
 
 
 def test_polling_loop() -> None:
