@@ -18,9 +18,12 @@ parameter. Either way they go through the link-parameter extension: the bank is 
 with HFF, then the parameter is read or written at its offset. The two
 transactions hold a per-drive lock, so another task cannot switch the bank
 in between; the bank last written is remembered and not written again
-while it holds. It is forgotten (written again next time) after any error
-in such a pair and after an inverter reset, which returns the drive's bank
-to 0. Selecting a bank only prepares a read, so a read-only bus allows it.
+while it holds. A refusal (NAK) keeps it: the drive answered, and only a
+bank write changes its bank, so walking every number of a bank (most of
+which a drive lacks: NAK B) writes the bank once. It is forgotten (written
+again next time) after any other error in such a pair (a time-out may hide
+a restart, which returns the bank to 0) and after an inverter reset, which
+does. Selecting a bank only prepares a read, so a read-only bus allows it.
 """
 
 from __future__ import annotations
@@ -30,7 +33,7 @@ from collections.abc import Coroutine
 from typing import TYPE_CHECKING, Any
 
 from ..bus import TransactionStats
-from ..wire import Direction, LocalProtocolError
+from ..wire import Direction, LocalProtocolError, NakError
 from . import _requests as rq
 from ._codec import DEFAULT_LINE_OPTIONS, Fr700LineOptions
 from ._codes import Fr700Instruction, Fr700OperationMode, Fr700StatusBits
@@ -378,6 +381,8 @@ class Fr700Drive:
             try:
                 request = rq.read_parameter(self._station, number, options=self._options)
                 return decode_hex(await self._data(request))
+            except NakError:
+                raise  # the drive answered: its bank holds
             except BaseException:
                 self._bank = None
                 raise
@@ -401,6 +406,8 @@ class Fr700Drive:
             await self._select_bank(bank)
             try:
                 await self._execute(request)
+            except NakError:
+                raise  # the drive answered: its bank holds
             except BaseException:
                 self._bank = None
                 raise

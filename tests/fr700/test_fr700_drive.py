@@ -187,6 +187,30 @@ async def test_the_bank_is_written_only_when_it_changes() -> None:
         assert codes == [b"FF", b"07", b"08", b"FF", b"11", b"12"]
 
 
+async def test_a_refusal_keeps_the_bank_and_another_error_forgets_it() -> None:
+    async with fr700_bus(timeout=0.05, retries=0) as bus:
+        drive = bus.drive(1)
+        sim = bus.simulator
+        assert isinstance(sim, Fr700SimulatedBus)
+        sent: list[bytes] = []
+        bus.trace = lambda record: sent.append(record.data) if record.direction == "tx" else None
+        for number in (23, 24, 25):  # none of them on the simulated drive: NAK B each
+            with pytest.raises(sj.NakError):
+                await drive.read_parameter_raw(number)
+        with pytest.raises(sj.NakError):
+            await drive.write_parameter_raw(7, 40000)  # NAK C
+        assert await drive.read_parameter_raw(7) == 50
+        assert [frame[3:5] for frame in sent] == [b"FF", b"17", b"18", b"19", b"87", b"07"]
+        sent.clear()
+        sim.faults.drop_next(1)  # a time-out may hide a restart: the bank is unknown
+        with pytest.raises(sj.ReplyTimeoutError):
+            await drive.read_parameter_raw(8)
+        assert await drive.read_parameter_raw(8) == 50
+        codes = [frame[3:5] for frame in sent]
+        assert codes[0] == b"08"
+        assert codes[-2:] == [b"FF", b"08"]  # written again
+
+
 async def test_concurrent_parameter_reads_never_mix_banks() -> None:
     async with fr700_bus() as bus:
         drive = bus.drive(2)
