@@ -6,7 +6,10 @@ and, for run and frequency commands, when the writing client holds the
 drive's lease. A stop needs no lease: any client the configuration lets
 control the drive may stop it, even while another holds the lease (stop is
 the safe direction). Values are validated by the drive classes before
-anything reaches the wire. Every write goes through the same
+anything reaches the wire; a set frequency outside 0..the drive's maximum
+is refused before the lease is looked at (no client may send it), naming
+the maximum and where it comes from (the drive's own, A004 / Pr.1 when
+polled, else its protocol's highest). Every write goes through the same
 :class:`~sj300_async.Bus` as the polls, so the arbiter never interleaves it
 with them, and is confirmed by a read-back whose value also goes into the
 drive's readings (and so into its next snapshot, built at once). Every
@@ -265,6 +268,10 @@ class Controller:
             return WriteResult(
                 Refusal.NOT_ALLOWED, "the configuration does not allow control of this drive"
             )
+        if isinstance(request, SetFrequency):  # before the lease: nobody may send it
+            refused = self._frequency_refusal(drive, request.hz)
+            if refused is not None:
+                return refused
         if isinstance(request, RunCommand) and request.direction == Direction.STOP:
             return None  # the safe direction: no lease needed (module docstring)
         lease = drive.lease
@@ -280,23 +287,38 @@ class Controller:
             return None
         if not lease.held_by(client, now):
             return WriteResult(Refusal.NO_LEASE, "take the control lease first")
-        if isinstance(request, SetFrequency):
-            highest = self._max_hz(drive)
-            if not 0 <= request.hz <= highest:
-                return WriteResult(
-                    Refusal.INVALID_VALUE,
-                    f"{request.hz:g} Hz is outside 0..{highest:g} Hz (the drive's maximum)",
-                )
         return None
 
-    def _max_hz(self, drive: GatewayDrive) -> float:
-        """The drive's maximum frequency: its own setting when polled, else its protocol's."""
+    def _frequency_refusal(self, drive: GatewayDrive, hz: float) -> WriteResult | None:
+        """A set frequency above the drive's maximum (or below 0), refused with both named."""
+        highest, source = self._max_hz(drive)
+        if 0 <= hz <= highest:
+            return None
+        return WriteResult(
+            Refusal.INVALID_VALUE, f"{hz:g} Hz is outside 0..{highest:g} Hz ({source})"
+        )
+
+    def _max_hz(self, drive: GatewayDrive) -> tuple[float, str]:
+        """The drive's maximum frequency, and where it comes from: its own setting when
+        polled (``the drive's maximum frequency, A004``), else its protocol's highest."""
         profile = drive.profile
+        highest = f"the highest for {profile.model} drives"
         code = profile.max_frequency_parameter
-        raw = None if code is None else drive.readings.parameters.get(code)
-        if code is None or raw is None:
-            return profile.max_frequency_hz
-        return min(profile.max_frequency_hz, float(profile.parameters.spec(code).from_raw(raw)))
+        if code is None:
+            return profile.max_frequency_hz, highest
+        raw = drive.readings.parameters.get(code)
+        if raw is None:
+            if code not in self.config.parameters:
+                why = "is not polled"
+            elif code in drive.readings.unavailable:
+                why = "is unavailable"
+            else:
+                why = "has not been read yet"
+            return profile.max_frequency_hz, f"{highest}; this drive's own maximum, {code}, {why}"
+        own = float(profile.parameters.spec(code).from_raw(raw))
+        if own >= profile.max_frequency_hz:
+            return profile.max_frequency_hz, highest
+        return own, f"the drive's maximum frequency, {code}"
 
     def _describe(self, drive: GatewayDrive, request: WriteRequest) -> tuple[str, object, object]:
         if isinstance(request, Heartbeat):

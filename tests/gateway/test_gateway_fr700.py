@@ -9,6 +9,7 @@ needs the lease and is confirmed by a read-back of the drive's own set frequency
 from __future__ import annotations
 
 import asyncio
+import logging
 import textwrap
 
 import pytest
@@ -105,7 +106,10 @@ async def test_fr700_fault_history_on_its_trip_registers_and_in_the_snapshot() -
             assert registers == [1, 0x30, 0, 0, 0, 0, 0, 0, 0]
 
 
-async def test_fr700_control_with_the_lease_and_read_back() -> None:
+async def test_fr700_control_with_the_lease_and_read_back(
+    caplog: pytest.LogCaptureFixture,
+) -> None:
+    caplog.set_level(logging.INFO, logger="sj300_async.gateway.audit")
     async with running_gateway(CONFIG) as gateway:
         await polled(gateway)
         sim = _simulator(gateway)
@@ -121,6 +125,10 @@ async def test_fr700_control_with_the_lease_and_read_back() -> None:
             await _ok(client, 101, 1000, 1)  # the lease
             assert (await _read(client, 101, 1000, 2)).registers[0] == 1
             assert _code(await client.write_register(1003, 12001, device_id=101)) == 0x03  # > Pr.1
+            audit = [r.getMessage() for r in caplog.records if r.name.endswith(".audit")]
+            assert audit[-1].endswith(
+                "120.01 Hz is outside 0..120 Hz (the drive's maximum frequency, Pr.1)"
+            ), audit
             await _ok(client, 101, 1003, 3000)  # 30.00 Hz, read back from the drive (H6D)
             assert drive.set_frequency_hz == 30.0
             assert (await _read(client, 101, 1003)).registers == [3000]

@@ -469,6 +469,8 @@ async def test_commands_reach_the_drive_and_refusals_are_answered(
         running_gateway(mqtt_toml(sim_line.url, broker)) as gateway,
     ):
         await wait_for(lambda: bridge(gateway).connected, "connected")
+        own_max = gateway.drives[0].readings.parameters
+        await wait_for(lambda: "A004" in own_max, "the drive's maximum frequency (A004) read")
 
         async def refused(node: int, what: str, payload: str, error: str) -> None:
             count = len(errors(sub, node))
@@ -485,6 +487,13 @@ async def test_commands_reach_the_drive_and_refusals_are_answered(
             "frequency_hz",
             "25.5",
             "no_lease: take the control lease first (publish to …/set/lease)",
+        )
+        # A value no client may send is refused as such, lease or not, naming the maximum.
+        await refused(
+            1,
+            "frequency_hz",
+            "9999",
+            "invalid_value: 9999 Hz is outside 0..50 Hz (the drive's maximum frequency, A004)",
         )
         await publish(broker, topics.command("hall", 1, "lease"), "")
         await publish(broker, topics.command("hall", 1, "frequency_hz"), "25.5")
@@ -505,7 +514,7 @@ async def test_commands_reach_the_drive_and_refusals_are_answered(
             1,
             "frequency_hz",
             "500",
-            "invalid_value: 500 Hz is outside 0..55 Hz (the drive's maximum)",
+            "invalid_value: 500 Hz is outside 0..55 Hz (the drive's maximum frequency, A004)",
         )
         await refused(1, "command", "jog", "malformed: expected run_forward, run_reverse")
         # An untrusted payload comes back as a short escaped excerpt, never whole.
@@ -537,6 +546,37 @@ async def test_commands_reach_the_drive_and_refusals_are_answered(
     assert any("client mqtt line hall node 1" in a and "frequency_hz" in a and "fast" in a
                and "refused: malformed: " in a for a in audit)  # fmt: skip
     assert sim_line.log.interleaved() == []
+
+
+async def test_a_frequency_above_the_protocol_s_highest_names_it_through_both_doors(
+    sim_line: SimLine, broker: Broker, caplog: pytest.LogCaptureFixture
+) -> None:
+    """A004 not polled: the protocol's highest, and how to get the drive's own; the same
+    sentence for MQTT's error reply and for a Modbus write's audit record (its 0x03 has none)."""
+    caplog.set_level(logging.INFO, logger="sj300_async.gateway.audit")
+    topics = Topics("gw1")
+    control = '\n[[lines.writes]]\nnodes = "1"\ncontrol = true\n'
+    text = mqtt_toml(sim_line.url, broker).split("[[lines.writes]]")[0] + control
+    text = text.replace('["F001", "A004", "F002"]', '["F001", "F002"]')
+    why = "the highest for SJ300 drives; this drive's own maximum, A004, is not polled"
+    async with (
+        subscriber(broker, topics.error("hall", 1)) as sub,
+        running_gateway(text) as gateway,
+    ):
+        await wait_for(lambda: bridge(gateway).connected, "connected")
+        await publish(broker, topics.command("hall", 1, "frequency_hz"), "9999")
+        await sub.until(lambda m: m.topic == topics.error("hall", 1), "the refusal")
+        reply = errors(sub, 1)[0]
+        assert reply["error"] == f"invalid_value: 9999 Hz is outside 0..400 Hz ({why})"
+        assert reply["reason"] == "invalid_value"
+        async with modbus_client(gateway) as scada:  # 655.35 Hz: the register's highest
+            assert (await scada.write_register(1003, 65535, device_id=1)).exception_code == 3
+    audit = [r.getMessage() for r in caplog.records if r.name == "sj300_async.gateway.audit"]
+    assert audit[-1].startswith("client 127.0.0.1 line hall node 1 (unit 1): set frequency")
+    assert audit[-1].endswith(
+        f" -> 655.35: refused: invalid_value: 655.35 Hz is outside 0..400 Hz ({why})"
+    ), audit
+    assert sim_line.sim.drives[1].parameters["F001"] == 0  # nothing reached the drive
 
 
 async def _publish_file(broker: Broker, topic: str, payload: bytes, directory: Path) -> None:
@@ -764,6 +804,14 @@ def test_fr700_discovery_has_its_own_sensors_and_the_trip() -> None:
 def test_command_payloads(what: str, payload: bytes, request_or_refusal: object) -> None:
     result = parse_command(get_profile("sj300"), what, payload)
     assert (result.refusal if isinstance(result, WriteResult) else result) == request_or_refusal
+
+
+def test_a_parameter_value_past_any_integer_names_the_range() -> None:
+    """What the catalogue cannot even count is refused here; the rest by the drive's codec
+    (the gateway's audit: 'A004 (maximum frequency) must be within 30..400 Hz, got 9999.0')."""
+    result = parse_command(get_profile("sj300"), "A004", b"1e308")
+    assert isinstance(result, WriteResult)
+    assert str(result) == "invalid_value: 1e308 is outside A004's range, 30..400 Hz"
 
 
 async def test_the_bridge_counters_are_in_the_metrics(sim_line: SimLine, broker: Broker) -> None:

@@ -110,7 +110,11 @@ def parse_command(profile: Profile, what: str, payload: bytes) -> WriteRequest |
     try:
         raw = raw_value(spec, value)
     except (OverflowError, ValueError):
-        return WriteResult(Refusal.INVALID_VALUE, f"{excerpt(text)} is outside {code}'s range")
+        unit = f" {spec.unit}" if spec.unit else ""
+        return WriteResult(
+            Refusal.INVALID_VALUE,
+            f"{excerpt(text)} is outside {code}'s range, {spec.minimum:g}..{spec.maximum:g}{unit}",
+        )
     # raw_value rounds what its step cannot hold (Modbus cannot send it anyway);
     # a number on MQTT can be finer, and is refused rather than rounded.
     if abs(spec.from_raw(raw) - value) > 1e-9 * max(1.0, abs(value)):
