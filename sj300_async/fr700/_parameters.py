@@ -216,6 +216,7 @@ FR700_PARAMETERS: Final[Mapping[int, Fr700ParameterInfo]] = MappingProxyType(
             _p(20, "acceleration/deceleration reference frequency", "Hz", 2, 1.0, 400.0),
             _p(41, "up-to-frequency sensitivity", "%", 1, 0.0, 100.0),
             _p(42, "output frequency detection", "Hz", 2, 0.0, 400.0),
+            _p(77, "parameter write selection", "", 0, 0, 2),
             _p(79, "operation mode selection", "", 0, 0, 7),
             _p(117, "PU communication station number", "", 0, 0, 31),
             _p(118, "PU communication speed (x 100 bps)", "", 0, 48, 1152),

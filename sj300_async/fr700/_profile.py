@@ -21,6 +21,32 @@ Decisions:
   recorded (0..8), 302..309 each one's fault code, newest first.
 - No intelligent terminals over the link, no broadcast (the computer link
   has no broadcast station).
+- A parameter backup (``sj300 params``) walks every number the link can
+  address, Pr.0..Pr.999 (:meth:`_Catalogue.addressable`: banks 0..9 of the
+  link-parameter extension, 100 offsets each), not the catalogue, which
+  names only the parameters the library models: a drive has several
+  hundred, and a model or firmware lacks some numbers. A number the drive
+  refuses with NAK B (no such instruction code: the offset addresses
+  nothing in that bank) is absent; any other refusal of a read is an
+  error. An uncatalogued parameter is kept as its raw integer.
+- What a restore leaves alone: the station number Pr.117 (the address) and,
+  unless asked, the line settings of both ports, the PU connector's
+  Pr.118..Pr.124 and the RS-485 terminals' Pr.332..Pr.337 and Pr.341, and
+  the protocol selection Pr.549 (Modbus RTU would end the computer link):
+  a new value cuts the drive off the line the tool talks on. Never: the
+  RS-485 terminals' station number Pr.331 (another address of the drive),
+  the communication error count Pr.343 (read-only), and the calibration
+  parameters Pr.900..Pr.999 (the C-codes of the operation panel: meter and
+  analog-input calibration). A calibration is the drive's own hardware
+  measured, so another drive's would spoil it; and each bias/gain
+  parameter is two values behind the second-parameter switch (H6C/HEC), of
+  which a backup reads the one the switch selects (H00, the frequency,
+  unless a program changed it). A backup records them, so ``params diff``
+  shows a changed one.
+- Pr.77 (parameter write selection) is written last: 1 refuses every
+  parameter write but its own (NAK A), so a file taken from a write-locked
+  drive must set it after the others; a drive locked now refuses the
+  writes before it, which the restore tries again once Pr.77 is written.
 """
 
 from __future__ import annotations
@@ -52,6 +78,7 @@ from ._faults import FAULT_HISTORY_DEPTH, Fr700Fault, Fr700FaultHistory, known_f
 from ._parameters import FR700_PARAMETERS, PARAMETER_RAW_MAX, fr700_parameter_info
 from ._payloads import Fr700Monitor, Fr700Status
 from ._request_parser import BadRequest, HostAnswer, HostRequest, RequestParser
+from ._requests import MAX_PARAMETER
 
 __all__ = ["FR700_PROFILE", "Fr700Extras", "Fr700Profile", "fr700_state"]
 
@@ -90,10 +117,18 @@ class _Catalogue:
     def codes(self) -> Sequence[str]:
         return tuple(f"Pr.{number}" for number in sorted(FR700_PARAMETERS))
 
+    def addressable(self) -> Sequence[str]:
+        return _ADDRESSABLE
+
     @property
     def raw_range(self) -> tuple[int, int]:
         return 0, PARAMETER_RAW_MAX
 
+
+#: Every parameter number the link-parameter extension reaches, in order.
+_ADDRESSABLE: Final = tuple(f"Pr.{number}" for number in range(MAX_PARAMETER + 1))
+#: The calibration parameters (C-codes): the 900s.
+_CALIBRATION: Final = tuple(f"Pr.{number}" for number in range(900, MAX_PARAMETER + 1))
 
 _MODE_HINT: Final = (
     "the drive must be in network (computer link) operation mode (Pr.79, or HFB H0000), "
@@ -104,6 +139,7 @@ _HINTS: Final[dict[tuple[str, int], str]] = {
     ("run", Fr700NakCode.MODE): _MODE_HINT,
     ("frequency", Fr700NakCode.MODE): _MODE_HINT,
     ("frequency", Fr700NakCode.DATA_RANGE): "above the maximum frequency Pr.1?",
+    ("restore", Fr700NakCode.MODE): _MODE_HINT + "; Pr.77 = 1 refuses every write but Pr.77",
 }
 
 
@@ -196,7 +232,14 @@ class Fr700Profile:
     setpoint_parameter: str | None = None
     ramp_parameters = ("Pr.7", "Pr.8")
     address_parameter: str | None = "Pr.117"
-    line_parameters = ("Pr.118", "Pr.119", "Pr.120", "Pr.121", "Pr.122", "Pr.123", "Pr.124")
+    line_parameters = (
+        *(f"Pr.{number}" for number in range(118, 125)),  # the PU connector
+        *(f"Pr.{number}" for number in range(332, 338)),  # the RS-485 terminals
+        "Pr.341",
+        "Pr.549",  # protocol selection
+    )
+    kept_parameters = ("Pr.331", "Pr.343", *_CALIBRATION)
+    last_parameters = ("Pr.77",)
 
     def __init__(self) -> None:
         self.parameters = _Catalogue()

@@ -10,7 +10,8 @@ name or checks for one protocol's types:
   trip history as a :class:`~._snapshot.TripLog`, a trip code named
   (:meth:`Profile.trip`), the protocol's own extras for its register block;
 - its parameters (:class:`ParameterCatalogue`): code parsing and
-  completion, units, raw integer <-> value in the unit, ranges;
+  completion, units, raw integer <-> value in the unit, ranges, the codes
+  a backup reads; which of them a restore leaves alone or writes last;
 - the parameter holding the maximum frequency, and how the set frequency
   is read back;
 - where it sits in the gateway's register map: the unit-id offset, its
@@ -64,7 +65,9 @@ class Capabilities:
     #: apart (``drive.store()``).
     store: bool = False
     #: A whole parameter set can be backed up and restored (``sj300 params``):
-    #: the catalogue names every parameter, and absent ones are told apart.
+    #: every parameter a drive can have is addressable
+    #: (:meth:`ParameterCatalogue.addressable`), and absent ones are told apart
+    #: (:meth:`Profile.absent`).
     parameter_backup: bool = False
     #: The optional snapshot values its monitor read fills
     #: (``"output_torque_percent"``, ``"power_kw"``).
@@ -120,7 +123,16 @@ class ParameterCatalogue(Protocol):
         """
 
     def codes(self) -> Sequence[str]:
-        """Every catalogued code, in the catalogue's order (completion, backups)."""
+        """Every catalogued code, in the catalogue's order (completion)."""
+
+    def addressable(self) -> Sequence[str]:
+        """Every code a drive of the protocol can have, in order: what a backup reads.
+
+        The catalogued codes where the catalogue names every parameter; where
+        it does not, every code the protocol can address (a drive refuses the
+        ones it lacks, :meth:`Profile.absent`), catalogued or not. An
+        uncatalogued code has no :meth:`spec`: its value is a raw integer.
+        """
 
     @property
     def raw_range(self) -> tuple[int, int]:
@@ -190,6 +202,12 @@ class Profile(Protocol):
     #: The line's settings (speed, framing...): a restore writes them only when asked,
     #: since a new value cuts the drive off the line being used.
     line_parameters: tuple[str, ...]
+    #: Parameters a restore never writes besides the address: another address
+    #: of the drive, a read-only count, the drive's own calibration.
+    kept_parameters: tuple[str, ...]
+    #: Parameters a restore writes after every other, in this order: each one
+    #: changes whether the drive takes the writes after it (a write lock).
+    last_parameters: tuple[str, ...]
 
     def status_view(self, status: Any) -> StatusView:
         """What the drive class's status read result says."""

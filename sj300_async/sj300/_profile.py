@@ -123,6 +123,10 @@ class _Catalogue:
     def codes(self) -> Sequence[str]:
         return tuple(PARAMETERS)
 
+    def addressable(self) -> Sequence[str]:
+        # The table names every code a drive can have; firmware lacking one answers NAK 16.
+        return tuple(PARAMETERS)
+
     @property
     def raw_range(self) -> tuple[int, int]:
         return RAW_VALUE_MIN, RAW_VALUE_MAX
@@ -273,6 +277,8 @@ class Sj300Profile:
     ramp_parameters = ("F002", "F003")
     address_parameter: str | None = "C072"
     line_parameters = ("C071", "C073", "C074", "C075")
+    kept_parameters: tuple[str, ...] = ()
+    last_parameters: tuple[str, ...] = ()
 
     def __init__(self) -> None:
         self.parameters = _Catalogue()

@@ -30,6 +30,7 @@ from sj300_async.fr700 import (
 )
 from sj300_async.simulator.fr700 import PARAMETERS as SIM_PARAMETERS
 from sj300_async.simulator.fr700 import Fr700SimulatedBus
+from sj300_async.simulator.fr700._parameters import UNCATALOGUED
 
 URL = "sim://?protocol=fr700&nodes=0-1"
 INFOS = list(FR700_PARAMETERS.values())
@@ -41,7 +42,7 @@ IDS = [f"Pr.{info.number}" for info in INFOS]
 def test_the_catalogue_lists_the_reference_parameters() -> None:
     # the waiting time and CR/LF selections the reference names, station, maximum frequency
     assert {1, 7, 117, 123, 124, 337, 341} <= set(FR700_PARAMETERS)
-    assert len(FR700_PARAMETERS) == 26
+    assert len(FR700_PARAMETERS) == 27
     for number, info in FR700_PARAMETERS.items():
         assert info.number == number
         assert info.name
@@ -150,9 +151,13 @@ def test_unknown_and_bad_numbers_are_refused() -> None:
 
 
 def test_the_simulator_takes_its_ranges_from_the_catalogue() -> None:
-    assert set(SIM_PARAMETERS) == set(FR700_PARAMETERS)
-    for number, spec in SIM_PARAMETERS.items():
-        info = FR700_PARAMETERS[number]
+    # and has a few parameters the catalogue does not name, as a real drive has hundreds
+    assert set(SIM_PARAMETERS) == set(FR700_PARAMETERS) | set(UNCATALOGUED)
+    assert not set(UNCATALOGUED) & set(FR700_PARAMETERS)
+    for number in UNCATALOGUED:
+        assert SIM_PARAMETERS[number].accepts(0xFFFF)  # their ranges are not modelled
+    for number, info in FR700_PARAMETERS.items():
+        spec = SIM_PARAMETERS[number]
         assert (spec.low, spec.high, spec.extra) == (
             info.raw_minimum,
             info.raw_maximum,

@@ -64,6 +64,9 @@ class _Catalogue:
     def codes(self) -> Sequence[str]:
         return ("toy:set", "toy:speed", "toy:status")
 
+    def addressable(self) -> Sequence[str]:
+        return self.codes()
+
     @property
     def raw_range(self) -> tuple[int, int]:
         return 0, 99_999
@@ -93,6 +96,8 @@ class ToyProfile:
     ramp_parameters = ("toy:ramp_up", "toy:ramp_down")
     address_parameter: str | None = None
     line_parameters: tuple[str, ...] = ()
+    kept_parameters: tuple[str, ...] = ()
+    last_parameters: tuple[str, ...] = ()
 
     def __init__(self) -> None:
         self.parameters = _Catalogue()

@@ -19,8 +19,11 @@ What it models, from the FR-700 reference:
 - Monitors H6F / H70 / H71 from the same plausible electrical model as
   the SJ300 simulator (rated current Pr.9, 200 V class, base frequency Pr.3).
 - Operation mode H7B / HFB; parameters through the link-parameter
-  extension H7F / HFF; multi-command HF0; fault history H74..H77 and its
-  clear HF4; parameter clear HFC; inverter reset HFD H9696.
+  extension H7F / HFF (bank 0..9: Pr.0..Pr.999); the second-parameter
+  switch H6C / HEC, which selects the frequency (H00) or the analog value
+  (H01) of the bias/gain parameters Pr.902..Pr.905; multi-command HF0;
+  fault history H74..H77 and its clear HF4; parameter clear HFC; inverter
+  reset HFD H9696.
 - NAK codes as a drive gives them: 2 (sum), 3 (protocol), 7 (character)
   come from the request parser; A, B and C from here.
 
@@ -34,6 +37,8 @@ Decisions where the reference is silent:
   NAK A; an unknown mode is NAK C.
 - A parameter or instruction the drive does not have is NAK B (the code
   addresses nothing), a value out of range NAK C, a bank above 9 NAK C.
+  With Pr.77 (parameter write selection) = 1 every parameter write but
+  Pr.77's is NAK A (see :mod:`._parameters`).
 - HFD with data other than H9696 is NAK C (it is answered); HFD H9696 is
   not answered and the drive hears nothing for ``reset_s`` afterwards. The
   reset clears a trip, stops the output, returns the bank to 0 and the
@@ -71,7 +76,15 @@ from ...fr700.codec import (
 from ...wire import Direction, LocalProtocolError
 from .._electrical import MotorRating, electrical
 from .._motion import Output, Ramp, RunState, advance, classify
-from ._parameters import COMMUNICATION, NOT_USED, PARAMETERS, factory_values
+from ._parameters import (
+    BIAS_GAIN_ANALOG,
+    BIAS_GAIN_ANALOG_MAX,
+    COMMUNICATION,
+    NOT_USED,
+    PARAMETERS,
+    WRITE_SELECTION,
+    factory_values,
+)
 
 __all__ = ["DEFAULT_PROCESSING_S", "FaultCode", "Fr700SimulatedDrive"]
 
@@ -141,6 +154,7 @@ class Fr700SimulatedDrive:
         self._parameters[117] = station
         self._parameters[123] = NOT_USED if wait_field else 0
         self._parameters[340] = 0 if factory_defaults else 1
+        self._analog = dict(BIAS_GAIN_ANALOG)  # the bias/gain parameters' other half
         self._freq_ram = 0  # x 0.01 Hz
         self._freq_eeprom = 0
         self._run_bits = 0
@@ -170,6 +184,11 @@ class Fr700SimulatedDrive:
     def parameters(self) -> Mapping[int, int]:
         """The raw parameter values, read-only."""
         return MappingProxyType(self._parameters)
+
+    @property
+    def bias_gain_analog(self) -> Mapping[int, int]:
+        """The analog values (x 0.1 %) of the bias/gain parameters, read-only."""
+        return MappingProxyType(self._analog)
 
     @property
     def operation_mode(self) -> Fr700OperationMode:
@@ -267,6 +286,28 @@ class Fr700SimulatedDrive:
         self._advance(now)
         self._restart()
 
+    def set_parameter(self, number: int, raw: int) -> None:
+        """Set parameter *number* from outside the line, as at the operation panel.
+
+        It takes what a write over the line would (whatever the operation
+        mode, Pr.77 or the output); a bias/gain parameter's half is the one
+        the second-parameter switch selects.
+
+        Raises:
+            LocalProtocolError: the drive has no such parameter, or refuses *raw*.
+        """
+        spec = PARAMETERS.get(number)
+        if spec is None:
+            raise LocalProtocolError(f"the drive has no Pr.{number}")
+        if number in self._analog and self._second_parameter:
+            if not 0 <= raw <= BIAS_GAIN_ANALOG_MAX:
+                raise LocalProtocolError(f"Pr.{number} analog value {raw} is out of range")
+            self._analog[number] = raw
+            return
+        if not spec.accepts(raw):
+            raise LocalProtocolError(f"Pr.{number} = {raw} is out of range")
+        self._parameters[number] = raw
+
     def set_wait_ms(self, wait_ms: int) -> None:
         """Set Pr.123, the drive's own waiting time in ms (used when requests carry none).
 
@@ -315,6 +356,8 @@ class Fr700SimulatedDrive:
         number = self._bank * 100 + request.instruction
         if number not in self._parameters:
             return Fr700NakCode.INSTRUCTION_CODE
+        if number in self._analog and self._second_parameter:
+            return self._data(self._analog[number])
         return self._data(self._parameters[number])
 
     def _read_second_parameter(self, request: HostRequest, now: float) -> Result:
@@ -364,9 +407,16 @@ class Fr700SimulatedDrive:
             return Fr700NakCode.INSTRUCTION_CODE
         if self._mode is not _NETWORK:
             return Fr700NakCode.MODE
+        if self._parameters[WRITE_SELECTION] == 1 and number != WRITE_SELECTION:
+            return Fr700NakCode.MODE  # write disabled
         if not spec.while_running and self._state().outputting:
             return Fr700NakCode.MODE
         raw = int(request.data, 16)
+        if number in self._analog and self._second_parameter:
+            if raw > BIAS_GAIN_ANALOG_MAX:
+                return Fr700NakCode.DATA_RANGE
+            self._analog[number] = raw
+            return self._ack()
         if not spec.accepts(raw):
             return Fr700NakCode.DATA_RANGE
         self._parameters[number] = raw
@@ -458,6 +508,7 @@ class Fr700SimulatedDrive:
             return Fr700NakCode.MODE
         kept = {n: self._parameters[n] for n in COMMUNICATION}
         self._parameters = factory_values() | kept
+        self._analog = dict(BIAS_GAIN_ANALOG)
         return self._ack()
 
     def _inverter_reset(self, request: HostRequest, now: float) -> Result:
