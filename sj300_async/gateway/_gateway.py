@@ -26,8 +26,9 @@ A trip history is not part of the poll cycle (an SJ300's is 446
 characters: most of a 19200-baud cycle). For a protocol whose profile
 reads one, each drive's is read every ``trips_interval_s`` and as soon as
 its status shows a trip. The set frequency is read beside the poll too,
-every ``setpoint_interval_s``, unless it is polled (SJ300 F001 in the
-line's parameters): SCADA shows the setpoint next to the actual
+every ``setpoint_interval_s`` and at least twice per ``stale_after_s`` (so
+what the northbounds serve never goes stale between reads), unless it is
+polled (SJ300 F001 in the line's parameters): SCADA shows the setpoint next to the actual
 frequency, so it is there without configuration, at a cadence that
 costs the line little. A failed read of either is counted
 (``sj300_gateway_read_errors_total``) and tried again when due.
@@ -339,6 +340,10 @@ class Gateway:
         trips = profile.capabilities.trip_history and config.trips_interval_s > 0
         setpoint_polled = profile.setpoint_parameter in config.parameters
         setpoints = config.setpoint_interval_s > 0 and not setpoint_polled
+        # Twice per stale_after_s at least: read once per stale_after_s, the value
+        # aged past it before each read (a 9600-baud line of 8 drives: 11 of 294
+        # samples of register 1003 answered 0x0B with 5 s and 5 s).
+        setpoint_every = min(config.setpoint_interval_s, self.config.stale_after_s / 2)
         seen_trip: dict[int, bool] = {}
         # When each read last failed: a failure waits its interval too (no read per cycle).
         failed_at: dict[tuple[str, int], float] = {}
@@ -369,7 +374,7 @@ class Gateway:
                         readings.set_trips(history, loop.time(), profile)
                         self._changed(drive)
                 if setpoints and due(
-                    "setpoint", drive.node, readings.set_frequency_at, config.setpoint_interval_s
+                    "setpoint", drive.node, readings.set_frequency_at, setpoint_every
                 ):
                     hz = await self._read_beside(
                         line,

@@ -123,7 +123,9 @@ class LineConfig:
     #: Seconds between two reads of a drive's set frequency (0: never), when it
     #: is not polled as a parameter (SJ300 F001): SCADA shows the setpoint next
     #: to the output frequency, so it is read by default, slower than the poll.
-    setpoint_interval_s: float = 5.0
+    #: Read at least twice per ``stale_after_s`` whatever this says, so the value
+    #: a northbound serves never goes stale between two reads.
+    setpoint_interval_s: float = 2.0
     #: Unit id = node + unit_offset.
     unit_offset: int = 0
     #: The response time-out per attempt (None: the bus's computed one).

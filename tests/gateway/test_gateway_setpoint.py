@@ -87,3 +87,26 @@ def test_setpoint_interval_s_is_checked_and_0_turns_the_reads_off() -> None:
     with pytest.raises(GatewayConfigError) as caught:
         parse_config(text.replace("0.2", "-1"), "plant.toml")
     assert str(caught.value).startswith("plant.toml:9: lines[0].setpoint_interval_s: "), caught
+
+
+async def test_the_setpoint_is_read_often_enough_never_to_go_stale(sim_line: SimLine) -> None:
+    # setpoint_interval_s far past stale_after_s: read every stale_after_s / 2 all the same,
+    # so register 1003 never answers 0x0B between two reads (a reviewer's 9600-baud line
+    # of 8 drives: 11 of 294 samples stale with 5 s and 5 s).
+    text = "[gateway]\nstale_after_s = 0.6\n" + _toml(sim_line.url).replace(
+        "setpoint_interval_s = 0.2", "setpoint_interval_s = 3600"
+    )
+    async with running_gateway(text) as gateway:
+        await polled(gateway)
+
+        def reads() -> int:
+            return sum(r.node == 2 and r.data == b"F001" for r in sim_line.log.requests())
+
+        await wait_for(lambda: reads() >= 4, "four setpoint reads, each within 0.3 s of the last")
+        assert drive_of(gateway, "hall", 2).readings.set_frequency_hz is not None
+
+
+def test_the_default_setpoint_cadence_keeps_it_fresh() -> None:
+    config = parse_config(_toml("sim://").replace("setpoint_interval_s = 0.2\n", ""), "p.toml")
+    assert config.lines[0].setpoint_interval_s == 2.0
+    assert config.lines[0].setpoint_interval_s <= config.stale_after_s / 2
