@@ -42,7 +42,8 @@ def add_parser(subparsers: Any) -> None:
     p = subparsers.add_parser(
         "read",
         help="read parameters",
-        description="Read parameters (command 06), scaled to engineering units by the catalogue.",
+        description="Read parameters (SJ300: command 06; FR-700: the parameter's read "
+        "instruction code), scaled to engineering units by the protocol's catalogue.",
     )
     p.add_argument("codes", nargs="+", metavar="CODE", help="e.g. F002 A004 (FR-700: Pr.7)")
     p.add_argument("--raw", action="store_true", help="show the unscaled integers")

@@ -32,12 +32,18 @@ def add_parser(subparsers: Any) -> None:
     p = subparsers.add_parser(
         "write",
         help="write a parameter and read it back",
-        description="Write a parameter (command 07) and read it back (command 06).",
+        description="Write a parameter and read it back (SJ300: commands 07 and 06; FR-700: "
+        "the parameter's write and read instruction codes).",
     )
     p.add_argument("code", metavar="CODE", help="e.g. F002 (FR-700: Pr.7)")
     p.add_argument("value", metavar="VALUE", help="engineering value, e.g. 12.5 (--raw: integer)")
     p.add_argument("--raw", action="store_true", help="VALUE is the unscaled integer")
-    p.add_argument("--store", action="store_true", help="then store settings to EEPROM (0A)")
+    p.add_argument(
+        "--store",
+        action="store_true",
+        help="then store settings to EEPROM (SJ300 command 0A; FR-700 drives have no such "
+        "separate store: refused)",
+    )
     add_node_option(p)
     add_json_option(p)
     add_bus_options(p)
