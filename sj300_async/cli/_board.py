@@ -5,7 +5,10 @@ the drive's profile from that sample alone (a value not read this poll is
 unknown, ``-``), and the rows show the snapshot; a tripped drive's trip is
 read once per trip from its history (:class:`_TripNames`). The table's
 columns fit the terminal (:mod:`._fit`): from :data:`COMPACT_BELOW` columns
-the richest layout that fits, below it a compact one.
+the richest layout that fits, below it a compact one. The columns keep
+their width over a run, in the table and in the plain lines: the state's
+is :data:`~._fit.STATE_WIDTH` (a longer trip is cut with ``…``), the
+numbers' what their values take, the link's ``offline``'s.
 """
 
 from __future__ import annotations
@@ -21,7 +24,7 @@ from .. import Sample
 from ..bus import Bus
 from ..profiles import DriveReadings, DriveSnapshot, Profile, Trip, build_snapshot
 from ..wire import SJ300Error
-from ._fit import FitColumn, fit
+from ._fit import STATE_WIDTH, FitColumn, clip, fit
 from ._tripinfo import trip_or_none
 
 __all__ = ["COMPACT_BELOW", "Board"]
@@ -31,13 +34,17 @@ _log = logging.getLogger("sj300_async.cli.monitor")
 #: Below this many terminal columns the table takes its compact layout.
 COMPACT_BELOW: Final = 100
 
+#: How wide the last error column would be, given the room.
+_ERROR_WIDTH: Final = 40
+
 _Field = FitColumn
 _NODE = _Field("node", "node")
-_STATE = _Field("state", "state", "left", flexible=True, min_width=12)
-_SET_HZ = _Field("set Hz", "set_hz")
-_OUT_HZ = _Field("out Hz", "out_hz")
-_LINK = _Field("link", "link", "left")
-_ERROR = _Field("last error", "error", "left", flexible=True, min_width=10, max_width=40)
+_STATE = _Field("state", "state", "left", flexible=True, min_width=12, width=STATE_WIDTH)
+# A frequency up to 400.00 Hz, a current or a voltage up to 999.9 A or V.
+_SET_HZ = _Field("set Hz", "set_hz", width=6)
+_OUT_HZ = _Field("out Hz", "out_hz", width=6)
+_LINK = _Field("link", "link", "left", width=len("offline"))
+_ERROR = _Field("last error", "error", "left", flexible=True, min_width=10, width=_ERROR_WIDTH)
 
 #: The table's layouts, richest first: the first that fits the terminal is used
 #: (from :data:`COMPACT_BELOW` columns on; below, always the compact one).
@@ -68,11 +75,11 @@ _LAYOUTS: Final = (
 )
 _COMPACT: Final = (
     _NODE,
-    _Field("state", "state", "left", flexible=True, min_width=7),
+    _Field("state", "state", "left", flexible=True, min_width=7, width=STATE_WIDTH),
     _SET_HZ,
     _OUT_HZ,
-    _Field("A", "amps"),
-    _Field("V", "volts"),
+    _Field("A", "amps", width=5),
+    _Field("V", "volts", width=5),
     _LINK,
 )
 
@@ -272,7 +279,8 @@ class Board:
         now = time.time()
         clock = time.strftime("%H:%M:%S", time.localtime(now)) + f".{int(now % 1 * 1000):03d}"
         line = (
-            f"{clock} {self._profile.node_noun} {c['node']} {c['link']:<7} {c['state']:<24}"
+            f"{clock} {self._profile.node_noun} {c['node']} {c['link']:<7}"
+            f" {clip(c['state'], STATE_WIDTH):<{STATE_WIDTH}}"
             f" set {c['set_hz']:>6} Hz  out {c['out_hz']:>6} Hz  {c['amps']:>6} A"
             f"  {c['volts']:>6} V  {c['torque']:>4} %  {c['kw']:>6} kW  {c['latency']:>6} ms"
         )

@@ -18,13 +18,15 @@ Output, as the bus monitor's:
   node: gateway, line, node, online, output frequency, current, voltage,
   direction, state (a tripped drive names its trip) and the age of its
   data. The caption says how the broker connection is doing, and how many
-  malformed messages were skipped;
+  malformed messages were skipped. The columns keep their width over a
+  run, as the bus monitor's (a name column is as wide as its longest name);
 - ``--json``: one object per state message received, flushed: the
   message's fields (:class:`~sj300_async.gateway.mqtt.StateMessage`) plus
   ``age_s``, the wall-clock seconds since the gateway polled the drive
   (negative when the two clocks disagree: not hidden), and
   ``gateway_online`` (False once the gateway's last will said offline);
-- anything else: one plain line per state message.
+- anything else: one plain line per state message, its columns at fixed
+  places.
 
 ``--count N`` ends it after N state messages (the retained ones the broker
 hands over on subscribing count: ``--count`` with the number of drives
@@ -71,7 +73,7 @@ from ..gateway.mqtt import (
     parse_fleet_url,
 )
 from ._errors import FAILURE, USAGE, CliError
-from ._fit import FitColumn, fit
+from ._fit import STATE_WIDTH, FitColumn, clip, fit
 from ._install import gateway_install_command
 from ._output import Justify, is_terminal, jsonable, print_json
 
@@ -79,6 +81,10 @@ __all__ = ["fleet_table", "plain_line", "state_json", "state_text", "watch_fleet
 
 #: How long connecting and subscribing may take without ``--timeout``.
 DEFAULT_TIMEOUT_S: Final = 10.0
+#: How wide a plain line's gateway/line/node is (a longer one pushes the rest).
+_DRIVE_WIDTH: Final = 24
+#: How wide the age is: ``0.4 s`` .. ``119 min``.
+_AGE_WIDTH: Final = len("119 min")
 #: The options of a bus, refused with a broker URL (the attribute, the option).
 _BUS_OPTIONS: Final = (
     ("nodes", "--nodes"),
@@ -168,28 +174,35 @@ def cells(message: StateMessage, *, gateway_online: bool, now: float) -> dict[st
 
 
 def _Column(
-    header: str, key: str, justify: Justify = "left", *, flexible: bool = False, min_width: int = 0
+    header: str,
+    key: str,
+    justify: Justify = "left",
+    *,
+    flexible: bool = False,
+    min_width: int = 0,
+    width: int = 0,
 ) -> FitColumn:
     """A fleet column: left-aligned unless told otherwise (text, mostly)."""
-    return FitColumn(header, key, justify, flexible=flexible, min_width=min_width)
+    return FitColumn(header, key, justify, flexible=flexible, min_width=min_width, width=width)
 
 
 _GATEWAY = _Column("gateway", "gateway", flexible=True, min_width=4)
 _LINE = _Column("line", "line", flexible=True, min_width=4)
 _NODE = _Column("node", "node", "right")
-_AGE = _Column("age", "age", "right")
+_AGE = _Column("age", "age", "right", width=_AGE_WIDTH)
 #: The layouts, richest first: the first that fits the terminal is used (else the last).
+#: Numbers: a frequency up to 400.00 Hz, a current or a voltage up to 999.9 A or V.
 _LAYOUTS: Final = (
     (
         _GATEWAY,
         _LINE,
         _NODE,
-        _Column("online", "link"),
-        _Column("out Hz", "out_hz", "right"),
+        _Column("online", "link", width=len("offline (stale)")),
+        _Column("out Hz", "out_hz", "right", width=6),
         _Column("current A", "amps", "right"),
         _Column("voltage V", "volts", "right"),
         _Column("direction", "direction"),
-        _Column("state", "state", flexible=True, min_width=12),
+        _Column("state", "state", flexible=True, min_width=12, width=STATE_WIDTH),
         _AGE,
     ),
     # Compact (80 columns): no direction (a running FR-700's state says reverse), short
@@ -198,11 +211,11 @@ _LAYOUTS: Final = (
         _GATEWAY,
         _LINE,
         _NODE,
-        _Column("online", "link_short"),
-        _Column("Hz", "out_hz", "right"),
-        _Column("A", "amps", "right"),
-        _Column("V", "volts", "right"),
-        _Column("state", "state", flexible=True, min_width=7),
+        _Column("online", "link_short", width=len("offline")),
+        _Column("Hz", "out_hz", "right", width=6),
+        _Column("A", "amps", "right", width=5),
+        _Column("V", "volts", "right", width=5),
+        _Column("state", "state", flexible=True, min_width=7, width=STATE_WIDTH),
         _AGE,
     ),
 )
@@ -279,10 +292,12 @@ def plain_line(fleet: Fleet, message: StateMessage, now: float | None = None) ->
     now = time.time() if now is None else now
     c = cells(message, gateway_online=fleet.gateway_online(message.gateway), now=now)
     clock = time.strftime("%H:%M:%S", time.localtime(now)) + f".{int(now % 1 * 1000):03d}"
+    drive = f"{c['gateway']}/{c['line']}/{c['node']}"
     return (
-        f"{clock} {c['gateway']}/{c['line']}/{c['node']} {c['link']:<7}"
+        f"{clock} {drive:<{_DRIVE_WIDTH}} {c['link']:<15}"
         f" out {c['out_hz']:>6} Hz  {c['amps']:>6} A  {c['volts']:>6} V"
-        f"  {c['direction']:<7} {c['state']}  age {c['age']}"
+        f"  {c['direction']:<7} {clip(c['state'], STATE_WIDTH):<{STATE_WIDTH}}"
+        f"  age {c['age']:>{_AGE_WIDTH}}"
     )
 
 
