@@ -20,19 +20,37 @@ Format (version 2, what ``params backup`` writes)::
       ]
     }
 
+An FR-700 file (``"protocol": "fr700"``) has the same shape, one entry per
+number the link addresses, Pr.0..Pr.999::
+
+      "parameters": [
+        {"code": "Pr.7", "name": "acceleration time", "unit": "s",
+         "value": 5.0, "raw": 50},
+        {"code": "Pr.13", "name": null, "unit": null, "value": null,
+         "raw": 50},
+        {"code": "Pr.14", "name": null, "unit": null, "value": null,
+         "raw": null, "absent": "NAK B (instruction code error)"},
+        ...
+
 The file is the drives' protocol's: codes, names, units, the node's range
 and the raw values' come from the protocol's profile
 (:class:`~sj300_async.profiles.Profile`), and a file of one protocol is
-never read as another's. Entries come in the catalogue's order (codes it
-lacks last, sorting is stable). ``raw`` is the integer the drive holds
-(SJ300 commands 06 / 07: F002 = 30.00 s is 3000) and the one number ``params
-restore`` writes: it round-trips exactly, whatever scale a catalogue (or a
-firmware) gives the code, and a code the catalogue does not know is kept
-too. ``name``, ``unit`` and ``value`` (raw scaled by the catalogue of the
-version that wrote the file) are for people and other tools; a reader takes
-``raw`` and ignores them, so a hand edit must change ``raw``. A code the
-drive refused (NAK 16: its firmware lacks it) has ``raw`` and ``value`` null
-and the reason in ``absent``.
+never read as another's. Entries come in the order of the codes a backup
+reads (:meth:`~sj300_async.profiles.ParameterCatalogue.addressable`: the
+SJ300 function-code table, the FR-700's numbers; codes it lacks last,
+sorting is stable). ``raw`` is the integer the drive holds (SJ300 commands
+06 / 07: F002 = 30.00 s is 3000; FR-700 Pr.7 = 5.0 s is 50) and the one
+number ``params restore`` writes: it round-trips exactly, whatever scale a
+catalogue (or a firmware) gives the code, and a code the catalogue does not
+know is kept too. ``name``, ``unit`` and ``value`` (raw scaled by the
+catalogue of the version that wrote the file) are for people and other
+tools; a reader takes ``raw`` and ignores them, so a hand edit must change
+``raw``. A code the protocol addresses but the catalogue does not describe
+(most FR-700 numbers: the library models a few dozen of several hundred)
+has ``name``, ``unit`` and ``value`` null: its scale is unknown, and a raw
+50 is not 50 of anything. A code the drive refused (SJ300 NAK 16: its
+firmware lacks it; FR-700 NAK B: the model has no such number) has ``raw``
+and ``value`` null and the reason in ``absent``.
 
 Version 1 files (raw integers only: ``"parameters": {"F002": 3000, ...}``,
 ``"absent": ["P031"]``, ``"created"`` for the time, no protocol) are still
@@ -54,11 +72,19 @@ from typing import Any, Final
 
 from .. import __version__
 from ..bus import DEFAULT_PROTOCOL
-from ..profiles import Profile
+from ..profiles import ParameterSpec, Profile
 from ..wire import LocalProtocolError
 from ._errors import CliError
 
-__all__ = ["FORMAT", "READABLE_VERSIONS", "VERSION", "Snapshot"]
+__all__ = [
+    "FORMAT",
+    "READABLE_VERSIONS",
+    "VERSION",
+    "Snapshot",
+    "catalogued",
+    "parameter_code",
+    "utc_now",
+]
 
 FORMAT: Final = "sj300-params"
 #: The version a backup writes.
@@ -69,6 +95,48 @@ READABLE_VERSIONS: Final = (1, 2)
 _V1_PROTOCOL: Final = DEFAULT_PROTOCOL
 #: The reason a version 1 file gives for an absent code (it recorded none).
 _V1_ABSENT: Final = "absent (version 1 file: no reason recorded)"
+
+
+def catalogued(profile: Profile, code: str) -> ParameterSpec | None:
+    """*code*'s catalogue entry, None for a code the catalogue does not describe."""
+    try:
+        return profile.parameters.spec(code)
+    except LocalProtocolError:
+        return None
+
+
+def parameter_code(profile: Profile, text: str) -> str:
+    """The protocol's code for *text*: a catalogued one, or any code a backup reads.
+
+    ``"f002"`` is ``F002``, ``"pr 500"`` ``Pr.500`` (uncatalogued, but an
+    FR-700 drive may have it).
+
+    Raises:
+        LocalProtocolError: neither (the catalogue's reason).
+    """
+    try:
+        return profile.parameters.spec(text).code
+    except LocalProtocolError:
+        code = _addressable(profile).get(_key(text))
+        if code is None:
+            raise
+        return code
+
+
+def _key(text: str) -> str:
+    return "".join(text.split()).replace(".", "").upper()
+
+
+_ADDRESSABLE: dict[str, dict[str, str]] = {}
+
+
+def _addressable(profile: Profile) -> dict[str, str]:
+    """The codes a backup of *profile*'s drives reads, by :func:`_key`."""
+    found = _ADDRESSABLE.get(profile.name)
+    if found is None:
+        codes = profile.parameters.addressable()
+        found = _ADDRESSABLE[profile.name] = {_key(code): code for code in codes}
+    return found
 
 
 def utc_now() -> str:
@@ -98,14 +166,19 @@ class Snapshot:
     def to_json(self, profile: Profile) -> dict[str, Any]:
         """The file's JSON object (version 2); *profile* is the drives' protocol's."""
         readings: dict[str, int | str] = {**self.parameters, **self.absent}
-        position = {code: i for i, code in enumerate(profile.parameters.codes())}
+        position = {code: i for i, code in enumerate(profile.parameters.addressable())}
         entries: list[dict[str, Any]] = []
         for code in sorted(readings, key=lambda c: position.get(c, len(position))):
-            info = profile.parameters.spec(code)
+            info = catalogued(profile, code)
             reading = readings[code]
-            entry: dict[str, Any] = {"code": code, "name": info.name, "unit": info.unit}
+            entry: dict[str, Any] = {
+                "code": code,
+                "name": None if info is None else info.name,
+                "unit": None if info is None else info.unit,
+            }
             if isinstance(reading, int):
-                entry |= {"value": info.from_raw(reading), "raw": reading}
+                value = None if info is None else info.from_raw(reading)
+                entry |= {"value": value, "raw": reading}
             else:
                 entry |= {"value": None, "raw": None, "absent": reading}
             entries.append(entry)
@@ -218,7 +291,7 @@ class _Reader:
         if not isinstance(code, str):
             raise TypeError(f"parameter code {code!r} is not a string")
         try:
-            return self.profile.parameters.spec(code).code
+            return parameter_code(self.profile, code)
         except LocalProtocolError as exc:
             raise ValueError(str(exc)) from None
 

@@ -225,7 +225,7 @@ class Fr700Profile:
     manufacturer = "Mitsubishi Electric"
     node_noun = "station"
     node_range = (MIN_STATION, MAX_STATION)
-    capabilities = Capabilities(trip_history=True)
+    capabilities = Capabilities(trip_history=True, parameter_backup=True)
     unit_offset = 100
     max_frequency_hz = 400.0
     max_frequency_parameter: str | None = "Pr.1"

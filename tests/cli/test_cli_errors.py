@@ -75,11 +75,6 @@ async def test_no_subcommand_prints_help_and_exits_2() -> None:
         (["run", "sideways"], 2, ["invalid choice"]),
         (["status", "--url", "ftp://x"], 2, ["unknown bus URL scheme"]),
         (["status", "--url", "tcp://127.0.0.1"], 2, ["needs a host and a port"]),
-        (
-            ["params", "backup", "-", "--url", "sim://?protocol=fr700"],
-            2,
-            ["needs a parameter backup format", "FR-700"],
-        ),
         (["stop", "--all", "--protocol", "fr700", "--sim"], 2, ["a broadcast stop"]),
         (["status", "--protocol", "fr700", "-n", "32"], 2, ["a station is 0..31, got '32'"]),
         (["status", "--timeout", "-1"], 2, ["positive"]),

@@ -193,19 +193,6 @@ async def test_a_file_of_another_protocol_is_never_restored(
     assert dict(tcp_sim.bus.drives[1].parameters) == untouched
 
 
-async def test_fr700_buses_are_refused(tmp_path: Path) -> None:
-    file = tmp_path / "b.json"
-    results = await asyncio.gather(
-        sj300("params", "backup", str(file), "--protocol", "fr700", "--url", SIM),
-        sj300("params", "backup", str(file), "--url", "sim://?protocol=fr700&nodes=0-1"),
-    )
-    for result in results:
-        result.assert_one_line_error(
-            2, "params backup needs a parameter backup format, which FR-700 drives"
-        )
-    assert not file.exists()
-
-
 async def test_a_missing_directory_is_one_line_and_exit_2(tcp_sim: TcpSim, tmp_path: Path) -> None:
     missing = tmp_path / "missing"
     not_a_directory = tmp_path / "file"

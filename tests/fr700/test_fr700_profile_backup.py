@@ -14,6 +14,7 @@ def test_a_backup_walks_every_number_the_link_extension_reaches() -> None:
     catalogued = PROFILE.parameters.codes()
     assert len(catalogued) == len(FR700_PARAMETERS) < len(addressable)
     assert set(catalogued) <= set(addressable)
+    assert PROFILE.capabilities.parameter_backup
 
 
 def test_only_nak_b_means_absent() -> None:
