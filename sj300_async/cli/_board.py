@@ -9,6 +9,9 @@ the richest layout that fits, below it a compact one. The columns keep
 their width over a run, in the table and in the plain lines: the state's
 is :data:`~._fit.STATE_WIDTH` (a longer trip is cut with ``…``), the
 numbers' what their values take, the link's ``offline``'s.
+
+``--json`` prints each sample as a :class:`~._record.DriveRecord`
+(:meth:`Board.record`).
 """
 
 from __future__ import annotations
@@ -25,6 +28,7 @@ from ..bus import Bus
 from ..profiles import DriveReadings, DriveSnapshot, Profile, Trip, build_snapshot
 from ..wire import SJ300Error
 from ._fit import STATE_WIDTH, FitColumn, clip, fit
+from ._record import DriveRecord, direction_word
 from ._tripinfo import trip_or_none
 
 __all__ = ["COMPACT_BELOW", "Board"]
@@ -233,7 +237,42 @@ class Board:
             node=sample.node,
             unit=None,
             now=sample.timestamp,
-            wall=time.time(),
+            wall=_wall_time(sample.timestamp),
+        )
+
+    def record(self, sample: Sample) -> DriveRecord:
+        """*sample* as ``--json`` prints it (the trip named once its history is read)."""
+        s = self._snapshots.get(sample.node)
+        if s is None or s.taken_at != sample.timestamp:
+            s = self.snapshot(sample)
+        trip = self.trips.get(sample.node) if s.tripped else None
+        parameters: dict[str, float | None] = {
+            code: reading.value for code, reading in s.parameters.items()
+        }
+        parameters.update(dict.fromkeys(sorted(s.unavailable_parameters)))
+        return DriveRecord(
+            time=s.time,
+            gateway=None,
+            line=s.line,
+            node=s.node,
+            protocol=s.protocol,
+            online=_up(sample),
+            state=s.state,
+            running=s.running,
+            tripped=s.tripped,
+            trip=None if trip is None else trip.code,
+            trip_meaning=None if trip is None else trip.meaning,
+            direction=direction_word(s.direction),
+            output_frequency_hz=s.output_frequency_hz,
+            set_frequency_hz=s.set_frequency_hz,
+            output_current_a=s.output_current_a,
+            output_voltage_v=s.output_voltage_v,
+            output_torque_percent=s.output_torque_percent,
+            power_kw=s.power_kw,
+            status=s.status_fields,
+            parameters=parameters,
+            error=sample.error,
+            latency_s=sample.latency_s,
         )
 
     def cells(self, sample: Sample) -> dict[str, str]:
@@ -294,6 +333,15 @@ def _layout(width: int, rows: list[dict[str, str]]) -> tuple[tuple[FitColumn, ..
     """The layout for *width* columns (below :data:`COMPACT_BELOW`, the compact one) and widths."""
     candidates = (_COMPACT,) if width < COMPACT_BELOW else (*_LAYOUTS, _COMPACT)
     return fit(candidates, width, rows)
+
+
+def _wall_time(loop_time: float) -> float:
+    """The Unix time of the event loop's *loop_time* (a sample's time, not the time now)."""
+    try:
+        now = asyncio.get_running_loop().time()
+    except RuntimeError:  # no loop: taken as now
+        now = loop_time
+    return time.time() - (now - loop_time)
 
 
 def _number(value: float | None, digits: int) -> str:

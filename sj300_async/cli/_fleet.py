@@ -6,11 +6,11 @@ publish through the library's fleet subscriber
 :func:`~sj300_async.gateway.mqtt.follow`: the URL, the read-only
 subscription, reconnection and the checks on every message are there) and
 shows the latest state of each (gateway, line, node). This module only
-renders it. ``--timeout`` bounds the connection and the subscription
-(default 10 s); the options that describe a bus (``--nodes``,
-``--protocol``, ``--trace``, the line settings) are refused, since the
-gateways own the buses; ``--interval`` and ``--retries`` are the bus
-monitor's and do nothing here.
+renders it. ``--timeout`` bounds the connection and the subscription,
+its retained states included (default 10 s); the options that describe a
+bus (``--nodes``, ``--protocol``, ``--trace``, the line settings) are
+refused, since the gateways own the buses; ``--interval`` and
+``--retries`` are the bus monitor's and do nothing here.
 
 Output, as the bus monitor's:
 
@@ -20,18 +20,23 @@ Output, as the bus monitor's:
   data. The caption says how the broker connection is doing, and how many
   malformed messages were skipped. The columns keep their width over a
   run, as the bus monitor's (a name column is as wide as its longest name);
-- ``--json``: one object per state message received, flushed: the
-  message's fields (:class:`~sj300_async.gateway.mqtt.StateMessage`) plus
-  ``age_s``, the wall-clock seconds since the gateway polled the drive
-  (negative when the two clocks disagree: not hidden), and
-  ``gateway_online`` (False once the gateway's last will said offline);
+- ``--json``: one object per state message received, flushed: the record
+  the bus monitor prints too (:class:`~._record.DriveRecord`, :func:`record`),
+  ``time`` the gateway's poll (Unix seconds), ``gateway_online`` False once
+  the gateway's last will said offline, ``error`` and ``latency_s`` null;
 - anything else: one plain line per state message, its columns at fixed
   places.
 
-``--count N`` ends it after N state messages (the retained ones the broker
-hands over on subscribing count: ``--count`` with the number of drives
-shows each once); ``--duration`` after so many seconds; SIGTERM with 0,
-Ctrl-C with 130, as the bus monitor.
+``--count N`` ends it after N cycles, as on a bus: a cycle is one state of
+every drive, the first the retained states the broker hands over on
+subscribing (``--count 1``: every drive once), each later one a new state
+of every drive whose gateway and the drive itself are online
+(:attr:`~sj300_async.gateway.mqtt.Fleet.cycles`). MQTT marks no end to the
+retained states: the first cycle ends when a drive sends again (a
+gateway's next poll), or ``--timeout`` seconds after the last state when
+none comes (a broker whose gateways are all gone); a fleet with no drive
+left to wait for then ends the view. ``--duration`` ends it after so many
+seconds; SIGTERM with 0, Ctrl-C with 130, as the bus monitor.
 
 Decisions:
 
@@ -75,9 +80,10 @@ from ..gateway.mqtt import (
 from ._errors import FAILURE, USAGE, CliError
 from ._fit import STATE_WIDTH, FitColumn, clip, fit
 from ._install import gateway_install_command
-from ._output import Justify, is_terminal, jsonable, print_json
+from ._output import Justify, is_terminal, print_json
+from ._record import DriveRecord
 
-__all__ = ["fleet_table", "plain_line", "state_json", "state_text", "watch_fleet"]
+__all__ = ["fleet_table", "plain_line", "record", "state_text", "watch_fleet"]
 
 #: How long connecting and subscribing may take without ``--timeout``.
 DEFAULT_TIMEOUT_S: Final = 10.0
@@ -301,19 +307,37 @@ def plain_line(fleet: Fleet, message: StateMessage, now: float | None = None) ->
     )
 
 
-def state_json(
-    message: StateMessage, now: float | None = None, *, gateway_online: bool = True
-) -> dict[str, Any]:
-    """The ``--json`` object: the message's fields plus ``age_s`` and ``gateway_online``.
+def record(message: StateMessage, *, gateway_online: bool = True) -> DriveRecord:
+    """The ``--json`` record of *message* (:mod:`._record`: the bus monitor's shape).
 
     ``gateway_online`` is False once the gateway's availability says
     ``offline`` (its last will: it died or lost the broker): the message's
     own ``online`` is then the last word of a gateway that is gone.
     """
-    body: dict[str, Any] = jsonable(message)
-    body["age_s"] = round(age_s(message, now), 3)
-    body["gateway_online"] = gateway_online
-    return body
+    return DriveRecord(
+        time=message.time,
+        gateway=message.gateway,
+        line=message.line,
+        node=message.node,
+        protocol=message.protocol,
+        online=message.online,
+        state=message.state,
+        running=message.running,
+        tripped=message.tripped,
+        trip=message.trip,
+        trip_meaning=message.trip_meaning,
+        direction=message.direction,
+        output_frequency_hz=message.output_frequency_hz,
+        set_frequency_hz=message.set_frequency_hz,
+        output_current_a=message.output_current_a,
+        output_voltage_v=message.output_voltage_v,
+        output_torque_percent=message.output_torque_percent,
+        power_kw=message.power_kw,
+        status=message.status,
+        parameters=message.parameters,
+        gateway_online=gateway_online,
+        lapse_pending=message.lapse_pending,
+    )
 
 
 # --- the subscription ------------------------------------------------------------------------
@@ -343,7 +367,7 @@ def _refuse_bus_options(args: argparse.Namespace) -> None:
 
 
 async def watch_fleet(args: argparse.Namespace, url_text: str) -> None:
-    """``sj300 monitor`` on a broker: until ``--count`` states, ``--duration`` or a signal.
+    """``sj300 monitor`` on a broker: until ``--count`` cycles, ``--duration`` or a signal.
 
     Raises:
         CliError: a bad URL or a bus option (exit 2), aiomqtt missing (exit 2),
@@ -355,24 +379,51 @@ async def watch_fleet(args: argparse.Namespace, url_text: str) -> None:
     fleet = Fleet(url)
     live = is_terminal() and not args.json
     count: int | None = args.count
-    received = 0
+    timeout_s = args.timeout or DEFAULT_TIMEOUT_S
+    loop = asyncio.get_running_loop()
+    heard = loop.time()  # the latest state or link event
     connected_before = False
+    quiet: asyncio.Task[None] | None = None
+
+    def done() -> bool:
+        return count is not None and fleet.cycles >= count
 
     def on_state(message: StateMessage) -> bool:
-        nonlocal received
-        received += 1
+        nonlocal heard
+        heard = loop.time()
+        if count is not None and fleet.cycle > count:
+            return False  # the first state of the cycle after the last: not shown
         if args.json:
-            print_json(state_json(message, gateway_online=fleet.gateway_online(message.gateway)))
+            gateway_online = fleet.gateway_online(message.gateway)
+            print_json(record(message, gateway_online=gateway_online).as_json())
         elif not live:
             print(plain_line(fleet, message), flush=True)
-        return count is None or received < count
+        return not done()
+
+    async def end_first_cycle_when_quiet(deadline: asyncio.Timeout) -> None:
+        """The first cycle's end when no drive sends again: --timeout without a state."""
+        nonlocal heard
+        while fleet.cycles == 0:
+            wait = heard + timeout_s - loop.time()
+            if wait > 0:
+                await asyncio.sleep(wait)
+                continue
+            fleet.end_first_cycle()
+            heard = loop.time()  # nothing came at all: looked at again after as long
+            # Done, or nothing is left to wait for; --duration may be up at this very moment.
+            ended = count is not None and (done() or not fleet.waiting())
+            if ended and not deadline.expired():
+                deadline.reschedule(loop.time())  # ends the view, as --duration does
 
     with contextlib.ExitStack() as stack:
+        deadline = asyncio.timeout(args.duration)
 
         def on_link(problem: str | None) -> None:
-            nonlocal connected_before
+            nonlocal connected_before, heard, quiet
+            heard = loop.time()
             if problem is None and not connected_before:
                 connected_before = True
+                quiet = loop.create_task(end_first_cycle_when_quiet(deadline))
                 if live:  # only now: a broker that cannot be reached is one line, no table
                     stack.enter_context(_live(fleet))
             elif live:
@@ -382,16 +433,17 @@ async def watch_fleet(args: argparse.Namespace, url_text: str) -> None:
             else:
                 _note(problem)
 
-        timeout_s = args.timeout or DEFAULT_TIMEOUT_S
         try:
-            with contextlib.suppress(TimeoutError):  # --duration is up
-                async with asyncio.timeout(args.duration):
+            with contextlib.suppress(TimeoutError):  # --duration is up, or the view is done
+                async with deadline:
                     await follow(fleet, on_state, timeout_s=timeout_s, on_link=on_link)
         except BrokerUnreachable as exc:
             raise CliError(f"cannot connect to {url.broker}: {exc}", status=FAILURE) from None
         except SubscriptionRefused as exc:
             raise CliError(str(exc), status=FAILURE) from None
         finally:
+            if quiet is not None:
+                quiet.cancel()
             stack.close()  # the table's last frame, then the summary under it
             summary = fleet.summary()
             if summary is not None:

@@ -22,9 +22,8 @@ Output, by where stdout goes:
   column is (with ``…``) when the room runs out;
 - anything else: one plain line per drive per poll, for logs;
 - ``--json`` (either way): one JSON object per sample per line, flushed:
-  the fields of :class:`~sj300_async.Sample` (``status``, ``monitor`` as in
-  ``sj300 status --json``; ``parameters`` holds ``F001``), plus ``time``,
-  the wall-clock time (Unix seconds; ``timestamp`` is the event loop's).
+  a :class:`~._record.DriveRecord`, the record the fleet view prints too
+  (the drive model's names; ``time`` the sample's, in Unix seconds).
 
 Each sample becomes a :class:`~sj300_async.profiles.DriveSnapshot` built by
 the drive's profile, and the rows show the snapshot: states read as a person
@@ -44,9 +43,9 @@ and shows the fleet instead: every drive of every gateway on the broker
 (:mod:`._fleet`).
 
 It runs until Ctrl-C (exit 130, as for any command), SIGTERM (exit 0),
-``--count`` cycles (a cycle is one sample of every node; a node set aside
-as offline between its probes is not waited for) or ``--duration``
-seconds.
+``--count`` cycles or ``--duration`` seconds. A cycle is one sample of every
+drive, on a bus as on a broker (:data:`COUNT_HELP`): on a bus, of every node
+(a node set aside as offline between its probes is not waited for).
 """
 
 from __future__ import annotations
@@ -57,7 +56,6 @@ import contextlib
 import logging
 import signal
 import sys
-import time
 from collections.abc import AsyncIterator, Coroutine
 from typing import Any, Final
 
@@ -75,7 +73,7 @@ from ._common import (
 )
 from ._demo import run_demo
 from ._errors import FAILURE, CliError
-from ._output import is_terminal, jsonable, print_json
+from ._output import is_terminal, print_json
 from ._progress import progress
 from ._scan import probe
 from ._session import run_async
@@ -90,6 +88,13 @@ DEMO_URL: Final = "sim://?nodes=1-8"
 _DEFAULT_NODES: Final = tuple(range(1, 9))
 #: Exit status of Ctrl-C (SIGINT), as for every command.
 INTERRUPTED: Final = 130
+#: What ``--count`` counts, on a bus and on a broker alike.
+COUNT_HELP: Final = (
+    "stop after N cycles, a cycle being one sample of every drive (N samples of each): on a "
+    "bus every node polled once (a node set aside as offline is not waited for); on "
+    "mqtt:// the states the broker hands over on subscribing, then one new state of every "
+    "drive whose gateway and the drive itself are online"
+)
 
 
 def _positive_int(text: str) -> int:
@@ -130,7 +135,7 @@ def add_parser(subparsers: Any) -> None:
         "--count",
         type=_positive_int,
         metavar="N",
-        help="stop after N cycles (a cycle: one sample of every node; mqtt://: N states)",
+        help=COUNT_HELP,
     )
     p.add_argument("--duration", type=positive_float, metavar="SECONDS", help="stop after this")
     add_json_option(p)
@@ -295,7 +300,7 @@ async def _consume(
                 sample = await samples.get()
                 board.update(sample)
                 if args.json:
-                    print_json({**jsonable(sample), "time": time.time()})
+                    print_json(board.record(sample).as_json())
                 elif not board.is_live:
                     print(board.plain_line(sample), flush=True)
                 pending.discard(sample.node)

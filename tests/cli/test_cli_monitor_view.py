@@ -139,9 +139,11 @@ async def test_a_node_that_never_answered_is_offline(tcp_sim: TcpSim) -> None:
     assert {m["link"] for m in lines if m["node"] == "05"} == {"offline"}
     data = await sj300("monitor", *args, "--retries", "0", "--count", "1", "--json")
     by_node = {s["node"]: s for s in data.json_lines()}
-    assert by_node[4]["answered"] is True
-    assert by_node[5]["answered"] is False
-    assert by_node[5]["online"] is True  # polled in full until offline_after failures
+    assert (by_node[4]["online"], by_node[4]["state"]) == (True, "stopped")
+    # Never answered: offline from its first poll, though polled in full until
+    # offline_after failures.
+    assert (by_node[5]["online"], by_node[5]["state"]) == (False, None)
+    assert "node 05 did not answer" in by_node[5]["error"]
 
 
 async def test_count_counts_cycles_not_samples(tcp_sim: TcpSim) -> None:

@@ -33,7 +33,8 @@ def test_monitor_shows_fr700_drives(capsys: pytest.CaptureFixture[str]) -> None:
     assert {s["node"] for s in samples} == {0, 1, 2}
     for sample in samples:
         assert sample["error"] is None
-        assert set(sample["monitor"]) >= {"output_frequency_hz", "output_current_a"}
+        assert (sample["protocol"], sample["state"]) == ("fr700", "stopped")
+        assert sample["output_frequency_hz"] == sample["output_current_a"] == 0.0
 
 
 def test_monitor_demo_runs_fr700_drives_with_the_protocol_option(

@@ -36,6 +36,20 @@ Decisions:
 - An empty payload clears a retained message (``mosquitto_pub -r -n``): it
   removes the drive (or forgets the gateway's availability) rather than
   counting as malformed.
+- Cycles, as a bus monitor counts them (:attr:`Fleet.cycles`: what ``sj300
+  monitor --count`` counts on a bus and a broker alike): a cycle is one
+  state of every drive. Which drives there are is learnt from the first:
+  the retained states the broker hands over on subscribing, one per drive
+  (or, on a broker that holds none, the first states published). MQTT
+  marks no end to them, so the first cycle ends when a drive already in it
+  sends again (that state is the second cycle's), when the connection is
+  lost, or when the consumer says every drive has been heard
+  (:meth:`Fleet.end_first_cycle`: the fleet view does after ``--timeout``
+  without a state). Each later cycle ends once every drive waited for has
+  sent a state since it began; a drive whose state says offline, or whose
+  gateway's availability does, is not waited for (as the bus monitor does
+  not wait for a node set aside as offline), and a drive first heard of
+  during a cycle is in it.
 - Unreachable at the start: :class:`~._session.BrokerUnreachable` (a
   command line fails at once). Lost later: reconnect with a back-off of
   0.5 s doubling to 10 s (a viewer wants to see the fleet back soon); the
@@ -188,6 +202,14 @@ class Fleet:
         self.first_malformed: Malformed | None = None
         #: None while connected; else what is going on (``connecting``, ``lost ...``).
         self.link_problem: str | None = "connecting"
+        #: Cycles complete (see the module docstring).
+        self.cycles = 0
+        #: The cycle the latest state belongs to (1: the first; 0 before any state).
+        self.cycle = 0
+        #: The drives heard from in the first cycle.
+        self._heard: set[tuple[str, str, int]] = set()
+        #: The drives a later cycle still waits for.
+        self._pending: set[tuple[str, str, int]] = set()
 
     @property
     def drives(self) -> list[StateMessage]:
@@ -202,7 +224,10 @@ class Fleet:
         """Take one message in; the state it carries, if it is one (else None)."""
         key = parse_state_topic(topic, self.url.prefix)
         if key is not None:
-            return self._state(key, topic, payload)
+            state = self._state(key, topic, payload)
+            if state is not None:
+                self._count(key)
+            return state
         gateway = self._availability_of(topic)
         if gateway is None:
             self._malformed(topic, payload, "not a state or availability topic")
@@ -231,6 +256,44 @@ class Fleet:
             return None
         self._drives[key] = message
         return message
+
+    def waits_for(self, key: tuple[str, str, int]) -> bool:
+        """True when a cycle waits for the drive (gateway, line, node): it and its gateway
+        are online."""
+        message = self._drives.get(key)
+        return message is not None and message.online and self.gateway_online(message.gateway)
+
+    def waiting(self) -> bool:
+        """True when a cycle waits for any drive (see :meth:`waits_for`)."""
+        return any(self.waits_for(key) for key in self._drives)
+
+    def end_first_cycle(self) -> None:
+        """Every drive has been heard: the first cycle ends (if it holds any state)."""
+        if self.cycles == 0 and self._heard:
+            self._heard = set()
+            self._next_cycle()
+
+    def _next_cycle(self) -> None:
+        self.cycles += 1
+        self._pending = {key for key in self._drives if self.waits_for(key)}
+
+    def _count(self, key: tuple[str, str, int]) -> None:
+        """Count a state in its cycle (see the module docstring); O(1) amortized."""
+        if self.cycles == 0:
+            if key not in self._heard:
+                self._heard.add(key)
+                self.cycle = 1
+                return
+            self.end_first_cycle()  # a drive sends again: every drive has been heard
+        self.cycle = self.cycles + 1
+        pending = self._pending
+        pending.discard(key)
+        while pending:  # drop those no longer waited for (offline, their gateway gone)
+            first = next(iter(pending))
+            if self.waits_for(first):
+                return
+            pending.discard(first)
+        self._next_cycle()
 
     def _availability_of(self, topic: str) -> str | None:
         head = self.url.prefix.split("/")
@@ -330,6 +393,8 @@ async def follow(
 
     def link(problem: str | None) -> None:
         fleet.link_problem = problem
+        if problem is not None:
+            fleet.end_first_cycle()  # what came before the connection was lost
         if on_link is not None:
             on_link(problem)
 
