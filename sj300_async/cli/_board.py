@@ -3,7 +3,12 @@
 Each sample becomes a :class:`~sj300_async.profiles.DriveSnapshot` built by
 the drive's profile from that sample alone (a value not read this poll is
 unknown, ``-``), and the rows show the snapshot; a tripped drive's trip is
-read once per trip from its history (:class:`_TripNames`). The table's
+read once per trip from its history (:class:`_TripNames`), and the set
+frequency of a protocol that holds it in no parameter the poll reads
+(FR-700) every :data:`SETPOINT_EVERY_S` (:class:`_SetFrequencies`), each
+beside the poll. Lines and JSON records wait for those reads
+(:meth:`Board.settle`), so even ``--count 1`` names a drive's trip and
+shows its set frequency; the live table shows them when they come. The table's
 columns fit the terminal (:mod:`._fit`): from :data:`COMPACT_BELOW` columns
 the richest layout that fits, below it a compact one. The columns keep
 their width over a run, in the table and in the plain lines: the state's
@@ -37,6 +42,9 @@ _log = logging.getLogger("sj300_async.cli.monitor")
 
 #: Below this many terminal columns the table takes its compact layout.
 COMPACT_BELOW: Final = 100
+#: Seconds between two reads of a drive's set frequency beside the poll (as the
+#: gateway's default ``setpoint_interval_s``).
+SETPOINT_EVERY_S: Final = 2.0
 
 #: How wide the last error column would be, given the room.
 _ERROR_WIDTH: Final = 40
@@ -119,11 +127,67 @@ class _TripNames:
         """The trip *node* is in, if known."""
         return self._known.get(node)
 
+    def under_way(self, node: int) -> asyncio.Task[None] | None:
+        """*node*'s read, while it goes on."""
+        return self._reading.get(node)
+
     async def _read(self, node: int) -> None:
         try:
             self._known[node] = await trip_or_none(self._profile, self._bus.drive(node))
         except SJ300Error as exc:
             _log.debug("node %02d: trip history not read: %s", node, exc)
+        finally:
+            self._reading.pop(node, None)
+
+    def close(self) -> None:
+        """Cancel the reads still under way."""
+        for task in self._reading.values():
+            task.cancel()
+        self._reading.clear()
+
+
+class _SetFrequencies:
+    """The set frequency of each drive whose profile names no parameter holding it.
+
+    The poll reads a protocol's setpoint parameter (SJ300 F001) with the
+    rest; FR-700 has none, so its set frequency (H6D) is read beside the
+    poll in a task of its own, every :data:`SETPOINT_EVERY_S` per drive that
+    answers. A read that fails is tried again when due (its value is then
+    unknown, not an old one).
+    """
+
+    def __init__(self, bus: Bus, profile: Profile) -> None:
+        self._bus = bus
+        self._profile = profile
+        self.enabled = profile.setpoint_parameter is None
+        self._known: dict[int, tuple[float | None, float]] = {}  # node -> (Hz, loop time)
+        self._reading: dict[int, asyncio.Task[None]] = {}
+
+    def update(self, sample: Sample) -> None:
+        node = sample.node
+        if not self.enabled or not sample.online or node in self._reading:
+            return
+        known = self._known.get(node)
+        if known is None or sample.timestamp - known[1] >= SETPOINT_EVERY_S:
+            self._reading[node] = asyncio.create_task(self._read(node))
+
+    def get(self, node: int) -> tuple[float, float] | None:
+        """*node*'s set frequency and the loop time it was read, if known."""
+        known = self._known.get(node)
+        return None if known is None or known[0] is None else (known[0], known[1])
+
+    def under_way(self, node: int) -> asyncio.Task[None] | None:
+        """*node*'s read, while it goes on."""
+        return self._reading.get(node)
+
+    async def _read(self, node: int) -> None:
+        loop = asyncio.get_running_loop()
+        try:
+            hz = await self._profile.read_set_frequency(self._bus.drive(node))
+            self._known[node] = (hz, loop.time())
+        except SJ300Error as exc:
+            self._known[node] = (None, loop.time())
+            _log.debug("node %02d: set frequency not read: %s", node, exc)
         finally:
             self._reading.pop(node, None)
 
@@ -152,6 +216,7 @@ class Board:
         self._snapshots: dict[int, DriveSnapshot] = {}
         self._errors: dict[int, _LastError] = {}
         self.trips = _TripNames(bus, profile)
+        self.setpoints = _SetFrequencies(bus, profile)
         self.is_live = False
         self._console: Any = None
 
@@ -160,8 +225,22 @@ class Board:
         snapshot = self.snapshot(sample)
         self._snapshots[sample.node] = snapshot
         self.trips.update(snapshot)
+        self.setpoints.update(sample)
         if sample.error is not None:
             self._errors[sample.node] = _LastError(sample.error, time.time())
+
+    async def settle(self, node: int) -> None:
+        """Wait for *node*'s reads beside the poll under way (its trip, its set frequency)."""
+        reads = [t for t in (self.trips.under_way(node), self.setpoints.under_way(node)) if t]
+        if reads:
+            await asyncio.wait(reads)
+        if reads:  # built again with what they read
+            self._snapshots[node] = self.snapshot(self._samples[node])
+
+    def close(self) -> None:
+        """Cancel the reads beside the poll still under way."""
+        self.trips.close()
+        self.setpoints.close()
 
     @contextlib.contextmanager
     def live(self, *, enabled: bool) -> Any:
@@ -230,6 +309,9 @@ class Board:
         """*sample* alone as the profile sees it (a value not read this poll is unknown)."""
         readings = DriveReadings()
         readings.take(sample, self._profile)
+        setpoint = self.setpoints.get(sample.node)
+        if setpoint is not None:
+            readings.set_frequency(*setpoint)
         return build_snapshot(
             self._profile,
             readings,

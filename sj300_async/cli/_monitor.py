@@ -28,12 +28,12 @@ Output, by where stdout goes:
 Each sample becomes a :class:`~sj300_async.profiles.DriveSnapshot` built by
 the drive's profile, and the rows show the snapshot: states read as a person
 would (``stopped``, ``accelerating``, ``running``, ``tripped``), the set
-frequency where the profile names a parameter for it (SJ300 F001), torque
-and power where the protocol measures them. A tripped drive's row names its
+frequency (SJ300 F001 in the poll; an FR-700's read beside it, see
+:mod:`._board`), torque and power where the protocol measures them. A tripped drive's row names its
 trip (``tripped E07 over-voltage``; an FR-700 ``tripped E.OC1 overcurrent
 trip during acceleration``, or ``tripped fault H9A`` for a byte its table
-lacks), read once per trip from the drive's history by its profile. A drive that has never
-answered is ``offline`` (:attr:`~sj300_async.Sample.answered`); one that
+lacks), read once per trip from the drive's history by its profile. A
+drive that has never answered is ``offline`` (:attr:`~sj300_async.Sample.answered`); one that
 stops answering turns offline and is probed every few seconds instead of
 being polled; the monitor itself never stops for a failing drive or a
 dropped link.
@@ -180,7 +180,7 @@ async def _monitor(args: argparse.Namespace) -> int:
                 with board.live(enabled=is_terminal() and not args.json):
                     await _until_terminated(_consume(args, poller, bus, samples, board))
             finally:
-                board.trips.close()
+                board.close()
     return 0
 
 
@@ -299,6 +299,8 @@ async def _consume(
             while args.count is None or cycles < args.count:
                 sample = await samples.get()
                 board.update(sample)
+                if not board.is_live:  # a line is final: with its trip and set frequency
+                    await board.settle(sample.node)
                 if args.json:
                     print_json(board.record(sample).as_json())
                 elif not board.is_live:

@@ -10,9 +10,10 @@ form parses, and what a protocol lacks is refused in one line, exit 2,
 before anything is sent. After a command that moves a drive the test waits
 for the simulated drive's state (a deadline, never a guessed sleep).
 
-``params backup|diff|restore`` are not here yet; ``sniff`` and ``simulate``
-have their own tests (tests/capture/test_sniff_tap.py, tests/simulator/test_sim_cli.py,
-tests/fr700/test_fr700_sim_cli.py).
+``params backup|diff|restore`` have a file per protocol
+(tests/cli/test_cli_params.py, tests/cli/test_cli_params_fr700.py), as
+``sniff`` and ``simulate`` have theirs (tests/capture/test_sniff_tap.py,
+tests/simulator/test_sim_cli.py, tests/fr700/test_fr700_sim_cli.py).
 """
 
 from __future__ import annotations
@@ -482,12 +483,15 @@ async def test_monitor_count(line: Line) -> None:
     assert all(r["online"] and r["error"] is None for r in records)
 
 
-@pytest.mark.xfail(
-    strict=True,
-    reason="the monitor reads a tripped drive's trip in a task of its own and prints the "
-    "first sample before it: `monitor --count 1` never names the trip (row 'tripped', "
-    'JSON "trip": null), in both protocols',
-)
+async def test_monitor_shows_the_set_frequency_from_the_first_sample(line: Line) -> None:
+    # SJ300's is a parameter the poll reads (F001); FR-700's a read of its own (H6D).
+    assert (await line.run("freq", "12.5", "-n", "2")).code == 0
+    data = await line.json("monitor", "--count", "1", "--nodes", "2")
+    assert data["set_frequency_hz"] == 12.5
+    text = await line.human("monitor", "--count", "1", "--nodes", "2")
+    assert re.search(r"\b12\.50\b", text.out), text.out
+
+
 async def test_monitor_names_the_trip_from_the_first_sample(line: Line) -> None:
     assert line.drives[2].trip(line.facts.trip_byte, now=line.now())
     text, data = await asyncio.gather(
