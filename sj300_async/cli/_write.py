@@ -1,7 +1,9 @@
 """``sj300 write CODE VALUE``: write a parameter, read it back, print both.
 
 VALUE is in the catalogue's engineering unit (``write F002 12.5`` for 12.50
-s), or the raw integer with ``--raw``. It is checked against the protocol's
+s), or the raw integer with ``--raw``; a code the protocol addresses that
+the catalogue does not describe (an FR-700's Pr.13) takes only ``--raw``,
+its unit and increment being unknown. It is checked against the protocol's
 catalogue (range and resolution) before anything is sent. An SJ300 writes
 RAM (command 07): ``--store`` also stores every setting to EEPROM (command
 0A), which a power cycle otherwise forgets; a protocol whose drives have no
@@ -20,8 +22,8 @@ from ..profiles import ParameterSpec
 from ..wire import NakError
 from ._common import add_bus_options, add_json_option, add_node_option, cli_profile, open_cli_bus
 from ._errors import FAILURE, CliError
-from ._output import format_raw, print_json
-from ._read import parameter_spec, read_raw
+from ._output import print_json
+from ._read import NOT_CATALOGUED, parameter_target, read_raw, shown
 from ._session import run_async
 
 __all__ = ["add_parser", "write_raw"]
@@ -55,7 +57,7 @@ def run(args: argparse.Namespace) -> int:
     return run_async(_write(args))
 
 
-def _raw_value(info: ParameterSpec, text: str, raw: bool, raw_range: tuple[int, int]) -> int:
+def _raw_value(info: ParameterSpec | None, text: str, raw: bool, raw_range: tuple[int, int]) -> int:
     """VALUE as the raw integer to send, checked before anything is sent.
 
     Raises:
@@ -69,6 +71,7 @@ def _raw_value(info: ParameterSpec, text: str, raw: bool, raw_range: tuple[int, 
             f"VALUE must be {'an integer' if raw else 'a number'}, got {text!r}"
         ) from None
     if not raw:
+        assert info is not None  # _write asks an uncatalogued code for --raw first
         return info.to_raw(number)
     low, high = raw_range
     if not low <= number <= high:
@@ -91,8 +94,12 @@ async def write_raw(drive: Any, code: str, raw: int) -> None:
 
 async def _write(args: argparse.Namespace) -> int:
     profile = cli_profile(args)
-    info = parameter_spec(profile, args.code)
-    code = info.code
+    code, info = parameter_target(profile, args.code)
+    if info is None and not args.raw:
+        raise CliError(
+            f"argument CODE: {code} is not in the {profile.model} parameter catalogue, so "
+            "its unit and increment are unknown: give the raw integer with --raw"
+        )
     raw = _raw_value(info, args.value, args.raw, profile.parameters.raw_range)
     async with open_cli_bus(args, needs="store" if args.store else None) as bus:
         drive = bus.drive(args.node)
@@ -108,20 +115,19 @@ async def _write(args: argparse.Namespace) -> int:
             {
                 "node": args.node,
                 "code": code,
-                "name": info.name,
-                "unit": info.unit,
-                "old_value": info.from_raw(old),
+                "name": None if info is None else info.name,
+                "unit": None if info is None else info.unit,
+                "old_value": None if info is None else info.from_raw(old),
                 "old_raw": old,
-                "value": info.from_raw(back),
+                "value": None if info is None else info.from_raw(back),
                 "raw": back,
                 "stored": args.store,
             }
         )
     else:
-        before, after = (
-            (str(old), str(back)) if args.raw else (format_raw(info, old), format_raw(info, back))
-        )
+        before, after = (shown(info, v, as_raw=args.raw) for v in (old, back))
         stored = " (stored)" if args.store else ""
         noun = profile.node_noun
-        print(f"{noun} {args.node:02d} {code} {info.name}: {before} -> {after}{stored}")
+        name = NOT_CATALOGUED if info is None else info.name
+        print(f"{noun} {args.node:02d} {code} {name}: {before} -> {after}{stored}")
     return 0

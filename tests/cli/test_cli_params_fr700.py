@@ -365,3 +365,31 @@ async def test_ctrl_c_during_a_restore_says_how_far_it_got(
     assert 13 in writable  # uncatalogued parameters are written too
     assert 13 not in FR700_PARAMETERS
     assert 1 <= written < total
+
+
+# -- read / write of a number the catalogue does not describe ------------------------------
+
+
+async def test_read_and_write_take_a_number_the_catalogue_does_not_describe(
+    fr700_sim: Fr700Sim,
+) -> None:
+    # Pr.13 is simulated but not catalogued: a backup keeps it raw, so do read and write.
+    assert 13 not in FR700_PARAMETERS
+    url = ("--url", fr700_sim.url)
+    read = await sj300("read", "Pr.13", "Pr.7", "-n", "1", *url)
+    assert read.code == 0, read.err
+    rows = [line.split() for line in read.out.splitlines()[1:]]
+    assert rows[0][0] == "Pr.13"
+    assert " ".join(rows[0][1:]) == "(not in the catalogue) 50 (raw)"
+    assert " ".join(rows[1]) == "Pr.7 acceleration time 5.0 s"
+    as_json = await sj300("read", "pr 13", "-n", "1", "--json", *url)
+    assert as_json.json()["parameters"] == [
+        {"code": "Pr.13", "name": None, "value": None, "unit": None, "raw": 50}
+    ]
+    refused = await sj300("write", "Pr.13", "5", "-n", "1", *url)
+    refused.assert_one_line_error(2, "Pr.13 is not in the FR-700 parameter catalogue", "--raw")
+    written = await sj300("write", "Pr.13", "70", "--raw", "-n", "1", *url)
+    assert written.out == "station 01 Pr.13 (not in the catalogue): 50 -> 70\n", written.err
+    assert fr700_sim.bus.drives[1].parameters[13] == 70
+    outside = await sj300("read", "Pr.1000", "-n", "1", *url)
+    outside.assert_one_line_error(2, "parameter numbers are 0..999, got 1000")
