@@ -10,13 +10,15 @@ The set frequency (SJ300 F001, FR-700's set-frequency read) is shown
 beside the output frequency; a drive that refuses to give it shows none
 (``null`` in JSON).
 
-JSON: ``{"node": 1, "state": "stopped", "trip": null, "set_frequency_hz": 0.0,
-"status": {"a": "STOPPING",
+JSON: ``{"node": 1, "state": "stopped", "trip": null, "direction": "stop",
+"set_frequency_hz": 0.0, "status": {"a": "STOPPING",
 "b": "STOPPED", "c": "STOP"}, "monitor": {"output_frequency_hz": 50.0, ...}}``:
 ``status`` and ``monitor`` are the fields of the drive class's results
 (SJ300 :class:`~sj300_async.InverterStatus` and
 :class:`~sj300_async.MonitorData`; FR-700 :class:`~sj300_async.Fr700Status`
-and :class:`~sj300_async.Fr700Monitor`); ``trip`` is ``{"code": "E07",
+and :class:`~sj300_async.Fr700Monitor`); ``direction`` is the monitor's
+or the status's in the monitor record's words (``stop``, ``forward``,
+``reverse``; null when neither says), for either protocol; ``trip`` is ``{"code": "E07",
 "number": 7, "name": ..., "meaning": ...}`` when tripped and known.
 """
 
@@ -25,10 +27,11 @@ from __future__ import annotations
 import argparse
 from typing import Any
 
-from ..profiles import Profile
-from ..wire import NakError
+from ..profiles import Profile, StatusView
+from ..wire import Direction, NakError
 from ._common import add_bus_options, add_json_option, add_node_option, open_cli_bus, profile_of
 from ._output import Column, print_json, print_table
+from ._record import direction_word
 from ._session import run_async
 from ._tripinfo import trip_or_none
 
@@ -69,6 +72,7 @@ async def _status(args: argparse.Namespace) -> int:
                 "node": args.node,
                 "state": view.state,
                 "trip": None if trip is None else trip.as_json(),
+                "direction": direction_word(_direction(profile, view, monitor)),
                 "set_frequency_hz": setpoint,
                 "status": status,
                 "monitor": monitor,
@@ -88,6 +92,12 @@ async def _status(args: argparse.Namespace) -> int:
         show_header=False,
     )
     return 0
+
+
+def _direction(profile: Profile, view: StatusView, monitor: Any) -> Direction | None:
+    """The monitor's direction, else the status's (as a snapshot takes it)."""
+    direction = profile.monitor_view(monitor).direction
+    return view.direction if direction is None else direction
 
 
 async def _set_frequency(profile: Profile, drive: Any) -> float | None:

@@ -274,6 +274,7 @@ async def test_status_takes_every_address_of_the_range_and_refuses_the_others(
     assert re.fullmatch(r"state +stopped", rows[1]), rows
     assert re.search(r"^set frequency +0\.00 Hz$", text.out, re.M), text.out
     assert (data["node"], data["state"], data["trip"]) == (last, "stopped", None)
+    assert data["direction"] == "stop"
     assert data["set_frequency_hz"] == 0.0
     assert data["monitor"]["output_frequency_hz"] == 0.0
     noun = line.facts.noun
@@ -366,6 +367,7 @@ async def test_freq_run_forward_reverse_and_stop(line: Line) -> None:
     assert re.search(r"^direction +forward$", status.out, re.M), status.out
     assert re.search(rf"^set frequency +{RUN_HZ:.2f} Hz$", status.out, re.M), status.out
     assert status_json["state"] == "running"
+    assert status_json["direction"] == "forward"  # both protocols, as the text row
     assert status_json["set_frequency_hz"] == RUN_HZ
     assert status_json["monitor"]["output_frequency_hz"] == RUN_HZ
 
