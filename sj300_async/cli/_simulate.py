@@ -161,9 +161,12 @@ def add_parser(subparsers: Any) -> None:
         help="line speed (default 19200): TCP listeners answer as soon as a line at this "
         "speed could carry the frames (--pace: every character at its wire time)",
     )
-    line.add_argument("--bytesize", type=int, choices=(7, 8), default=8)
-    line.add_argument("--parity", type=str.upper, choices=("N", "E", "O"), default="N")
-    line.add_argument("--stopbits", type=int, choices=(1, 2), default=1)
+    # No defaults here: any of them given means a line was described (default 8N1).
+    line.add_argument("--bytesize", type=int, choices=(7, 8), help="data bits (default 8)")
+    line.add_argument(
+        "--parity", type=str.upper, choices=("N", "E", "O"), help="parity (default N)"
+    )
+    line.add_argument("--stopbits", type=int, choices=(1, 2), help="stop bits (default 1)")
     line.add_argument(
         "--pace",
         action="store_true",
@@ -189,9 +192,14 @@ def run(args: argparse.Namespace) -> int:
         )
     elsewhere = args.pty or args.device
     listen: list[ListenAddress] = args.listen or ([] if elsewhere else [parse_listen("tcp://")])
-    line_given = args.baud is not None or args.pace
+    # --parity E alone is a line too (8E2 carries a frame slower than 8N1): it was
+    # ignored unless --baud came with it.
+    framing = (args.bytesize, args.parity, args.stopbits)
+    line_given = args.baud is not None or args.pace or any(f is not None for f in framing)
     try:
-        pacing = LinePacing(args.baud or 19200, args.bytesize, args.parity, args.stopbits)
+        pacing = LinePacing(
+            args.baud or 19200, args.bytesize or 8, args.parity or "N", args.stopbits or 1
+        )
         command_lines = _command_lines()
         command_line = command_lines[args.protocol]
         _refuse_other_protocols_options(args, command_lines)
@@ -300,7 +308,11 @@ async def _serve(
                 raise CliError(f"cannot serve on {path}: {why or exc}") from None
             print(f"listening on {path}", flush=True)
         mode = command_line.describe(bus, simulated)
-        pace = f", paced at {line.pacing.baudrate} bps" if line else ""
+        pace = ""
+        if settings is not None:  # the line the listeners answer as (its framing too)
+            framing = f"{settings.bytesize}{settings.parity}{settings.stopbits}"
+            verb = "paced at" if line else "answering as"
+            pace = f", {verb} {settings.baudrate} bps {framing}"
         print(
             f"simulating {noun}(s) {format_nodes(sorted(bus.drives))} ({mode}{pace}); "
             "Ctrl-C to stop",

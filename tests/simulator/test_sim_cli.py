@@ -221,3 +221,28 @@ def test_listen_addresses_stay_on_loopback_unless_a_host_is_written() -> None:
     assert parse_listen("tcp://:5000").is_loopback
     assert not parse_listen("tcp://0.0.0.0:5000").is_loopback
     assert str(parse_listen("tcp://[::1]:0")) == "tcp://[::1]:0"
+
+
+@pytest.mark.parametrize(
+    ("options", "said"),
+    [
+        ((), None),
+        (("--parity", "E", "--stopbits", "2"), "answering as 19200 bps 8E2"),  # was ignored
+        (("--baud", "9600"), "answering as 9600 bps 8N1"),
+        (("--baud", "9600", "--bytesize", "7", "--pace"), "paced at 9600 bps 7N1"),
+    ],
+)
+async def test_the_summary_names_the_line_the_listeners_answer_as(
+    procs: list[Process], options: tuple[str, ...], said: str | None
+) -> None:
+    proc = await start("--listen", "tcp://127.0.0.1:0", *options)
+    procs.append(proc)
+    await tcp_port(proc)
+    code, err = await stop(proc)
+    assert code == 0, err
+    summary = err.splitlines()[0]
+    assert summary.startswith("simulating node(s) 1 (serial control"), summary
+    if said is None:
+        assert "bps" not in summary, summary
+    else:
+        assert f", {said})" in summary, summary
