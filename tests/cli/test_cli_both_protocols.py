@@ -10,19 +10,21 @@ form parses, and what a protocol lacks is refused in one line, exit 2,
 before anything is sent. After a command that moves a drive the test waits
 for the simulated drive's state (a deadline, never a guessed sleep).
 
-``params backup|diff|restore`` have a file per protocol
-(tests/cli/test_cli_params.py, tests/cli/test_cli_params_fr700.py), as
-``sniff`` and ``simulate`` have theirs (tests/capture/test_sniff_tap.py,
+``params backup|diff|restore`` run here on two codes; their whole walk has
+a file per protocol (tests/cli/test_cli_params.py,
+tests/cli/test_cli_params_fr700.py), as ``sniff`` and ``simulate`` have theirs (tests/capture/test_sniff_tap.py,
 tests/simulator/test_sim_cli.py, tests/fr700/test_fr700_sim_cli.py).
 """
 
 from __future__ import annotations
 
 import asyncio
+import json
 import re
 import sys
 from collections.abc import AsyncIterator, Callable, Iterable, Mapping
 from dataclasses import dataclass
+from pathlib import Path
 from typing import Any, Final, Protocol
 
 import pytest
@@ -465,6 +467,39 @@ async def test_trips_status_run_and_reset_of_a_tripped_drive(line: Line) -> None
     assert again_json == {"node": 3, "was_tripped": False, "trip": None}
     # The history keeps the trip once it is cleared.
     assert [r["error_code"] for r in history["records"]] == [facts.trip_code]
+
+
+async def test_params_backup_diff_and_restore(line: Line, tmp_path: Path) -> None:
+    # Two codes (--codes): the whole walk has a test per protocol (test_cli_params*.py).
+    accel, maximum = line.facts.accel, line.facts.maximum
+    file = tmp_path / "backup.json"
+    saved = await line.human(
+        "params", "backup", str(file), "-n", "2", "--codes", f"{accel.code},{maximum.code}"
+    )
+    assert saved.out.startswith(f"{line.tag(2)}: 2 parameters saved to {file}"), saved.out
+    data = json.loads(file.read_text())
+    assert (data["protocol"], data["node"]) == (line.facts.name, 2)
+    assert {p["code"]: p["raw"] for p in data["parameters"]} == {  # in the protocol's order
+        accel.code: accel.raw(accel.value),
+        maximum.code: maximum.raw(maximum.value),
+    }
+    same = await line.human("params", "diff", str(file))
+    assert same.out == f"{line.tag(2)} matches {file} (2 parameters)\n"
+    await line.human("write", accel.code, "1", "-n", "2")
+    differs = await line.run("params", "diff", str(file))
+    assert differs.code == 1, differs.err
+    assert differs.out.splitlines()[0] == f"{line.tag(2)} differs from {file}"
+    assert re.search(
+        rf"^{re.escape(accel.code)} .* {accel.shown(accel.value)} +{accel.shown(1)}$",
+        differs.out,
+        re.M,
+    ), differs.out
+    restored = await line.human("params", "restore", str(file))
+    assert restored.out.startswith(
+        f"{line.tag(2)}: 2 of 2 parameters restored and verified"
+    ), restored.out
+    assert line.drives[2].parameters[accel.key] == accel.raw(accel.value)
+    assert (await line.run("params", "diff", str(file))).code == 0
 
 
 async def test_monitor_count(line: Line) -> None:
