@@ -12,8 +12,9 @@ for the simulated drive's state (a deadline, never a guessed sleep).
 
 ``params backup|diff|restore`` run here on two codes; their whole walk has
 a file per protocol (tests/cli/test_cli_params.py,
-tests/cli/test_cli_params_fr700.py), as ``sniff`` and ``simulate`` have theirs (tests/capture/test_sniff_tap.py,
-tests/simulator/test_sim_cli.py, tests/fr700/test_fr700_sim_cli.py).
+tests/cli/test_cli_params_fr700.py), as ``sniff`` and ``simulate`` have
+theirs (tests/capture/test_sniff_tap.py, tests/simulator/test_sim_cli.py,
+tests/fr700/test_fr700_sim_cli.py).
 """
 
 from __future__ import annotations
