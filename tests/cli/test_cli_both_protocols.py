@@ -496,9 +496,9 @@ async def test_params_backup_diff_and_restore(line: Line, tmp_path: Path) -> Non
         re.M,
     ), differs.out
     restored = await line.human("params", "restore", str(file))
-    assert restored.out.startswith(
-        f"{line.tag(2)}: 2 of 2 parameters restored and verified"
-    ), restored.out
+    assert restored.out.startswith(f"{line.tag(2)}: 2 of 2 parameters restored and verified"), (
+        restored.out
+    )
     assert line.drives[2].parameters[accel.key] == accel.raw(accel.value)
     assert (await line.run("params", "diff", str(file))).code == 0
 
