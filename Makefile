@@ -89,8 +89,13 @@ system-packages:
 	export DEBIAN_FRONTEND=noninteractive; \
 	apt-get update -qq && apt-get install -y -qq $$missing >/dev/null
 
+# The suite in this many worker processes (pytest-xdist; 0: all in one process, as a
+# plain `pytest FILE` runs). Most tests wait on sockets, ptys and subprocesses:
+# on 2 cores, 2 workers take the default suite from 536 s to 294 s.
+PYTEST_WORKERS ?= 2
+
 pytest: $(DEV_STAMP) system-packages
-	$(BIN)/pytest $(PYTEST_ARGS)
+	$(BIN)/pytest -n $(PYTEST_WORKERS) --dist worksteal $(PYTEST_ARGS)
 
 bench: $(DEV_STAMP)
 	$(BIN)/python -m benchmarks $(BENCH_ARGS)

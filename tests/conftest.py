@@ -5,6 +5,10 @@ size; ``--soak`` (``make soak``) runs them at the sizes docs/RELIABILITY.md
 publishes. Each of them records its figures in the ``soak_figures`` fixture;
 they are printed at the end of the run and, with ``--soak-report PATH``,
 written there as JSON.
+
+``make test`` runs the suite in worker processes (pytest-xdist, ``-n``):
+each worker sends its figures and its peak memory to the controller when it
+finishes (``workeroutput``), which prints them all as a serial run does.
 """
 
 from __future__ import annotations
@@ -22,6 +26,10 @@ from typing import Any
 import pytest
 
 _FIGURES = pytest.StashKey[dict[str, Any]]()
+#: The workers' peak resident memory, MiB (pytest-xdist runs only).
+_WORKER_RSS = pytest.StashKey[list[float]]()
+#: The key of a worker's figures and peak memory in its ``workeroutput``.
+_WORKER_KEY = "sj300_soak_figures"
 
 
 def pytest_addoption(parser: pytest.Parser) -> None:
@@ -48,6 +56,30 @@ def pytest_addoption(parser: pytest.Parser) -> None:
 
 def pytest_configure(config: pytest.Config) -> None:
     config.stash[_FIGURES] = {}
+    config.stash[_WORKER_RSS] = []
+
+
+def _peak_rss_mib() -> float:
+    # ru_maxrss is in KiB on Linux: the peak of this whole process.
+    return round(resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024, 1)
+
+
+def pytest_sessionfinish(session: pytest.Session) -> None:
+    output = getattr(session.config, "workeroutput", None)
+    if output is not None:  # a pytest-xdist worker: hand the figures to the controller
+        figures = session.config.stash.get(_FIGURES, {})
+        output[_WORKER_KEY] = json.dumps({"runs": figures, "rss": _peak_rss_mib()}, default=str)
+
+
+@pytest.hookimpl(optionalhook=True)
+def pytest_testnodedown(node: Any, error: object) -> None:
+    """pytest-xdist: a worker finished; keep its figures for the summary."""
+    sent = getattr(node, "workeroutput", {}).get(_WORKER_KEY)
+    if sent is None:
+        return
+    received = json.loads(sent)
+    node.config.stash[_FIGURES].update(received["runs"])
+    node.config.stash[_WORKER_RSS].append(received["rss"])
 
 
 @pytest.fixture(scope="session")
@@ -75,6 +107,7 @@ def pytest_terminal_summary(terminalreporter: Any, exitstatus: int, config: pyte
     figures = config.stash.get(_FIGURES, {})
     if not figures:
         return
+    workers_rss: list[float] = config.stash.get(_WORKER_RSS, [])
     report = {
         "form": "long (--soak)" if config.getoption("--soak") else "short (default suite)",
         "date": time.strftime("%Y-%m-%d %H:%M:%S %z"),
@@ -82,9 +115,10 @@ def pytest_terminal_summary(terminalreporter: Any, exitstatus: int, config: pyte
         "python": sys.version.split()[0],
         "platform": platform.platform(),
         "cpus": os.cpu_count(),
+        "pytest_workers": len(workers_rss) or 1,
         "ci": os.environ.get("SJ300_CI") == "1",
-        # ru_maxrss is in KiB on Linux: the peak of the whole pytest process.
-        "peak_rss_mib": round(resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024, 1),
+        # The peak of the pytest process that ran the tests (the largest worker's).
+        "peak_rss_mib": max(workers_rss, default=_peak_rss_mib()),
         "runs": figures,
     }
     text = json.dumps(report, indent=2, sort_keys=False, default=str)
