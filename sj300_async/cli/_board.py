@@ -25,6 +25,7 @@ import asyncio
 import contextlib
 import logging
 import time
+from collections.abc import Coroutine
 from dataclasses import dataclass
 from typing import Any, Final
 
@@ -96,7 +97,29 @@ _COMPACT: Final = (
 )
 
 
-class _TripNames:
+class _ReadsBeside:
+    """Reads beside the poll, one task per drive at a time, cancelled at close."""
+
+    def __init__(self, bus: Bus, profile: Profile) -> None:
+        self._bus = bus
+        self._profile = profile
+        self._reading: dict[int, asyncio.Task[None]] = {}
+
+    def _start(self, node: int, read: Coroutine[Any, Any, None]) -> None:
+        self._reading[node] = asyncio.create_task(read)
+
+    def under_way(self, node: int) -> asyncio.Task[None] | None:
+        """*node*'s read, while it goes on."""
+        return self._reading.get(node)
+
+    def close(self) -> None:
+        """Cancel the reads still under way."""
+        for task in self._reading.values():
+            task.cancel()
+        self._reading.clear()
+
+
+class _TripNames(_ReadsBeside):
     """The trip each tripped drive is in, read once per trip from its history.
 
     The status says only that a drive is tripped; the profile reads which
@@ -105,10 +128,8 @@ class _TripNames:
     """
 
     def __init__(self, bus: Bus, profile: Profile) -> None:
-        self._bus = bus
-        self._profile = profile
+        super().__init__(bus, profile)
         self._known: dict[int, Trip | None] = {}
-        self._reading: dict[int, asyncio.Task[None]] = {}
 
     def update(self, snapshot: DriveSnapshot) -> None:
         node = snapshot.node
@@ -121,15 +142,11 @@ class _TripNames:
                 task.cancel()
             return
         if node not in self._known and node not in self._reading:
-            self._reading[node] = asyncio.create_task(self._read(node))
+            self._start(node, self._read(node))
 
     def get(self, node: int) -> Trip | None:
         """The trip *node* is in, if known."""
         return self._known.get(node)
-
-    def under_way(self, node: int) -> asyncio.Task[None] | None:
-        """*node*'s read, while it goes on."""
-        return self._reading.get(node)
 
     async def _read(self, node: int) -> None:
         try:
@@ -139,14 +156,8 @@ class _TripNames:
         finally:
             self._reading.pop(node, None)
 
-    def close(self) -> None:
-        """Cancel the reads still under way."""
-        for task in self._reading.values():
-            task.cancel()
-        self._reading.clear()
 
-
-class _SetFrequencies:
+class _SetFrequencies(_ReadsBeside):
     """The set frequency of each drive whose profile names no parameter holding it.
 
     The poll reads a protocol's setpoint parameter (SJ300 F001) with the
@@ -157,11 +168,9 @@ class _SetFrequencies:
     """
 
     def __init__(self, bus: Bus, profile: Profile) -> None:
-        self._bus = bus
-        self._profile = profile
+        super().__init__(bus, profile)
         self.enabled = profile.setpoint_parameter is None
         self._known: dict[int, tuple[float | None, float]] = {}  # node -> (Hz, loop time)
-        self._reading: dict[int, asyncio.Task[None]] = {}
 
     def update(self, sample: Sample) -> None:
         node = sample.node
@@ -169,16 +178,12 @@ class _SetFrequencies:
             return
         known = self._known.get(node)
         if known is None or sample.timestamp - known[1] >= SETPOINT_EVERY_S:
-            self._reading[node] = asyncio.create_task(self._read(node))
+            self._start(node, self._read(node))
 
     def get(self, node: int) -> tuple[float, float] | None:
         """*node*'s set frequency and the loop time it was read, if known."""
         known = self._known.get(node)
         return None if known is None or known[0] is None else (known[0], known[1])
-
-    def under_way(self, node: int) -> asyncio.Task[None] | None:
-        """*node*'s read, while it goes on."""
-        return self._reading.get(node)
 
     async def _read(self, node: int) -> None:
         loop = asyncio.get_running_loop()
@@ -190,12 +195,6 @@ class _SetFrequencies:
             _log.debug("node %02d: set frequency not read: %s", node, exc)
         finally:
             self._reading.pop(node, None)
-
-    def close(self) -> None:
-        """Cancel the reads still under way."""
-        for task in self._reading.values():
-            task.cancel()
-        self._reading.clear()
 
 
 @dataclass(slots=True)

@@ -8,13 +8,16 @@ import fcntl
 import json
 import os
 import re
+import signal
 import socket
 import struct
 import sys
 import termios
-from collections.abc import AsyncIterator
+from collections.abc import AsyncIterator, Callable
 from dataclasses import dataclass
 from typing import Any
+
+from waiting import wait_for
 
 from sj300_async.simulator.sj300 import SimulatedBus
 
@@ -167,3 +170,30 @@ async def sj300_on_terminal(*args: str, timeout: float = TIMEOUT, columns: int =
     assert proc.returncode is not None
     text = _ANSI.sub("", b"".join(chunks).decode(errors="replace")).replace("\r", "")
     return Result(proc.returncode, text, "")
+
+
+async def interrupted_restore(
+    *args: str, restoring: Callable[[], bool], stall: Callable[[], None]
+) -> tuple[int, int]:
+    """``sj300 params restore ARGS`` stopped with Ctrl-C while it writes: (written, total).
+
+    Once *restoring* says a write landed, *stall* silences the drive (the next
+    write waits for its answer: still writing) and SIGINT goes. Checks the
+    exit status 130, nothing on stdout and the one line on stderr.
+    """
+    async with running("params", "restore", *args) as proc:
+        await wait_for(restoring, "a parameter restored")
+        stall()
+        proc.send_signal(signal.SIGINT)
+        out, err = await asyncio.wait_for(proc.communicate(), TIMEOUT)
+    assert proc.returncode == 130
+    assert out == b""
+    lines = err.decode().splitlines()
+    assert len(lines) == 1, lines
+    said = re.fullmatch(
+        r"sj300 params restore: interrupted after (\d+) of (\d+) parameters written; "
+        r"the drive holds a mix of the file's values and its own",
+        lines[0],
+    )
+    assert said, lines
+    return int(said[1]), int(said[2])

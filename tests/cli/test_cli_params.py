@@ -4,15 +4,11 @@ from __future__ import annotations
 
 import asyncio
 import json
-import re
-import signal
 from pathlib import Path
-
-from waiting import wait_for
 
 from sj300_async.sj300 import PARAMETERS
 
-from .clirun import TIMEOUT, TcpSim, running, sj300
+from .clirun import TcpSim, interrupted_restore, sj300
 
 
 async def test_backup_writes_the_documented_format(tcp_sim: TcpSim, tmp_path: Path) -> None:
@@ -202,21 +198,12 @@ async def test_ctrl_c_during_a_restore_says_how_far_it_got(tcp_sim: TcpSim, tmp_
     assert (await sj300("params", "backup", str(file), "--url", tcp_sim.url)).code == 0
     drive = tcp_sim.bus.drives[1]
     drive.set_parameter("F002", 1250)  # among the first the restore writes
-    async with running("params", "restore", str(file), "--url", tcp_sim.url) as proc:
-        await wait_for(lambda: drive.parameters["F002"] == 3000, "F002 restored")
-        tcp_sim.bus.faults.silence(1)  # the next write waits for its answer: still writing
-        proc.send_signal(signal.SIGINT)
-        out, err = await asyncio.wait_for(proc.communicate(), TIMEOUT)
-    assert proc.returncode == 130
-    assert out == b""
-    lines = err.decode().splitlines()
-    assert len(lines) == 1, lines
-    said = re.fullmatch(
-        r"sj300 params restore: interrupted after (\d+) of (\d+) parameters written; "
-        r"the drive holds a mix of the file's values and its own",
-        lines[0],
+    written, total = await interrupted_restore(
+        str(file),
+        "--url",
+        tcp_sim.url,
+        restoring=lambda: drive.parameters["F002"] == 3000,
+        stall=lambda: tcp_sim.bus.faults.silence(1),
     )
-    assert said, lines
-    written, total = int(said[1]), int(said[2])
     assert total == len(PARAMETERS) - 5  # the communication settings are skipped
     assert 1 <= written < total

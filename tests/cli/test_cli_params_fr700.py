@@ -13,21 +13,18 @@ from __future__ import annotations
 
 import asyncio
 import json
-import re
-import signal
 from collections.abc import AsyncIterator, Iterable
 from dataclasses import dataclass
 from pathlib import Path
 
 import pytest
-from waiting import wait_for
 
 import sj300_async as sj
 from sj300_async.fr700 import FR700_PARAMETERS, Fr700OperationMode
 from sj300_async.simulator import LinePacing, PlausibleLine, serve_tcp
 from sj300_async.simulator.fr700 import Fr700SimulatedBus
 
-from .clirun import TIMEOUT, running, sj300
+from .clirun import interrupted_restore, sj300
 from .conftest import FAST_BAUD
 
 #: What a restore never writes, or only with --include-comm, among the simulated parameters.
@@ -345,22 +342,12 @@ async def test_ctrl_c_during_a_restore_says_how_far_it_got(
     backup = await sj300("params", "backup", str(file), "-n", "1", "--codes", codes(writable), *url)
     assert backup.code == 0, backup.err
     drive.set_parameter(1, 6000)  # the second the restore writes, once Pr.0's ACK came
-    async with running("params", "restore", str(file), *url) as proc:
-        await wait_for(lambda: drive.parameters[1] == 12000, "Pr.1 restored")
-        fr700_sim.bus.faults.silence(1)  # the next write waits for its answer: still writing
-        proc.send_signal(signal.SIGINT)
-        out, err = await asyncio.wait_for(proc.communicate(), TIMEOUT)
-    assert proc.returncode == 130
-    assert out == b""
-    lines = err.decode().splitlines()
-    assert len(lines) == 1, lines
-    said = re.fullmatch(
-        r"sj300 params restore: interrupted after (\d+) of (\d+) parameters written; "
-        r"the drive holds a mix of the file's values and its own",
-        lines[0],
+    written, total = await interrupted_restore(
+        str(file),
+        *url,
+        restoring=lambda: drive.parameters[1] == 12000,
+        stall=lambda: fr700_sim.bus.faults.silence(1),
     )
-    assert said, lines
-    written, total = int(said[1]), int(said[2])
     assert total == len(writable)
     assert 13 in writable  # uncatalogued parameters are written too
     assert 13 not in FR700_PARAMETERS
