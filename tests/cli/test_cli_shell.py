@@ -22,7 +22,9 @@ from pathlib import Path
 import pytest
 
 from sj300_async.cli import build_parser
+from sj300_async.cli._read import parameter_target
 from sj300_async.cli._shell import _Completer, _subcommands
+from sj300_async.profiles import get_profile
 
 from .clirun import TIMEOUT, cli_env
 
@@ -374,6 +376,19 @@ def test_global_options_of_the_shell_hold_for_its_commands(history: Path) -> Non
     assert len(errors) == 2, done.stderr
     assert errors[0].startswith("sj300 status: error: --retries belongs to the session")
     assert errors[1].startswith("sj300 status: error: --url belongs to the session")
+
+
+@pytest.mark.parametrize("protocol", ["sj300", "fr700"])
+def test_every_code_completion_offers_is_one_read_takes(protocol: str) -> None:
+    # Issue 27: `read Pr.` offered codes that `read Pr.1` then refused.
+    profile = get_profile(protocol)
+    parser = build_parser()
+    completer = _Completer(parser, _subcommands(parser), list(profile.parameters.codes()))
+    prefix = "Pr." if protocol == "fr700" else "F"
+    offered = completer.candidates("read ", prefix)
+    assert len(offered) >= 4, offered
+    for code in offered:
+        assert parameter_target(profile, code) == (code, profile.parameters.spec(code)), code
 
 
 def test_completion_candidates() -> None:
