@@ -73,8 +73,9 @@ def run(args: argparse.Namespace) -> int:
     return run_async(_read(args))
 
 
-async def read_raw(drive: Any, code: str) -> int:
-    """Read *code*; a NAK names the code.
+async def read_raw(drive: Any, code: str, profile: Profile | None = None) -> int:
+    """Read *code*; a NAK names the code, and says when it means *profile*'s drive
+    has no such parameter (SJ300 NAK 16, FR-700 NAK B: :meth:`Profile.absent`).
 
     Raises:
         CliError: the drive answered NAK (status 1).
@@ -83,7 +84,9 @@ async def read_raw(drive: Any, code: str) -> int:
     try:
         return int(await drive.read_parameter_raw(code))
     except NakError as exc:
-        raise CliError(f"{code}: {exc}", status=FAILURE) from None
+        absent = profile is not None and profile.absent(int(exc.code))
+        why = ": the drive has no such parameter" if absent else ""
+        raise CliError(f"{code}: {exc}{why}", status=FAILURE) from None
 
 
 def parameter_json(code: str, info: ParameterSpec | None, raw: int) -> dict[str, Any]:
@@ -112,7 +115,7 @@ async def _read(args: argparse.Namespace) -> int:
     async with open_cli_bus(args) as bus:
         drive = bus.drive(args.node)
         for code, info in targets:
-            values.append((code, info, await read_raw(drive, code)))
+            values.append((code, info, await read_raw(drive, code, profile)))
     if args.json:
         params = [parameter_json(code, info, raw) for code, info, raw in values]
         print_json({"node": args.node, "parameters": params})

@@ -103,7 +103,7 @@ async def _write(args: argparse.Namespace) -> int:
     raw = _raw_value(info, args.value, args.raw, profile.parameters.raw_range)
     async with open_cli_bus(args, needs="store" if args.store else None) as bus:
         drive = bus.drive(args.node)
-        old = await read_raw(drive, code)
+        old = await read_raw(drive, code, profile)
         await write_raw(drive, code, raw)
         back = await read_raw(drive, code)
         if back != raw:

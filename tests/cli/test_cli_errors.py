@@ -27,7 +27,13 @@ async def test_time_out_over_tcp_with_retries(tcp_sim: TcpSim) -> None:
 async def test_nak_for_an_unknown_parameter() -> None:
     result = await sj300("read", "F999", "--sim")
     result.assert_one_line_error(
-        1, "sj300 read: error: F999: node 01 answered NAK 16 (abnormal parameter code or value)"
+        1,
+        "sj300 read: error: F999: node 01 answered NAK 16 (abnormal parameter code or value)",
+        ": the drive has no such parameter",  # the profile's absent NAK
+    )
+    fr700 = await sj300("read", "Pr.999", "--protocol", "fr700", "--sim")
+    fr700.assert_one_line_error(
+        1, "Pr.999: station 01 answered NAK B (instruction code error): the drive has no such"
     )
 
 
