@@ -117,6 +117,16 @@ async def running(*args: str) -> AsyncIterator[asyncio.subprocess.Process]:
         await _reap(proc)
 
 
+async def finished(proc: asyncio.subprocess.Process, stdin: bytes | None = None) -> Result:
+    """What *proc* left when it ended (given *stdin*), within :data:`TIMEOUT`; killed if not."""
+    try:
+        out, err = await asyncio.wait_for(proc.communicate(stdin), TIMEOUT)
+    finally:
+        await _reap(proc)
+    assert proc.returncode is not None
+    return Result(proc.returncode, out.decode(), err.decode())
+
+
 async def _reap(proc: asyncio.subprocess.Process) -> None:
     """Kill *proc* if it still runs, and wait for it: no child outlives its test."""
     if proc.returncode is None:

@@ -38,7 +38,7 @@ from sj300_async.simulator import LinePacing, PlausibleLine, RunState, serve_tcp
 from sj300_async.simulator.fr700 import Fr700SimulatedBus
 from sj300_async.simulator.sj300 import SimulatedBus
 
-from .clirun import TIMEOUT, Result, cli_env, sj300
+from .clirun import Result, cli_env, finished, sj300
 
 #: The line speed the simulator answers at and each URL declares (as conftest's tcp_sim).
 BAUD: Final = 115200
@@ -554,14 +554,7 @@ async def shell_on_a_pipe(url: str, commands: str) -> Result:
         stderr=asyncio.subprocess.PIPE,
         env=cli_env(),
     )
-    try:
-        out, err = await asyncio.wait_for(proc.communicate(commands.encode()), TIMEOUT)
-    finally:
-        if proc.returncode is None:
-            proc.kill()
-            await proc.wait()
-    assert proc.returncode is not None
-    return Result(proc.returncode, out.decode(), err.decode())
+    return await finished(proc, commands.encode())
 
 
 async def test_shell_runs_the_commands_on_one_bus(line: Line) -> None:

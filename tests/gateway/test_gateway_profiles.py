@@ -30,7 +30,7 @@ from pathlib import Path
 from typing import Any, cast
 
 import pytest
-from cli.clirun import TIMEOUT, Result, cli_env
+from cli.clirun import TIMEOUT, cli_env, finished
 from mqtt_broker import Broker, running_broker
 from pymodbus.client import AsyncModbusTcpClient
 from pymodbus.pdu import ModbusPDU
@@ -335,17 +335,6 @@ async def sj300_with_jsonl(*args: str) -> asyncio.subprocess.Process:
         stderr=asyncio.subprocess.PIPE,
         env=cli_env(),
     )
-
-
-async def finished(proc: asyncio.subprocess.Process) -> Result:
-    try:
-        out, err = await asyncio.wait_for(proc.communicate(), TIMEOUT)
-    finally:
-        if proc.returncode is None:
-            proc.kill()
-            await proc.wait()
-    assert proc.returncode is not None
-    return Result(proc.returncode, out.decode(), err.decode())
 
 
 async def test_the_jsonl_flag_of_sj300_gateway(tmp_path: Path) -> None:
