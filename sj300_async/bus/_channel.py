@@ -17,7 +17,7 @@ from typing import TYPE_CHECKING, Any, Generic, Protocol
 
 from ..wire import BusClosedError, LocalProtocolError, ReadOnlyError
 from ._dialect import Dialect, RequestT
-from ._stats import TransactionStats
+from ._stats import BusStats, TransactionStats
 
 if TYPE_CHECKING:
     from ._arbiter import Arbiter
@@ -69,6 +69,9 @@ class BusState(Protocol):
     @property
     def closed(self) -> bool: ...
 
+    @property
+    def stats(self) -> BusStats: ...
+
 
 class Channel(Generic[RequestT]):
     """A typed gate to one bus's arbiter (made by the bus, handed to its drives)."""
@@ -96,6 +99,18 @@ class Channel(Generic[RequestT]):
     def read_only(self) -> bool:
         """True when the bus refuses every request that changes a drive."""
         return self._bus.read_only
+
+    def retries_allowed(self) -> int:
+        """The retries a call of the current task gets: the bus's, under any cap
+        (:func:`retries_at_most`). For a drive that makes its own retries."""
+        cap = _RETRIES_CAP.get()
+        return self._retries if cap is None else min(cap, self._retries)
+
+    @property
+    def connects(self) -> int:
+        """How many times the bus's link has connected: a drive that keeps state
+        of the far end (FR-700's parameter bank) forgets it on a new connection."""
+        return self._bus.stats.connects
 
     @property
     def dialect(self) -> Dialect[RequestT, object]:

@@ -17,23 +17,44 @@ list); :meth:`~Fr700Drive.read_parameter_raw` /
 parameter. Either way they go through the link-parameter extension: the bank is written
 with HFF, then the parameter is read or written at its offset. The two
 transactions hold a per-drive lock, so another task cannot switch the bank
-in between; the bank last written is remembered and not written again
-while it holds. A refusal (NAK) keeps it: the drive answered, and only a
-bank write changes its bank, so walking every number of a bank (most of
-which a drive lacks: NAK B) writes the bank once. It is forgotten (written
-again next time) after any other error in such a pair (a time-out may hide
-a restart, which returns the bank to 0) and after an inverter reset, which
-does. Selecting a bank only prepares a read, so a read-only bus allows it.
+in between. A write always writes its bank first: a restarted drive is back
+in bank 0, and a write that trusted a remembered bank would change
+Pr.N - 100 (a review's script set Pr.8 to 60 s writing "Pr.108"), so the
+extra request is the price of never writing the wrong parameter. A read
+reuses the bank last written while nothing says the drive may have
+restarted: a refusal (NAK) keeps it (the drive answered, and only a bank
+write changes its bank), so walking every number of a bank (most of which
+a drive lacks: NAK B) writes the bank once. It is forgotten after any
+other error in such a pair, after an inverter reset, after a raw HFF write
+(:meth:`Fr700Drive.write`), and whenever this drive's time-outs, retries
+or transport errors or the link's connections have moved since it was
+written (:meth:`Fr700Drive._bank_epoch`), and when the drive last answered
+a parameter or bank request more than :data:`BANK_TRUST_S` ago: a drive
+that restarts answers nothing for far longer than that (a power cycle, an
+inverter reset: a decision, the reference gives no figure), so a walk of
+reads, one every few milliseconds, writes its bank once, while a read
+after a pause, in which a restart may have gone unseen, writes it again.
+The retries of a parameter request are made here, each after a bank write
+(:meth:`Fr700Drive._in_bank`): the bus's own retry of an attempt a restart
+met would land in bank 0.
+Selecting a bank only prepares a read, so a read-only bus allows it.
 """
 
 from __future__ import annotations
 
 import asyncio
+import math
 from collections.abc import Coroutine
 from typing import TYPE_CHECKING, Any
 
 from ..bus import TransactionStats
-from ..wire import Direction, LocalProtocolError, NakError
+from ..wire import (
+    Direction,
+    LocalProtocolError,
+    NakError,
+    RemoteProtocolError,
+    ReplyTimeoutError,
+)
 from . import _requests as rq
 from ._codec import DEFAULT_LINE_OPTIONS, Fr700LineOptions
 from ._codes import Fr700Instruction, Fr700OperationMode, Fr700StatusBits
@@ -41,6 +62,10 @@ from ._faults import Fr700FaultHistory, decode_fault_history
 from ._parameters import fr700_parameter_info
 from ._payloads import Fr700Monitor, Fr700MultiReply, Fr700Status, decode_hex, decode_multi_reply
 from ._requests import Fr700MultiReceive, Fr700Request
+
+#: Seconds after the drive's last answer to a parameter or bank request during which
+#: a read trusts the bank written last (module docstring).
+BANK_TRUST_S = 0.2
 
 if TYPE_CHECKING:
     from ..bus import Channel
@@ -78,6 +103,8 @@ class Fr700Drive:
         self.wait_time_s = wait_time_s
         self.timeout_s: float | None = None
         self._bank: int | None = None
+        self._bank_written_at: tuple[int, int] = (-1, -1)  # _bank_epoch() then
+        self._bank_answered_at = -math.inf  # loop time of the last answer in a bank
         self._bank_lock = asyncio.Lock()
 
     @property
@@ -160,8 +187,8 @@ class Fr700Drive:
         """
         request = rq.write(self._station, code, value, options=self._options, digits=digits)
         await self._execute(request)
-        if request.instruction == I.INVERTER_RESET:
-            self._bank = None
+        if request.instruction in (I.INVERTER_RESET, I.WRITE_LINK_EXTENSION):
+            self._bank = None  # a restart's bank 0, or one chosen behind our back
 
     # -- status and monitors -------------------------------------------------------------
 
@@ -376,16 +403,8 @@ class Fr700Drive:
             TransportError: the link is down, or a write failed.
         """
         bank, _offset = rq.parameter_bank(number)
-        async with self._bank_lock:
-            await self._select_bank(bank)
-            try:
-                request = rq.read_parameter(self._station, number, options=self._options)
-                return decode_hex(await self._data(request))
-            except NakError:
-                raise  # the drive answered: its bank holds
-            except BaseException:
-                self._bank = None
-                raise
+        request = rq.read_parameter(self._station, number, options=self._options)
+        return decode_hex(await self._in_bank(bank, request, write=False))
 
     async def write_parameter_raw(self, number: int | str, value: int) -> None:
         """Write the raw *value* (0..65535) to parameter *number* (0..999, or ``"Pr.7"``).
@@ -402,20 +421,59 @@ class Fr700Drive:
         request = rq.write_parameter(self._station, number, value, options=self._options)
         self._channel.check(request)  # refuse before switching the bank, not after it
         bank, _offset = rq.parameter_bank(number)
-        async with self._bank_lock:
-            await self._select_bank(bank)
-            try:
-                await self._execute(request)
-            except NakError:
-                raise  # the drive answered: its bank holds
-            except BaseException:
-                self._bank = None
-                raise
+        await self._in_bank(bank, request, write=True)
 
-    async def _select_bank(self, bank: int) -> None:
-        if self._bank == bank:
+    async def _in_bank(self, bank: int, request: Fr700Request, *, write: bool) -> bytes:
+        """*request* (a parameter read or write) in *bank*, under the bank lock.
+
+        The retries are made here, not by the bus: each attempt follows a bank
+        write the drive acknowledged (a write's first too, a read's when the
+        bank may not hold), so an attempt that a restart met cannot be tried
+        again in bank 0 (module docstring).
+        """
+        tries = self._channel.retries_allowed() + 1
+        async with self._bank_lock:
+            for attempt in range(tries):
+                await self._select_bank(bank, always=write or attempt > 0)
+                try:
+                    data = await self._channel.transact(
+                        request,
+                        self.stats,
+                        wait_s=self.wait_time_s,
+                        timeout_s=self.timeout_s,
+                        retries=0,
+                    )
+                    self._bank_answered_at = asyncio.get_running_loop().time()
+                    return data
+                except NakError:
+                    self._bank_answered_at = asyncio.get_running_loop().time()
+                    raise  # the drive answered: its bank holds
+                except (ReplyTimeoutError, RemoteProtocolError):
+                    self._bank = None
+                    if attempt + 1 == tries:
+                        raise
+                    self.stats.retries += 1
+                except BaseException:
+                    self._bank = None
+                    raise
+        raise AssertionError("unreachable: the last attempt returns or raises")
+
+    def _bank_epoch(self) -> tuple[int, int]:
+        """What must not move for the bank last written to hold (module docstring)."""
+        stats = self.stats
+        return stats.timeouts + stats.retries + stats.transport_errors, self._channel.connects
+
+    async def _select_bank(self, bank: int, *, always: bool = False) -> None:
+        if (
+            not always
+            and self._bank == bank
+            and self._bank_written_at == self._bank_epoch()
+            and asyncio.get_running_loop().time() - self._bank_answered_at <= BANK_TRUST_S
+        ):
             return
         self._bank = None  # unknown until the drive has acknowledged
         request = rq.link_extension(self._station, bank, options=self._options, changes_drive=False)
         await self._execute(request)
         self._bank = bank
+        self._bank_written_at = self._bank_epoch()
+        self._bank_answered_at = asyncio.get_running_loop().time()

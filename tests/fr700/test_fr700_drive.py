@@ -6,6 +6,7 @@ import asyncio
 from contextlib import AbstractAsyncContextManager
 
 import pytest
+from waiting import wait_for
 
 import sj300_async as sj
 import sj300_async.bus as sjbus
@@ -17,6 +18,7 @@ from sj300_async.fr700 import (
     Fr700OperationMode,
     Fr700StatusBits,
 )
+from sj300_async.fr700._drive import BANK_TRUST_S
 from sj300_async.simulator.fr700 import Fr700SimulatedBus
 from sj300_async.simulator.sj300 import SimulatedBus
 
@@ -200,7 +202,8 @@ async def test_a_refusal_keeps_the_bank_and_another_error_forgets_it() -> None:
         with pytest.raises(sj.NakError):
             await drive.write_parameter_raw(7, 40000)  # NAK C
         assert await drive.read_parameter_raw(7) == 50
-        assert [frame[3:5] for frame in sent] == [b"FF", b"17", b"18", b"19", b"87", b"07"]
+        # A write writes its bank first, whatever was written before.
+        assert [frame[3:5] for frame in sent] == [b"FF", b"17", b"18", b"19", b"FF", b"87", b"07"]
         sent.clear()
         sim.faults.drop_next(1)  # a time-out may hide a restart: the bank is unknown
         with pytest.raises(sj.ReplyTimeoutError):
@@ -361,3 +364,46 @@ async def test_every_line_option_works_end_to_end(query: str) -> None:
         # ACK may still be on its way)
         assert sim.stats.host_acks >= (2 if "ack=1" in query else 0)
         assert sim.stats.host_acks <= (3 if "ack=1" in query else 0)
+
+
+async def test_a_restart_hidden_by_a_retry_never_writes_the_hundred_below() -> None:
+    # The drive restarts (bank 0) and the host sees no error; a write's first attempt
+    # then goes unanswered and its retry is answered. Trusting the bank last written,
+    # that retry changed Pr.20 for "Pr.120" (a review set Pr.8 to 60 s writing "Pr.108").
+    async with fr700_bus(timeout=0.05, retries=3) as bus:
+        drive = bus.drive(1)
+        sim = bus.simulator
+        assert isinstance(sim, Fr700SimulatedBus)
+        simulated = sim.drives[1]
+        assert await drive.read_parameter_raw(118) == simulated.parameters[118]  # bank 1
+        before = dict(simulated.parameters)
+        simulated.power_cycle(asyncio.get_running_loop().time())  # bank 0, unseen
+        sim.faults.silence(1)
+        writing = asyncio.create_task(drive.write_parameter_raw(120, 1))
+        await wait_for(lambda: drive.stats.timeouts >= 1, "an attempt unanswered")
+        sim.faults.silence(1, False)
+        await writing
+        assert simulated.parameter_bank == 1
+        assert simulated.parameters[120] == 1
+        assert {n: v for n, v in simulated.parameters.items() if n != 120} == {
+            n: v for n, v in before.items() if n != 120
+        }
+
+
+async def test_a_read_after_a_pause_writes_its_bank_again() -> None:
+    # A restart in a pause with no request in flight shows nowhere: a read more than
+    # BANK_TRUST_S after the drive's last answer writes its bank first.
+    async with fr700_bus() as bus:
+        drive = bus.drive(1)
+        sim = bus.simulator
+        assert isinstance(sim, Fr700SimulatedBus)
+        simulated = sim.drives[1]
+        sent: list[bytes] = []
+        bus.trace = lambda record: sent.append(record.data) if record.direction == "tx" else None
+        await drive.read_parameter_raw(118)
+        loop = asyncio.get_running_loop()
+        simulated.power_cycle(loop.time())  # back in bank 0
+        paused_until = loop.time() + BANK_TRUST_S * 1.5
+        await wait_for(lambda: loop.time() >= paused_until, "a pause past BANK_TRUST_S")
+        assert await drive.read_parameter_raw(119) == simulated.parameters[119]
+        assert [frame[3:5] for frame in sent] == [b"FF", b"12", b"FF", b"13"]
