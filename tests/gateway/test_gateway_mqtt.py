@@ -516,6 +516,10 @@ async def test_commands_reach_the_drive_and_refusals_are_answered(
             "500",
             "invalid_value: 500 Hz is outside 0..55 Hz (the drive's maximum frequency, A004)",
         )
+        # 1e308 * 100 overflowed the step check and killed the drive's command worker:
+        # the stop below went nowhere (a review's finding).
+        await refused(1, "frequency_hz", "1e308", "invalid_value: ")
+        assert "outside 0..55 Hz" in errors(sub, 1)[-1]["error"]
         await refused(1, "command", "jog", "malformed: expected run_forward, run_reverse")
         # An untrusted payload comes back as a short escaped excerpt, never whole.
         long = "\x1b[2J" + "x" * 100
@@ -794,6 +798,7 @@ def test_fr700_discovery_has_its_own_sensors_and_the_trip() -> None:
         ("frequency_hz", b"12.34", SetFrequency(12.34)),
         ("frequency_hz", b"nan", Refusal.MALFORMED),
         ("frequency_hz", b"12.345", Refusal.INVALID_VALUE),
+        ("frequency_hz", b"1e308", SetFrequency(1e308)),  # the gateway refuses its range
         ("frequency_hz", b"\xff", Refusal.MALFORMED),
         ("a004", b"60", ParameterWrite("A004", 600)),
         ("A004", b"1e400", Refusal.MALFORMED),
@@ -849,3 +854,39 @@ async def test_a_stop_mid_batch_counts_what_it_could_not_confirm() -> None:
     with pytest.raises(asyncio.CancelledError):
         await sending
     assert (bridge.stats.published, bridge.stats.lost) == (0, 100)
+
+
+async def test_a_command_a_bug_stops_leaves_the_drive_s_next_command_going(
+    sim_line: SimLine, broker: Broker, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    # No payload reaches a bug now (1e308 did); one is planted so the worker's guard is
+    # seen: the failed command is answered and counted, and the stop after it is carried out.
+    from sj300_async.gateway.mqtt import _bridge
+
+    parse = parse_command
+
+    def planted(profile: Any, what: str, payload: bytes) -> Any:
+        if payload == b"boom":
+            raise RuntimeError("a planted bug")
+        return parse(profile, what, payload)
+
+    monkeypatch.setattr(_bridge, "parse_command", planted)
+    topics = Topics("gw1")
+    drive = sim_line.sim.drives[1]
+    async with (
+        subscriber(broker) as sub,
+        running_gateway(mqtt_toml(sim_line.url, broker)) as gateway,
+    ):
+        await wait_for(lambda: bridge(gateway).connected, "connected")
+        await publish(broker, topics.command("hall", 1, "lease"), "")
+        await publish(broker, topics.command("hall", 1, "frequency_hz"), "10")
+        await publish(broker, topics.command("hall", 1, "command"), "run_forward")
+        await wait_for(lambda: drive.state(asyncio.get_running_loop().time()).outputting, "run")
+        await publish(broker, topics.command("hall", 1, "frequency_hz"), "boom")
+        await sub.until(lambda m: m.topic == topics.error("hall", 1), "the failure answered")
+        assert errors(sub, 1)[-1]["reason"] == "no_answer"
+        assert bridge(gateway).stats.failed == 1
+        await publish(broker, topics.command("hall", 1, "command"), "stop")
+        await wait_for(
+            lambda: not drive.state(asyncio.get_running_loop().time()).outputting, "stopped"
+        )

@@ -494,6 +494,16 @@ class MqttBridge:
             self._busy.add(key)
             try:
                 await self._carry_out(drive, topic, what, payload)
+            except Exception:  # a bug: the worker, and the drive's next stop, go on
+                self.stats.failed += 1
+                _log.exception("MQTT: %s %r: the command failed", topic, excerpt(payload))
+                self._refuse(
+                    drive,
+                    topic,
+                    what,
+                    payload,
+                    WriteResult(Refusal.NO_ANSWER, "the gateway failed to carry it out"),
+                )
             finally:
                 self._busy.discard(key)
 

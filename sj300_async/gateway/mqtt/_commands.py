@@ -91,7 +91,10 @@ def parse_command(profile: Profile, what: str, payload: bytes) -> WriteRequest |
         hz = _number(text)
         if hz is None:
             return WriteResult(Refusal.MALFORMED, f"expected a number of Hz, got {_quoted(text)}")
-        if abs(round(hz * 100) - hz * 100) > 1e-6:  # the set frequency's step, every protocol
+        # The set frequency's step, every protocol. Past 1e6 Hz no drive's range holds
+        # it (the gateway refuses it naming the maximum), and 1e308 * 100 is inf,
+        # which round() cannot take: it once killed the drive's command worker.
+        if abs(hz) <= 1e6 and abs(round(hz * 100) - hz * 100) > 1e-6:
             return WriteResult(Refusal.INVALID_VALUE, f"{excerpt(text)} Hz is finer than 0.01 Hz")
         return SetFrequency(hz)
     code = profile.parameters.code(what)

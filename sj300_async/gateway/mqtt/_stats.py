@@ -45,6 +45,9 @@ class BridgeStats(SessionStats):
     ignored: int = 0
     #: Commands refused unread: longer than MAX_PAYLOAD_BYTES (also in ``refused``).
     oversized: int = 0
+    #: Commands a bug stopped (logged with its traceback; also in ``refused``): the
+    #: drive's command worker goes on with the next.
+    failed: int = 0
 
 
 #: The bridge's counters: (name, HELP, BridgeStats attribute).
@@ -62,6 +65,7 @@ _COMMAND_RESULTS: Final = (
     ("discarded", "discarded"),
     ("ignored", "ignored"),
     ("oversized", "oversized"),
+    ("failed", "failed"),
 )
 
 
