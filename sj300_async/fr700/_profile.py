@@ -239,7 +239,22 @@ class Fr700Profile:
         "Pr.549",  # protocol selection
     )
     kept_parameters = ("Pr.331", "Pr.343", *_CALIBRATION)
-    last_parameters = ("Pr.77",)
+    # Written after the rest, in this order: the settings that change how the drive
+    # takes the link's writes. Pr.342 (EEPROM or RAM only), the command and start-up
+    # sources (Pr.338..340, Pr.550, Pr.551) and the operation mode Pr.79 (a mode
+    # other than NET refuses later writes with NAK A), then the write lock Pr.77
+    # (1 refuses every write but its own). From the manual as remembered: the
+    # reference describes none of them; a review asked for them last.
+    last_parameters = (
+        "Pr.342",
+        "Pr.338",
+        "Pr.339",
+        "Pr.340",
+        "Pr.550",
+        "Pr.551",
+        "Pr.79",
+        "Pr.77",
+    )
 
     def __init__(self) -> None:
         self.parameters = _Catalogue()

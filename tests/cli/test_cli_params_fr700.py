@@ -250,7 +250,8 @@ async def test_pr77_is_written_last_and_a_locked_drive_is_unlocked_first(
         drive.set_parameter(number, raw)
     restored = await sj300("params", "restore", str(locked), "--json", *url)
     assert restored.code == 0, restored.err
-    assert restored.json()["written"] == ["Pr.7", "Pr.79", "Pr.340", "Pr.77"]
+    # The mode and command-source settings after the rest, the write lock last.
+    assert restored.json()["written"] == ["Pr.7", "Pr.340", "Pr.79", "Pr.77"]
     assert {n: drive.parameters[n] for n in (7, 77, 79, 340)} == {7: 80, 77: 1, 79: 2, 340: 0}
 
     # The drive is locked now: every write before Pr.77 = 0 is refused, then tried again.

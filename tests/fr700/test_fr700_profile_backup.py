@@ -34,7 +34,8 @@ def test_what_a_restore_leaves_alone() -> None:
     assert {f"Pr.{n}" for n in range(118, 125)} <= line  # the PU connector's settings
     assert {"Pr.337", "Pr.341", "Pr.549"} <= line  # the RS-485 terminals', the protocol
     assert {"Pr.331", "Pr.343", "Pr.900", "Pr.902", "Pr.999"} <= kept
-    assert last == {"Pr.77"}
+    assert PROFILE.last_parameters[-2:] == ("Pr.79", "Pr.77")  # the mode, then the lock
+    assert {"Pr.338", "Pr.339", "Pr.340", "Pr.342", "Pr.550", "Pr.551"} <= last
     groups = [{PROFILE.address_parameter}, line, kept, last]
     assert sum(map(len, groups)) == len(set().union(*groups))  # no code in two groups
     assert set().union(*groups) <= addressable
