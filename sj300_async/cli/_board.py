@@ -30,7 +30,7 @@ from dataclasses import dataclass
 from typing import Any, Final
 
 from .. import Sample
-from ..bus import Bus
+from ..bus import Bus, retries_at_most
 from ..profiles import DriveReadings, DriveSnapshot, Profile, Trip, build_snapshot
 from ..wire import SJ300Error
 from ._fit import STATE_WIDTH, FitColumn, clip, fit
@@ -46,6 +46,8 @@ COMPACT_BELOW: Final = 100
 #: Seconds between two reads of a drive's set frequency beside the poll (as the
 #: gateway's default ``setpoint_interval_s``).
 SETPOINT_EVERY_S: Final = 2.0
+#: Seconds before a failed set-frequency read is tried again.
+SETPOINT_AFTER_FAILURE_S: Final = 30.0
 
 #: How wide the last error column would be, given the room.
 _ERROR_WIDTH: Final = 40
@@ -98,7 +100,12 @@ _COMPACT: Final = (
 
 
 class _ReadsBeside:
-    """Reads beside the poll, one task per drive at a time, cancelled at close."""
+    """Reads beside the poll, one task per drive at a time, cancelled at close.
+
+    Each makes one attempt, as the poller's reads do (the bus's retries would
+    let a drive that refuses one read take the line from the polls, and the
+    printed lines wait for these reads).
+    """
 
     def __init__(self, bus: Bus, profile: Profile) -> None:
         self._bus = bus
@@ -106,7 +113,7 @@ class _ReadsBeside:
         self._reading: dict[int, asyncio.Task[None]] = {}
 
     def _start(self, node: int, read: Coroutine[Any, Any, None]) -> None:
-        self._reading[node] = asyncio.create_task(read)
+        self._reading[node] = asyncio.create_task(_one_attempt(read))
 
     def under_way(self, node: int) -> asyncio.Task[None] | None:
         """*node*'s read, while it goes on."""
@@ -117,6 +124,11 @@ class _ReadsBeside:
         for task in self._reading.values():
             task.cancel()
         self._reading.clear()
+
+
+async def _one_attempt(read: Coroutine[Any, Any, None]) -> None:
+    with retries_at_most(0):
+        await read
 
 
 class _TripNames(_ReadsBeside):
@@ -163,8 +175,9 @@ class _SetFrequencies(_ReadsBeside):
     The poll reads a protocol's setpoint parameter (SJ300 F001) with the
     rest; FR-700 has none, so its set frequency (H6D) is read beside the
     poll in a task of its own, every :data:`SETPOINT_EVERY_S` per drive that
-    answers. A read that fails is tried again when due (its value is then
-    unknown, not an old one).
+    answers. A read that fails leaves the value unknown (not an old one) and
+    is tried again after :data:`SETPOINT_AFTER_FAILURE_S`: a drive that
+    refuses it costs the line little.
     """
 
     def __init__(self, bus: Bus, profile: Profile) -> None:
@@ -177,7 +190,11 @@ class _SetFrequencies(_ReadsBeside):
         if not self.enabled or not sample.online or node in self._reading:
             return
         known = self._known.get(node)
-        if known is None or sample.timestamp - known[1] >= SETPOINT_EVERY_S:
+        if known is None:
+            self._start(node, self._read(node))
+            return
+        every = SETPOINT_EVERY_S if known[0] is not None else SETPOINT_AFTER_FAILURE_S
+        if sample.timestamp - known[1] >= every:
             self._start(node, self._read(node))
 
     def get(self, node: int) -> tuple[float, float] | None:

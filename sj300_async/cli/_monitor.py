@@ -171,7 +171,8 @@ async def _monitor(args: argparse.Namespace) -> int:
         )
         poller.add(bus, nodes)
         # Subscribed before polling starts, so not even the first sample is missed.
-        # Unbounded, but printing is synchronous: the poller cannot run ahead of it.
+        # Unbounded: printing waits only for the reads beside the poll (one attempt
+        # each, on the same line), which hold the poller back as much as the printing.
         samples: asyncio.Queue[Sample] = asyncio.Queue()
         poller.on_sample(samples.put_nowait)
         board = Board(bus, profile, nodes, demo=url is None)

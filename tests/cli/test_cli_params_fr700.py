@@ -16,6 +16,7 @@ import json
 from collections.abc import AsyncIterator, Iterable
 from dataclasses import dataclass
 from pathlib import Path
+from typing import Any
 
 import pytest
 
@@ -381,3 +382,35 @@ async def test_read_and_write_take_a_number_the_catalogue_does_not_describe(
     assert fr700_sim.bus.drives[1].parameters[13] == 70
     outside = await sj300("read", "Pr.1000", "-n", "1", *url)
     outside.assert_one_line_error(2, "parameter numbers are 0..999, got 1000")
+
+
+# -- the monitor's set-frequency read beside the poll ------------------------------------
+
+
+async def test_a_station_that_never_answers_its_set_frequency_read_costs_one_attempt(
+    fr700_sim: Fr700Sim, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    # A review's station 1 answered its polls but never H6D: each read, with the bus's
+    # retries and again 2 s later, took the line from the polls (13 records in 30 s
+    # where 60 were due). One attempt now, and the next after SETPOINT_AFTER_FAILURE_S.
+    simulated = fr700_sim.bus.drives[1]
+    asked: list[float] = []
+    handle = simulated.handle
+
+    def deaf_to_h6d(request: Any, now: float) -> Any:
+        if request.instruction == 0x6D:
+            asked.append(now)
+            return None  # not answered
+        return handle(request, now)
+
+    monkeypatch.setattr(simulated, "handle", deaf_to_h6d)
+    result = await sj300(
+        "monitor", "--url", fr700_sim.url, "--nodes", "0-2", "--json", "--count", "6",
+        "--interval", "0.05", "--timeout", "0.1", "--retries", "2",
+    )  # fmt: skip
+    assert result.code == 0, result.err
+    records = result.json_lines()
+    assert [r["node"] for r in records].count(1) == 6
+    assert [r["set_frequency_hz"] for r in records if r["node"] == 1] == [None] * 6
+    assert all(r["set_frequency_hz"] == 0.0 for r in records if r["node"] != 1)
+    assert len(asked) == 1, asked  # one attempt, no retry, no second read within 30 s
