@@ -400,16 +400,19 @@ async def watch_fleet(args: argparse.Namespace, url_text: str) -> None:
             print(plain_line(fleet, message), flush=True)
         return not done()
 
-    async def end_first_cycle_when_quiet(deadline: asyncio.Timeout) -> None:
-        """The first cycle's end when no drive sends again: --timeout without a state."""
+    async def end_cycles_when_quiet(deadline: asyncio.Timeout) -> None:
+        """What --timeout without a state ends: the first cycle, when no drive sends
+        again; a later one's wait for drives gone offline or whose gateway died
+        (their gateway's last will came, and no state will)."""
         nonlocal heard
-        while fleet.cycles == 0:
+        while True:
             wait = heard + timeout_s - loop.time()
             if wait > 0:
                 await asyncio.sleep(wait)
                 continue
             fleet.end_first_cycle()
-            heard = loop.time()  # nothing came at all: looked at again after as long
+            fleet.recheck()
+            heard = loop.time()  # nothing came: looked at again after as long
             # Done, or nothing is left to wait for; --duration may be up at this very moment.
             ended = count is not None and (done() or not fleet.waiting())
             if ended and not deadline.expired():
@@ -423,7 +426,7 @@ async def watch_fleet(args: argparse.Namespace, url_text: str) -> None:
             heard = loop.time()
             if problem is None and not connected_before:
                 connected_before = True
-                quiet = loop.create_task(end_first_cycle_when_quiet(deadline))
+                quiet = loop.create_task(end_cycles_when_quiet(deadline))
                 if live:  # only now: a broker that cannot be reached is one line, no table
                     stack.enter_context(_live(fleet))
             elif live:

@@ -210,6 +210,23 @@ async def test_count_1_on_a_broker_nobody_publishes_to_ends_after_the_timeout(
     assert sorted(r["node"] for r in result.json_lines()) == [1, 2, 3]
 
 
+async def test_count_ends_when_a_gateway_dies_mid_count(broker: Broker) -> None:
+    """A review's view hung: the gateway killed after the first cycle, its last will
+    came, and no state would ever end the cycle. --timeout without a state ends it."""
+    for node in (1, 2):
+        await _publish(broker, _state("gw-a", node), retain=True)
+    args = ("--url", broker.url, "--json", "--count", "5", "--timeout", "0.5")
+    async with running("monitor", *args) as proc:
+        assert proc.stdout is not None
+        first = [json.loads(await proc.stdout.readline()) for _ in range(2)]
+        await _publish(broker, _state("gw-a", 1, hz=21.0), retain=False)  # cycle 2 begins
+        await broker.publish(Topics("gw-a").availability, "offline", retain=True)  # the will
+        out, err = await asyncio.wait_for(proc.communicate(), TIMEOUT)
+    assert proc.returncode == 0, err
+    assert sorted(r["node"] for r in first) == [1, 2]
+    assert [json.loads(line)["node"] for line in out.decode().splitlines()] == [1]
+
+
 def test_the_fleets_cycles() -> None:
     fleet = Fleet(FleetUrl("mqtt", "h", 1883))
 
@@ -234,6 +251,18 @@ def test_the_fleets_cycles() -> None:
     assert receive(_state("gw-a", 1)) == (4, 4)
     assert receive(_state("gw-a", 1)) == (5, 4)
     assert receive(_state("gw-a", 9)) == (5, 5)
+
+    # A gateway that dies mid-cycle sends no state that would end it: recheck() does.
+    assert fleet.receive(Topics("gw-b").availability, b"online") is None
+    assert receive(_state("gw-b", 1)) == (6, 5)  # back during cycle 6: in it, not awaited
+    assert receive(_state("gw-a", 1)) == (6, 5)
+    assert receive(_state("gw-a", 9)) == (6, 6)
+    assert receive(_state("gw-a", 1)) == (7, 6)
+    assert receive(_state("gw-a", 9)) == (7, 6)  # cycle 7 waits for gw-b/1 too
+    assert fleet.receive(Topics("gw-b").availability, b"offline") is None  # its last will
+    assert fleet.cycles == 6
+    fleet.recheck()
+    assert fleet.cycles == 7
 
     # Nothing sent again (nobody publishes): the consumer ends the first cycle.
     quiet = Fleet(FleetUrl("mqtt", "h", 1883))

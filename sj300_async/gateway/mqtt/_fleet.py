@@ -286,9 +286,17 @@ class Fleet:
                 return
             self.end_first_cycle()  # a drive sends again: every drive has been heard
         self.cycle = self.cycles + 1
+        self._pending.discard(key)
+        self.recheck()
+
+    def recheck(self) -> None:
+        """A later cycle drops the drives it no longer waits for (offline, their gateway
+        gone) and ends when none is left: after a state, and when a caller finds the
+        fleet quiet (a gateway that died sends no state that would do it); O(1) amortized."""
+        if self.cycles == 0:
+            return
         pending = self._pending
-        pending.discard(key)
-        while pending:  # drop those no longer waited for (offline, their gateway gone)
+        while pending:
             first = next(iter(pending))
             if self.waits_for(first):
                 return
