@@ -88,7 +88,13 @@ from pathlib import Path
 from typing import Any, Final, Literal
 
 from ..profiles import Profile
-from ..wire import LocalProtocolError, NakError
+from ..wire import (
+    LocalProtocolError,
+    NakError,
+    RemoteProtocolError,
+    ReplyTimeoutError,
+    TransportError,
+)
 from ._common import (
     DEFAULT_URL,
     NEEDS,
@@ -312,20 +318,20 @@ class _Restored:
     written: list[str] = field(default_factory=list)
     verified: dict[str, int | str] = field(default_factory=dict)  # code -> raw read back
 
-    def interrupted(self) -> str:
-        """Where it stopped, and what the drive holds."""
+    def interrupted(self, verb: str = "interrupted") -> str:
+        """Where it stopped (*verb*: how), and what the drive holds."""
         if self.phase == "writing":
             return (
-                f"interrupted after {len(self.written)} of {self.total} parameters written; "
+                f"{verb} after {len(self.written)} of {self.total} parameters written; "
                 "the drive holds a mix of the file's values and its own"
             )
         if self.phase == "verifying":
             return (
-                f"interrupted while verifying, after {len(self.verified)} of {self.total} "
+                f"{verb} while verifying, after {len(self.verified)} of {self.total} "
                 f"parameters read back ({len(self.written)} written): params diff checks them"
             )
         return (
-            f"interrupted while storing to EEPROM: the {self.total} parameters were written "
+            f"{verb} while storing to EEPROM: the {self.total} parameters were written "
             "and verified, whether they were stored is unknown (--store again)"
         )
 
@@ -412,6 +418,8 @@ async def _restore(args: argparse.Namespace) -> int:
     except (asyncio.CancelledError, KeyboardInterrupt):  # Ctrl-C: say how far, exit 130
         print(f"sj300 {args.command_name}: {restored.interrupted()}", file=sys.stderr, flush=True)
         raise
+    except (ReplyTimeoutError, RemoteProtocolError, TransportError) as exc:  # how far, too
+        raise CliError(f"{exc}; {restored.interrupted('stopped')}", status=FAILURE) from None
     skipped = _in_order(profile, (c for c in snapshot.parameters if c in left_alone))
     said = {c: str(exc) for c, exc in errors.items()}
     if args.json:

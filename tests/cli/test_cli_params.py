@@ -4,11 +4,14 @@ from __future__ import annotations
 
 import asyncio
 import json
+import re
 from pathlib import Path
+
+from waiting import wait_for
 
 from sj300_async.sj300 import PARAMETERS
 
-from .clirun import TcpSim, interrupted_restore, sj300
+from .clirun import TcpSim, finished, interrupted_restore, running, sj300
 
 
 async def test_backup_writes_the_documented_format(tcp_sim: TcpSim, tmp_path: Path) -> None:
@@ -207,3 +210,22 @@ async def test_ctrl_c_during_a_restore_says_how_far_it_got(tcp_sim: TcpSim, tmp_
     )
     assert total == len(PARAMETERS) - 5  # the communication settings are skipped
     assert 1 <= written < total
+
+
+async def test_a_restore_the_drive_stops_answering_says_how_far_it_got(
+    tcp_sim: TcpSim, tmp_path: Path
+) -> None:
+    file = tmp_path / "backup.json"
+    assert (await sj300("params", "backup", str(file), "--url", tcp_sim.url)).code == 0
+    drive = tcp_sim.bus.drives[1]
+    drive.set_parameter("F002", 1250)  # among the first the restore writes
+    async with running("params", "restore", str(file), "--url", tcp_sim.url) as proc:
+        await wait_for(lambda: drive.parameters["F002"] == 3000, "F002 restored")
+        tcp_sim.bus.faults.silence(1)
+        result = await finished(proc)
+    result.assert_one_line_error(1, "node 01 did not answer", "; stopped after ")
+    said = re.search(
+        r"stopped after (\d+) of (\d+) parameters written; the drive holds a mix", result.err
+    )
+    assert said, result.err
+    assert 1 <= int(said[1]) < int(said[2]) == len(PARAMETERS) - 5
