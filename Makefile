@@ -58,11 +58,11 @@ examples: $(RUN_STAMP)
 test: lint typecheck lint-imports docs pytest
 
 lint: $(DEV_STAMP)
-	$(BIN)/ruff check sj300_async tests benchmarks examples
-	$(BIN)/ruff format --check sj300_async tests benchmarks examples docs
+	$(BIN)/ruff check sj300_async tests benchmarks examples scripts
+	$(BIN)/ruff format --check sj300_async tests benchmarks examples docs scripts
 
 typecheck: $(DEV_STAMP)
-	$(BIN)/mypy --strict sj300_async tests
+	$(BIN)/mypy --strict sj300_async tests scripts
 
 # The import contracts in pyproject.toml ([tool.importlinter]).
 lint-imports: $(DEV_STAMP)
