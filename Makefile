@@ -15,9 +15,11 @@ GATEWAY_STAMP := $(VENV)/.installed-gateway
 # installed): socat + ser2net for the serial-device-server bridge test, mbpoll as an
 # independent Modbus client, mosquitto + its clients for the MQTT tests, tshark for the
 # Wireshark dissector's test (its debconf question, whether non-root users may capture,
-# takes its default "no" under DEBIAN_FRONTEND=noninteractive).
+# takes its default "no" under DEBIAN_FRONTEND=noninteractive), chromium for the
+# workbench page's browser tests (Playwright drives it: its own browser download is
+# never run).
 SYSTEM_PACKAGES := socat:socat ser2net:ser2net mbpoll:mbpoll mosquitto:mosquitto \
-	mosquitto-clients:mosquitto_sub tshark:tshark
+	mosquitto-clients:mosquitto_sub tshark:tshark chromium:chromium
 
 .PHONY: demo gateway examples test lint typecheck lint-imports docs system-packages pytest bench \
 	bench-compare soak clean venv
