@@ -15,19 +15,23 @@ A command that fails is skipped; the demo goes on.
 from __future__ import annotations
 
 import asyncio
+import contextlib
 import logging
 import random
-from collections.abc import Awaitable
+from collections.abc import AsyncIterator, Awaitable
 from typing import Final
 
 from ..bus import Bus
 from ..profiles import get_profile
 from ..wire import Direction, LocalProtocolError, SJ300Error
 
-__all__ = ["run_demo"]
+__all__ = ["DEMO_NODES", "DEMO_URL", "demo_running", "run_demo"]
 
 _log = logging.getLogger("sj300_async.cli.demo")
 
+#: The demo's bus (``sj300 monitor`` without --url, ``sj300 gateway --demo``), and its nodes.
+DEMO_URL: Final = "sim://?nodes=1-8"
+DEMO_NODES: Final = "1-8"
 #: Setpoints the demo picks from (Hz; the simulated drives' maximum is 50 Hz).
 _SETPOINTS: Final = (10.0, 15.0, 20.0, 25.0, 30.0, 35.0, 40.0, 45.0, 50.0)
 #: Trips the demo causes: None is the over-current code that fits the drive's phase; the
@@ -149,3 +153,22 @@ class _Demo:
     async def _reset(self, node: int) -> None:
         await self._do(self._profile.reset(self._bus.drive(node)))
         await self._start(node)
+
+
+@contextlib.asynccontextmanager
+async def demo_running(buses: list[Bus]) -> AsyncIterator[None]:
+    """Animate the simulated drives of each of *buses* while the block runs.
+
+    A demo that fails is logged when the block ends (it stops; nothing else does).
+    """
+    tasks = [asyncio.create_task(run_demo(bus), name="sj300 demo") for bus in buses]
+    try:
+        yield
+    finally:
+        for task in tasks:
+            task.cancel()
+        if tasks:
+            await asyncio.wait(tasks)
+        for task in tasks:
+            if not task.cancelled() and task.exception() is not None:
+                _log.warning("the demo stopped: %s", task.exception())

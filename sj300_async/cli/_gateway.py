@@ -4,7 +4,7 @@
 grants, leases; docs/GATEWAY.md); the flags cover the simple case, one
 read-only line: ``--url URL --nodes LIST [--protocol NAME] --id NAME`` and
 one flag per registered northbound that has one (``--modbus HOST:PORT``,
-``--metrics HOST:PORT``, ``--mqtt mqtt://HOST:PORT``: each northbound
+``--http HOST:PORT``, ``--mqtt mqtt://HOST:PORT``: each northbound
 declares its own, :class:`~sj300_async.gateway.Flag`). A bad configuration
 starts nothing (exit 2, one line naming the file, line and key).
 
@@ -40,10 +40,14 @@ from ..gateway import (
     load_config,
     northbound_names,
 )
+from ._demo import DEMO_NODES, DEMO_URL, demo_running
 from ._errors import EXIT_ON_SIGNAL, USAGE, CliError
 from ._install import gateway_install_command
 
-__all__ = ["add_parser"]
+__all__ = ["DEMO_HTTP", "add_parser"]
+
+#: Where ``--demo`` serves the workbench when no other northbound is named.
+DEMO_HTTP = "127.0.0.1:8080"
 
 
 def add_parser(subparsers: Any) -> None:
@@ -63,8 +67,16 @@ def add_parser(subparsers: Any) -> None:
         "--protocol", default=None, help=f"with --url: the line's protocol ({_protocols()})"
     )
     p.add_argument("--nodes", metavar="LIST", help="with --url: the drives to poll, e.g. 1-8")
+    p.add_argument(
+        "--demo",
+        action="store_true",
+        help=f"serve eight simulated drives that move and trip ({DEMO_URL}); "
+        f"with no other flag, the workbench on http://{DEMO_HTTP}/",
+    )
     for section, flag in _flags():
-        p.add_argument(flag.option, dest=_dest(section), metavar=flag.metavar, help=flag.help)
+        p.add_argument(
+            flag.option, *flag.aliases, dest=_dest(section), metavar=flag.metavar, help=flag.help
+        )
     p.add_argument(
         "--id", metavar="NAME", help="the gateway's name on MQTT (default: the host name)"
     )
@@ -109,9 +121,14 @@ def _config(args: argparse.Namespace) -> GatewayConfig:
     given = {section: value for section, value in given.items() if value is not None}
     options = ", ".join(["--url", "--nodes", *(flag.option for _, flag in flags), "--id"])
     if args.config is not None:
-        if args.url or args.nodes or given or args.id:
-            raise CliError(f"--config describes everything: no {options}")
+        if args.url or args.nodes or given or args.id or args.demo:
+            raise CliError(f"--config describes everything: no {options}, --demo")
         return load_config(args.config)
+    if args.demo:
+        if args.url or args.nodes:
+            raise CliError("--demo serves its own simulated line: no --url, --nodes")
+        args.url, args.nodes = DEMO_URL, DEMO_NODES
+        given = given or {"http": DEMO_HTTP}
     if not args.url or not args.nodes:
         raise CliError("give --config FILE, or --url URL and --nodes LIST", status=USAGE)
     if not given:
@@ -149,10 +166,10 @@ def run(args: argparse.Namespace) -> int:
         )
     config = _config(args)  # a bad one raises here: nothing has started
     _check_requirements(config)
-    return asyncio.run(_serve(config, args.capture))
+    return asyncio.run(_serve(config, args.capture, demo=args.demo))
 
 
-async def _serve(config: GatewayConfig, capture: str | None) -> int:
+async def _serve(config: GatewayConfig, capture: str | None, *, demo: bool = False) -> int:
     from ..gateway import Gateway, GatewayStartError
 
     loop = asyncio.get_running_loop()
@@ -180,7 +197,9 @@ async def _serve(config: GatewayConfig, capture: str | None) -> int:
                 line = northbound.announce()
                 if line is not None:
                     print(line, flush=True)
-            await stop.wait()
+            simulated = [line.bus for line in gateway.lines if line.bus.simulator is not None]
+            async with demo_running(simulated if demo else []):
+                await stop.wait()
             print("stopping", file=sys.stderr, flush=True)
     except asyncio.CancelledError:
         if not (starting and stop.is_set()):

@@ -56,7 +56,7 @@ import contextlib
 import logging
 import signal
 import sys
-from collections.abc import AsyncIterator, Coroutine
+from collections.abc import Coroutine
 from typing import Any, Final
 
 from .. import Poller, Sample
@@ -71,7 +71,7 @@ from ._common import (
     positive_float,
     profile_of,
 )
-from ._demo import run_demo
+from ._demo import DEMO_URL, demo_running
 from ._errors import FAILURE, CliError
 from ._output import is_terminal, print_json
 from ._progress import progress
@@ -82,8 +82,6 @@ __all__ = ["add_parser"]
 
 _log = logging.getLogger("sj300_async.cli.monitor")
 
-#: The embedded demo's bus.
-DEMO_URL: Final = "sim://?nodes=1-8"
 #: The nodes polled on a ``sim://`` bus whose simulated drives are not known.
 _DEFAULT_NODES: Final = tuple(range(1, 9))
 #: Exit status of Ctrl-C (SIGINT), as for every command.
@@ -176,7 +174,7 @@ async def _monitor(args: argparse.Namespace) -> int:
         samples: asyncio.Queue[Sample] = asyncio.Queue()
         poller.on_sample(samples.put_nowait)
         board = Board(bus, profile, nodes, demo=url is None)
-        async with poller, _demo(bus, enabled=url is None):
+        async with poller, demo_running([bus] if url is None else []):
             try:
                 with board.live(enabled=is_terminal() and not args.json):
                     await _until_terminated(_consume(args, poller, bus, samples, board))
@@ -269,21 +267,6 @@ async def _until_terminated(work: Coroutine[Any, Any, None]) -> None:
 def _current_cancelling() -> int:
     current = asyncio.current_task()
     return current.cancelling() if current is not None else 0
-
-
-@contextlib.asynccontextmanager
-async def _demo(bus: Bus, *, enabled: bool) -> AsyncIterator[None]:
-    if not enabled:
-        yield
-        return
-    task = asyncio.create_task(run_demo(bus), name="sj300 demo")
-    try:
-        yield
-    finally:
-        task.cancel()
-        await asyncio.wait([task])
-        if not task.cancelled() and task.exception() is not None:
-            _log.warning("the demo stopped: %s", task.exception())
 
 
 async def _consume(

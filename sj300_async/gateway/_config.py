@@ -64,7 +64,13 @@ from ._model import (
     WriteGrant,
     default_gateway_id,
 )
-from ._northbound import RESERVED_SECTIONS, SectionContext, get_northbound, northbound_names
+from ._northbound import (
+    RESERVED_SECTIONS,
+    SectionContext,
+    get_northbound,
+    northbound_names,
+    section_aliases,
+)
 from ._toml import (
     COMMAND_LINE,
     ConfigContext,
@@ -196,9 +202,11 @@ def config_from_flags(
 
 def _build(ctx: ConfigContext, data: object, *, base_dir: Path) -> GatewayConfig:
     sections = northbound_names()
+    aliases = {section: section_aliases(get_northbound(section)) for section in sections}
     # In the order a file is written (and the error's list of keys reads): [gateway], the
-    # northbounds' sections, then the [[lines]].
-    root = ConfigTable(ctx, "", data, ("gateway", *sections, "lines"))
+    # northbounds' sections (each with the older names it still takes), then the [[lines]].
+    names = [name for section in sections for name in (section, *aliases[section])]
+    root = ConfigTable(ctx, "", data, ("gateway", *names, "lines"))
     gateway = ConfigTable(ctx, "gateway", root.data.get("gateway", {}), _GATEWAY_KEYS)
     stale_after_s = gateway.number("stale_after_s", minimum=0, inclusive=False)
     audit_log = _audit_log(gateway, base_dir)
@@ -207,10 +215,13 @@ def _build(ctx: ConfigContext, data: object, *, base_dir: Path) -> GatewayConfig
     northbounds: dict[str, object] = {}
     listening: dict[Endpoint, str] = {}
     for section in sections:
-        if not root.has(section) or section in RESERVED_SECTIONS:
+        given = [name for name in (section, *aliases[section]) if root.has(name)]
+        if not given or section in RESERVED_SECTIONS:
             continue
+        if len(given) > 1:
+            raise root.error(given[1], f"[{given[0]}] and [{given[1]}] are one section: keep one")
         spec = get_northbound(section)
-        table = ConfigTable(ctx, section, root.data[section], spec.keys)
+        table = ConfigTable(ctx, given[0], root.data[given[0]], spec.keys)
         northbounds[section] = config = spec.parse(table, context)
         for key, endpoint in spec.endpoints(config):
             for other, where in listening.items():

@@ -47,6 +47,8 @@ from ._writes import WriteRequest, WriteResult
 if TYPE_CHECKING:
     from prometheus_client.core import Metric
 
+    from ._gateway import GatewayLine
+
 __all__ = [
     "Flag",
     "GatewayView",
@@ -56,6 +58,7 @@ __all__ = [
     "get_northbound",
     "northbound_names",
     "register_northbound",
+    "section_aliases",
     "unregister_northbound",
 ]
 
@@ -65,6 +68,10 @@ class GatewayView(Protocol):
 
     @property
     def config(self) -> GatewayConfig: ...
+
+    @property
+    def lines(self) -> Sequence[GatewayLine]:
+        """Every line, in the configuration's order: its bus, poller, controller and drives."""
 
     @property
     def drives(self) -> Sequence[GatewayDrive]:
@@ -133,6 +140,8 @@ class Flag:
     key: str
     metavar: str
     help: str
+    #: Older spellings of the option that still set the same key (``--metrics``).
+    aliases: tuple[str, ...] = ()
 
 
 @dataclass(frozen=True, slots=True)
@@ -170,6 +179,10 @@ class NorthboundSpec(Protocol):
             GatewayConfigError: through *table*'s getters and ``table.error``.
         """
 
+    # Optional: ``aliases``, a sequence of older section names the spec still takes
+    # (the HTTP northbound's ``[metrics]``); read through :func:`section_aliases`, so a
+    # spec written before it existed needs no change.
+
     def endpoints(self, config: object) -> Sequence[tuple[str, Endpoint]]:
         """The sockets it listens on, with the key that names each (two may not collide)."""
 
@@ -177,10 +190,15 @@ class NorthboundSpec(Protocol):
         """The northbound for *config*, not started."""
 
 
+def section_aliases(spec: NorthboundSpec) -> tuple[str, ...]:
+    """The older section names *spec* still takes (``("metrics",)`` for ``[http]``)."""
+    return tuple(getattr(spec, "aliases", ()))
+
+
 #: The library's northbounds, in the order they start (and announce themselves).
 _BUILT_IN: Final = {
     "modbus": "sj300_async.gateway.modbus:NORTHBOUND",
-    "metrics": "sj300_async.gateway.http:NORTHBOUND",
+    "http": "sj300_async.gateway.http:NORTHBOUND",
     "mqtt": "sj300_async.gateway.mqtt:NORTHBOUND",
 }
 _NAME: Final = re.compile(r"[a-z][a-z0-9_]*\Z")

@@ -145,7 +145,7 @@ GATEWAY_MQTT_NAMES = (
     "parse_state_topic", "state_message",
 )  # fmt: skip
 GATEWAY_HTTP_NAMES = (
-    "DEFAULT_LIMITS", "MetricsConfig", "NORTHBOUND",
+    "DEFAULT_LIMITS", "DEFAULT_TREND_S", "HttpConfig", "NORTHBOUND",
 )  # fmt: skip
 
 #: Every package's pinned ``__all__``.

@@ -117,7 +117,7 @@ def modbus_port(gateway: Gateway) -> int:
 
 def metrics_port(gateway: Gateway) -> int:
     """The port of the gateway's running HTTP northbound (/metrics, /healthz)."""
-    northbound = gateway.northbounds["metrics"]
+    northbound = gateway.northbounds["http"]
     assert isinstance(northbound, HttpNorthbound)
     return northbound.port
 

@@ -32,7 +32,7 @@ from .conftest import SimLine
 #: Seconds a clean stop may take, SIGTERM to exit.
 STOP_WITHIN_S = 5.0
 _MODBUS = re.compile(r"modbus on (\S+):(\d+)")
-_METRICS = re.compile(r"metrics on http://(\S+):(\d+)/metrics")
+_METRICS = re.compile(r"http on http://(\S+):(\d+)/ \(workbench, /metrics, /healthz\)")
 
 
 def gateway_process(*args: str) -> AbstractAsyncContextManager[asyncio.subprocess.Process]:

@@ -21,7 +21,7 @@ from sj300_async.gateway import (
     parse_config,
     parse_endpoint,
 )
-from sj300_async.gateway.http import MetricsConfig
+from sj300_async.gateway.http import HttpConfig
 from sj300_async.gateway.modbus import ModbusConfig
 from sj300_async.gateway.mqtt import MqttConfig
 from sj300_async.wire import LocalProtocolError
@@ -131,7 +131,7 @@ def test_a_full_file_reaches_every_field(tmp_path: Path) -> None:
         ),
         northbounds={
             "modbus": ModbusConfig(Endpoint("0.0.0.0", 1502)),
-            "metrics": MetricsConfig(Endpoint("::1", 9300)),
+            "http": HttpConfig(Endpoint("::1", 9300)),
         },
         stale_after_s=3.0,
         audit_log=tmp_path / "logs" / "audit.log",
@@ -277,9 +277,19 @@ REFUSALS = [
         id="unknown-key-did-you-mean",
     ),
     pytest.param(
+        '[http]\nlisten = "127.0.0.1:1"\n[metrics]\nlisten = "127.0.0.1:2"\n',
+        "gateway.toml:3: metrics: [http] and [metrics] are one section: keep one",
+        id="http-and-its-old-name",
+    ),
+    pytest.param(
+        '[http]\nlisten = "127.0.0.1:1"\ntrend_s = 86401\n',
+        "gateway.toml:3: http.trend_s: must be <= 86400 (a day), got 86401",
+        id="trend-longer-than-a-day",
+    ),
+    pytest.param(
         "[metrics]\nport = 9300\n",
         "gateway.toml:2: metrics.port: unknown key 'port' "
-        "(use listen, max_connections, idle_timeout_s)",
+        "(use listen, max_connections, idle_timeout_s, trend_s)",
         id="unknown-key-no-close-match",
     ),
     pytest.param(
@@ -848,7 +858,7 @@ def test_a_key_inside_an_inline_table_points_at_its_first_line() -> None:
 
     assert (
         refusal(text)
-        == "gateway.toml:1: x: unknown key 'x' (use gateway, modbus, metrics, mqtt, lines)"
+        == "gateway.toml:1: x: unknown key 'x' (use gateway, modbus, http, metrics, mqtt, lines)"
     )
     assert refusal(text[6:]) == (
         "gateway.toml:1: lines[0].nodes: bad node list '40': nodes are 1..32, got '40'"
@@ -939,7 +949,7 @@ def test_flags_build_one_read_only_line() -> None:
         url="sim://?nodes=1-4",
         nodes="1-4",
         protocol=None,
-        northbounds={"modbus": ":0", "metrics": "127.0.0.1:0"},
+        northbounds={"modbus": ":0", "http": "127.0.0.1:0"},
         stale_after_s=2.0,
         interval_s=0.2,
     )
@@ -956,7 +966,7 @@ def test_flags_build_one_read_only_line() -> None:
         ),
         northbounds={
             "modbus": ModbusConfig(Endpoint("0.0.0.0", 0)),
-            "metrics": MetricsConfig(Endpoint("127.0.0.1", 0)),
+            "http": HttpConfig(Endpoint("127.0.0.1", 0)),
         },
         stale_after_s=2.0,
     )
@@ -1017,8 +1027,8 @@ FLAG_DEFAULTS: dict[str, object] = {
             id="modbus",
         ),
         pytest.param(
-            {"northbounds": {"modbus": ":502", "metrics": "0.0.0.0:502"}},
-            "<command line>: --metrics: --modbus already listens on 0.0.0.0:502",
+            {"northbounds": {"modbus": ":502", "http": "0.0.0.0:502"}},
+            "<command line>: --http: --modbus already listens on 0.0.0.0:502",
             id="metrics",
         ),
         pytest.param(

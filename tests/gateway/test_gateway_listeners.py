@@ -17,8 +17,9 @@ from sj300_async.gateway import (
     RateLimitedLog,
     parse_config,
 )
-from sj300_async.gateway.http import MetricsConfig
-from sj300_async.gateway.http._server import make_registry, serve_http
+from sj300_async.gateway.http import HttpConfig
+from sj300_async.gateway.http._api import serve_http
+from sj300_async.gateway.http._server import make_registry
 from sj300_async.gateway.modbus import ModbusConfig
 
 from .test_gateway_metrics import fetch
@@ -48,8 +49,8 @@ def test_the_limits_are_configured_per_listener() -> None:
     modbus = config.northbounds["modbus"]
     assert isinstance(modbus, ModbusConfig)
     assert modbus.limits == ListenerLimits(8, 2.5)
-    metrics = config.northbounds["metrics"]
-    assert metrics == MetricsConfig(Endpoint("127.0.0.1", 9300), ListenerLimits(16, 1.0))
+    metrics = config.northbounds["http"]
+    assert metrics == HttpConfig(Endpoint("127.0.0.1", 9300), ListenerLimits(64, 1.0))
     defaults = parse_config(_config('[modbus]\nlisten = "127.0.0.1:1502"\n'), "test.toml")
     assert defaults.northbounds["modbus"] == ModbusConfig(
         Endpoint("127.0.0.1", 1502), ListenerLimits(64, 60.0)

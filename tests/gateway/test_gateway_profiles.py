@@ -264,7 +264,8 @@ def test_the_jsonl_section_is_its_northbound_s_own(jsonl_registered: None, tmp_p
     )
     assert jsonl_refusal("[jsonl]\n") == "gateway.toml:1: jsonl.path: missing required key 'path'"
     assert jsonl_refusal("x = 1\n") == (
-        "gateway.toml:1: x: unknown key 'x' (use gateway, modbus, metrics, mqtt, jsonl, lines)"
+        "gateway.toml:1: x: unknown key 'x' "
+        "(use gateway, modbus, http, metrics, mqtt, jsonl, lines)"
     )
 
 
@@ -272,7 +273,8 @@ def test_an_unregistered_section_is_an_unknown_key() -> None:
     with pytest.raises(GatewayConfigError) as caught:
         parse_config('[jsonl]\npath = "states.jsonl"\n' + JSONL_LINE, "gateway.toml")
     assert str(caught.value) == (
-        "gateway.toml:1: jsonl: unknown key 'jsonl' (use gateway, modbus, metrics, mqtt, lines)"
+        "gateway.toml:1: jsonl: unknown key 'jsonl' "
+        "(use gateway, modbus, http, metrics, mqtt, lines)"
     )
 
 
@@ -283,7 +285,7 @@ async def test_the_jsonl_northbound_runs_in_the_gateway(
     text = '[gateway]\nid = "gwj"\n[metrics]\nlisten = "127.0.0.1:0"\n'
     text += '[jsonl]\npath = "states.jsonl"\n' + JSONL_LINE
     async with Gateway(parse_config(text, str(tmp_path / "gateway.toml"))) as gateway:
-        assert list(gateway.northbounds) == ["metrics", "jsonl"]  # the registry's order
+        assert list(gateway.northbounds) == ["http", "jsonl"]  # the registry's order
         jsonl = gateway.northbounds["jsonl"]
         assert isinstance(jsonl, JsonlNorthbound)
         assert jsonl.announce() == f"jsonl to {path}"
@@ -361,7 +363,7 @@ async def test_the_jsonl_flag_of_sj300_gateway(tmp_path: Path) -> None:
         async with asyncio.timeout(TIMEOUT):
             metrics = (await proc.stdout.readline()).decode().strip()
             announced = (await proc.stdout.readline()).decode().strip()
-        assert metrics.startswith("metrics on http://127.0.0.1:"), metrics
+        assert metrics.startswith("http on http://127.0.0.1:"), metrics
         assert announced == f"jsonl to {path}"
         port = int(metrics.rsplit(":", 1)[1].split("/")[0])
         await wait_for(lambda: len(jsonl_lines(path)) >= 4, "four snapshots written", timeout=10)

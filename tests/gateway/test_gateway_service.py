@@ -38,11 +38,11 @@ from .test_gateway_cli import client_of, http_get, until_polled
 #: A generous bound on a stop, signal to exit (the issue wants 0.5 s; the figures are in
 #: the report of issue 26, measured over 20 runs: a loaded machine must not fail this test).
 STOP_WITHIN_S = 5.0
-_PORT = re.compile(r"(modbus) on \S+:(\d+)|(metrics) on http://\S+:(\d+)/metrics|(mqtt) to ")
+_PORT = re.compile(r"(modbus) on \S+:(\d+)|(http) on http://\S+:(\d+)/ |(mqtt) to ")
 
 
 async def announced(proc: asyncio.subprocess.Process, count: int) -> dict[str, int]:
-    """The first *count* lines of stdout: ``{"modbus": port, "metrics": port, "mqtt": 0}``."""
+    """The first *count* lines of stdout: ``{"modbus": port, "http": port, "mqtt": 0}``."""
     assert proc.stdout is not None
     assert proc.stderr is not None
     found: dict[str, int] = {}
@@ -119,11 +119,11 @@ async def test_a_line_down_at_start_is_served_offline_and_comes_up(tmp_path: Pat
             monitor = await client.read_holding_registers(100, count=4, device_id=3)
             assert monitor.isError()
             assert monitor.exception_code == 0x0B  # as for a line lost later
-            assert await until_healthz(ports["metrics"], 503) == "line yard: link down\n"
+            assert await until_healthz(ports["http"], 503) == "line yard: link down\n"
             server = await serve_tcp(SimulatedBus([3]), port=port)  # the device server is back
             async with server:
                 await until_polled(client, 3)  # reconnected with its back-off, and polled
-                assert await until_healthz(ports["metrics"], 200) == "ok\n"
+                assert await until_healthz(ports["http"], 200) == "ok\n"
                 result, _ = await stopped_by(proc, signal.SIGTERM)
     assert result.code == 0, result
     assert "Traceback" not in result.err, result.err
@@ -140,7 +140,7 @@ async def test_a_serial_device_not_there_is_a_line_down(tmp_path: Path) -> None:
         ports = await announced(proc, 2)
         async with client_of(ports["modbus"]) as client:
             await until_polled(client, 1, 2)
-        assert await until_healthz(ports["metrics"], 503) == "line yard: link down\n"
+        assert await until_healthz(ports["http"], 503) == "line yard: link down\n"
         result, _ = await stopped_by(proc, signal.SIGTERM)
     assert result.code == 0, result
     assert f"line yard: {url} is down (cannot open serial port" in result.err
@@ -173,12 +173,16 @@ def taken_port() -> Iterator[int]:
         yield listener.getsockname()[1]
 
 
-@pytest.mark.parametrize("flag", ["--modbus", "--metrics"])
-async def test_a_port_in_use_is_one_line_naming_it(flag: str, taken_port: int) -> None:
+@pytest.mark.parametrize(
+    ("flag", "section"),
+    [("--modbus", "modbus"), ("--http", "http"), ("--metrics", "http")],  # --metrics: the old name
+)
+async def test_a_port_in_use_is_one_line_naming_it(
+    flag: str, section: str, taken_port: int
+) -> None:
     endpoint = f"127.0.0.1:{taken_port}"
     result = await sj300("gateway", "--url", "sim://?nodes=1", "--nodes", "1", flag, endpoint)
     result.assert_one_line_error(2)
-    section = flag.removeprefix("--")
     assert result.err == (
         f"sj300 gateway: error: {section}: cannot listen on {endpoint}: Address already in use\n"
     )
@@ -212,7 +216,7 @@ async def test_a_signal_ends_a_serving_gateway_at_once(
                 async with asyncio.timeout(TIMEOUT):  # the broker took the bridge's session
                     while (
                         "sj300_mqtt_connects_total 1.0"
-                        not in (await http_get(ports["metrics"], "/metrics"))[1]
+                        not in (await http_get(ports["http"], "/metrics"))[1]
                     ):
                         pass
                 result, took = await stopped_by(proc, sig)  # a Modbus client still connected

@@ -1,15 +1,19 @@
-"""The HTTP northbound, running: /metrics and /healthz on one listener."""
+"""The HTTP northbound, running: the workbench, its API and events, /metrics, /healthz."""
 
 from __future__ import annotations
 
+import asyncio
+import contextlib
 import logging
-from collections.abc import Iterable
+from collections.abc import Iterator
 from typing import TYPE_CHECKING
 
 from ...profiles import DriveSnapshot
-from .. import ConnectionLimit, GatewayView, Listener, listener_families
-from . import MetricsConfig
-from ._server import make_registry, serve_http
+from .. import ConnectionLimit, GatewayView, listener_families
+from . import HttpConfig
+from ._api import make_app
+from ._server import HttpServer, make_registry, serve_app
+from ._workbench import Workbench
 
 if TYPE_CHECKING:
     from prometheus_client.core import Metric
@@ -20,39 +24,68 @@ _log = logging.getLogger("sj300_async.gateway.http")
 
 
 class HttpNorthbound:
-    """Serves /metrics and /healthz (a :class:`~sj300_async.gateway.Northbound`)."""
+    """Serves the workbench and /metrics (a :class:`~sj300_async.gateway.Northbound`)."""
 
-    def __init__(self, config: MetricsConfig) -> None:
+    def __init__(self, config: HttpConfig) -> None:
         self.config = config
-        self.server: Listener | None = None
-        limits = config.limits
+        self.server: HttpServer | None = None
+        self.workbench: Workbench | None = None
+        self._ticker: asyncio.Task[None] | None = None
         #: Open connections, and those refused at the cap or timed out.
-        self.limit = ConnectionLimit("http", limits.max_connections, _log)
+        self.limit = ConnectionLimit("http", config.limits.max_connections, _log)
 
     async def start(self, gateway: GatewayView) -> None:
-        self.server = await serve_http(
+        self.workbench = Workbench(gateway, self.config.trend_s)
+        app = make_app(self.workbench, make_registry(gateway.metrics), gateway.problems)
+        self.server = await serve_app(
             self.config.listen,
-            make_registry(gateway.metrics),
-            gateway.problems,
+            app,
             limit=self.limit,
-            timeout_s=self.config.limits.idle_timeout_s,
+            idle_timeout_s=self.config.limits.idle_timeout_s,
         )
+        self._ticker = asyncio.create_task(self.workbench.run(), name="sj300-http-lines")
 
     @property
     def port(self) -> int:
         """The port it listens on (the real one when asked for port 0), 0 when not started."""
-        return 0 if self.server is None else int(self.server.sockets[0].getsockname()[1])
+        return 0 if self.server is None else self.server.port
 
     def announce(self) -> str | None:
-        return f"metrics on http://{self.config.listen.host}:{self.port}/metrics"
+        host = self.config.listen.host
+        shown = f"[{host}]" if ":" in host else host
+        return f"http on http://{shown}:{self.port}/ (workbench, /metrics, /healthz)"
 
     def publish(self, snapshot: DriveSnapshot) -> None:
-        """Nothing to do: a scrape reads the latest snapshots."""
+        if self.workbench is not None:
+            self.workbench.publish(snapshot)
 
-    def metrics(self) -> Iterable[Metric]:
-        return listener_families("sj300_http", self.limit)
+    def metrics(self) -> Iterator[Metric]:
+        from prometheus_client.core import CounterMetricFamily, GaugeMetricFamily
+
+        yield from listener_families("sj300_http", self.limit)
+        if self.workbench is None:
+            return
+        hub = self.workbench.hub
+        yield GaugeMetricFamily(
+            "sj300_http_event_streams", "Workbench event streams open.", len(hub)
+        )
+        yield CounterMetricFamily(
+            "sj300_http_events_sent", "Events written to workbench event streams.", hub.sent
+        )
+        yield CounterMetricFamily(
+            "sj300_http_events_replaced",
+            "Events replaced by a newer state of the same subject before a slow stream took them.",
+            hub.replaced,
+        )
 
     async def close(self) -> None:
+        if self._ticker is not None:
+            self._ticker.cancel()
+            with contextlib.suppress(asyncio.CancelledError):
+                await self._ticker
+            self._ticker = None
+        if self.workbench is not None:
+            self.workbench.hub.close()  # the streams end, so the server's shutdown need not wait
         if self.server is not None:
             self.server.close()
             await self.server.wait_closed()

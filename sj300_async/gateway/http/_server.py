@@ -1,95 +1,72 @@
-"""``GET /metrics`` and ``GET /healthz`` over a small asyncio HTTP/1.1 server.
+"""The HTTP listener: an aiohttp application behind the gateway's own accept loop.
 
 Decisions:
 
-- asyncio's own streams, no web framework and no thread: two read-only
-  resources do not justify a dependency, and prometheus_client's own
-  server runs in a thread, where it would read the buses' live counters
-  while the event loop updates them. Here the scrape runs on the loop
-  (:func:`prometheus_client.generate_latest` is synchronous and cheap: the
-  families are built from counters the gateway keeps anyway), so it sees
-  one consistent state.
-- ``/metrics`` is always the classic text format (``CONTENT_TYPE_LATEST``),
-  whatever the scraper's ``Accept`` says: Prometheus reads it, and nothing
-  exported here needs what OpenMetrics adds (exemplars, ``_created``).
-- One request per connection: every response says ``Connection: close``
-  and the connection is closed after it. Scrapers and health probes make
-  one request per interval; keep-alive would only add state.
-- The request's header section is read and thrown away (nothing here
-  depends on a header), within limits: more than :data:`MAX_HEAD_BYTES`
-  or slower than the listener's ``idle_timeout_s`` (:data:`HEAD_TIMEOUT_S`
-  unless configured) and the connection is closed without an answer, so a
-  slow or endless client cannot hold a handler. Writing the response has
-  the same time limit. At most ``max_connections`` are open at once: past
-  it a newcomer is accepted and closed at once
-  (:class:`~sj300_async.gateway.ConnectionLimit`, the Modbus listener's
-  too).
-- A malformed request line gets 400, a path other than the two 404, a
-  method other than GET and HEAD on them 405 (with ``Allow``). HEAD
-  answers the GET's status and headers, without the body.
-- Nothing is dropped silently (project rule): a refused or abandoned
-  request is logged at DEBUG with the bytes received, in hex; a failure
-  while building a response is logged with its traceback and answered
-  with 500.
+- aiohttp serves HTTP (parsing, keep-alive, routing, static files,
+  streamed responses for server-sent events): the workbench needs all of
+  it, and a framework that thousands of services run is a better parser of
+  what browsers and scanners send than the two-route server it replaces.
+- The sockets are the gateway's :class:`~sj300_async.gateway.Listener`, as
+  the Modbus server's: at ``max_connections`` a newcomer is accepted and
+  closed at once, and an accept that fails for want of descriptors pauses
+  the listener instead of logging a traceback per attempt. Each admitted
+  connection gets aiohttp's protocol wrapped in :class:`_Connection`, which
+  releases the slot when the connection ends.
+- **Idle connections are closed.** A connection may go ``idle_timeout_s``
+  without a request in progress (from the moment it opens, and from the
+  end of each request): a client that never sends a request, or sends its
+  head a byte at a time, is closed and counted
+  (``sj300_http_connections_timed_out_total``). A request in progress is
+  never timed out by this rule, so an event stream stays open as long as
+  its client reads it. aiohttp's own keep-alive timer, at twice the
+  value, is a second guard.
+- The request head is bounded by aiohttp's limits (:data:`MAX_LINE_BYTES`
+  per line and per header field); a body by each route's own limit.
+- The scrape (``/metrics``) runs on the event loop, like everything that
+  updates the counters it reads, so one scrape sees one consistent state;
+  prometheus_client's own server would read them from a thread.
+- Nothing is dropped silently: an error inside a handler is logged with its
+  traceback and answered 500; every refusal (4xx: a malformed request
+  aiohttp's parser refused, an unknown path, a wrong method) is logged at
+  DEBUG with an escaped, bounded excerpt of the bytes the request came in
+  (:class:`_Refusals`, aiohttp's access-log hook, which sees the parser's
+  refusals too, where the application's middleware does not).
 """
 
 from __future__ import annotations
 
 import asyncio
 import logging
-import re
+import socket
 from collections.abc import Awaitable, Callable, Iterable
-from dataclasses import dataclass
-from typing import Final
+from typing import TYPE_CHECKING, Final
 
+from aiohttp import web
+from aiohttp.abc import AbstractAccessLogger
 from prometheus_client import CONTENT_TYPE_LATEST, CollectorRegistry, generate_latest
-from prometheus_client.core import Metric
 
-from .. import ConnectionLimit, Endpoint, Listener
+from .. import ConnectionLimit, Endpoint, Listener, excerpt
 
-__all__ = ["HEAD_TIMEOUT_S", "MAX_HEAD_BYTES", "make_registry", "serve_http"]
+if TYPE_CHECKING:
+    from aiohttp.web_protocol import RequestHandler
+    from aiohttp.web_request import BaseRequest
+    from prometheus_client.core import Metric
+
+__all__ = [
+    "MAX_LINE_BYTES",
+    "HttpServer",
+    "health_response",
+    "make_registry",
+    "metrics_response",
+    "serve_app",
+]
 
 _log = logging.getLogger("sj300_async.gateway.http")
 
-#: The largest request line plus header section accepted, in bytes.
-MAX_HEAD_BYTES: Final = 8 * 1024
-#: Seconds a client has to send its request line and headers (and to take the response).
-HEAD_TIMEOUT_S: Final = 5.0
+#: The longest request line, and the longest header field, accepted (aiohttp's limits).
+MAX_LINE_BYTES: Final = 8190
 
-_TEXT: Final = "text/plain; charset=utf-8"
-_REASONS: Final = {
-    200: "OK",
-    400: "Bad Request",
-    404: "Not Found",
-    405: "Method Not Allowed",
-    500: "Internal Server Error",
-    503: "Service Unavailable",
-}
-#: ``METHOD SP request-target SP HTTP-version`` (RFC 9112, section 3): origin-form
-#: targets only, printable ASCII (so that decoding them cannot fail).
-_REQUEST_LINE: Final = re.compile(rb"([!#$%&'*+.^_`|~0-9A-Za-z-]+) (/[!-~]*) HTTP/\d\.\d")
-_ALLOWED: Final = "GET, HEAD"
-
-
-@dataclass(frozen=True, slots=True)
-class _Response:
-    status: int
-    body: bytes
-    content_type: str = _TEXT
-    #: Extra header lines, without their CRLF.
-    headers: tuple[str, ...] = ()
-
-    def encode(self, *, head_only: bool) -> bytes:
-        """The whole response; with *head_only*, its head (Content-Length still the body's)."""
-        lines = [
-            f"HTTP/1.1 {self.status} {_REASONS[self.status]}",
-            f"Content-Type: {self.content_type}",
-            f"Content-Length: {len(self.body)}",
-            "Connection: close",
-            *self.headers,
-        ]
-        head = ("\r\n".join(lines) + "\r\n\r\n").encode("ascii")
-        return head if head_only else head + self.body
+Handler = Callable[[web.Request], Awaitable[web.StreamResponse]]
 
 
 class _Collector:
@@ -113,175 +90,240 @@ def make_registry(collect: Callable[[], Iterable[Metric]]) -> CollectorRegistry:
     return registry
 
 
-class _BadRequest(Exception):
-    """The request head was too large, too slow, cut off or malformed."""
+def metrics_response(registry: CollectorRegistry) -> web.Response:
+    """``/metrics``: the classic text format, whatever the scraper's ``Accept`` says.
 
-    def __init__(self, reason: str, received: bytes, *, timed_out: bool = False) -> None:
-        super().__init__(reason)
-        self.received = received
-        #: The client was too slow (counted as a time-out), rather than wrong.
-        self.timed_out = timed_out
-
-
-async def serve_http(
-    endpoint: Endpoint,
-    registry: CollectorRegistry,
-    health: Callable[[], list[str]],
-    *,
-    limit: ConnectionLimit | None = None,
-    timeout_s: float | None = None,
-) -> Listener:
-    """Serve ``/metrics`` from *registry* and ``/healthz`` from *health* at *endpoint*.
-
-    Args:
-        endpoint: where to listen; port 0 picks a free port (read it from
-            ``server.sockets[0].getsockname()``).
-        health: returns the gateway's problems now, one line each; none
-            means healthy (200 ``ok``), any means 503 with them as the body.
-        limit: admits each connection (None: no cap to speak of); counts the
-            timed-out ones.
-        timeout_s: seconds a client has to send its request head, and to take
-            the response (None: :data:`HEAD_TIMEOUT_S`).
-
-    Returns:
-        The listening server; close it with ``close()`` and ``wait_closed()``.
+    Prometheus reads it, and nothing exported here needs what OpenMetrics
+    adds (exemplars, ``_created``).
     """
-    routes: dict[str, Callable[[], _Response]] = {
-        "/metrics": lambda: _Response(200, generate_latest(registry), CONTENT_TYPE_LATEST),
-        "/healthz": lambda: _health_response(health()),
-    }
-    timeout = HEAD_TIMEOUT_S if timeout_s is None else timeout_s
-    connections = ConnectionLimit("http", 1 << 30, _log) if limit is None else limit
-
-    async def handle(reader: asyncio.StreamReader, writer: asyncio.StreamWriter) -> None:
-        if not await _handle(reader, writer, routes, timeout):
-            connections.timed_out += 1
-
-    def protocol() -> asyncio.StreamReaderProtocol:
-        # limit: a single line longer than the whole head allowance fails readline() at once.
-        reader = asyncio.StreamReader(limit=MAX_HEAD_BYTES)
-        return _Counted(reader, handle, connections)
-
-    server = Listener(protocol, connections)
-    await server.start(endpoint.host, endpoint.port)
-    return server
+    response = web.Response(body=generate_latest(registry))
+    response.headers["Content-Type"] = CONTENT_TYPE_LATEST
+    return response
 
 
-class _Counted(asyncio.StreamReaderProtocol):
-    """asyncio's stream protocol (what ``start_server`` makes), releasing its slot at the end."""
+def health_response(problems: list[str]) -> web.Response:
+    """``/healthz``: 200 ``ok``, or 503 with the gateway's problems one per line."""
+    if not problems:
+        return web.Response(text="ok\n")
+    return web.Response(status=503, text="".join(f"{problem}\n" for problem in problems))
 
-    def __init__(
-        self,
-        reader: asyncio.StreamReader,
-        handle: Callable[[asyncio.StreamReader, asyncio.StreamWriter], Awaitable[None]],
-        limit: ConnectionLimit,
-    ) -> None:
-        super().__init__(reader, handle)
-        self._limit = limit
+
+class HttpServer:
+    """An aiohttp application served on a :class:`~sj300_async.gateway.Listener`."""
+
+    def __init__(self, app: web.Application, limit: ConnectionLimit, idle_timeout_s: float):
+        self.limit = limit
+        self.idle_timeout_s = idle_timeout_s
+        server = self
+
+        class Refusals(_Refusals):
+            def connection(self, request: BaseRequest) -> _Connection | None:
+                return server._connections.get(request.protocol)
+
+        self._runner = web.AppRunner(
+            app,
+            handle_signals=False,
+            access_log=_log,
+            access_log_class=Refusals,
+            # The idle rule is ours (_Connection), which counts what it closes;
+            # aiohttp's own timer is the second guard, behind it.
+            keepalive_timeout=2 * idle_timeout_s,
+            max_line_size=MAX_LINE_BYTES,
+            max_field_size=MAX_LINE_BYTES,
+            # A stopping gateway waits this long for requests in progress (event
+            # streams end on their own when the northbound closes them first).
+            shutdown_timeout=2.0,
+        )
+        self._listener: Listener | None = None
+        self._closing: asyncio.Future[None] | None = None
+        self._connections: dict[RequestHandler, _Connection] = {}
+        app.middlewares.insert(0, self._track)  # outermost: it sees every request
+
+    @property
+    def sockets(self) -> list[socket.socket]:
+        return [] if self._listener is None else list(self._listener.sockets)
+
+    @property
+    def port(self) -> int:
+        """The port it listens on (the real one when asked for port 0), 0 when not started."""
+        if self._listener is None or not self._listener.sockets:
+            return 0
+        return int(self._listener.sockets[0].getsockname()[1])
+
+    async def start(self, endpoint: Endpoint) -> None:
+        """Listen on *endpoint*.
+
+        Raises:
+            OSError: the address cannot be bound (nothing is left running).
+        """
+        await self._runner.setup()
+        server = self._runner.server
+        assert server is not None
+
+        def factory() -> asyncio.BaseProtocol:
+            return _Connection(server(), self)
+
+        self._listener = Listener(factory, self.limit)
+        try:
+            await self._listener.start(endpoint.host, endpoint.port)
+        except BaseException:
+            self._listener = None
+            await self._runner.cleanup()
+            raise
+
+    def close(self) -> None:
+        """Stop listening and start closing every connection (see :meth:`wait_closed`)."""
+        if self._listener is not None:
+            self._listener.close()
+            self._listener = None
+        if self._closing is None:
+            self._closing = asyncio.ensure_future(self._runner.cleanup())
+
+    async def wait_closed(self) -> None:
+        """Wait until every connection is closed (requests in progress get a moment)."""
+        if self._closing is not None:
+            await self._closing
+
+    @web.middleware
+    async def _track(self, request: web.Request, handler: Handler) -> web.StreamResponse:
+        connection = self._connections.get(request.protocol)
+        if connection is not None:
+            connection.begin()
+        try:
+            return await handler(request)
+        except web.HTTPException:
+            raise
+        except Exception:
+            _log.exception("http %s: %s %s failed", request.remote, request.method, request.path)
+            raise web.HTTPInternalServerError(text="internal error\n") from None
+        finally:
+            if connection is not None:
+                connection.end()
+
+
+#: Bytes of a request's head kept for the log line of its refusal.
+_KEPT_BYTES: Final = 256
+
+
+class _Refusals(AbstractAccessLogger):
+    """aiohttp's access log, used to log each refusal (4xx) with what the client sent."""
+
+    def connection(self, request: BaseRequest) -> _Connection | None:
+        raise NotImplementedError
+
+    def log(self, request: BaseRequest, response: web.StreamResponse, time: float) -> None:
+        connection = self.connection(request)
+        received = b""
+        if connection is not None:  # the next request's bytes start afresh
+            received = bytes(connection.received)
+            connection.received.clear()
+        if not 400 <= response.status < 500:
+            return
+        self.logger.debug(
+            "http %s: refused %d %s; received: %s",
+            request.remote,
+            response.status,
+            response.reason,
+            excerpt(received),
+        )
+
+
+class _Connection(asyncio.Protocol):
+    """aiohttp's protocol for one connection, releasing its slot and closing it when idle."""
+
+    def __init__(self, handler: RequestHandler, server: HttpServer) -> None:
+        self._handler = handler
+        self._server = server
+        self._transport: asyncio.Transport | None = None
+        self._busy = 0
+        self._timer: asyncio.TimerHandle | None = None
+        #: The first bytes received since the last request ended (for a refusal's log).
+        self.received = bytearray()
+
+    def connection_made(self, transport: asyncio.BaseTransport) -> None:
+        assert isinstance(transport, asyncio.Transport)
+        self._transport = transport
+        self._server._connections[self._handler] = self
+        self._handler.connection_made(transport)
+        self._arm()
+
+    def data_received(self, data: bytes) -> None:
+        if len(self.received) < _KEPT_BYTES:
+            self.received += data[: _KEPT_BYTES - len(self.received)]
+        self._handler.data_received(data)
+
+    def eof_received(self) -> None:
+        self._handler.eof_received()
+
+    def pause_writing(self) -> None:
+        self._handler.pause_writing()
+
+    def resume_writing(self) -> None:
+        self._handler.resume_writing()
 
     def connection_lost(self, exc: Exception | None) -> None:
-        super().connection_lost(exc)
-        self._limit.release()
-
-
-def _health_response(problems: list[str]) -> _Response:
-    if not problems:
-        return _Response(200, b"ok\n")
-    return _Response(503, "".join(f"{problem}\n" for problem in problems).encode())
-
-
-async def _handle(
-    reader: asyncio.StreamReader,
-    writer: asyncio.StreamWriter,
-    routes: dict[str, Callable[[], _Response]],
-    timeout_s: float,
-) -> bool:
-    """Serve one request; False when the client was too slow (closed for it)."""
-    peer = writer.get_extra_info("peername")
-    try:
+        self._disarm()
+        if self.received and not self._busy:  # bytes of a request that never came whole
+            _log.debug(
+                "http %s: closed before a whole request came; received: %s",
+                None if self._transport is None else self._transport.get_extra_info("peername"),
+                excerpt(bytes(self.received)),
+            )
+        self._server._connections.pop(self._handler, None)
         try:
-            request_line = await _read_head(reader, timeout_s)
-        except _BadRequest as bad:
-            _log.debug("http %s: %s, closed; received: %s", peer, bad, bad.received.hex(" "))
-            return not bad.timed_out
-        response, head_only = _respond(request_line, routes, peer)
-        async with asyncio.timeout(timeout_s):
-            writer.write(response.encode(head_only=head_only))
-            await writer.drain()
-    except TimeoutError:
-        _log.debug("http %s: the response not taken within %g s", peer, timeout_s)
-        return False
-    except ConnectionError as exc:
-        # The client went away: nothing left to answer.
-        _log.debug("http %s: connection ended before the response was sent: %r", peer, exc)
-    finally:
-        writer.close()
-        try:
-            await writer.wait_closed()
-        except ConnectionError:
-            pass  # reset by the peer while closing: it is closed either way
-    return True
+            self._handler.connection_lost(exc)
+        finally:
+            self._server.limit.release()
+
+    # -- the idle rule (module docstring) --------------------------------------------------
+
+    def begin(self) -> None:
+        self._busy += 1
+        self._disarm()
+
+    def end(self) -> None:
+        self._busy -= 1
+        if self._busy == 0:
+            self._arm()
+
+    def _arm(self) -> None:
+        self._disarm()
+        loop = asyncio.get_running_loop()
+        self._timer = loop.call_later(self._server.idle_timeout_s, self._expire)
+
+    def _disarm(self) -> None:
+        if self._timer is not None:
+            self._timer.cancel()
+            self._timer = None
+
+    def _expire(self) -> None:
+        self._timer = None
+        if self._busy or self._transport is None or self._transport.is_closing():
+            return
+        self._server.limit.timed_out += 1
+        _log.debug(
+            "http %s: no request for %g s, closed; received: %s",
+            self._transport.get_extra_info("peername"),
+            self._server.idle_timeout_s,
+            excerpt(bytes(self.received)),
+        )
+        self.received.clear()
+        self._transport.close()
 
 
-async def _read_head(reader: asyncio.StreamReader, timeout_s: float) -> bytes:
-    """Read the request line and the header section; return the request line.
+async def serve_app(
+    endpoint: Endpoint,
+    app: web.Application,
+    *,
+    limit: ConnectionLimit | None = None,
+    idle_timeout_s: float = 5.0,
+) -> HttpServer:
+    """Serve *app* at *endpoint* (port 0: a free one, :attr:`HttpServer.port`).
 
     Raises:
-        _BadRequest: the head is too large, cut off, or does not come in time.
+        OSError: the address cannot be bound.
     """
-    received = bytearray()  # kept out here so that a refusal can log it
-    try:
-        async with asyncio.timeout(timeout_s):
-            return await _read_lines(reader, received)
-    except TimeoutError:
-        raise _BadRequest(
-            f"request head not complete within {timeout_s:g} s", bytes(received), timed_out=True
-        ) from None
-    except ValueError:
-        # readline() found a line longer than the stream's limit, and dropped it.
-        raise _BadRequest(
-            f"request head over {MAX_HEAD_BYTES} bytes (a line over the limit, not shown)",
-            bytes(received),
-        ) from None
-
-
-async def _read_lines(reader: asyncio.StreamReader, received: bytearray) -> bytes:
-    """Read lines into *received* up to the empty line ending the head; return the first."""
-    request_line: bytes | None = None
-    while True:
-        line = await reader.readline()
-        received += line
-        if len(received) > MAX_HEAD_BYTES:
-            raise _BadRequest(f"request head over {MAX_HEAD_BYTES} bytes", bytes(received))
-        if not line.endswith(b"\n"):
-            raise _BadRequest("connection closed before the end of the head", bytes(received))
-        if request_line is None:
-            # RFC 9112 section 2.2: empty lines before the request line are ignored.
-            if line.strip(b"\r\n"):
-                request_line = line.rstrip(b"\r\n")
-        elif line in (b"\r\n", b"\n"):
-            return request_line
-
-
-def _respond(
-    request_line: bytes, routes: dict[str, Callable[[], _Response]], peer: object
-) -> tuple[_Response, bool]:
-    """The response to *request_line*, and whether to send its head only (HEAD)."""
-    match = _REQUEST_LINE.fullmatch(request_line)
-    if match is None:
-        _log.debug("http %s: malformed request line: %s", peer, request_line.hex(" "))
-        return _Response(400, b"malformed request line\n"), False
-    method, target = match[1].decode("ascii"), match[2].decode("ascii")
-    path = target.partition("?")[0]  # a query string changes nothing here
-    route = routes.get(path)
-    if route is None:
-        _log.debug("http %s: no such path: %s", peer, request_line.hex(" "))
-        return _Response(404, b"not found\n"), method == "HEAD"
-    if method not in ("GET", "HEAD"):
-        _log.debug("http %s: method not allowed: %s", peer, request_line.hex(" "))
-        return _Response(405, b"method not allowed\n", headers=(f"Allow: {_ALLOWED}",)), False
-    try:
-        return route(), method == "HEAD"
-    except Exception:
-        _log.exception("http %s: %s failed", peer, path)
-        return _Response(500, b"internal error\n"), method == "HEAD"
+    connections = ConnectionLimit("http", 1 << 30, _log) if limit is None else limit
+    server = HttpServer(app, connections, idle_timeout_s)
+    await server.start(endpoint)
+    return server

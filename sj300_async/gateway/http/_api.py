@@ -1,0 +1,243 @@
+"""The HTTP northbound's routes: the workbench page, its JSON API and event stream, /metrics.
+
+docs/WORKBENCH_API.md describes each route for scripts; the page is one
+of its clients. Every route here reads; there is no route that writes
+(the gateway's writes come to the workbench with authentication).
+
+Decisions:
+
+- Paths are versioned (``/api/v1/...``) so that a script written today
+  keeps working when the API grows.
+- An error is JSON ``{"error": "..."}`` with its 4xx status, for scripts
+  and the page alike; a path that names no drive is 404, a malformed
+  query 400.
+- The page and its assets ship inside the package (``static/``): plants
+  are air-gapped, so nothing is fetched from elsewhere at run time, and
+  the Content-Security-Policy says so to the browser (``'self'`` only).
+- Every response says ``nosniff``, refuses framing and sends no referrer.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import contextlib
+import csv
+import io
+import json
+import logging
+import math
+from collections.abc import Callable
+from datetime import UTC, datetime
+from pathlib import Path
+from typing import Any, Final
+
+from aiohttp import web
+from prometheus_client import CollectorRegistry
+
+from .. import ConnectionLimit, Endpoint, GatewayDrive
+from ._events import KEEPALIVE
+from ._json import trip_log_json, unix_time
+from ._server import HttpServer, health_response, metrics_response, serve_app
+from ._workbench import Workbench
+
+__all__ = ["STATIC_DIR", "make_app", "operations_app", "serve_http"]
+
+_log = logging.getLogger("sj300_async.gateway.http")
+
+#: The page and its assets (the vendored libraries under ``vendor/``).
+STATIC_DIR: Final = Path(__file__).parent / "static"
+#: Seconds between two keep-alive comments on an idle event stream.
+KEEPALIVE_S: Final = 15.0
+#: Seconds a client may take to accept one write of its event stream before it is closed.
+STREAM_WRITE_TIMEOUT_S: Final = 30.0
+
+_HEADERS: Final = {
+    "X-Content-Type-Options": "nosniff",
+    "X-Frame-Options": "DENY",
+    "Referrer-Policy": "no-referrer",
+    "Content-Security-Policy": (
+        "default-src 'self'; img-src 'self' data:; style-src 'self' 'unsafe-inline'; "
+        "frame-ancestors 'none'; base-uri 'none'; form-action 'self'"
+    ),
+}
+_WORKBENCH: Final = web.AppKey("workbench", Workbench)
+
+
+def operations_app(registry: CollectorRegistry, health: Callable[[], list[str]]) -> web.Application:
+    """An application with /metrics (from *registry*) and /healthz (from *health*) alone."""
+    app = web.Application(client_max_size=64 * 1024)
+
+    async def metrics(request: web.Request) -> web.Response:
+        return metrics_response(registry)
+
+    async def healthz(request: web.Request) -> web.Response:
+        return health_response(health())
+
+    app.router.add_get("/metrics", metrics)
+    app.router.add_get("/healthz", healthz)
+    app.on_response_prepare.append(_security_headers)
+    return app
+
+
+def make_app(
+    workbench: Workbench, registry: CollectorRegistry, health: Callable[[], list[str]]
+) -> web.Application:
+    """The whole application: page, API, events, /metrics and /healthz."""
+    app = operations_app(registry, health)
+    app[_WORKBENCH] = workbench
+    app.router.add_get("/", _index)
+    app.router.add_static("/static/", STATIC_DIR, follow_symlinks=False)
+    app.router.add_get("/api/v1/gateway", _gateway)
+    app.router.add_get("/api/v1/lines", _lines)
+    app.router.add_get("/api/v1/drives", _drives)
+    app.router.add_get("/api/v1/drives/{line}/{node}", _drive)
+    app.router.add_get("/api/v1/drives/{line}/{node}/trend", _trend)
+    app.router.add_get("/api/v1/drives/{line}/{node}/trend.csv", _trend_csv)
+    app.router.add_get("/api/v1/drives/{line}/{node}/trips", _trips)
+    app.router.add_get("/api/v1/events", _events)
+    return app
+
+
+async def _security_headers(request: web.Request, response: web.StreamResponse) -> None:
+    response.headers["Server"] = "sj300-gateway"  # not the framework's name and version
+    for name, value in _HEADERS.items():
+        response.headers.setdefault(name, value)
+    if request.path.startswith(("/static/", "/api/")) or request.path == "/":
+        response.headers.setdefault("Cache-Control", "no-cache")
+
+
+def _json(data: Any, status: int = 200) -> web.Response:
+    return web.json_response(data, status=status, dumps=_dumps)
+
+
+def _dumps(data: Any) -> str:
+    return json.dumps(data, separators=(",", ":"), allow_nan=False)
+
+
+def _error(status: type[web.HTTPException], message: str) -> web.HTTPException:
+    return status(text=_dumps({"error": message}), content_type="application/json")
+
+
+def _bench(request: web.Request) -> Workbench:
+    return request.app[_WORKBENCH]
+
+
+def _find(request: web.Request) -> GatewayDrive:
+    line, node = request.match_info["line"], request.match_info["node"]
+    drive = None
+    if node.isascii() and node.isdigit() and len(node) <= 4:
+        drive = _bench(request).gateway.drive(line, int(node))
+    if drive is None:
+        raise _error(web.HTTPNotFound, f"no drive {node[:16]!r} on line {line[:64]!r}")
+    return drive
+
+
+async def _index(request: web.Request) -> web.FileResponse:
+    return web.FileResponse(STATIC_DIR / "index.html")
+
+
+async def _gateway(request: web.Request) -> web.Response:
+    return _json(_bench(request).gateway_json())
+
+
+async def _lines(request: web.Request) -> web.Response:
+    bench = _bench(request)
+    return _json([bench.line_json(line) for line in bench.gateway.lines])
+
+
+async def _drives(request: web.Request) -> web.Response:
+    bench = _bench(request)
+    return _json([bench.drive_json(drive.snapshot) for drive in bench.gateway.drives])
+
+
+async def _drive(request: web.Request) -> web.Response:
+    return _json(_bench(request).drive_json(_find(request).snapshot))
+
+
+def _since(request: web.Request) -> float | None:
+    text = request.query.get("since")
+    if text is None:
+        return None
+    try:
+        since = float(text)
+    except ValueError:
+        since = math.nan
+    if not math.isfinite(since):
+        raise _error(web.HTTPBadRequest, f"since: expected Unix seconds, got {text[:32]!r}")
+    return since
+
+
+async def _trend(request: web.Request) -> web.Response:
+    drive = _find(request)
+    trend = _bench(request).trends[drive.key]
+    return _json({"capacity": trend.capacity, **trend.columns(_since(request))})
+
+
+async def _trend_csv(request: web.Request) -> web.Response:
+    drive = _find(request)
+    columns = _bench(request).trends[drive.key].columns(_since(request))
+    out = io.StringIO()
+    writer = csv.writer(out, lineterminator="\r\n")
+    names = ["output_frequency_hz", "output_current_a", "output_voltage_v"]
+    writer.writerow(["time_utc", "time_unix", *names])
+    for row, at in enumerate(columns["time"]):
+        assert at is not None
+        stamp = datetime.fromtimestamp(at, UTC).isoformat(timespec="milliseconds")
+        values = ["" if columns[name][row] is None else columns[name][row] for name in names]
+        writer.writerow([stamp, f"{at:.3f}", *values])
+    line, node = drive.key
+    return web.Response(
+        text=out.getvalue(),
+        content_type="text/csv",
+        headers={"Content-Disposition": f'attachment; filename="{line}-{node}-trend.csv"'},
+    )
+
+
+async def _trips(request: web.Request) -> web.Response:
+    snapshot = _find(request).snapshot
+    return _json(trip_log_json(snapshot.trips, unix_time(snapshot, snapshot.trips_at)))
+
+
+async def _events(request: web.Request) -> web.StreamResponse:
+    """Server-sent events: everything as of now, then each change (module _events)."""
+    bench = _bench(request)
+    response = web.StreamResponse(
+        headers={
+            "Content-Type": "text/event-stream",
+            "Cache-Control": "no-cache",
+            "X-Accel-Buffering": "no",  # a reverse proxy must not hold events back
+        }
+    )
+    stream = bench.hub.open()
+    try:
+        for subject, frame in bench.everything():
+            stream.put(subject, frame)
+        await response.prepare(request)
+        await response.write(b"retry: 2000\n\n")
+        while True:
+            chunk = await stream.take(KEEPALIVE_S)
+            if chunk is None:
+                break
+            async with asyncio.timeout(STREAM_WRITE_TIMEOUT_S):
+                await response.write(chunk or KEEPALIVE)
+    except (ConnectionError, TimeoutError) as exc:
+        _log.debug("http %s: event stream ended: %r", request.remote, exc)
+    finally:
+        bench.hub.discard(stream)
+    with contextlib.suppress(ConnectionError):
+        await response.write_eof()
+    return response
+
+
+async def serve_http(
+    endpoint: Endpoint,
+    registry: CollectorRegistry,
+    health: Callable[[], list[str]],
+    *,
+    limit: ConnectionLimit | None = None,
+    idle_timeout_s: float = 5.0,
+) -> HttpServer:
+    """Serve /metrics and /healthz alone at *endpoint* (what a test or a tool needs)."""
+    return await serve_app(
+        endpoint, operations_app(registry, health), limit=limit, idle_timeout_s=idle_timeout_s
+    )

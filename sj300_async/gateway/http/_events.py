@@ -1,0 +1,113 @@
+"""The workbench's event stream: server-sent events, encoded once, coalesced per subject.
+
+Sans-IO but for one :class:`asyncio.Event` per stream. The gateway hands
+each new state (a drive's snapshot, a line's counters) to
+:meth:`EventHub.publish` as one encoded frame, built once for every open
+stream; each :class:`EventStream` keeps the frames its client has not been
+sent yet.
+
+Decisions:
+
+- **Latest state wins.** A stream keeps at most one pending frame per
+  subject (a drive, a line): a new one replaces the one not yet sent,
+  where it stood. A client that reads slowly (a tab in the background, a
+  slow link) gets the newest state of everything, never a backlog, and
+  the gateway's memory per stream is bounded by the number of subjects.
+  Each replaced frame is counted (``sj300_http_events_replaced_total``):
+  nothing is dropped silently.
+- Publishing never blocks and never awaits: it runs on the poller's
+  sample (the northbound's ``publish``).
+- The frames are SSE's (``event: NAME`` and one ``data:`` line of JSON);
+  a comment line keeps an idle stream alive through proxies and tells a
+  dead client from a quiet gateway (the write fails).
+"""
+
+from __future__ import annotations
+
+import asyncio
+import json
+from typing import Any, Final
+
+__all__ = ["KEEPALIVE", "EventHub", "EventStream", "sse_frame"]
+
+#: What an idle stream is sent every ``keepalive_s`` (an SSE comment).
+KEEPALIVE: Final = b": keepalive\n\n"
+
+
+def sse_frame(event: str, data: Any) -> bytes:
+    """One server-sent event: ``event: NAME``, its JSON on one ``data:`` line."""
+    text = json.dumps(data, separators=(",", ":"), allow_nan=False)
+    return f"event: {event}\ndata: {text}\n\n".encode()
+
+
+class EventStream:
+    """One client's pending frames, at most one per subject (see the module docstring)."""
+
+    def __init__(self, hub: EventHub) -> None:
+        self._hub = hub
+        self._pending: dict[str, bytes] = {}
+        self._ready = asyncio.Event()
+        self.closed = False
+
+    def put(self, subject: str, frame: bytes) -> None:
+        if subject in self._pending:
+            self._hub.replaced += 1
+        self._pending[subject] = frame
+        self._ready.set()
+
+    async def take(self, timeout_s: float) -> bytes | None:
+        """The pending frames as one chunk, waiting up to *timeout_s* for one.
+
+        Returns b"" when none came in time, None once the stream is closed.
+        """
+        if not self._pending and not self.closed:
+            try:
+                async with asyncio.timeout(timeout_s):
+                    await self._ready.wait()
+            except TimeoutError:
+                return b""
+        if self.closed:
+            return None
+        chunk = b"".join(self._pending.values())
+        self._hub.sent += len(self._pending)
+        self._pending.clear()
+        self._ready.clear()
+        return chunk
+
+    def close(self) -> None:
+        self.closed = True
+        self._ready.set()
+
+
+class EventHub:
+    """Every open stream; :meth:`publish` puts a frame into each."""
+
+    def __init__(self) -> None:
+        self._streams: set[EventStream] = set()
+        #: Frames handed to clients, and frames replaced by a newer one before being sent.
+        self.sent = 0
+        self.replaced = 0
+        #: Streams opened since the start.
+        self.opened = 0
+
+    def __len__(self) -> int:
+        return len(self._streams)
+
+    def open(self) -> EventStream:
+        stream = EventStream(self)
+        self._streams.add(stream)
+        self.opened += 1
+        return stream
+
+    def discard(self, stream: EventStream) -> None:
+        stream.close()
+        self._streams.discard(stream)
+
+    def publish(self, subject: str, frame: bytes) -> None:
+        for stream in self._streams:
+            stream.put(subject, frame)
+
+    def close(self) -> None:
+        """End every stream (the gateway is stopping)."""
+        for stream in list(self._streams):
+            self.discard(stream)

@@ -1,0 +1,194 @@
+"""The workbench's state: each drive's trend, the event hub, the lines' counters as JSON.
+
+One :class:`Workbench` per HTTP northbound. It is fed by the northbound's
+``publish`` (every drive snapshot: the trend keeps its monitor values, the
+open event streams get it encoded once) and by its own ticker, which
+sends every line's counters once per :data:`LINE_EVENT_S`. The API
+(:mod:`._api`) reads it.
+
+Decisions:
+
+- A drive event is encoded only when some stream is open: with no
+  workbench page open, a sample costs the trend's append and nothing else.
+- Line utilisation is the fraction of the last tick the line carried bytes
+  (:func:`~sj300_async.gateway.busy_seconds` over the tick's length), the
+  same figure ``rate(sj300_line_busy_seconds_total[1s])`` would give.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import time
+from collections.abc import Callable
+from typing import Any, Final
+
+from ...profiles import NEVER, DriveSnapshot
+from ...version import __version__
+from .. import GatewayLine, GatewayView, busy_seconds
+from ._events import EventHub, sse_frame
+from ._json import Json, drive_json, monitor_time
+from ._trend import Trend, trend_capacity
+
+__all__ = ["LINE_EVENT_S", "Workbench"]
+
+#: Seconds between two events of each line's counters.
+LINE_EVENT_S: Final = 1.0
+
+
+class Workbench:
+    """What the workbench's API and event stream serve (see the module docstring)."""
+
+    def __init__(
+        self,
+        gateway: GatewayView,
+        trend_s: float,
+        *,
+        clock: Callable[[], float] | None = None,
+    ) -> None:
+        self.gateway = gateway
+        self.trend_s = trend_s
+        self.hub = EventHub()
+        self._clock = clock or asyncio.get_running_loop().time
+        self.trends: dict[tuple[str, int], Trend] = {
+            drive.key: Trend(trend_capacity(trend_s, drive.line.interval_s))
+            for drive in gateway.drives
+        }
+        #: Each drive's latest monitor read: its loop time, and its Unix time in the trend.
+        self._monitor_at: dict[tuple[str, int], float] = {}
+        self._monitor_time: dict[tuple[str, int], float] = {}
+        #: Each line's (loop time, busy seconds) at the last tick, and its utilisation then.
+        self._marks: dict[str, tuple[float, float]] = {}
+        self._utilisation: dict[str, float | None] = {}
+
+    @property
+    def stale_after_s(self) -> float:
+        return self.gateway.config.stale_after_s
+
+    def now(self) -> float:
+        return self._clock()
+
+    # -- drives ----------------------------------------------------------------------------
+
+    def publish(self, snapshot: DriveSnapshot) -> None:
+        """A drive's new snapshot: into its trend, and to every open stream."""
+        key = (snapshot.line, snapshot.node)
+        trend = self.trends.get(key)
+        if trend is not None and snapshot.monitor_at != self._monitor_at.get(key, NEVER):
+            # A new monitor read (a read-back or a trip read repeats the last one). Its
+            # Unix time is worked out once: recomputed from a later snapshot, the
+            # clocks' drift would move it by microseconds and make it look new.
+            self._monitor_at[key] = snapshot.monitor_at
+            at = monitor_time(snapshot)
+            assert at is not None
+            self._monitor_time[key] = at
+            trend.add(
+                at,
+                snapshot.output_frequency_hz,
+                snapshot.output_current_a,
+                snapshot.output_voltage_v,
+            )
+        if len(self.hub):
+            self.hub.publish(
+                f"drive/{snapshot.line}/{snapshot.node}",
+                sse_frame("drive", self.drive_json(snapshot)),
+            )
+
+    def drive_json(self, snapshot: DriveSnapshot) -> Json:
+        data = drive_json(snapshot, now=self.now(), stale_after_s=self.stale_after_s)
+        known = self._monitor_time.get((snapshot.line, snapshot.node))
+        if known is not None and snapshot.monitor_at == self._monitor_at.get(
+            (snapshot.line, snapshot.node)
+        ):
+            data["monitor_time"] = known  # the trend's own time of this read
+        return data
+
+    # -- lines -----------------------------------------------------------------------------
+
+    def line_json(self, line: GatewayLine) -> Json:
+        """A line's link and counters, and its utilisation over the last tick."""
+        bus = line.bus
+        stats = bus.stats
+        transactions = stats.transactions
+        drives = line.drives.values()
+        return {
+            "name": line.config.name,
+            "protocol": line.config.protocol,
+            "url": line.config.url,
+            "interval_s": line.config.interval_s,
+            "connected": bus.connected,
+            "drives": len(line.drives),
+            "drives_online": sum(1 for drive in drives if drive.snapshot.available),
+            "utilisation": self._utilisation.get(line.config.name),
+            "requests": transactions.requests,
+            "replies": transactions.replies,
+            "timeouts": transactions.timeouts,
+            "retries": transactions.retries,
+            "naks": sum(transactions.naks.values()),
+            "transport_errors": transactions.transport_errors,
+            "protocol_errors": transactions.protocol_errors,
+            "bad_frames": stats.bad_frames,
+            "early_frames": stats.early_frames,
+            "stray_frames": stats.stray_frames,
+            "unsolicited_frames": stats.unsolicited_frames,
+            "discarded_bytes": stats.discarded_bytes,
+            "connects": stats.connects,
+            "disconnects": stats.disconnects,
+            "latency_mean_s": transactions.latency_mean_s,
+            "latency_max_s": transactions.latency_max_s if transactions.replies else None,
+        }
+
+    def tick_lines(self) -> None:
+        """Measure each line's utilisation since the last tick and send its counters."""
+        now = self.now()
+        for line in self.gateway.lines:
+            name = line.config.name
+            busy = busy_seconds(line.bus)
+            mark = self._marks.get(name)
+            if mark is not None and now > mark[0]:
+                self._utilisation[name] = min(1.0, (busy - mark[1]) / (now - mark[0]))
+            self._marks[name] = (now, busy)
+            if len(self.hub):
+                self.hub.publish(f"line/{name}", sse_frame("line", self.line_json(line)))
+
+    async def run(self) -> None:
+        """Tick the lines every :data:`LINE_EVENT_S` until cancelled."""
+        while True:
+            self.tick_lines()
+            await asyncio.sleep(LINE_EVENT_S)
+
+    # -- the gateway -----------------------------------------------------------------------
+
+    def gateway_json(self) -> Json:
+        config = self.gateway.config
+        return {
+            "id": config.gateway_id,
+            "version": __version__,
+            "time": time.time(),
+            "stale_after_s": config.stale_after_s,
+            "trend_s": self.trend_s,
+            "writes": False,
+            "lines": [
+                {
+                    "name": line.name,
+                    "protocol": line.protocol,
+                    "nodes": list(line.nodes),
+                    "interval_s": line.interval_s,
+                }
+                for line in config.lines
+            ],
+        }
+
+    def everything(self) -> list[tuple[str, bytes]]:
+        """Every subject's frame as of now: what a new stream starts with."""
+        out: list[tuple[str, bytes]] = [("gateway", sse_frame("gateway", self.gateway_json()))]
+        for line in self.gateway.lines:
+            out.append((f"line/{line.config.name}", sse_frame("line", self.line_json(line))))
+        for drive in self.gateway.drives:
+            snapshot = drive.snapshot
+            subject = f"drive/{snapshot.line}/{snapshot.node}"
+            out.append((subject, sse_frame("drive", self.drive_json(snapshot))))
+        return out
+
+    def extra(self) -> dict[str, Any]:
+        """The event hub's counters (for the northbound's metrics)."""
+        return {"streams": len(self.hub), "sent": self.hub.sent, "replaced": self.hub.replaced}

@@ -1,0 +1,356 @@
+// The sj300 workbench: one page over the gateway's API (/api/v1/) and event stream.
+//
+// Plain JavaScript, no build step: the page ships inside the Python package and
+// plants are air-gapped. The only library is uPlot (static/vendor/uplot, with its
+// licence), for the trend. Every value from the gateway is put into the page as
+// text (textContent), never as markup.
+//
+// Routes (the part after #): "/" the overview, "/drive/LINE/NODE" a drive.
+// The event stream sends everything once when it opens, then each change; the
+// page keeps the latest of each line and drive and redraws what is on screen
+// once per animation frame.
+"use strict";
+
+(() => {
+  const API = "/api/v1";
+  const state = { gateway: null, lines: new Map(), drives: new Map() };
+  const dirty = { lines: new Set(), drives: new Set(), scheduled: false };
+  let view = null; // the page on screen: { kind, ... , update(kind, key) }
+
+  // What tests and curious users can read from the console.
+  window.workbench = { state, events: 0, view: () => view };
+
+  const $ = (root, selector) => root.querySelector(selector);
+  const driveKey = (line, node) => `${line}/${node}`;
+
+  function text(value, digits) {
+    if (value === null || value === undefined) return "–";
+    if (typeof value === "number") return digits === undefined ? String(value) : value.toFixed(digits);
+    if (typeof value === "boolean") return value ? "yes" : "no";
+    return String(value);
+  }
+
+  // "E07 over-voltage": the code the drive shows and its meaning (the protocol's
+  // own name of the trip is in the API, and in the trip history's title).
+  function tripText(trip) {
+    if (!trip) return "";
+    return trip.meaning ? `${trip.code} ${trip.meaning}` : trip.code;
+  }
+
+  function cell(row, field, value, cls) {
+    const td = document.createElement("td");
+    td.dataset.field = field;
+    if (cls) td.className = cls;
+    td.textContent = value;
+    row.appendChild(td);
+    return td;
+  }
+
+  // -- the event stream ---------------------------------------------------------------
+
+  function connect() {
+    const live = document.getElementById("live");
+    const source = new EventSource(`${API}/events`);
+    source.onopen = () => {
+      live.textContent = "live";
+      live.classList.remove("off");
+    };
+    source.onerror = () => {
+      // EventSource reconnects by itself (the stream says retry: 2000).
+      live.textContent = "reconnecting";
+      live.classList.add("off");
+    };
+    source.addEventListener("gateway", (event) => {
+      state.gateway = JSON.parse(event.data);
+      const g = state.gateway;
+      document.getElementById("gateway").textContent = `${g.id} · ${g.version}`;
+      document.title = `${g.id} · sj300 workbench`;
+    });
+    source.addEventListener("line", (event) => {
+      const line = JSON.parse(event.data);
+      state.lines.set(line.name, line);
+      mark("lines", line.name);
+    });
+    source.addEventListener("drive", (event) => {
+      const drive = JSON.parse(event.data);
+      const key = driveKey(drive.line, drive.node);
+      state.drives.set(key, drive);
+      window.workbench.events += 1;
+      mark("drives", key);
+    });
+  }
+
+  function mark(kind, key) {
+    dirty[kind].add(key);
+    if (!dirty.scheduled) {
+      dirty.scheduled = true;
+      requestAnimationFrame(flush);
+    }
+  }
+
+  function flush() {
+    dirty.scheduled = false;
+    const lines = [...dirty.lines];
+    const drives = [...dirty.drives];
+    dirty.lines.clear();
+    dirty.drives.clear();
+    if (!view) return;
+    for (const key of lines) view.update("line", key);
+    for (const key of drives) view.update("drive", key);
+  }
+
+  // -- the overview -------------------------------------------------------------------
+
+  function overview(main) {
+    main.replaceChildren(document.getElementById("overview").content.cloneNode(true));
+    const lineBody = $(main, '[data-testid="lines"] tbody');
+    const driveBody = $(main, '[data-testid="drives"] tbody');
+    const lineRows = new Map();
+    const driveRows = new Map();
+
+    function rowFor(rows, body, key, order) {
+      let row = rows.get(key);
+      if (!row) {
+        row = document.createElement("tr");
+        row.dataset.key = key;
+        rows.set(key, row);
+        // Keep the gateway's order (lines as configured, nodes ascending).
+        const keys = order();
+        const next = keys.slice(keys.indexOf(key) + 1).map((k) => rows.get(k)).find(Boolean);
+        body.insertBefore(row, next || null);
+      }
+      return row;
+    }
+
+    function renderLine(name) {
+      const line = state.lines.get(name);
+      if (!line) return;
+      const row = rowFor(lineRows, lineBody, name, () => [...state.lines.keys()]);
+      row.replaceChildren();
+      cell(row, "name", line.name);
+      cell(row, "protocol", line.protocol);
+      cell(row, "connected", line.connected ? "up" : "down", line.connected ? "" : "bad");
+      cell(row, "drives_online", `${line.drives_online} of ${line.drives}`, "num");
+      cell(row, "utilisation",
+        line.utilisation === null ? "–" : `${(100 * line.utilisation).toFixed(1)} %`, "num");
+      for (const field of ["requests", "timeouts", "naks", "bad_frames", "early_frames", "stray_frames"]) {
+        cell(row, field, text(line[field]), `num${line[field] && field !== "requests" ? " bad" : ""}`);
+      }
+      cell(row, "latency_mean_s",
+        line.latency_mean_s === null ? "–" : `${(1000 * line.latency_mean_s).toFixed(1)} ms`, "num");
+    }
+
+    function renderDrive(key) {
+      const drive = state.drives.get(key);
+      if (!drive) return;
+      const row = rowFor(driveRows, driveBody, key, () => [...state.drives.keys()]);
+      row.replaceChildren();
+      row.className = drive.tripped ? "tripped" : drive.online ? "" : "offline";
+      const name = cell(row, "line", "");
+      const link = document.createElement("a");
+      link.href = `#/drive/${encodeURIComponent(drive.line)}/${drive.node}`;
+      link.textContent = drive.line;
+      name.appendChild(link);
+      cell(row, "node", String(drive.node), "num");
+      cell(row, "online", drive.online ? "online" : "offline", drive.online ? "" : "bad");
+      cell(row, "state", text(drive.state));
+      cell(row, "output_frequency_hz", text(drive.output_frequency_hz, 2), "num");
+      cell(row, "set_frequency_hz", text(drive.set_frequency_hz, 2), "num");
+      cell(row, "output_current_a", text(drive.output_current_a, 1), "num");
+      cell(row, "output_voltage_v", text(drive.output_voltage_v, 1), "num");
+      cell(row, "trip", tripText(drive.trip));
+    }
+
+    for (const name of state.lines.keys()) renderLine(name);
+    for (const key of state.drives.keys()) renderDrive(key);
+    return {
+      kind: "overview",
+      update(kind, key) {
+        if (kind === "line") renderLine(key);
+        else renderDrive(key);
+      },
+      close() {},
+    };
+  }
+
+  // -- a drive ------------------------------------------------------------------------
+
+  const SERIES = [
+    { label: "output Hz", key: "output_frequency_hz", scale: "Hz", stroke: "#1f6feb" },
+    { label: "current A", key: "output_current_a", scale: "A", stroke: "#d9480f" },
+    { label: "voltage V", key: "output_voltage_v", scale: "V", stroke: "#2b8a3e" },
+  ];
+
+  function drivePage(main, line, node) {
+    const key = driveKey(line, node);
+    const base = `${API}/drives/${encodeURIComponent(line)}/${node}`;
+    main.replaceChildren(document.getElementById("drive").content.cloneNode(true));
+    const field = (name) => $(main, `[data-field="${name}"]`);
+    field("title").textContent = `${line} · node ${node}`;
+    field("csv").href = `${base}/trend.csv`;
+    const chartBox = $(main, '[data-testid="trend"]');
+    const data = [[], [], [], []];
+    let capacity = 2000;
+    let following = true;
+    let chart = null;
+    let tripsTime;
+    let closed = false;
+
+    function makeChart() {
+      const width = Math.max(320, chartBox.clientWidth - 2);
+      chart = new uPlot({
+        width,
+        height: 320,
+        series: [
+          { label: "time" },
+          ...SERIES.map((s) => ({ label: s.label, scale: s.scale, stroke: s.stroke, width: 1.5, spanGaps: false })),
+        ],
+        scales: { x: { time: true } },
+        axes: [
+          {},
+          { scale: "Hz", label: "Hz" },
+          { scale: "A", label: "A", side: 1, grid: { show: false } },
+          { scale: "V", label: "V", side: 1, grid: { show: false } },
+        ],
+        cursor: { drag: { x: true, y: false } },
+        hooks: {
+          setSelect: [() => { following = false; }],
+        },
+      }, data, chartBox);
+      window.workbench.chart = chart;
+    }
+
+    function redraw() {
+      if (chart) chart.setData(data, following);
+      const n = data[0].length;
+      field("trend-info").textContent = n
+        ? `${n} samples since ${new Date(data[0][0] * 1000).toLocaleTimeString()}`
+        : "no samples yet";
+    }
+
+    function append(drive) {
+      const at = drive.monitor_time;
+      const times = data[0];
+      if (at === null || (times.length && at <= times[times.length - 1])) return;
+      times.push(at);
+      SERIES.forEach((s, i) => data[i + 1].push(drive[s.key]));
+      if (times.length > capacity) for (const column of data) column.shift();
+      redraw();
+    }
+
+    async function loadTrend() {
+      const response = await fetch(`${base}/trend`);
+      if (!response.ok) throw new Error(`trend: ${response.status}`);
+      const trend = await response.json();
+      capacity = trend.capacity;
+      // Samples that came by the event stream while this loaded stay, after these.
+      const later = data[0].map((t, i) => [t, data[1][i], data[2][i], data[3][i]])
+        .filter((r) => !trend.time.length || r[0] > trend.time[trend.time.length - 1]);
+      data[0] = trend.time.slice();
+      SERIES.forEach((s, i) => { data[i + 1] = trend[s.key].slice(); });
+      for (const r of later) r.forEach((v, i) => data[i].push(v));
+      redraw();
+    }
+
+    async function loadTrips() {
+      const response = await fetch(`${base}/trips`);
+      if (!response.ok) return;
+      const log = await response.json();
+      if (closed) return;
+      const body = $(main, '[data-testid="trips"] tbody');
+      body.replaceChildren();
+      field("trips-info").textContent = log.time === null
+        ? "not read yet"
+        : `read ${new Date(log.time * 1000).toLocaleTimeString()}` +
+          (log.total_count === null ? "" : `; ${log.total_count} trips counted by the drive`);
+      log.records.forEach((trip, i) => {
+        const row = document.createElement("tr");
+        cell(row, "index", String(i + 1), "num");
+        cell(row, "code", trip.code).title = text(trip.name);
+        cell(row, "meaning", text(trip.meaning));
+        cell(row, "output_frequency_hz", text(trip.output_frequency_hz, 2), "num");
+        cell(row, "output_current_a", text(trip.output_current_a, 1), "num");
+        cell(row, "output_voltage_v", text(trip.output_voltage_v, 1), "num");
+        cell(row, "run_time_h", text(trip.run_time_h), "num");
+        cell(row, "details", trip.details.map((d) => `${d.name}: ${d.value}`).join("; "));
+        body.appendChild(row);
+      });
+    }
+
+    function renderStatus(drive) {
+      const body = $(main, '[data-testid="status"] tbody');
+      body.replaceChildren();
+      const rows = [["state", text(drive.state)], ["running", text(drive.running)],
+        ["tripped", text(drive.tripped)], ["protocol", drive.protocol], ["unit id", text(drive.unit)]];
+      for (const [name, value] of Object.entries(drive.status || {})) rows.push([name, text(value)]);
+      for (const [code, reading] of Object.entries(drive.parameters || {})) {
+        rows.push([code, reading === null ? "–" : `${reading.value} ${reading.unit}`.trim()]);
+      }
+      for (const [name, value] of rows) {
+        const row = document.createElement("tr");
+        cell(row, "name", name);
+        cell(row, "value", value);
+        body.appendChild(row);
+      }
+    }
+
+    function render() {
+      const drive = state.drives.get(key);
+      if (!drive) return;
+      const badge = field("state");
+      badge.textContent = text(drive.state);
+      badge.className = `badge${drive.tripped ? " tripped" : ""}`;
+      field("online").textContent = drive.online ? "online" : "offline";
+      field("direction").textContent = text(drive.direction);
+      field("output_frequency_hz").textContent = text(drive.output_frequency_hz, 2);
+      field("set_frequency_hz").textContent = text(drive.set_frequency_hz, 2);
+      field("output_current_a").textContent = text(drive.output_current_a, 1);
+      field("output_voltage_v").textContent = text(drive.output_voltage_v, 1);
+      field("output_torque_percent").textContent = text(drive.output_torque_percent, 0);
+      field("power_kw").textContent = text(drive.power_kw, 2);
+      const trip = field("trip");
+      trip.textContent = drive.trip ? tripText(drive.trip) : "none";
+      trip.className = drive.trip ? "bad" : "";
+      renderStatus(drive);
+      append(drive);
+      if (drive.trips_time !== tripsTime) {
+        tripsTime = drive.trips_time;
+        loadTrips();
+      }
+    }
+
+    $(main, '[data-action="follow"]').addEventListener("click", () => {
+      following = true;
+      redraw();
+    });
+    makeChart();
+    render();
+    loadTrend().catch((error) => { field("trend-info").textContent = String(error); });
+    return {
+      kind: "drive",
+      key,
+      data,
+      update(kind, changed) {
+        if (kind === "drive" && changed === key) render();
+      },
+      close() {
+        closed = true;
+        if (chart) chart.destroy();
+        window.workbench.chart = null;
+      },
+    };
+  }
+
+  // -- routing ------------------------------------------------------------------------
+
+  function route() {
+    const main = document.getElementById("main");
+    if (view) view.close();
+    const match = /^#\/drive\/([^/]+)\/(\d+)$/.exec(location.hash);
+    view = match ? drivePage(main, decodeURIComponent(match[1]), Number(match[2])) : overview(main);
+  }
+
+  window.addEventListener("hashchange", route);
+  connect();
+  route();
+})();
