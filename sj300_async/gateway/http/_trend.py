@@ -31,13 +31,12 @@ __all__ = ["SAMPLE_BYTES", "Trend", "trend_capacity"]
 
 #: Bytes one sample takes: a float64 time and three float32 values.
 SAMPLE_BYTES: Final = 8 + 3 * 4
-#: The margin over window / interval (module docstring).
-_MARGIN: Final = 1.1
 
 
 def trend_capacity(window_s: float, interval_s: float) -> int:
     """Samples needed to cover *window_s* at one sample per *interval_s* (at least 2)."""
-    return max(2, math.ceil(window_s / max(interval_s, 0.001) * _MARGIN))
+    # window * 11 / (10 * interval): one rounding, so 900 s at 0.5 s is 1980, not 1981.
+    return max(2, math.ceil(window_s * 11 / (10 * max(interval_s, 0.001))))
 
 
 class Trend:

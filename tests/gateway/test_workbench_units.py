@@ -1,0 +1,114 @@
+"""The workbench's sans-IO parts: the trend's ring buffer and the event hub's coalescing."""
+
+from __future__ import annotations
+
+import json
+import math
+
+import pytest
+from hypothesis import given
+from hypothesis import strategies as st
+
+from sj300_async.gateway.http._events import EventHub, sse_frame
+from sj300_async.gateway.http._trend import SAMPLE_BYTES, Trend, trend_capacity
+
+
+def test_the_capacity_covers_the_window_with_a_margin() -> None:
+    assert trend_capacity(900, 0.5) == 1980
+    assert trend_capacity(60, 0.1) == 660
+    assert trend_capacity(1, 10) == 2  # never fewer than two samples
+
+
+def test_a_trend_keeps_the_newest_samples_oldest_first() -> None:
+    trend = Trend(3)
+    for at in (1.0, 2.0, 3.0, 4.0, 5.0):
+        assert trend.add(at, at * 10, at, None)
+    columns = trend.columns()
+    assert columns == {
+        "time": [3.0, 4.0, 5.0],
+        "output_frequency_hz": [30.0, 40.0, 50.0],
+        "output_current_a": [3.0, 4.0, 5.0],
+        "output_voltage_v": [None, None, None],  # not reported: NaN inside, null outside
+    }
+    assert trend.columns(since=4.0)["time"] == [5.0]
+    assert len(trend) == 3
+
+
+def test_a_sample_not_newer_than_the_last_is_not_kept() -> None:
+    trend = Trend(4)
+    assert trend.add(2.0, 1.0, 1.0, 1.0)
+    assert not trend.add(2.0, 9.0, 9.0, 9.0)
+    assert not trend.add(1.0, 9.0, 9.0, 9.0)
+    assert trend.columns()["output_frequency_hz"] == [1.0]
+
+
+def test_float32_values_come_back_as_the_decimal_written() -> None:
+    trend = Trend(2)
+    trend.add(1.0, 49.99, 12.3, 398.7)
+    columns = trend.columns()
+    assert columns["output_frequency_hz"] == [49.99]
+    assert columns["output_current_a"] == [12.3]
+    assert columns["output_voltage_v"] == [398.7]
+
+
+def test_the_memory_is_fixed_when_made() -> None:
+    trend = Trend(1980)
+    before = trend.nbytes
+    for at in range(5000):
+        trend.add(float(at), 1.0, 2.0, 3.0)
+    assert trend.nbytes == before == 1980 * SAMPLE_BYTES
+
+
+def test_a_trend_holds_at_least_one_sample() -> None:
+    with pytest.raises(ValueError, match="at least one"):
+        Trend(0)
+
+
+@given(st.integers(1, 20), st.lists(st.floats(0, 1e6, allow_nan=False), max_size=60))
+def test_the_ring_is_the_tail_of_the_increasing_samples(capacity: int, times: list[float]) -> None:
+    trend = Trend(capacity)
+    kept: list[float] = []
+    for at in times:
+        if trend.add(at, 1.0, 1.0, 1.0):
+            kept.append(at)
+    assert kept == sorted(set(kept))
+    assert trend.columns()["time"] == kept[-capacity:]
+    assert trend.last_time == (kept[-1] if kept else None)
+
+
+def test_the_hub_sends_the_latest_frame_of_each_subject_and_counts_the_rest() -> None:
+    hub = EventHub()
+    fast, slow = hub.open(), hub.open()
+    hub.publish("drive/a/1", b"one\n\n")
+    assert fast._pending == {"drive/a/1": b"one\n\n"}
+    fast._pending.clear()
+    hub.publish("drive/a/1", b"two\n\n")
+    hub.publish("drive/a/2", b"other\n\n")
+    # the slow stream still had "one": replaced where it stood, by "two"
+    assert list(slow._pending.items()) == [("drive/a/1", b"two\n\n"), ("drive/a/2", b"other\n\n")]
+    assert hub.replaced == 1
+    hub.discard(slow)
+    assert len(hub) == 1
+    assert slow.closed
+
+
+async def test_a_stream_takes_its_frames_as_one_chunk() -> None:
+    hub = EventHub()
+    stream = hub.open()
+    assert await stream.take(0.01) == b""  # nothing came in time
+    hub.publish("line/x", b"a\n\n")
+    hub.publish("drive/x/1", b"b\n\n")
+    assert await stream.take(1) == b"a\n\nb\n\n"
+    assert hub.sent == 2
+    hub.close()
+    assert await stream.take(1) is None
+
+
+def test_an_event_is_one_json_line() -> None:
+    frame = sse_frame("drive", {"state": "tripped\nE07", "x": 1.5})
+    name, data, end = frame.split(b"\n", 2)
+    assert name == b"event: drive"
+    assert json.loads(data.removeprefix(b"data: ")) == {"state": "tripped\nE07", "x": 1.5}
+    assert end == b"\n"
+    with pytest.raises(ValueError, match="JSON compliant"):
+        sse_frame("drive", {"x": math.nan})  # never "NaN" on the wire: JSON has none
