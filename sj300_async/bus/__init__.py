@@ -10,7 +10,7 @@ scheme in the same registry (a :class:`SchemeConnector`).
 from __future__ import annotations
 
 from ._bus import Bus
-from ._capture import CaptureFile
+from ._capture import CaptureFile, combine
 from ._channel import Channel, cap_retries, retries_at_most
 from ._dialect import Dialect, LineFramer, LineParser, LineRequest, SimulatorFactory
 from ._link import ReconnectPolicy
@@ -67,6 +67,7 @@ __all__ = [
     "TransactionStats",
     "Unanswered",
     "cap_retries",
+    "combine",
     "format_node_list",
     "get_dialect",
     "load_object",

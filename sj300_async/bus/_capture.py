@@ -74,14 +74,22 @@ class CaptureFile:
         LocalProtocolError: the file cannot be created.
     """
 
-    def __init__(self, path: str | Path) -> None:
-        self.path = Path(path)
-        try:
-            self._file: BinaryIO = self.path.open("wb")
-        except OSError as exc:
-            raise LocalProtocolError(
-                f"cannot write capture {self.path}: {exc.strerror or exc}"
-            ) from None
+    def __init__(self, path: str | Path | BinaryIO) -> None:
+        # A binary stream (io.BytesIO: the workbench's "last N seconds" download) is
+        # written and left open: its owner reads it, and closes it.
+        self._owned = isinstance(path, str | Path)
+        if isinstance(path, str | Path):
+            self.path: Path | None = Path(path)
+            try:
+                self._file: BinaryIO = self.path.open("wb")
+            except OSError as exc:
+                raise LocalProtocolError(
+                    f"cannot write capture {self.path}: {exc.strerror or exc}"
+                ) from None
+        else:
+            self.path = None
+            self._file = path
+        self._closed = False
         self._writer = PcapngWriter()
         self._file.write(self._writer.section(f"sj300_async {__version__}"))
         self._flushed = time.monotonic()
@@ -93,7 +101,7 @@ class CaptureFile:
 
     @property
     def closed(self) -> bool:
-        return self._file.closed
+        return self._closed or self._file.closed
 
     def line(self, dialect: Dialect[Any, Any], name: str, line: LineSettings) -> LineCapture:
         """A new interface for one line; the returned hook captures what that bus traces."""
@@ -113,7 +121,7 @@ class CaptureFile:
     def write(self, packet: CapturedPacket) -> None:
         """Write one packet; after :meth:`close` it is counted in :attr:`unwritten`, not
         written (a bus may outlive its capture)."""
-        if self._file.closed:
+        if self.closed:
             self.unwritten += 1
             return
         self._file.write(self._writer.packet(packet))
@@ -124,12 +132,19 @@ class CaptureFile:
             self._flushed = now
 
     def close(self) -> None:
-        """Write what the lines still hold (an incomplete frame, as noise), and close."""
-        if self._file.closed:
+        """Write what the lines still hold (an incomplete frame, as noise), and close.
+
+        A stream given instead of a path is flushed, not closed.
+        """
+        if self.closed:
             return
         for line in self._lines:
             line.flush()
-        self._file.close()
+        self._closed = True
+        if self._owned:
+            self._file.close()
+        else:
+            self._file.flush()
 
     def __enter__(self) -> CaptureFile:
         return self

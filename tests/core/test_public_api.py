@@ -91,6 +91,8 @@ BUS_NAMES = (
     # captures and the passive sniffer
     "CaptureFile", "LineFramer", "Anomaly", "LineSniffer", "SniffedFrame", "Sniffing",
     "Unanswered", "sniff",
+    # several trace hooks on one bus (the capture and the workbench's line trace)
+    "combine",
 )  # fmt: skip
 SIMULATOR_NAMES = (
     "BusModel", "Faults", "LineCounters", "LinePacing", "PacedLine", "PlausibleLine",

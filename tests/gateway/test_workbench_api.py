@@ -25,6 +25,7 @@ from waiting import wait_for
 from sj300_async.gateway import Gateway
 from sj300_async.gateway.http._northbound import HttpNorthbound
 from sj300_async.profiles import DriveSnapshot
+from sj300_async.wire import PacketDirection, read_pcapng
 
 from .conftest import SimLine, gateway_toml, running_gateway
 
@@ -346,3 +347,83 @@ async def test_security_headers_and_the_page(sim_line: SimLine) -> None:
             assert status == 200, asset
         status, _ = await client.get("/static/../__init__.py")
         assert status in (403, 404)
+
+
+# -- the line, seen ---------------------------------------------------------------------------
+
+
+async def test_the_line_s_frames_are_paired_and_timed(sim_line: SimLine) -> None:
+    async with serving(sim_line) as (gateway, client):
+        await until_samples(gateway, 3)
+        answer = await client.json("/api/v1/lines/hall/frames?seconds=2")
+        frames = answer["frames"]
+        assert answer["line"] == "hall"
+        requests = {f["n"]: f for f in frames if f["role"] == "request"}
+        replies = [f for f in frames if f["role"] == "reply"]
+        assert len(replies) >= 8
+        for reply in replies:
+            if reply["answers"] in requests:  # its request is in the window too
+                request = requests[reply["answers"]]
+                assert request["node"] == reply["node"]
+                assert request["direction"] == "tx"
+                assert reply["direction"] == "rx"
+                assert 0 < reply["latency_ms"] < 1000
+        assert not any(f["anomalies"] for f in frames)  # a clean line
+        assert [f["time"] for f in frames] == sorted(f["time"] for f in frames)
+        two = await client.json("/api/v1/lines/hall/frames?seconds=2&node=2")
+        assert two["frames"]
+        assert {f["node"] for f in two["frames"]} == {2}
+
+
+async def test_a_corrupted_reply_is_flagged_on_the_line(sim_line: SimLine) -> None:
+    async with serving(sim_line) as (gateway, client):
+        await until_samples(gateway, 1)
+        sim_line.sim.faults.corrupt_next(3)
+        await wait_for(
+            lambda: gateway.lines[0].bus.stats.bad_frames > 0, "the corrupted reply received"
+        )
+        frames = (await client.json("/api/v1/lines/hall/frames?seconds=10"))["frames"]
+        flagged = [f for f in frames if "bad check code" in f["anomalies"]]
+        assert len(flagged) == 1
+        assert flagged[0]["role"] == "broken"
+        line = await client.json("/api/v1/lines")
+        assert line[0]["bad_frames"] == 1
+
+
+async def test_the_last_seconds_download_as_pcapng(sim_line: SimLine) -> None:
+    async with serving(sim_line) as (gateway, client):
+        await until_samples(gateway, 3)
+        url = client.base + "/api/v1/lines/hall/capture.pcapng?seconds=2"
+        async with client.session.get(url) as response:
+            assert response.status == 200
+            assert response.headers["Content-Type"] == "application/x-pcapng"
+            assert response.headers["Content-Disposition"].startswith('attachment; filename="hall-')
+            data = await response.read()
+    capture = read_pcapng(data)
+    (interface,) = capture.interfaces
+    assert interface.name == "hall"
+    assert len(capture.packets) >= 8
+    directions = {p.direction for p in capture.packets}
+    assert directions == {PacketDirection.INBOUND, PacketDirection.OUTBOUND}
+    # The packets are the frames, byte for byte: the requests start with STX and end CR.
+    assert all(p.data.startswith(b"\x02") and p.data.endswith(b"\r") for p in capture.packets)
+
+
+_SECONDS = "seconds: expected 0 < seconds <= 300, got"
+
+
+@pytest.mark.parametrize(
+    ("path", "status", "error"),
+    [
+        ("/api/v1/lines/yard/frames", 404, "no line 'yard'"),
+        ("/api/v1/lines/hall/frames?seconds=0", 400, f"{_SECONDS} '0'"),
+        ("/api/v1/lines/hall/frames?seconds=301", 400, f"{_SECONDS} '301'"),
+        ("/api/v1/lines/hall/frames?node=-1", 400, "node: expected a node number, got '-1'"),
+        ("/api/v1/lines/hall/capture.pcapng?seconds=x", 400, f"{_SECONDS} 'x'"),
+    ],
+)
+async def test_a_bad_line_query_is_a_json_error(
+    sim_line: SimLine, path: str, status: int, error: str
+) -> None:
+    async with serving(sim_line) as (_, client):
+        assert await client.get(path) == (status, {"error": error})

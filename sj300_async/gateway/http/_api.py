@@ -37,6 +37,7 @@ from prometheus_client import CollectorRegistry
 from .. import ConnectionLimit, Endpoint, GatewayDrive
 from ._events import KEEPALIVE
 from ._json import trip_log_json, unix_time
+from ._linetrace import KEEP_S, LineTrace
 from ._server import HttpServer, health_response, metrics_response, serve_app
 from ._workbench import Workbench
 
@@ -94,6 +95,8 @@ def make_app(
     app.router.add_get("/api/v1/drives/{line}/{node}/trend", _trend)
     app.router.add_get("/api/v1/drives/{line}/{node}/trend.csv", _trend_csv)
     app.router.add_get("/api/v1/drives/{line}/{node}/trips", _trips)
+    app.router.add_get("/api/v1/lines/{line}/frames", _frames)
+    app.router.add_get("/api/v1/lines/{line}/capture.pcapng", _capture)
     app.router.add_get("/api/v1/events", _events)
     return app
 
@@ -130,6 +133,56 @@ def _find(request: web.Request) -> GatewayDrive:
     if drive is None:
         raise _error(web.HTTPNotFound, f"no drive {node[:16]!r} on line {line[:64]!r}")
     return drive
+
+
+def _trace(request: web.Request) -> LineTrace:
+    name = request.match_info["line"]
+    trace = _bench(request).traces.get(name)
+    if trace is None:
+        raise _error(web.HTTPNotFound, f"no line {name[:64]!r}")
+    return trace
+
+
+def _seconds(request: web.Request, default: float) -> float:
+    text = request.query.get("seconds")
+    if text is None:
+        return default
+    try:
+        seconds = float(text)
+    except ValueError:
+        seconds = math.nan
+    if not 0 < seconds <= KEEP_S:
+        raise _error(
+            web.HTTPBadRequest, f"seconds: expected 0 < seconds <= {KEEP_S:g}, got {text[:32]!r}"
+        )
+    return seconds
+
+
+def _node(request: web.Request) -> int | None:
+    text = request.query.get("node")
+    if text is None or text == "":
+        return None
+    if not (text.isascii() and text.isdigit() and len(text) <= 3):
+        raise _error(web.HTTPBadRequest, f"node: expected a node number, got {text[:32]!r}")
+    return int(text)
+
+
+async def _frames(request: web.Request) -> web.Response:
+    trace = _trace(request)
+    seconds = _seconds(request, 10.0)
+    frames = trace.frames(seconds, node=_node(request))
+    return _json({"line": trace.name, "seconds": seconds, "frames": frames})
+
+
+async def _capture(request: web.Request) -> web.Response:
+    trace = _trace(request)
+    seconds = _seconds(request, 60.0)
+    stamp = datetime.now(UTC).strftime("%Y%m%dT%H%M%SZ")
+    return web.Response(
+        body=trace.pcapng(seconds),
+        content_type="application/x-pcapng",
+        headers={"Content-Disposition": f'attachment; filename="{trace.name}-{stamp}.pcapng"'},
+    )
 
 
 async def _index(request: web.Request) -> web.FileResponse:

@@ -85,7 +85,7 @@ class HttpNorthbound:
                 await self._ticker
             self._ticker = None
         if self.workbench is not None:
-            self.workbench.hub.close()  # the streams end, so the server's shutdown need not wait
+            self.workbench.close()  # the streams end, so the server's shutdown need not wait
         if self.server is not None:
             self.server.close()
             await self.server.wait_closed()

@@ -127,7 +127,10 @@
       if (!line) return;
       const row = rowFor(lineRows, lineBody, name, () => [...state.lines.keys()]);
       row.replaceChildren();
-      cell(row, "name", line.name);
+      const link = document.createElement("a");
+      link.href = `#/line/${encodeURIComponent(line.name)}`;
+      link.textContent = line.name;
+      cell(row, "name", "").appendChild(link);
       cell(row, "protocol", line.protocol);
       cell(row, "connected", line.connected ? "up" : "down", line.connected ? "" : "bad");
       cell(row, "drives_online", `${line.drives_online} of ${line.drives}`, "num");
@@ -341,13 +344,119 @@
     };
   }
 
+  // -- a line: its recent frames -------------------------------------------------------
+
+  // The frames come from the gateway's record of the line, judged by the same
+  // sniffer as `sj300 sniff`: fetched every second (the last 10 s), newest first.
+  const FRAME_WINDOW_S = 10;
+  const REFRESH_MS = 1000;
+
+  function linePage(main, name) {
+    main.replaceChildren(document.getElementById("line").content.cloneNode(true));
+    const field = (f) => $(main, `[data-field="${f}"]`);
+    const base = `${API}/lines/${encodeURIComponent(name)}`;
+    field("title").textContent = name;
+    const nodeSelect = field("node");
+    fetch(`${API}/gateway`).then((r) => r.json()).then((gateway) => {
+      const line = gateway.lines.find((l) => l.name === name);
+      for (const node of line ? line.nodes : []) {
+        const option = document.createElement("option");
+        option.value = String(node);
+        option.textContent = String(node);
+        nodeSelect.appendChild(option);
+      }
+    }).catch(() => {});  // the filter stays at "all"; the frames say what is wrong
+    const seconds = field("seconds");
+    const pcapng = field("pcapng");
+    const setLink = () => {
+      const s = Math.min(300, Math.max(1, Number(seconds.value) || 60));
+      pcapng.href = `${base}/capture.pcapng?seconds=${s}`;
+    };
+    seconds.addEventListener("input", setLink);
+    setLink();
+    let timer = null;
+    let closed = false;
+
+    function clock(t) {
+      const d = new Date(t * 1000);
+      return `${d.toLocaleTimeString([], { hour12: false })}.${String(d.getMilliseconds()).padStart(3, "0")}`;
+    }
+
+    function render(frames) {
+      const body = $(main, '[data-testid="frames"] tbody');
+      const onlyAnomalies = field("anomalies").checked;
+      const shown = frames.filter((f) => !onlyAnomalies || f.anomalies.length).reverse();
+      body.replaceChildren();
+      for (const f of shown) {
+        const row = document.createElement("tr");
+        if (f.anomalies.length) row.className = "anomaly";
+        cell(row, "time", clock(f.time));
+        if (f.kind === "unanswered") {
+          cell(row, "n", "");
+          cell(row, "role", "—");
+          cell(row, "node", text(f.node));
+          cell(row, "summary", f.summary);
+          cell(row, "text", "");
+          cell(row, "answers", `#${f.request}`);
+          cell(row, "latency_ms", "", "num");
+        } else {
+          cell(row, "n", String(f.n), "num");
+          cell(row, "role", f.role);
+          cell(row, "node", text(f.node));
+          cell(row, "summary", f.summary).title = f.summary;
+          cell(row, "text", f.text).title = f.text;
+          cell(row, "answers", f.answers === null ? "" : `#${f.answers}`);
+          cell(row, "latency_ms", f.latency_ms === null ? "" : `${f.latency_ms.toFixed(1)} ms`, "num");
+        }
+        cell(row, "flags", f.anomalies.join(", "));
+        body.appendChild(row);
+      }
+      const flagged = frames.filter((f) => f.anomalies.length).length;
+      field("info").textContent = `${frames.length} frames in the last ${FRAME_WINDOW_S} s, ${flagged} flagged`;
+    }
+
+    async function refresh() {
+      if (closed) return;
+      if (!field("paused").checked) {
+        const node = nodeSelect.value;
+        const query = `seconds=${FRAME_WINDOW_S}${node ? `&node=${node}` : ""}`;
+        try {
+          const response = await fetch(`${base}/frames?${query}`);
+          const answer = await response.json();
+          if (!closed) {
+            if (response.ok) render(answer.frames);
+            else field("info").textContent = answer.error;
+          }
+        } catch (error) {
+          if (!closed) field("info").textContent = `the gateway did not answer: ${error}`;
+        }
+      }
+      if (!closed) timer = setTimeout(refresh, REFRESH_MS);
+    }
+
+    nodeSelect.addEventListener("change", () => { clearTimeout(timer); refresh(); });
+    field("anomalies").addEventListener("change", () => { clearTimeout(timer); refresh(); });
+    refresh();
+    return {
+      kind: "line",
+      update() {},
+      close() {
+        closed = true;
+        clearTimeout(timer);
+      },
+    };
+  }
+
   // -- routing ------------------------------------------------------------------------
 
   function route() {
     const main = document.getElementById("main");
     if (view) view.close();
-    const match = /^#\/drive\/([^/]+)\/(\d+)$/.exec(location.hash);
-    view = match ? drivePage(main, decodeURIComponent(match[1]), Number(match[2])) : overview(main);
+    const drive = /^#\/drive\/([^/]+)\/(\d+)$/.exec(location.hash);
+    const line = /^#\/line\/([^/]+)$/.exec(location.hash);
+    if (drive) view = drivePage(main, decodeURIComponent(drive[1]), Number(drive[2]));
+    else if (line) view = linePage(main, decodeURIComponent(line[1]));
+    else view = overview(main);
   }
 
   window.addEventListener("hashchange", route);
