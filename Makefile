@@ -17,9 +17,9 @@ GATEWAY_STAMP := $(VENV)/.installed-gateway
 # Wireshark dissector's test (its debconf question, whether non-root users may capture,
 # takes its default "no" under DEBIAN_FRONTEND=noninteractive), chromium for the
 # workbench page's browser tests (Playwright drives it: its own browser download is
-# never run).
+# never run), openssl for the certificate of the workbench's HTTPS test.
 SYSTEM_PACKAGES := socat:socat ser2net:ser2net mbpoll:mbpoll mosquitto:mosquitto \
-	mosquitto-clients:mosquitto_sub tshark:tshark chromium:chromium
+	mosquitto-clients:mosquitto_sub tshark:tshark chromium:chromium openssl:openssl
 
 .PHONY: demo gateway examples test lint typecheck lint-imports docs system-packages pytest bench \
 	bench-compare soak clean venv

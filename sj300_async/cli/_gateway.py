@@ -93,8 +93,47 @@ def add_parser(subparsers: Any) -> None:
         metavar="PATH",
         help="write every line's frames to PATH, a pcapng file (one interface per line)",
     )
+    p.add_argument(
+        "--hash-password",
+        action="store_true",
+        help="read a password (prompted, or a line on stdin) and print its hash for "
+        "[[http.users]] password_hash, then exit",
+    )
+    p.add_argument(
+        "--new-token",
+        metavar="NAME",
+        help="print a new API token for a script and the [[http.tokens]] entry that "
+        "admits it, then exit",
+    )
     p.add_argument("-v", "--verbose", action="count", default=0, help="log more (-vv: debug)")
     p.set_defaults(run=run)
+
+
+def _hash_password() -> int:
+    import getpass
+
+    from ..gateway.http import hash_password
+
+    if sys.stdin.isatty():
+        password = getpass.getpass("password: ")
+        if getpass.getpass("again: ") != password:
+            raise CliError("the two passwords differ")
+    else:
+        password = sys.stdin.readline().rstrip("\r\n")
+    if len(password) < 8:
+        raise CliError("a password of at least 8 characters, please")
+    print(hash_password(password))
+    return 0
+
+
+def _new_token(name: str) -> int:
+    from ..gateway.http import hash_token, new_token
+
+    token = new_token()
+    print(f"token (give it to the script; it is not stored): {token}")
+    print("the gateway's configuration:")
+    print(f'[[http.tokens]]\nname = "{name}"\ntoken_hash = "{hash_token(token)}"')
+    return 0
 
 
 def _protocols() -> str:
@@ -159,6 +198,14 @@ def _check_requirements(config: GatewayConfig) -> None:
 
 def run(args: argparse.Namespace) -> int:
     """Serve until SIGINT / SIGTERM; return 130 after SIGINT, 0 after SIGTERM."""
+    if args.hash_password:
+        return _hash_password()
+    if args.new_token is not None:
+        from ..gateway import valid_name
+
+        if not valid_name(args.new_token):
+            raise CliError(f"--new-token: a name of letters, digits, _ . -: {args.new_token!r}")
+        return _new_token(args.new_token)
     if args.verbose:
         logging.basicConfig(
             level=logging.DEBUG if args.verbose > 1 else logging.INFO,

@@ -16,6 +16,7 @@ so no client can make a log line longer than a few hundred characters.
 
 from __future__ import annotations
 
+import collections
 import json
 import logging
 import time
@@ -67,12 +68,19 @@ def excerpt(text: str | bytes, limit: int = EXCERPT_CHARS) -> str:
     return "".join(out) + note
 
 
+#: Records the audit log keeps in memory (the file, when configured, keeps them all).
+RECENT: Final = 1000
+
+
 class AuditLog:
     """Every write: who, which drive, what, old -> new, and the result (module docstring)."""
 
     def __init__(self, path: Path | None = None) -> None:
         self.path = path
         self._file = None if path is None else path.open("a", encoding="utf-8")
+        #: The latest records, newest last, as the file has them (the workbench's audit
+        #: page): bounded, so a gateway that runs for years holds :data:`RECENT` at most.
+        self.recent: collections.deque[dict[str, object]] = collections.deque(maxlen=RECENT)
         #: Records written, by result: ``"ok"``, a refusal's reason, or a lapse's outcome.
         self.counts: dict[str, int] = {}
 
@@ -125,20 +133,21 @@ class AuditLog:
             "client %s line %s node %d (unit %d): %s %s -> %s: %s",
             client, line, node, unit, what, old, new, result,
         )  # fmt: skip
+        entry: dict[str, object] = {
+            "time": time.time(),
+            "client": client,
+            "line": line,
+            "node": node,
+            "unit": unit,
+            "what": what,
+            "old": old,
+            "new": new,
+            "result": "refused" if fields is not None else result,
+        }
+        if fields is not None:
+            entry |= fields
+        self.recent.append(entry)
         if self._file is not None:
-            entry: dict[str, object] = {
-                "time": time.time(),
-                "client": client,
-                "line": line,
-                "node": node,
-                "unit": unit,
-                "what": what,
-                "old": old,
-                "new": new,
-                "result": "refused" if fields is not None else result,
-            }
-            if fields is not None:
-                entry |= fields
             self._file.write(json.dumps(entry) + "\n")
             self._file.flush()
 

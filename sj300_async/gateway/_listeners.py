@@ -35,6 +35,7 @@ from __future__ import annotations
 import asyncio
 import logging
 import socket
+import ssl
 import time
 from collections.abc import Callable, Iterator
 from dataclasses import dataclass
@@ -55,6 +56,8 @@ __all__ = [
     "RateLimitedLog",
     "listener_families",
 ]
+
+_log = logging.getLogger("sj300_async.gateway")
 
 #: The keys of a listening northbound's section that :meth:`ListenerLimits.parse` reads.
 LIMIT_KEYS: Final = ("max_connections", "idle_timeout_s")
@@ -171,9 +174,19 @@ class Listener:
     :class:`asyncio.Server`.
     """
 
-    def __init__(self, factory: Callable[[], asyncio.BaseProtocol], limit: ConnectionLimit):
+    def __init__(
+        self,
+        factory: Callable[[], asyncio.BaseProtocol],
+        limit: ConnectionLimit,
+        *,
+        tls: ssl.SSLContext | None = None,
+        handshake_timeout_s: float = 10.0,
+    ):
         self._factory = factory
         self.limit = limit
+        #: TLS on every connection (the handshake must end within *handshake_timeout_s*).
+        self._tls = tls
+        self._handshake_timeout_s = handshake_timeout_s
         self.sockets: list[socket.socket] = []
         self._loop = asyncio.get_running_loop()
         self._closed = False
@@ -232,8 +245,19 @@ class Listener:
 
     async def _connect(self, connection: socket.socket) -> None:
         try:
-            await self._loop.connect_accepted_socket(self._factory, connection)
-        except OSError:  # reset before its transport was made: nothing to serve
+            if self._tls is None:
+                await self._loop.connect_accepted_socket(self._factory, connection)
+            else:
+                await self._loop.connect_accepted_socket(
+                    self._factory,
+                    connection,
+                    ssl=self._tls,
+                    ssl_handshake_timeout=self._handshake_timeout_s,
+                )
+        except (OSError, TimeoutError) as exc:
+            # Reset before its transport was made, or a failed TLS handshake (plain
+            # HTTP to an HTTPS port, an old client): nothing to serve.
+            _log.debug("%s: connection not set up: %r", self.limit.listener, exc)
             connection.close()
             self.limit.release()
 

@@ -47,6 +47,7 @@ from ._writes import WriteRequest, WriteResult
 if TYPE_CHECKING:
     from prometheus_client.core import Metric
 
+    from ._audit import AuditLog
     from ._gateway import GatewayLine
 
 __all__ = [
@@ -68,6 +69,10 @@ class GatewayView(Protocol):
 
     @property
     def config(self) -> GatewayConfig: ...
+
+    @property
+    def audit(self) -> AuditLog:
+        """The audit log of every write, whichever door it came through."""
 
     @property
     def lines(self) -> Sequence[GatewayLine]:

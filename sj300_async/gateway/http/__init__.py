@@ -17,8 +17,11 @@ starts.
 
 from __future__ import annotations
 
+import re
+import ssl
 from collections.abc import Sequence
 from dataclasses import dataclass
+from pathlib import Path
 from typing import Final
 
 from .. import (
@@ -30,8 +33,19 @@ from .. import (
     Northbound,
     SectionContext,
 )
+from ._auth import ApiToken, User, hash_password, hash_token, new_token, parse_password_hash
 
-__all__ = ["DEFAULT_LIMITS", "DEFAULT_TREND_S", "NORTHBOUND", "HttpConfig"]
+__all__ = [
+    "DEFAULT_LIMITS",
+    "DEFAULT_TREND_S",
+    "NORTHBOUND",
+    "ApiToken",
+    "HttpConfig",
+    "User",
+    "hash_password",
+    "hash_token",
+    "new_token",
+]
 
 #: The listener's limits when ``[http]`` sets none. A workbench tab holds one event
 #: stream and up to six requests at once; with a few tabs, a scraper and a health
@@ -44,6 +58,11 @@ DEFAULT_TREND_S: Final = 900.0
 MAX_TREND_S: Final = 86_400.0
 
 
+#: A user's or a token's name: it shows in the audit log.
+_NAME: Final = re.compile(r"[A-Za-z0-9_.@-]{1,64}\Z")
+_TOKEN_HASH: Final = re.compile(r"sha256\$[0-9a-f]{64}\Z")
+
+
 @dataclass(frozen=True, slots=True)
 class HttpConfig:
     """``[http]``: where the workbench, /metrics and /healthz are served, and how."""
@@ -51,12 +70,93 @@ class HttpConfig:
     listen: Endpoint
     limits: ListenerLimits = DEFAULT_LIMITS
     trend_s: float = DEFAULT_TREND_S
+    #: Who may write (module _auth): people with passwords, scripts with tokens.
+    users: tuple[User, ...] = ()
+    tokens: tuple[ApiToken, ...] = ()
+    #: HTTPS: the certificate chain and its key (PEM files), both or neither.
+    tls_cert: Path | None = None
+    tls_key: Path | None = None
+
+    @property
+    def authentication(self) -> bool:
+        """Someone is named who may write (without, the workbench serves no write)."""
+        return bool(self.users or self.tokens)
+
+    def ssl_context(self) -> ssl.SSLContext | None:
+        """The server's TLS context, None without TLS.
+
+        Raises:
+            ssl.SSLError, OSError: the files cannot be loaded.
+        """
+        if self.tls_cert is None or self.tls_key is None:
+            return None
+        context = ssl.create_default_context(ssl.Purpose.CLIENT_AUTH)
+        context.minimum_version = ssl.TLSVersion.TLSv1_2
+        context.load_cert_chain(self.tls_cert, self.tls_key)
+        return context
+
+
+def _users(table: ConfigTable) -> tuple[User, ...]:
+    users: dict[str, User] = {}
+    for i, item in enumerate(table.tables("users", "http.users")):
+        user = ConfigTable(table.ctx, f"{table.path}.users[{i}]", item, ("name", "password_hash"))
+        name = user.required_string("name")
+        if not _NAME.match(name):
+            raise user.error("name", f"expected 1..64 of A-Z a-z 0-9 _ . @ -, got {name!r}")
+        if name in users:
+            raise user.error("name", f"user {name!r} is named twice")
+        stored = user.required_string("password_hash")
+        try:
+            parse_password_hash(stored)
+        except ValueError as exc:
+            raise user.error("password_hash", str(exc)) from None
+        users[name] = User(name, stored)
+    return tuple(users.values())
+
+
+def _tokens(table: ConfigTable) -> tuple[ApiToken, ...]:
+    tokens: dict[str, ApiToken] = {}
+    for i, item in enumerate(table.tables("tokens", "http.tokens")):
+        token = ConfigTable(table.ctx, f"{table.path}.tokens[{i}]", item, ("name", "token_hash"))
+        name = token.required_string("name")
+        if not _NAME.match(name):
+            raise token.error("name", f"expected 1..64 of A-Z a-z 0-9 _ . @ -, got {name!r}")
+        if name in tokens:
+            raise token.error("name", f"token {name!r} is named twice")
+        stored = token.required_string("token_hash")
+        if not _TOKEN_HASH.match(stored):
+            raise token.error(
+                "token_hash", "expected sha256$ and 64 hex digits (sj300 gateway --new-token)"
+            )
+        tokens[name] = ApiToken(name, stored)
+    return tuple(tokens.values())
+
+
+def _tls(table: ConfigTable, base_dir: Path) -> tuple[Path | None, Path | None]:
+    cert, key = table.string("tls_cert"), table.string("tls_key")
+    if (cert is None) != (key is None):
+        missing = "tls_key" if key is None else "tls_cert"
+        raise table.error(missing, "HTTPS needs both tls_cert and tls_key")
+    if cert is None or key is None:
+        return None, None
+    paths = []
+    for name, text in (("tls_cert", cert), ("tls_key", key)):
+        path = base_dir / text
+        if not text.strip() or not path.is_file():
+            raise table.error(name, f"no such file: {str(path)!r}")
+        paths.append(path)
+    context = ssl.create_default_context(ssl.Purpose.CLIENT_AUTH)
+    try:  # a bad pair starts nothing: it is refused here, with the file's line
+        context.load_cert_chain(paths[0], paths[1])
+    except (ssl.SSLError, OSError) as exc:
+        raise table.error("tls_cert", f"cannot load the certificate and key: {exc}") from None
+    return paths[0], paths[1]
 
 
 class _Spec:
     section = "http"
     aliases = ("metrics",)
-    keys = ("listen", *LIMIT_KEYS, "trend_s")
+    keys = ("listen", *LIMIT_KEYS, "trend_s", "users", "tokens", "tls_cert", "tls_key")
     flag = Flag(
         "--http",
         "listen",
@@ -70,10 +170,15 @@ class _Spec:
         trend_s = table.number("trend_s", minimum=0, inclusive=False)
         if trend_s is not None and trend_s > MAX_TREND_S:
             raise table.error("trend_s", f"must be <= {MAX_TREND_S:g} (a day), got {trend_s:g}")
+        tls_cert, tls_key = _tls(table, context.base_dir)
         return HttpConfig(
             table.required_endpoint("listen"),
             DEFAULT_LIMITS.parse(table),
             DEFAULT_TREND_S if trend_s is None else trend_s,
+            users=_users(table),
+            tokens=_tokens(table),
+            tls_cert=tls_cert,
+            tls_key=tls_key,
         )
 
     def endpoints(self, config: object) -> Sequence[tuple[str, Endpoint]]:

@@ -1,8 +1,9 @@
 """The HTTP northbound's routes: the workbench page, its JSON API and event stream, /metrics.
 
 docs/WORKBENCH_API.md describes each route for scripts; the page is one
-of its clients. Every route here reads; there is no route that writes
-(the gateway's writes come to the workbench with authentication).
+of its clients. Every route here reads
+(the routes that write are :mod:`._write_api`'s, added only when the
+gateway grants writes and names who may make them).
 
 Decisions:
 
@@ -40,6 +41,7 @@ from ._json import trip_log_json, unix_time
 from ._linetrace import KEEP_S, LineTrace
 from ._server import HttpServer, health_response, metrics_response, serve_app
 from ._workbench import Workbench
+from ._write_api import WriteRoutes
 
 __all__ = ["STATIC_DIR", "make_app", "operations_app", "serve_http"]
 
@@ -81,11 +83,17 @@ def operations_app(registry: CollectorRegistry, health: Callable[[], list[str]])
 
 
 def make_app(
-    workbench: Workbench, registry: CollectorRegistry, health: Callable[[], list[str]]
+    workbench: Workbench,
+    registry: CollectorRegistry,
+    health: Callable[[], list[str]],
+    writes: WriteRoutes | None = None,
 ) -> web.Application:
-    """The whole application: page, API, events, /metrics and /healthz."""
+    """The whole application: page, API, events, /metrics and /healthz; with *writes*,
+    the routes that write (module _write_api)."""
     app = operations_app(registry, health)
     app[_WORKBENCH] = workbench
+    if writes is not None:
+        writes.add_to(app)
     app.router.add_get("/", _index)
     app.router.add_static("/static/", STATIC_DIR, follow_symlinks=False)
     app.router.add_get("/api/v1/gateway", _gateway)
@@ -97,6 +105,7 @@ def make_app(
     app.router.add_get("/api/v1/drives/{line}/{node}/trips", _trips)
     app.router.add_get("/api/v1/lines/{line}/frames", _frames)
     app.router.add_get("/api/v1/lines/{line}/capture.pcapng", _capture)
+    app.router.add_get("/api/v1/audit", _audit)
     app.router.add_get("/api/v1/events", _events)
     return app
 
@@ -183,6 +192,17 @@ async def _capture(request: web.Request) -> web.Response:
         content_type="application/x-pcapng",
         headers={"Content-Disposition": f'attachment; filename="{trace.name}-{stamp}.pcapng"'},
     )
+
+
+async def _audit(request: web.Request) -> web.Response:
+    """The latest writes, newest first, as the audit log records them."""
+    text = request.query.get("limit", "200")
+    if not (text.isascii() and text.isdigit() and 1 <= int(text[:5]) <= 1000):
+        raise _error(web.HTTPBadRequest, f"limit: expected 1..1000, got {text[:32]!r}")
+    recent = _bench(request).gateway.audit.recent
+    limit = int(text)
+    records = [recent[-i] for i in range(1, min(limit, len(recent)) + 1)]
+    return _json({"records": records, "kept": recent.maxlen})
 
 
 async def _index(request: web.Request) -> web.FileResponse:

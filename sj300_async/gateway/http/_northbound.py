@@ -14,6 +14,7 @@ from . import HttpConfig
 from ._api import make_app
 from ._server import HttpServer, make_registry, serve_app
 from ._workbench import Workbench
+from ._write_api import WriteRoutes
 
 if TYPE_CHECKING:
     from prometheus_client.core import Metric
@@ -30,18 +31,35 @@ class HttpNorthbound:
         self.config = config
         self.server: HttpServer | None = None
         self.workbench: Workbench | None = None
+        #: The routes that write, when there are any (module _write_api).
+        self.writes: WriteRoutes | None = None
         self._ticker: asyncio.Task[None] | None = None
         #: Open connections, and those refused at the cap or timed out.
         self.limit = ConnectionLimit("http", config.limits.max_connections, _log)
 
     async def start(self, gateway: GatewayView) -> None:
-        self.workbench = Workbench(gateway, self.config.trend_s)
-        app = make_app(self.workbench, make_registry(gateway.metrics), gateway.problems)
+        config = self.config
+        granted = any(line.grants for line in gateway.config.lines)
+        tls = config.ssl_context()
+        if granted and config.authentication:
+            self.writes = WriteRoutes(
+                gateway, config.users, config.tokens, secure_cookie=tls is not None
+            )
+        elif granted:
+            _log.warning(
+                "the workbench serves no writes: the configuration grants some, but [http] "
+                "names nobody who may make them ([[http.users]] or [[http.tokens]])"
+            )
+        self.workbench = Workbench(gateway, config.trend_s, writes=self.writes is not None)
+        app = make_app(
+            self.workbench, make_registry(gateway.metrics), gateway.problems, self.writes
+        )
         self.server = await serve_app(
-            self.config.listen,
+            config.listen,
             app,
             limit=self.limit,
-            idle_timeout_s=self.config.limits.idle_timeout_s,
+            idle_timeout_s=config.limits.idle_timeout_s,
+            tls=tls,
         )
         self._ticker = asyncio.create_task(self.workbench.run(), name="sj300-http-lines")
 
@@ -53,7 +71,8 @@ class HttpNorthbound:
     def announce(self) -> str | None:
         host = self.config.listen.host
         shown = f"[{host}]" if ":" in host else host
-        return f"http on http://{shown}:{self.port}/ (workbench, /metrics, /healthz)"
+        scheme = "https" if self.config.tls_cert is not None else "http"
+        return f"http on {scheme}://{shown}:{self.port}/ (workbench, /metrics, /healthz)"
 
     def publish(self, snapshot: DriveSnapshot) -> None:
         if self.workbench is not None:

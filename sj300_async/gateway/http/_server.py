@@ -38,6 +38,7 @@ from __future__ import annotations
 import asyncio
 import logging
 import socket
+import ssl
 from collections.abc import Awaitable, Callable, Iterable
 from typing import TYPE_CHECKING, Final
 
@@ -111,8 +112,15 @@ def health_response(problems: list[str]) -> web.Response:
 class HttpServer:
     """An aiohttp application served on a :class:`~sj300_async.gateway.Listener`."""
 
-    def __init__(self, app: web.Application, limit: ConnectionLimit, idle_timeout_s: float):
+    def __init__(
+        self,
+        app: web.Application,
+        limit: ConnectionLimit,
+        idle_timeout_s: float,
+        tls: ssl.SSLContext | None = None,
+    ):
         self.limit = limit
+        self.tls = tls
         self.idle_timeout_s = idle_timeout_s
         server = self
 
@@ -163,7 +171,9 @@ class HttpServer:
         def factory() -> asyncio.BaseProtocol:
             return _Connection(server(), self)
 
-        self._listener = Listener(factory, self.limit)
+        self._listener = Listener(
+            factory, self.limit, tls=self.tls, handshake_timeout_s=self.idle_timeout_s
+        )
         try:
             await self._listener.start(endpoint.host, endpoint.port)
         except BaseException:
@@ -317,13 +327,15 @@ async def serve_app(
     *,
     limit: ConnectionLimit | None = None,
     idle_timeout_s: float = 5.0,
+    tls: ssl.SSLContext | None = None,
 ) -> HttpServer:
-    """Serve *app* at *endpoint* (port 0: a free one, :attr:`HttpServer.port`).
+    """Serve *app* at *endpoint* (port 0: a free one, :attr:`HttpServer.port`), over TLS
+    when *tls* is given.
 
     Raises:
         OSError: the address cannot be bound.
     """
     connections = ConnectionLimit("http", 1 << 30, _log) if limit is None else limit
-    server = HttpServer(app, connections, idle_timeout_s)
+    server = HttpServer(app, connections, idle_timeout_s, tls)
     await server.start(endpoint)
     return server

@@ -45,10 +45,13 @@ class Workbench:
         gateway: GatewayView,
         trend_s: float,
         *,
+        writes: bool = False,
         clock: Callable[[], float] | None = None,
     ) -> None:
         self.gateway = gateway
         self.trend_s = trend_s
+        #: The routes that write exist (module _write_api).
+        self.writes = writes
         self.hub = EventHub()
         self._clock = clock or asyncio.get_running_loop().time
         self.trends: dict[tuple[str, int], Trend] = {
@@ -104,7 +107,16 @@ class Workbench:
             )
 
     def drive_json(self, snapshot: DriveSnapshot) -> Json:
-        data = drive_json(snapshot, now=self.now(), stale_after_s=self.stale_after_s)
+        now = self.now()
+        data = drive_json(snapshot, now=now, stale_after_s=self.stale_after_s)
+        drive = self.gateway.drive(snapshot.line, snapshot.node)
+        if drive is not None:  # who controls it (the lease), so every page shows it
+            lease = drive.lease
+            held = lease.held(now)
+            data["control"] = {
+                "holder": lease.holder if held else None,
+                "seconds_left": lease.seconds_left(now) if held else 0.0,
+            }
         known = self._monitor_time.get((snapshot.line, snapshot.node))
         if known is not None and snapshot.monitor_at == self._monitor_at.get(
             (snapshot.line, snapshot.node)
@@ -184,13 +196,25 @@ class Workbench:
             "time": time.time(),
             "stale_after_s": config.stale_after_s,
             "trend_s": self.trend_s,
-            "writes": False,
+            "writes": self.writes,
             "lines": [
                 {
                     "name": line.name,
                     "protocol": line.protocol,
                     "nodes": list(line.nodes),
                     "interval_s": line.interval_s,
+                    "lease_s": line.lease_s,
+                    # What may be written, where writes are served at all.
+                    "grants": [
+                        {
+                            "nodes": sorted(grant.nodes),
+                            "control": grant.control,
+                            "parameters": sorted(grant.parameters),
+                        }
+                        for grant in line.grants
+                    ]
+                    if self.writes
+                    else [],
                 }
                 for line in config.lines
             ],

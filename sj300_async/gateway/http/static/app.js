@@ -14,11 +14,15 @@
 (() => {
   const API = "/api/v1";
   const state = { gateway: null, lines: new Map(), drives: new Map() };
+  // The logged-in user and the session's CSRF token (kept in memory only), and this
+  // page's own id: the control lease belongs to this tab, not to the user's other tabs.
+  const session = { user: null, csrf: null, checked: false };
+  const TAB = Array.from(crypto.getRandomValues(new Uint8Array(6)), (b) => (b % 36).toString(36)).join("");
   const dirty = { lines: new Set(), drives: new Set(), scheduled: false };
   let view = null; // the page on screen: { kind, ... , update(kind, key) }
 
   // What tests and curious users can read from the console.
-  window.workbench = { state, events: 0, view: () => view };
+  window.workbench = { state, session, tab: TAB, events: 0, view: () => view };
 
   const $ = (root, selector) => root.querySelector(selector);
   const driveKey = (line, node) => `${line}/${node}`;
@@ -65,6 +69,9 @@
       const g = state.gateway;
       document.getElementById("gateway").textContent = `${g.id} · ${g.version}`;
       document.title = `${g.id} · sj300 workbench`;
+      if (g.writes && !session.checked) checkSession();
+      renderUser();
+      if (view && view.gatewayChanged) view.gatewayChanged();
     });
     source.addEventListener("line", (event) => {
       const line = JSON.parse(event.data);
@@ -78,6 +85,70 @@
       window.workbench.events += 1;
       mark("drives", key);
     });
+  }
+
+  // -- the session (only where the gateway serves writes) --------------------------------
+
+  async function checkSession() {
+    session.checked = true;
+    const response = await fetch(`${API}/session`);
+    if (response.ok) Object.assign(session, await response.json());
+    renderUser();
+    if (view && view.gatewayChanged) view.gatewayChanged();
+  }
+
+  function renderUser() {
+    const box = document.getElementById("user");
+    box.replaceChildren();
+    if (!state.gateway || !state.gateway.writes) return;
+    if (!session.user) {
+      const link = document.createElement("a");
+      link.href = "#/login";
+      link.textContent = "Log in";
+      box.appendChild(link);
+      return;
+    }
+    const name = document.createElement("span");
+    name.textContent = `${session.user} `;
+    const out = document.createElement("button");
+    out.type = "button";
+    out.textContent = "Log out";
+    out.addEventListener("click", async () => {
+      await post(`${API}/logout`, {});
+      session.user = session.csrf = null;
+      renderUser();
+      if (view && view.gatewayChanged) view.gatewayChanged();
+    });
+    box.append(name, out);
+  }
+
+  // A write: JSON, with the session's CSRF token; the answer's JSON, and ok or not.
+  async function post(url, body) {
+    const headers = { "Content-Type": "application/json" };
+    if (session.csrf) headers["X-CSRF-Token"] = session.csrf;
+    const response = await fetch(url, { method: "POST", headers, body: JSON.stringify(body) });
+    let answer = {};
+    try { answer = await response.json(); } catch (error) { answer = { error: String(error) }; }
+    return { ok: response.ok, status: response.status, answer };
+  }
+
+  function loginPage(main) {
+    main.replaceChildren(document.getElementById("login").content.cloneNode(true));
+    const form = $(main, "form");
+    const back = sessionStorage.getItem("sj300-after-login") || "#/";
+    form.addEventListener("submit", async (event) => {
+      event.preventDefault();
+      const data = new FormData(form);
+      const result = await post(`${API}/login`, { name: data.get("name"), password: data.get("password") });
+      if (!result.ok) {
+        $(main, '[data-field="error"]').textContent = result.answer.error || `refused (${result.status})`;
+        return;
+      }
+      Object.assign(session, result.answer);
+      renderUser();
+      location.hash = back;
+    });
+    return { kind: "login", update() {}, close() {} };
   }
 
   function mark(kind, key) {
@@ -322,22 +393,100 @@
       }
     }
 
+    // -- control (where the gateway grants it, to a logged-in user) ----------------------
+    const control = $(main, '[data-testid="control"]');
+    let heartbeat = null;
+    let holding = false;
+
+    function grant() {
+      const g = state.gateway;
+      if (!g || !g.writes) return null;
+      const gl = g.lines.find((l) => l.name === line);
+      if (!gl) return null;
+      const grants = gl.grants.filter((x) => x.nodes.includes(node));
+      return { lease_s: gl.lease_s, control: grants.some((x) => x.control) };
+    }
+
+    function showControl() {
+      const allowed = grant();
+      control.hidden = !(allowed && allowed.control && session.user);
+      renderLease();
+    }
+
+    function renderLease() {
+      const drive = state.drives.get(key);
+      const holder = drive && drive.control ? drive.control.holder : null;
+      const mine = holder !== null && holder === `http:${session.user}#${TAB}`;
+      if (holding && holder !== null && !mine) stopHeartbeat("another client took control");
+      const text = mine || holding
+        ? "You have control: this page renews it while it is open. Close it, or lose the network, and the drive stops."
+        : holder ? `Controlled by ${holder}.` : "Nobody controls this drive.";
+      field("lease").textContent = text;
+      for (const action of ["forward", "reverse", "frequency"]) {
+        $(main, `[data-action="${action}"]`).disabled = !holding;
+      }
+      $(main, '[data-action="take"]').disabled = holding;
+    }
+
+    function stopHeartbeat(why) {
+      holding = false;
+      clearInterval(heartbeat);
+      heartbeat = null;
+      if (why) field("control-error").textContent = `control lost: ${why}`;
+      renderLease();
+    }
+
+    async function command(path, body) {
+      const result = await post(`${base}/${path}`, { tab: TAB, ...body });
+      field("control-error").textContent = result.ok ? "" : result.answer.error || `refused (${result.status})`;
+      return result;
+    }
+
+    async function take() {
+      const allowed = grant();
+      const result = await command("lease", {});
+      if (!result.ok) return;
+      holding = true;
+      clearInterval(heartbeat);
+      // Three heartbeats per lease: one late or lost does not lapse it.
+      heartbeat = setInterval(async () => {
+        const renewed = await command("lease", {});
+        if (!renewed.ok) stopHeartbeat(renewed.answer.error || "refused");
+      }, (allowed.lease_s * 1000) / 3);
+      renderLease();
+    }
+
+    $(main, '[data-action="take"]').addEventListener("click", take);
+    $(main, '[data-action="forward"]').addEventListener("click", () => command("run", { direction: "forward" }));
+    $(main, '[data-action="reverse"]').addEventListener("click", () => command("run", { direction: "reverse" }));
+    $(main, '[data-action="stop"]').addEventListener("click", () => command("stop", {}));
+    $(main, '[data-action="frequency"]').addEventListener("click", () => {
+      const hz = Number(field("hz").value);
+      command("frequency", { hz });
+    });
+
     $(main, '[data-action="follow"]').addEventListener("click", () => {
       following = true;
       redraw();
     });
     makeChart();
     render();
+    showControl();
     loadTrend().catch((error) => { field("trend-info").textContent = String(error); });
     return {
       kind: "drive",
       key,
       data,
       update(kind, changed) {
-        if (kind === "drive" && changed === key) render();
+        if (kind === "drive" && changed === key) {
+          render();
+          renderLease();
+        }
       },
+      gatewayChanged: showControl,
       close() {
         closed = true;
+        stopHeartbeat();
         if (chart) chart.destroy();
         window.workbench.chart = null;
       },
@@ -447,6 +596,43 @@
     };
   }
 
+  // -- the audit log ---------------------------------------------------------------------
+
+  function auditPage(main) {
+    main.replaceChildren(document.getElementById("audit").content.cloneNode(true));
+    let closed = false;
+    let timer = null;
+    async function refresh() {
+      try {
+        const response = await fetch(`${API}/audit?limit=200`);
+        const answer = await response.json();
+        if (closed) return;
+        $(main, '[data-field="kept"]').textContent = String(answer.kept);
+        const body = $(main, '[data-testid="audit"] tbody');
+        body.replaceChildren();
+        for (const r of answer.records) {
+          const row = document.createElement("tr");
+          if (r.result !== "ok") row.className = "anomaly";
+          cell(row, "time", new Date(r.time * 1000).toLocaleString());
+          cell(row, "client", text(r.client));
+          cell(row, "line", text(r.line));
+          cell(row, "node", text(r.node), "num");
+          cell(row, "what", text(r.what));
+          cell(row, "old", text(r.old));
+          cell(row, "new", text(r.new));
+          cell(row, "result", r.result === "refused" ? r.reason : text(r.result));
+          cell(row, "detail", text(r.detail === undefined ? "" : r.detail));
+          body.appendChild(row);
+        }
+      } catch (error) {
+        // The next refresh tries again; the table keeps what it showed.
+      }
+      if (!closed) timer = setTimeout(refresh, 2000);
+    }
+    refresh();
+    return { kind: "audit", update() {}, close() { closed = true; clearTimeout(timer); } };
+  }
+
   // -- routing ------------------------------------------------------------------------
 
   function route() {
@@ -456,7 +642,10 @@
     const line = /^#\/line\/([^/]+)$/.exec(location.hash);
     if (drive) view = drivePage(main, decodeURIComponent(drive[1]), Number(drive[2]));
     else if (line) view = linePage(main, decodeURIComponent(line[1]));
+    else if (location.hash === "#/login") view = loginPage(main);
+    else if (location.hash === "#/audit") view = auditPage(main);
     else view = overview(main);
+    if (location.hash !== "#/login") sessionStorage.setItem("sj300-after-login", location.hash || "#/");
   }
 
   window.addEventListener("hashchange", route);

@@ -1,0 +1,319 @@
+"""The workbench's routes that write: log in and out, and control a drive under its lease.
+
+Registered only when the gateway grants some write and ``[http]`` names
+someone who may write (:mod:`._auth`); otherwise these paths do not
+exist (404), and every path refuses other methods than GET (405): a
+read-only gateway has no write endpoint at all, not merely hidden buttons.
+
+Every write goes through :meth:`~sj300_async.gateway.GatewayView.write`,
+the door every northbound uses: the same grants, the same control lease
+(a run or a set frequency needs it; a stop does not: stop is the safe
+direction, open to anyone allowed to control the drive), the same
+validation before anything reaches the wire, the same audit log.
+
+Decisions:
+
+- **Who.** A page's writes name the user and the page (``http:alice#k3f9``:
+  the tab's own id): the lease belongs to that tab, so a second tab of the
+  same user does not keep it alive, and closing the tab lapses it after
+  ``lease_s``. A script's writes name its token (``http-token:NAME``).
+- **How the answer reads.** A refusal is ``{"error": sentence, "refusal":
+  reason}`` with a status that says what kind of refusal it is
+  (:data:`REFUSAL_STATUS`): 403 not allowed, 409 the lease (none, or
+  another's), 422 an invalid value, 400 a malformed body, 404 an unknown
+  target, 503 busy, 502 the drive refused or did not confirm, 504 no
+  answer.
+- **Bad input** (not JSON, a body over 64 KiB, a missing or mistyped
+  field) is refused before the gateway is asked, and audited through
+  :meth:`~sj300_async.gateway.GatewayView.refused` like every refusal.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import re
+from collections.abc import Awaitable, Callable
+from typing import Any, Final
+
+from aiohttp import web
+
+from ...wire import Direction
+from .. import (
+    GatewayDrive,
+    GatewayView,
+    Heartbeat,
+    Refusal,
+    RunCommand,
+    SetFrequency,
+    WriteRequest,
+    WriteResult,
+    excerpt,
+)
+from ._auth import (
+    ApiToken,
+    Identity,
+    LoginGuard,
+    Sessions,
+    User,
+    verify_password,
+    verify_token,
+)
+
+__all__ = ["REFUSAL_STATUS", "SESSION_COOKIE", "WriteRoutes"]
+
+#: The cookie that carries a page's session id.
+SESSION_COOKIE: Final = "sj300_session"
+#: The header that carries a session's CSRF token.
+CSRF_HEADER: Final = "X-CSRF-Token"
+#: Each refusal's HTTP status (module docstring).
+REFUSAL_STATUS: Final = {
+    Refusal.NOT_ALLOWED: 403,
+    Refusal.NO_LEASE: 409,
+    Refusal.LEASE_HELD: 409,
+    Refusal.INVALID_VALUE: 422,
+    Refusal.MALFORMED: 400,
+    Refusal.UNKNOWN_TARGET: 404,
+    Refusal.BUSY: 503,
+    Refusal.DRIVE_REFUSED: 502,
+    Refusal.NOT_CONFIRMED: 502,
+    Refusal.NO_ANSWER: 504,
+}
+_TAB: Final = re.compile(r"[A-Za-z0-9]{1,16}\Z")
+_DIRECTIONS: Final = {"forward": Direction.FORWARD, "reverse": Direction.REVERSE}
+
+Handler = Callable[[web.Request], Awaitable[web.StreamResponse]]
+
+
+def _dumps(data: Any) -> str:
+    return json.dumps(data, separators=(",", ":"), allow_nan=False)
+
+
+def _json(data: Any, status: int = 200) -> web.Response:
+    return web.json_response(data, status=status, dumps=_dumps)
+
+
+def _fail(status: int, message: str, **extra: Any) -> web.HTTPException:
+    error = web.HTTPException(
+        text=_dumps({"error": message, **extra}), content_type="application/json"
+    )
+    error.set_status(status)
+    return error
+
+
+class WriteRoutes:
+    """The write routes of one gateway's workbench (see the module docstring)."""
+
+    def __init__(
+        self,
+        gateway: GatewayView,
+        users: tuple[User, ...],
+        tokens: tuple[ApiToken, ...],
+        *,
+        secure_cookie: bool,
+    ) -> None:
+        self.gateway = gateway
+        self._users = {user.name: user for user in users}
+        self._tokens = tokens
+        self._secure = secure_cookie
+        self.sessions = Sessions()
+        self.guard = LoginGuard()
+
+    def add_to(self, app: web.Application) -> None:
+        router = app.router
+        router.add_post("/api/v1/login", self._login)
+        router.add_post("/api/v1/logout", self._logout)
+        router.add_get("/api/v1/session", self._session)
+        router.add_post("/api/v1/drives/{line}/{node}/lease", self._lease)
+        router.add_post("/api/v1/drives/{line}/{node}/run", self._run)
+        router.add_post("/api/v1/drives/{line}/{node}/stop", self._stop)
+        router.add_post("/api/v1/drives/{line}/{node}/frequency", self._frequency)
+
+    # -- who is asking -----------------------------------------------------------------
+
+    def identify(self, request: web.Request) -> Identity | None:
+        """The identity of *request*'s credentials (a token, else a session), or None."""
+        header = request.headers.get("Authorization", "")
+        if header:
+            scheme, _, token = header.partition(" ")
+            if scheme.lower() != "bearer" or not token:
+                return None
+            for known in self._tokens:
+                if verify_token(token.strip(), known.token_hash):
+                    return Identity(known.name, "token")
+            return None
+        session = self.sessions.get(request.cookies.get(SESSION_COOKIE))
+        if session is None:
+            return None
+        return Identity(session.user, "user", session.id)
+
+    def writer(self, request: web.Request) -> Identity:
+        """The identity allowed to write *request*, or the refusal (401, 403) raised."""
+        _same_origin(request)
+        identity = self.identify(request)
+        if identity is None:
+            raise _fail(401, "log in first (or send Authorization: Bearer TOKEN)")
+        if identity.kind == "user":
+            session = self.sessions.get(identity.session)
+            sent = request.headers.get(CSRF_HEADER, "")
+            if session is None or not sent or sent != session.csrf:
+                raise _fail(403, f"missing or wrong {CSRF_HEADER}: reload the page")
+        return identity
+
+    # -- sessions ----------------------------------------------------------------------
+
+    async def _login(self, request: web.Request) -> web.Response:
+        _same_origin(request)
+        address = request.remote or "?"
+        if self.guard.blocked(address):
+            raise _fail(429, "too many failed logins from this address: wait 5 minutes")
+        body = await _body(request)
+        name, password = body.get("name"), body.get("password")
+        if not isinstance(name, str) or not isinstance(password, str):
+            raise _fail(400, 'expected {"name": ..., "password": ...}')
+        user = self._users.get(name)
+        # The hash is computed for an unknown name too: the time does not tell names apart.
+        stored = user.password_hash if user is not None else _DUMMY_HASH
+        if not verify_password(password, stored) or user is None:
+            self.guard.failed(address)
+            raise _fail(401, "unknown user or wrong password")
+        self.guard.succeeded(address)
+        session = self.sessions.create(user.name)
+        response = _json({"user": user.name, "csrf": session.csrf})
+        response.set_cookie(
+            SESSION_COOKIE,
+            session.id,
+            httponly=True,
+            samesite="Strict",
+            secure=self._secure,
+            path="/",
+        )
+        return response
+
+    async def _logout(self, request: web.Request) -> web.Response:
+        identity = self.writer(request)
+        self.sessions.end(identity.session)
+        response = _json({"user": None})
+        response.del_cookie(SESSION_COOKIE, path="/")
+        return response
+
+    async def _session(self, request: web.Request) -> web.Response:
+        """Who the page is logged in as, with its CSRF token; 401 when it is not."""
+        session = self.sessions.get(request.cookies.get(SESSION_COOKIE))
+        if session is None:
+            raise _fail(401, "not logged in")
+        return _json({"user": session.user, "csrf": session.csrf})
+
+    # -- control -----------------------------------------------------------------------
+
+    async def _lease(self, request: web.Request) -> web.Response:
+        return await self._write(request, lambda body: Heartbeat())
+
+    async def _stop(self, request: web.Request) -> web.Response:
+        return await self._write(request, lambda body: RunCommand(Direction.STOP))
+
+    async def _run(self, request: web.Request) -> web.Response:
+        def command(body: dict[str, Any]) -> WriteRequest:
+            direction = _DIRECTIONS.get(body.get("direction", "forward"))
+            if direction is None:
+                raise _BadBody('direction: expected "forward" or "reverse"')
+            return RunCommand(direction)
+
+        return await self._write(request, command)
+
+    async def _frequency(self, request: web.Request) -> web.Response:
+        def command(body: dict[str, Any]) -> WriteRequest:
+            hz = body.get("hz")
+            if isinstance(hz, bool) or not isinstance(hz, int | float) or not math.isfinite(hz):
+                raise _BadBody("hz: expected a number of hertz")
+            return SetFrequency(float(hz))
+
+        return await self._write(request, command)
+
+    async def _write(
+        self, request: web.Request, command: Callable[[dict[str, Any]], WriteRequest]
+    ) -> web.Response:
+        identity = self.writer(request)
+        drive = _drive(self.gateway, request)
+        body = await _body(request)
+        client = identity.client
+        tab = body.get("tab")
+        if identity.kind == "user":
+            if not isinstance(tab, str) or not _TAB.match(tab):
+                return self._refuse(client, drive, request, "tab: expected the page's id")
+            client = f"{client}#{tab}"
+        try:
+            write = command(body)
+        except _BadBody as bad:
+            return self._refuse(client, drive, request, str(bad))
+        result = await self.gateway.write(client, drive, write)
+        return _answer(result, client, drive)
+
+    def _refuse(
+        self, client: str, drive: GatewayDrive, request: web.Request, why: str
+    ) -> web.Response:
+        result = WriteResult(Refusal.MALFORMED, why)
+        self.gateway.refused(client, drive, request.path.rsplit("/", 1)[-1], None, result)
+        return _answer(result, client, drive)
+
+
+class _BadBody(Exception):
+    """A field of the body is missing or mistyped."""
+
+
+#: A valid hash of nothing anyone types: an unknown name costs a real verification.
+_DUMMY_HASH: Final = (
+    "scrypt$16384$8$1$AAAAAAAAAAAAAAAAAAAAAA==$AAAAAAAAAAAAAAAAAAAAAAAAAAAAAAAAAAAAAAAAAAA="
+)
+
+
+def _answer(result: WriteResult, client: str, drive: GatewayDrive) -> web.Response:
+    lease = drive.lease
+    if result.refusal is None:
+        return _json({"ok": True, "client": client, "lease_s": lease.duration_s})
+    return _json(
+        {"error": result.detail or result.refusal.value, "refusal": result.refusal.value},
+        REFUSAL_STATUS[result.refusal],
+    )
+
+
+def _drive(gateway: GatewayView, request: web.Request) -> GatewayDrive:
+    line, node = request.match_info["line"], request.match_info["node"]
+    drive = None
+    if node.isascii() and node.isdigit() and len(node) <= 4:
+        drive = gateway.drive(line, int(node))
+    if drive is None:
+        raise _fail(404, f"no drive {node[:16]!r} on line {line[:64]!r}")
+    return drive
+
+
+async def _body(request: web.Request) -> dict[str, Any]:
+    """The request's JSON object (an empty body is ``{}``).
+
+    Raises:
+        HTTPException: 415 not JSON, 413 too large (aiohttp's limit), 400 malformed.
+    """
+    if not request.body_exists:
+        return {}
+    if request.content_type != "application/json":
+        raise _fail(415, f"expected application/json, got {excerpt(request.content_type)}")
+    try:
+        text = await request.text()
+    except web.HTTPRequestEntityTooLarge:
+        raise _fail(413, "the body is over 64 KiB") from None
+    try:
+        body = json.loads(text)
+    except ValueError:
+        raise _fail(400, f"not JSON: {excerpt(text)}") from None
+    if not isinstance(body, dict):
+        raise _fail(400, f"expected a JSON object, got {excerpt(text)}")
+    return body
+
+
+def _same_origin(request: web.Request) -> None:
+    """Refuse (403) a request a page of another site made the browser send (CSRF)."""
+    origin = request.headers.get("Origin")
+    if origin is not None and origin != f"{request.scheme}://{request.host}":
+        raise _fail(403, f"a request from another site ({excerpt(origin)}) is refused")
+    if request.headers.get("Sec-Fetch-Site") == "cross-site":
+        raise _fail(403, "a request from another site is refused")
