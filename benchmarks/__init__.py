@@ -29,6 +29,7 @@ BENCHMARKS: dict[str, str] = {
     "scale": "benchmarks.bench_scale",
     "gateway": "benchmarks.bench_gateway",
     "mqtt": "benchmarks.bench_mqtt",
+    "workbench": "benchmarks.bench_workbench",
 }
 
 

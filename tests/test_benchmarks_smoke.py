@@ -263,6 +263,7 @@ def test_every_registered_benchmark_has_the_module_contract(harness: ModuleType)
         "scale",
         "gateway",
         "mqtt",
+        "workbench",
     ]
     for name in benchmarks.BENCHMARKS:
         module = benchmarks.load(name)
@@ -545,6 +546,53 @@ def test_mqtt_counts_every_state_and_times_every_change(harness: ModuleType) -> 
     ]
 
 
+def test_workbench_streams_every_sample_and_times_the_overview(harness: ModuleType) -> None:
+    bench = importlib.import_module("benchmarks.bench_workbench")
+    config = _quick(harness)
+    # Raises on a failed poll, a stream that missed a sample, or a page that never
+    # showed every drive.
+    result = bench.measure(config)
+    cpu, browser, memory = result.cpu, result.browser, result.memory
+    assert len(cpu.windows) == 1  # one timed window after the untimed one
+    for window in cpu.windows:
+        assert window.streams_samples > 0
+        assert window.quiet_samples > 0
+        assert window.events > 0
+    # Every sample published in the timed window reached each stream once (checked by
+    # measure), and the clients kept up: nothing replaced while they read.
+    assert cpu.checked_samples > 0
+    assert sum(w.replaced for w in cpu.windows) == 0
+    assert cpu.metrics_replaced == cpu.final.replaced
+    assert 0 < cpu.metrics_sent <= cpu.final.sent
+    assert cpu.final.streams == bench.STREAMS
+    assert cpu.final.failed == 0
+    # The browser: one timed load of each page, the overview's phases in order.
+    assert len(browser.overview) == len(browser.json) == bench.QUICK_LOADS
+    for load in browser.overview:
+        assert load.first_event_ms is not None
+        assert 0 < load.html_ms <= load.ready_ms
+        assert load.html_ms <= load.first_event_ms <= load.shown_ms  # rows come from events
+    assert all(load.first_event_ms is None for load in browser.json)
+    assert browser.delays_s
+    assert list(browser.delays_s) == sorted(browser.delays_s)
+    assert len(browser.arrival_s) <= len(browser.delays_s)
+    assert browser.errors == ()
+    # The trends: the default window at the default interval, measured at least as large
+    # as its arrays' samples.
+    assert memory.drives == bench.QUICK_MEMORY_DRIVES
+    assert memory.capacity == 1980
+    assert memory.nbytes == memory.payload == 1980 * 20
+    assert memory.per_drive >= memory.payload + memory.spare
+    section = bench.report(result, config)
+    assert [(r.unit, r.target, r.against, r.as_multiple) for r in section.results] == [
+        ("µs", bench.TARGET_CPU_RATIO, "no stream", True),
+        ("ms", bench.TARGET_FIRST_PAINT_RATIO, "JSON page", True),
+        ("ms", None, "poll interval", True),
+        ("ms", bench.TARGET_UPDATE_RATIO, "poll interval", True),
+        ("bytes", bench.TARGET_MEMORY_RATIO, "payload", True),
+    ]
+
+
 # -- the command line ----------------------------------------------------------------
 
 
@@ -563,15 +611,27 @@ def test_cli_quick_runs_every_benchmark_into_one_table() -> None:
     done = _cli()
     assert done.returncode == 0, done.stdout + done.stderr
     out = done.stdout
-    for title in ("codec", "tcp", "loopback", "latency", "wire", "scale", "gateway", "mqtt"):
+    titles = (
+        "codec",
+        "tcp",
+        "loopback",
+        "latency",
+        "wire",
+        "scale",
+        "gateway",
+        "mqtt",
+        "workbench",
+    )
+    for title in titles:
         assert f"\n## {title}\n" in out
     # The run re-executed itself with glibc's malloc thresholds pinned (benchmarks._allocator).
     if sys.platform == "linux" and platform.libc_ver()[0] == "glibc":
         assert "- allocator: glibc malloc thresholds pinned" in out
     table = out.split("\n## results\n", 1)[1]
     rows = [line for line in table.splitlines() if line.startswith("| ") and "---" not in line]
-    # header + rows of each benchmark: codec, tcp, loopback, latency, wire, scale, gateway, mqtt
-    assert len(rows) == 1 + 3 + 10 + 4 + 3 + 2 + 5 + 3 + 3
+    # header + rows of each benchmark: codec, tcp, loopback, latency, wire, scale, gateway,
+    # mqtt, workbench
+    assert len(rows) == 1 + 3 + 10 + 4 + 3 + 2 + 5 + 3 + 3 + 5
     assert "**failed**" not in out
 
 
