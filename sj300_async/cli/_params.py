@@ -11,7 +11,7 @@ parameters a restore never writes or writes last. No protocol is named here.
 - ``backup FILE`` reads every code a drive of the protocol can have and
   saves each one's code, name, unit, value in its unit and raw value, with
   the node, the protocol, the time (UTC) and the library version (format:
-  :mod:`._snapshot`); ``--codes`` reads only those. SJ300: the
+  :mod:`sj300_async.profiles._backup`); ``--codes`` reads only those. SJ300: the
   function-code table, 335 codes, which names every parameter a drive can
   have. FR-700: every number the computer link addresses, Pr.0..Pr.999
   (ten banks of the link-parameter extension), not the catalogue, which
@@ -87,7 +87,8 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Final, Literal
 
-from ..profiles import Profile
+from ..profiles import BackupFormatError, Profile, catalogued, parameter_code, utc_now
+from ..profiles import ParameterBackup as Snapshot
 from ..wire import (
     LocalProtocolError,
     NakError,
@@ -109,7 +110,6 @@ from ._errors import FAILURE, USAGE, CliError
 from ._output import Column, format_raw, print_json, print_table
 from ._progress import progress
 from ._session import run_async
-from ._snapshot import Snapshot, catalogued, parameter_code, utc_now
 
 __all__ = ["add_parser"]
 
@@ -188,6 +188,14 @@ def _runner(
         return run_async(step(args))
 
     return run
+
+
+def _load(path: Path, profile: Profile) -> Snapshot:
+    """The backup file *path* (its trouble as one line: :class:`CliError`)."""
+    try:
+        return Snapshot.load(path, profile)
+    except BackupFormatError as exc:
+        raise CliError(str(exc)) from None
 
 
 def _absent_reason(exc: NakError) -> str:
@@ -389,7 +397,7 @@ async def _restore(args: argparse.Namespace) -> int:
             f"{args.command_name} --store needs {NEEDS['store']}, which {profile.model} drives "
             f"(protocol {profile.name}) do not have here"
         )
-    snapshot = Snapshot.load(args.file, profile)
+    snapshot = _load(args.file, profile)
     node: int = args.node if args.node is not None else snapshot.node
     noun = profile.node_noun
     if node != snapshot.node and not args.force:
@@ -473,7 +481,7 @@ def _show(profile: Profile, code: str, raw: int | None) -> str:
 
 async def _diff(args: argparse.Namespace) -> int:
     profile = _profile(args)
-    snapshot = Snapshot.load(args.file, profile)
+    snapshot = _load(args.file, profile)
     node: int = args.node if args.node is not None else snapshot.node
     noun = profile.node_noun
     expected: dict[str, int | None] = dict(snapshot.parameters)

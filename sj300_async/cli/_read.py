@@ -19,13 +19,12 @@ from __future__ import annotations
 import argparse
 from typing import Any
 
-from ..profiles import ParameterSpec, Profile
+from ..profiles import ParameterSpec, Profile, parameter_code
 from ..wire import LocalProtocolError, NakError
 from ._common import add_bus_options, add_json_option, add_node_option, cli_profile, open_cli_bus
 from ._errors import FAILURE, CliError
 from ._output import Column, format_raw, print_json, print_table
 from ._session import run_async
-from ._snapshot import parameter_code
 
 __all__ = ["NOT_CATALOGUED", "add_parser", "parameter_json", "parameter_target", "read_raw"]
 

@@ -10,6 +10,15 @@ model and the profiles", shows where this sits.
 
 from __future__ import annotations
 
+from ._backup import (
+    BACKUP_FORMAT,
+    BACKUP_VERSION,
+    BackupFormatError,
+    ParameterBackup,
+    catalogued,
+    parameter_code,
+    utc_now,
+)
 from ._build import build_snapshot
 from ._profile import (
     Capabilities,
@@ -36,11 +45,15 @@ from ._snapshot import (
 from ._words import frame_text, words
 
 __all__ = [
+    "BACKUP_FORMAT",
+    "BACKUP_VERSION",
     "NEVER",
+    "BackupFormatError",
     "Capabilities",
     "DriveReadings",
     "DriveSnapshot",
     "MonitorView",
+    "ParameterBackup",
     "ParameterCatalogue",
     "ParameterReading",
     "ParameterSpec",
@@ -52,12 +65,15 @@ __all__ = [
     "Trip",
     "TripLog",
     "build_snapshot",
+    "catalogued",
     "frame_text",
     "get_profile",
     "in_counts",
     "is_fresh",
+    "parameter_code",
     "profiled_protocols",
     "raw_value",
     "read_time",
+    "utc_now",
     "words",
 ]

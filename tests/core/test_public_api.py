@@ -113,6 +113,9 @@ PROFILES_NAMES = (
     "RegisterField", "RegisterLayout", "StatusView", "Trip", "TripLog", "build_snapshot",
     "frame_text", "get_profile", "in_counts", "is_fresh", "profiled_protocols", "raw_value",
     "read_time", "words",
+    # the parameter backup file (sj300 params, the workbench)
+    "BACKUP_FORMAT", "BACKUP_VERSION", "BackupFormatError", "ParameterBackup", "catalogued",
+    "parameter_code", "utc_now",
 )  # fmt: skip
 #: The gateway's core, and each built-in northbound's face.
 GATEWAY_NAMES = (
@@ -150,6 +153,8 @@ GATEWAY_HTTP_NAMES = (
     "DEFAULT_LIMITS", "DEFAULT_TREND_S", "HttpConfig", "NORTHBOUND",
     # who may write through the workbench, and the hashes their configuration holds
     "ApiToken", "User", "hash_password", "hash_token", "new_token",
+    # each drive's trend (its memory is a benchmark's figure)
+    "SAMPLE_BYTES", "Trend", "trend_capacity",
 )  # fmt: skip
 
 #: Every package's pinned ``__all__``.

@@ -93,7 +93,14 @@ async def test_the_gateway_lines_and_drives(sim_line: SimLine) -> None:
         assert about["writes"] is False
         assert about["trend_s"] == 60
         assert about["lines"] == [
-            {"name": "hall", "protocol": "sj300", "nodes": [1, 2, 3, 4], "interval_s": 0.1}
+            {
+                "name": "hall",
+                "protocol": "sj300",
+                "nodes": [1, 2, 3, 4],
+                "interval_s": 0.1,
+                "lease_s": 5.0,
+                "grants": [],  # a read-only gateway shows none
+            }
         ]
         (line,) = await client.json("/api/v1/lines")
         assert line["name"] == "hall"

@@ -34,17 +34,21 @@ from .. import (
     SectionContext,
 )
 from ._auth import ApiToken, User, hash_password, hash_token, new_token, parse_password_hash
+from ._trend import SAMPLE_BYTES, Trend, trend_capacity
 
 __all__ = [
     "DEFAULT_LIMITS",
     "DEFAULT_TREND_S",
     "NORTHBOUND",
+    "SAMPLE_BYTES",
     "ApiToken",
     "HttpConfig",
+    "Trend",
     "User",
     "hash_password",
     "hash_token",
     "new_token",
+    "trend_capacity",
 ]
 
 #: The listener's limits when ``[http]`` sets none. A workbench tab holds one event

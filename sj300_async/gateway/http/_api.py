@@ -36,7 +36,7 @@ from aiohttp import web
 from prometheus_client import CollectorRegistry
 
 from .. import ConnectionLimit, Endpoint, GatewayDrive
-from ._events import KEEPALIVE
+from ._events import GATHER_S, KEEPALIVE
 from ._json import trip_log_json, unix_time
 from ._linetrace import KEEP_S, LineTrace
 from ._server import HttpServer, health_response, metrics_response, serve_app
@@ -288,9 +288,15 @@ async def _events(request: web.Request) -> web.StreamResponse:
         await response.prepare(request)
         await response.write(b"retry: 2000\n\n")
         while True:
-            chunk = await stream.take(KEEPALIVE_S)
+            chunk = await stream.take(KEEPALIVE_S, GATHER_S)
             if chunk is None:
                 break
+            transport = request.transport
+            if transport is not None and transport.get_write_buffer_size() == 0:
+                # The client has taken everything so far: the write goes to the socket
+                # without waiting, and needs no timer (one per write per stream costs).
+                await response.write(chunk or KEEPALIVE)
+                continue
             async with asyncio.timeout(STREAM_WRITE_TIMEOUT_S):
                 await response.write(chunk or KEEPALIVE)
     except (ConnectionError, TimeoutError) as exc:

@@ -17,6 +17,13 @@ Decisions:
   nothing is dropped silently.
 - Publishing never blocks and never awaits: it runs on the poller's
   sample (the northbound's ``publish``).
+- **One write per gathering, not per sample.** A stream that wakes for a
+  frame waits :data:`GATHER_S` for the frames that follow (the rest of the
+  poll cycle's drives) and writes them together: waking every stream's
+  task for every sample cost the gateway more than the poll itself (see
+  docs/BENCHMARKS.md, "workbench"). The delay it adds is far inside the
+  poll interval the page must follow, and the page redraws at most once a
+  frame anyway.
 - The frames are SSE's (``event: NAME`` and one ``data:`` line of JSON);
   a comment line keeps an idle stream alive through proxies and tells a
   dead client from a quiet gateway (the write fails).
@@ -28,8 +35,10 @@ import asyncio
 import json
 from typing import Any, Final
 
-__all__ = ["KEEPALIVE", "EventHub", "EventStream", "sse_frame"]
+__all__ = ["GATHER_S", "KEEPALIVE", "EventHub", "EventStream", "sse_frame"]
 
+#: Seconds a stream that woke for a frame waits for more before it writes them together.
+GATHER_S: Final = 0.05
 #: What an idle stream is sent every ``keepalive_s`` (an SSE comment).
 KEEPALIVE: Final = b": keepalive\n\n"
 
@@ -55,9 +64,11 @@ class EventStream:
         self._pending[subject] = frame
         self._ready.set()
 
-    async def take(self, timeout_s: float) -> bytes | None:
+    async def take(self, timeout_s: float, gather_s: float = 0.0) -> bytes | None:
         """The pending frames as one chunk, waiting up to *timeout_s* for one.
 
+        Once one is there, waits *gather_s* more for the others of the same cycle, so
+        that a poll cycle of many drives goes out in one write (module docstring).
         Returns b"" when none came in time, None once the stream is closed.
         """
         if not self._pending and not self.closed:
@@ -66,6 +77,8 @@ class EventStream:
                     await self._ready.wait()
             except TimeoutError:
                 return b""
+            if gather_s > 0 and not self.closed:
+                await asyncio.sleep(gather_s)
         if self.closed:
             return None
         chunk = b"".join(self._pending.values())

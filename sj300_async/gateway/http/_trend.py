@@ -48,10 +48,12 @@ class Trend:
         if capacity < 1:
             raise ValueError(f"a trend holds at least one sample, got {capacity}")
         self.capacity = capacity
-        self._times = array("d", bytes(8 * capacity))
-        self._frequency = array("f", bytes(4 * capacity))
-        self._current = array("f", bytes(4 * capacity))
-        self._voltage = array("f", bytes(4 * capacity))
+        # Repeated, not built from bytes: array(code, bytes(n)) reserves 1/16 more than it
+        # holds (CPython's growth rule), 2.5 kB per drive at the default window.
+        self._times = array("d", [0.0]) * capacity
+        self._frequency = array("f", [0.0]) * capacity
+        self._current = array("f", [0.0]) * capacity
+        self._voltage = array("f", [0.0]) * capacity
         self._next = 0
         self._size = 0
 

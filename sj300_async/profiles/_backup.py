@@ -1,4 +1,4 @@
-"""The parameter snapshot file of ``sj300 params``: JSON, each value in its unit and raw.
+"""The parameter backup file (``sj300 params``, the workbench): JSON, values in unit and raw.
 
 Format (version 2, what ``params backup`` writes)::
 
@@ -70,17 +70,16 @@ from datetime import UTC, datetime
 from pathlib import Path
 from typing import Any, Final
 
-from .. import __version__
 from ..bus import DEFAULT_PROTOCOL
-from ..profiles import ParameterSpec, Profile
+from ..version import __version__
 from ..wire import LocalProtocolError
-from ._errors import CliError
+from ._profile import ParameterSpec, Profile
 
 __all__ = [
-    "FORMAT",
-    "READABLE_VERSIONS",
-    "VERSION",
-    "Snapshot",
+    "BACKUP_FORMAT",
+    "BACKUP_VERSION",
+    "BackupFormatError",
+    "ParameterBackup",
     "catalogued",
     "parameter_code",
     "utc_now",
@@ -89,6 +88,8 @@ __all__ = [
 FORMAT: Final = "sj300-params"
 #: The version a backup writes.
 VERSION: Final = 2
+BACKUP_FORMAT: Final = FORMAT
+BACKUP_VERSION: Final = VERSION
 #: The versions a restore or diff reads.
 READABLE_VERSIONS: Final = (1, 2)
 #: The protocol of a version 1 file: it names none, and predates every other protocol.
@@ -144,8 +145,12 @@ def utc_now() -> str:
     return datetime.now(UTC).strftime("%Y-%m-%dT%H:%M:%SZ")
 
 
+class BackupFormatError(LocalProtocolError):
+    """A backup that cannot be read: not JSON, not this format, or another protocol's."""
+
+
 @dataclass(frozen=True, slots=True)
-class Snapshot:
+class ParameterBackup:
     """A drive's parameters as a backup holds them."""
 
     node: int
@@ -211,35 +216,49 @@ class Snapshot:
             raise
 
     @classmethod
-    def load(cls, path: Path, profile: Profile) -> Snapshot:
-        """Read and check a snapshot file of *profile*'s protocol's drives.
+    def load(cls, path: Path, profile: Profile) -> ParameterBackup:
+        """Read and check a backup file of *profile*'s protocol's drives.
 
         Raises:
-            CliError: it cannot be read, is not a valid version 1 or 2
-                snapshot, or holds another protocol's parameters.
+            BackupFormatError: it cannot be read, is not a valid version 1 or 2
+                backup, or holds another protocol's parameters (the message
+                starts with the file's name).
         """
         try:
-            data = json.loads(path.read_text(encoding="utf-8"))
+            data = path.read_bytes()
         except OSError as exc:
-            raise CliError(f"{path}: {exc.strerror or exc}") from None
-        except (json.JSONDecodeError, UnicodeDecodeError) as exc:
-            raise CliError(f"{path}: not JSON ({exc})") from None
+            raise BackupFormatError(f"{path}: {exc.strerror or exc}") from None
+        return cls.from_bytes(data, profile, source=str(path))
+
+    @classmethod
+    def from_bytes(cls, data: bytes | str, profile: Profile, *, source: str) -> ParameterBackup:
+        """Read and check a backup's text (an upload), named *source* in errors.
+
+        Raises:
+            BackupFormatError: see :meth:`load`.
+        """
         try:
-            _check_header(data)
+            parsed = json.loads(data)
+        except (json.JSONDecodeError, UnicodeDecodeError) as exc:
+            raise BackupFormatError(f"{source}: not JSON ({exc})") from None
+        try:
+            _check_header(parsed)
         except ValueError as exc:
-            raise CliError(f"{path}: not an {FORMAT} file: {exc}") from None
-        protocol = data.get("protocol", _V1_PROTOCOL)
+            raise BackupFormatError(f"{source}: not an {FORMAT} file: {exc}") from None
+        protocol = parsed.get("protocol", _V1_PROTOCOL)
         if protocol != profile.name:
             model = profile.model
-            raise CliError(
-                f"{path}: a backup of {protocol} drives: its codes are not {model} parameters, "
+            raise BackupFormatError(
+                f"{source}: a backup of {protocol} drives: its codes are not {model} parameters, "
                 f"so it is never restored onto or compared with an {model} drive"
             )
         try:
-            return _Reader(profile).snapshot(data)
+            return _Reader(profile).snapshot(parsed)
         except (KeyError, TypeError, ValueError) as exc:
-            version = data["version"]
-            raise CliError(f"{path}: not an {FORMAT} version {version} file: {exc}") from None
+            version = parsed["version"]
+            raise BackupFormatError(
+                f"{source}: not an {FORMAT} version {version} file: {exc}"
+            ) from None
 
 
 class _Reader:
@@ -248,7 +267,7 @@ class _Reader:
     def __init__(self, profile: Profile) -> None:
         self.profile = profile
 
-    def snapshot(self, data: dict[str, Any]) -> Snapshot:
+    def snapshot(self, data: dict[str, Any]) -> ParameterBackup:
         node = data["node"]
         low, high = self.profile.node_range
         if type(node) is not int or not low <= node <= high:
@@ -262,7 +281,7 @@ class _Reader:
             absent = dict.fromkeys(
                 (self._code(code) for code in data.get("absent", ())), _V1_ABSENT
             )
-            return Snapshot(node, url, parameters, absent, _text(data, "created"), version=1)
+            return ParameterBackup(node, url, parameters, absent, _text(data, "created"), version=1)
         parameters = {}
         absent = {}
         entries = data["parameters"]
@@ -276,7 +295,7 @@ class _Reader:
                 absent[code] = str(entry["absent"])
             else:
                 parameters[code] = self._raw(code, entry["raw"])
-        return Snapshot(
+        return ParameterBackup(
             node,
             url,
             parameters,
