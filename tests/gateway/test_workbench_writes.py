@@ -29,6 +29,7 @@ from sj300_async.gateway import Gateway, GatewayConfigError, parse_config
 from sj300_async.gateway.http import hash_password, hash_token
 from sj300_async.gateway.http._auth import MAX_FAILURES, verify_password
 from sj300_async.gateway.http._northbound import HttpNorthbound
+from sj300_async.profiles import DriveSnapshot, ParameterBackup, get_profile
 from sj300_async.simulator import RunState
 
 from .conftest import SimLine
@@ -125,6 +126,12 @@ async def workbench(text: str) -> AsyncIterator[tuple[Gateway, Page]]:
         aiohttp.ClientSession(cookie_jar=aiohttp.CookieJar(unsafe=True)) as session,
     ):
         yield gateway, Page(session, f"http://127.0.0.1:{northbound(gateway).port}")
+
+
+def snapshot_of(gateway: Gateway, node: int) -> DriveSnapshot:
+    drive = gateway.drive("hall", node)
+    assert drive is not None
+    return drive.snapshot
 
 
 def state(gateway: Gateway, node: int) -> str | None:
@@ -426,3 +433,117 @@ def test_the_command_line_makes_the_hashes() -> None:
     )  # fmt: skip
     secret = token.stdout.split("not stored): ", 1)[1].split("\n", 1)[0]
     assert f'token_hash = "{hash_token(secret)}"' in token.stdout
+
+
+# -- parameters -----------------------------------------------------------------------------
+
+
+def params_config(url: str) -> str:
+    """Drives 1-2 may have F002 written (polled, as a grant needs), by alice."""
+    text = config_text(url)
+    text = text.replace(f"lease_s = {LEASE_S}", f'lease_s = {LEASE_S}\nparameters = ["F002"]')
+    return text.replace("control = true", 'control = true\nparameters = ["F002"]')
+
+
+async def read_all(page: Page, node: int) -> tuple[list[dict[str, Any]], dict[str, Any]]:
+    """The progress events and the backup of a whole-set read over the event stream."""
+    progress: list[dict[str, Any]] = []
+    url = f"{page.base}/api/v1/drives/hall/{node}/parameters"
+    async with page.session.get(url) as response:
+        assert response.status == 200
+        event = ""
+        async for raw in response.content:
+            line = raw.decode().rstrip("\n")
+            if line.startswith("event: "):
+                event = line.removeprefix("event: ")
+            elif line.startswith("data: "):
+                data = json.loads(line.removeprefix("data: "))
+                if event == "progress":
+                    progress.append(data)
+                elif event == "backup":
+                    return progress, data
+                else:
+                    raise AssertionError(f"{event}: {data}")
+    raise AssertionError("the stream ended without a backup")
+
+
+async def test_a_whole_set_is_read_with_progress_in_the_backup_format(
+    sim_line: SimLine,
+) -> None:
+    async with workbench(params_config(sim_line.url)) as (_, page):
+        progress, backup = await read_all(page, 1)
+        async with page.session.get(page.base + "/api/v1/drives/hall/1/parameters") as first:
+            assert first.status == 200
+            await first.content.readline()  # under way
+            # One whole set per line at a time: the second waits its turn (409).
+            second = page.base + "/api/v1/drives/hall/2/parameters"
+            async with page.session.get(second) as refused:
+                assert refused.status == 409
+                assert "reading a drive's parameters already" in (await refused.json())["error"]
+    profile = get_profile("sj300")
+    codes = list(profile.parameters.addressable())
+    assert [p["done"] for p in progress] == list(range(1, len(codes) + 1))
+    assert [p["code"] for p in progress] == codes
+    assert backup["format"] == "sj300-params"
+    assert backup["node"] == 1
+    parsed = ParameterBackup.from_bytes(json.dumps(backup), profile, source="the stream")
+    assert parsed.parameters["F002"] == sim_line.sim.drives[1].parameters["F002"]
+
+
+async def test_a_backup_upload_is_checked_by_the_gateway(sim_line: SimLine) -> None:
+    profile = get_profile("sj300")
+    backup = ParameterBackup(1, "x", {"F002": 3000}, {"P044": "NAK 16"}).to_json(profile)
+    async with workbench(params_config(sim_line.url)) as (_, page):
+        url = page.base + "/api/v1/parameters/check?protocol=sj300"
+        async with page.session.post(url, data=json.dumps(backup)) as response:
+            assert response.status == 200
+            checked = await response.json()
+        assert checked["parameters"] == {"F002": {"raw": 3000, "value": 30.0}}
+        assert checked["absent"] == {"P044": "NAK 16"}
+        bad: list[tuple[bytes, int, str]] = [
+            (b"{not json", 400, "the file: not JSON"),
+            (b'{"format": "other"}', 400, 'not an sj300-params file: no "format"'),
+            (json.dumps(backup | {"protocol": "fr700"}).encode(), 400, "a backup of fr700 drives"),
+            (b" " * (1024 * 1024 + 1), 413, "a backup is at most 1024 KiB"),
+        ]
+        for data, status, message in bad:
+            async with page.session.post(url, data=data) as response:
+                assert response.status == status
+                assert message in (await response.json())["error"]
+        other = page.base + "/api/v1/parameters/check?protocol=fr700"
+        async with page.session.post(other, data=json.dumps(backup)) as response:
+            assert response.status == 400
+
+
+async def test_a_granted_parameter_is_written_read_back_and_audited(sim_line: SimLine) -> None:
+    async with workbench(params_config(sim_line.url)) as (gateway, page):
+        assert (await page.post("/api/v1/drives/hall/1/parameter", {"code": "F002"}))[0] == 401
+        await page.login()
+        await wait_for(
+            lambda: "F002" in snapshot_of(gateway, 1).parameters, "F002 polled (the old value)"
+        )
+        status, answer = await page.control(1, "parameter", code="f002", value=25)
+        assert (status, answer["ok"]) == (200, True)
+        assert sim_line.sim.drives[1].parameters["F002"] == 2500
+        record = gateway.audit.recent[-1]
+        assert (record["what"], record["old"], record["new"], record["result"]) == (
+            "parameter F002",
+            30.0,
+            25.0,
+            "ok",
+        )
+        cases: list[tuple[dict[str, Any], int, str]] = [
+            ({"code": "F002", "value": 1e6}, 422, "invalid_value"),  # outside its range
+            ({"code": "F002", "value": 1.234}, 422, "invalid_value"),  # finer than 0.01 s
+            ({"code": "A004", "value": 60}, 403, "not_allowed"),  # not granted
+            ({"code": "X999", "value": 1}, 400, "malformed"),
+            ({"code": "F002", "raw": "3000"}, 400, "malformed"),
+            ({"code": "F002"}, 400, "malformed"),
+        ]
+        for body, status, refusal in cases:
+            got, answer = await page.control(1, "parameter", **body)
+            assert (got, answer["refusal"]) == (status, refusal), body
+        assert sim_line.sim.drives[1].parameters["F002"] == 2500  # nothing half-applied
+        assert (await page.control(3, "parameter", code="F002", value=20))[1]["refusal"] == (
+            "not_allowed"
+        )

@@ -39,6 +39,7 @@ from .. import ConnectionLimit, Endpoint, GatewayDrive
 from ._events import GATHER_S, KEEPALIVE
 from ._json import trip_log_json, unix_time
 from ._linetrace import KEEP_S, LineTrace
+from ._parameters import ParameterRoutes
 from ._server import HttpServer, health_response, metrics_response, serve_app
 from ._workbench import Workbench
 from ._write_api import WriteRoutes
@@ -92,6 +93,7 @@ def make_app(
     the routes that write (module _write_api)."""
     app = operations_app(registry, health)
     app[_WORKBENCH] = workbench
+    ParameterRoutes(workbench.gateway).add_to(app)
     if writes is not None:
         writes.add_to(app)
     app.router.add_get("/", _index)

@@ -38,11 +38,12 @@ from typing import Any, Final
 
 from aiohttp import web
 
-from ...wire import Direction
+from ...wire import Direction, LocalProtocolError
 from .. import (
     GatewayDrive,
     GatewayView,
     Heartbeat,
+    ParameterWrite,
     Refusal,
     RunCommand,
     SetFrequency,
@@ -128,6 +129,7 @@ class WriteRoutes:
         router.add_post("/api/v1/drives/{line}/{node}/run", self._run)
         router.add_post("/api/v1/drives/{line}/{node}/stop", self._stop)
         router.add_post("/api/v1/drives/{line}/{node}/frequency", self._frequency)
+        router.add_post("/api/v1/drives/{line}/{node}/parameter", self._parameter)
 
     # -- who is asking -----------------------------------------------------------------
 
@@ -198,10 +200,13 @@ class WriteRoutes:
         return response
 
     async def _session(self, request: web.Request) -> web.Response:
-        """Who the page is logged in as, with its CSRF token; 401 when it is not."""
+        """Who the page is logged in as, with its CSRF token; nulls when it is not.
+
+        Not logged in is an answer, not an error: the page asks at every load.
+        """
         session = self.sessions.get(request.cookies.get(SESSION_COOKIE))
         if session is None:
-            raise _fail(401, "not logged in")
+            return _json({"user": None, "csrf": None})
         return _json({"user": session.user, "csrf": session.csrf})
 
     # -- control -----------------------------------------------------------------------
@@ -230,6 +235,30 @@ class WriteRoutes:
 
         return await self._write(request, command)
 
+    async def _parameter(self, request: web.Request) -> web.Response:
+        drive = _drive(self.gateway, request)
+
+        def command(body: dict[str, Any]) -> WriteRequest:
+            text, raw, value = body.get("code"), body.get("raw"), body.get("value")
+            if not isinstance(text, str):
+                raise _BadBody("code: expected a parameter code")
+            catalogue = drive.profile.parameters
+            code = catalogue.code(text)
+            if code is None:
+                raise _BadBody(f"code: {excerpt(text)} is not a parameter code")
+            if value is not None:  # in the parameter's unit: the catalogue makes it raw
+                if isinstance(value, bool) or not isinstance(value, int | float):
+                    raise _BadBody("value: expected a number in the parameter's unit")
+                try:
+                    raw = catalogue.spec(code).to_raw(float(value))
+                except LocalProtocolError as exc:
+                    raise _Invalid(str(exc)) from None
+            if isinstance(raw, bool) or not isinstance(raw, int):
+                raise _BadBody("raw: expected the drive's integer (or value: in its unit)")
+            return ParameterWrite(code, raw)
+
+        return await self._write(request, command)
+
     async def _write(
         self, request: web.Request, command: Callable[[dict[str, Any]], WriteRequest]
     ) -> web.Response:
@@ -246,19 +275,30 @@ class WriteRoutes:
             write = command(body)
         except _BadBody as bad:
             return self._refuse(client, drive, request, str(bad))
+        except _Invalid as bad:
+            return self._refuse(client, drive, request, str(bad), Refusal.INVALID_VALUE)
         result = await self.gateway.write(client, drive, write)
         return _answer(result, client, drive)
 
     def _refuse(
-        self, client: str, drive: GatewayDrive, request: web.Request, why: str
+        self,
+        client: str,
+        drive: GatewayDrive,
+        request: web.Request,
+        why: str,
+        refusal: Refusal = Refusal.MALFORMED,
     ) -> web.Response:
-        result = WriteResult(Refusal.MALFORMED, why)
+        result = WriteResult(refusal, why)
         self.gateway.refused(client, drive, request.path.rsplit("/", 1)[-1], None, result)
         return _answer(result, client, drive)
 
 
 class _BadBody(Exception):
     """A field of the body is missing or mistyped."""
+
+
+class _Invalid(Exception):
+    """A value the drive must not get (out of range, finer than its increment)."""
 
 
 #: A valid hash of nothing anyone types: an unknown name costs a real verification.

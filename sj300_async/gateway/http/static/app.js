@@ -465,6 +465,172 @@
       command("frequency", { hz });
     });
 
+    // -- parameters: read all (progress), compare with a backup, edit what is granted ----------
+    let backup = null;      // the drive's set as read: the sj300-params format
+    let compared = null;    // the uploaded backup as the gateway read it: {parameters, absent}
+    let reading = null;     // the EventSource of a read under way
+
+    function granted(code) {
+      const g = state.gateway;
+      if (!g || !g.writes || !session.user) return false;
+      const gl = g.lines.find((l) => l.name === line);
+      return !!gl && gl.grants.some((x) => x.nodes.includes(node) && x.parameters.includes(code));
+    }
+
+    function readParameters() {
+      if (reading) return;
+      const bar = field("progress");
+      field("params-error").textContent = "";
+      bar.hidden = false;
+      bar.value = 0;
+      reading = new EventSource(`${base}/parameters`);
+      reading.addEventListener("progress", (event) => {
+        const p = JSON.parse(event.data);
+        bar.max = p.total;
+        bar.value = p.done;
+        field("params-info").textContent = `${p.done} of ${p.total} read (${p.code})`;
+      });
+      reading.addEventListener("backup", (event) => {
+        backup = JSON.parse(event.data);
+        finishRead();
+        field("params-info").textContent =
+          `${backup.parameters.length} codes read at ${new Date(backup.taken_at).toLocaleTimeString()}`;
+        const blob = new Blob([JSON.stringify(backup, null, 2) + "\n"], { type: "application/json" });
+        const link = field("download");
+        link.href = URL.createObjectURL(blob);
+        link.download = `${line}-${node}-params.json`;
+        link.hidden = false;
+        renderParameters();
+      });
+      reading.addEventListener("error", (event) => {
+        // The gateway's own "error" event carries data; a lost connection does not.
+        const message = event.data ? JSON.parse(event.data).error : "the read stopped: the connection was lost";
+        field("params-error").textContent = message;
+        finishRead();
+      });
+    }
+
+    function finishRead() {
+      if (reading) reading.close();  // else EventSource would start the read again
+      reading = null;
+      field("progress").hidden = true;
+    }
+
+    async function compareWith(file) {
+      field("params-error").textContent = "";
+      const protocol = (state.drives.get(key) || {}).protocol || "";
+      const response = await fetch(`${API}/parameters/check?protocol=${encodeURIComponent(protocol)}`, {
+        method: "POST", headers: { "Content-Type": "application/json" }, body: await file.text(),
+      });
+      const answer = await response.json();
+      if (!response.ok) {
+        compared = null;
+        field("params-error").textContent = `${file.name}: ${answer.error}`;
+      } else {
+        compared = answer;
+        if (answer.node !== node) {
+          field("params-error").textContent =
+            `${file.name} was read from node ${answer.node}, this is node ${node}: compared all the same`;
+        }
+      }
+      renderParameters();
+    }
+
+    function renderParameters() {
+      const body = $(main, '[data-testid="parameter-table"] tbody');
+      body.replaceChildren();
+      if (!backup) return;
+      const onlyDiff = field("only-diff").checked;
+      let differences = 0;
+      let restorable = 0;
+      for (const p of backup.parameters) {
+        const other = compared ? compared.parameters[p.code] : undefined;
+        const otherAbsent = compared ? p.code in compared.absent : false;
+        const differs = compared !== null && ((other ? other.raw : null) !== p.raw) && !(otherAbsent && p.raw === null);
+        if (differs) differences += 1;
+        if (differs && other && granted(p.code)) restorable += 1;
+        if (onlyDiff && !differs) continue;
+        const row = document.createElement("tr");
+        row.dataset.code = p.code;
+        if (differs) row.className = "changed";
+        cell(row, "code", p.code);
+        cell(row, "name", text(p.name));
+        cell(row, "value", p.absent ? "absent" : text(p.value), "num");
+        cell(row, "unit", text(p.unit));
+        cell(row, "raw", text(p.raw), "num");
+        const shown = !compared ? "" : otherAbsent ? "absent" : other ? text(other.value === null ? other.raw : other.value) : "not in the file";
+        cell(row, "backup", shown, "num");
+        const actions = cell(row, "actions", "");
+        if (granted(p.code) && p.raw !== null) {
+          const edit = document.createElement("button");
+          edit.type = "button";
+          edit.textContent = "edit";
+          edit.dataset.testid = "edit";
+          edit.addEventListener("click", () => editParameter(p));
+          actions.appendChild(edit);
+        }
+        body.appendChild(row);
+      }
+      if (compared) field("params-info").textContent = `${differences} differences with the file`;
+      const restore = $(main, '[data-action="restore"]');
+      restore.hidden = restorable === 0;
+      restore.textContent = `Write the backup's granted values (${restorable})`;
+    }
+
+    async function writeParameter(p, body, description) {
+      if (!confirm(`${line} node ${node}: ${description}\n\nWrite it to the drive?`)) return false;
+      const result = await post(`${base}/parameter`, { tab: TAB, code: p.code, ...body });
+      if (!result.ok) {
+        field("params-error").textContent = `${p.code}: ${result.answer.error}`;
+        return false;
+      }
+      return true;
+    }
+
+    async function editParameter(p) {
+      const answer = prompt(`${p.code} ${p.name || ""}: new value${p.unit ? ` in ${p.unit}` : ""}`, String(p.value));
+      if (answer === null) return;
+      const value = Number(answer);
+      if (answer.trim() === "" || !Number.isFinite(value)) {
+        field("params-error").textContent = `${p.code}: ${answer} is not a number`;
+        return;
+      }
+      const unit = p.unit ? ` ${p.unit}` : "";
+      if (await writeParameter(p, { value }, `${p.code} ${p.name || ""}: ${p.value}${unit} → ${value}${unit}`)) {
+        field("params-error").textContent = "";
+        readParameters();  // the set as the drive holds it now
+      }
+    }
+
+    async function restoreGranted() {
+      const changes = backup.parameters.filter((p) => {
+        const other = compared && compared.parameters[p.code];
+        return other && other.raw !== p.raw && granted(p.code);
+      });
+      const lines = changes.map((p) => {
+        const other = compared.parameters[p.code];
+        return `${p.code} ${p.name || ""}: ${text(p.value)} → ${text(other.value === null ? other.raw : other.value)} ${p.unit || ""}`;
+      });
+      if (!confirm(`${line} node ${node}: write ${changes.length} values from the file?\n\n${lines.join("\n")}`)) return;
+      const failed = [];
+      for (const p of changes) {
+        const result = await post(`${base}/parameter`, { tab: TAB, code: p.code, raw: compared.parameters[p.code].raw });
+        if (!result.ok) failed.push(`${p.code}: ${result.answer.error}`);
+      }
+      field("params-error").textContent = failed.length
+        ? `${failed.length} of ${changes.length} not written: ${failed.join("; ")}`
+        : "";
+      readParameters();
+    }
+
+    $(main, '[data-action="read-parameters"]').addEventListener("click", readParameters);
+    $(main, '[data-action="restore"]').addEventListener("click", restoreGranted);
+    field("only-diff").addEventListener("change", renderParameters);
+    field("compare-file").addEventListener("change", (event) => {
+      const file = event.target.files[0];
+      if (file) compareWith(file);
+    });
+
     $(main, '[data-action="follow"]').addEventListener("click", () => {
       following = true;
       redraw();
@@ -483,10 +649,14 @@
           renderLease();
         }
       },
-      gatewayChanged: showControl,
+      gatewayChanged() {
+        showControl();
+        renderParameters();
+      },
       close() {
         closed = true;
         stopHeartbeat();
+        finishRead();
         if (chart) chart.destroy();
         window.workbench.chart = null;
       },

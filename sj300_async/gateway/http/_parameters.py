@@ -1,0 +1,162 @@
+"""The workbench's parameter list: read a drive's whole set with progress, check a backup file.
+
+``GET /api/v1/drives/LINE/NODE/parameters`` reads every code a drive of
+the protocol can have (the profile's
+:meth:`~sj300_async.profiles.ParameterCatalogue.addressable`: SJ300's 335
+function codes, FR-700's Pr.0..Pr.999) and streams it as server-sent
+events: ``progress`` after each read, then ``backup``, the whole set in
+the ``sj300 params`` file format (:class:`~sj300_async.profiles.ParameterBackup`),
+which the page shows, compares and offers as a download.
+``POST /api/v1/parameters/check`` reads a backup file (an upload) with the
+same reader ``sj300 params restore`` uses and answers its parameters, or
+400 with the reason: it changes nothing, and exists on a read-only gateway.
+
+Decisions:
+
+- **The line first.** The reads queue on the line's arbiter like every
+  request, between the polls; a whole set is hundreds of transactions, so
+  one line runs at most one at a time (409 for a second), and a client
+  that goes away stops it (the next progress event's write fails).
+- A code the drive refuses as not its own (the profile's
+  :meth:`~sj300_async.profiles.Profile.absent` NAK) is recorded absent, as
+  a backup records it; any other failure ends the stream with an ``error``
+  event naming the code, after the codes read so far.
+- The stream carries no CSRF token and needs no login: it reads.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import json
+import logging
+from typing import Any, Final
+
+from aiohttp import web
+
+from ...profiles import BackupFormatError, ParameterBackup, catalogued, utc_now
+from ...wire import NakError, SJ300Error
+from .. import GatewayDrive, GatewayView
+from ._events import sse_frame
+
+__all__ = ["MAX_BACKUP_BYTES", "ParameterRoutes"]
+
+_log = logging.getLogger("sj300_async.gateway.http")
+
+#: The largest backup file accepted (an FR-700 one is about 165 kB).
+MAX_BACKUP_BYTES: Final = 1024 * 1024
+
+
+def _fail(status: int, message: str) -> web.HTTPException:
+    error = web.HTTPException(text=json.dumps({"error": message}), content_type="application/json")
+    error.set_status(status)
+    return error
+
+
+class ParameterRoutes:
+    """The parameter routes of one gateway's workbench (see the module docstring)."""
+
+    def __init__(self, gateway: GatewayView) -> None:
+        self.gateway = gateway
+        #: Lines reading a whole set now.
+        self._busy: set[str] = set()
+
+    def add_to(self, app: web.Application) -> None:
+        app.router.add_get("/api/v1/drives/{line}/{node}/parameters", self._read)
+        app.router.add_post("/api/v1/parameters/check", self._check)
+
+    def _drive(self, request: web.Request) -> GatewayDrive:
+        line, node = request.match_info["line"], request.match_info["node"]
+        drive = None
+        if node.isascii() and node.isdigit() and len(node) <= 4:
+            drive = self.gateway.drive(line, int(node))
+        if drive is None:
+            raise _fail(404, f"no drive {node[:16]!r} on line {line[:64]!r}")
+        return drive
+
+    async def _read(self, request: web.Request) -> web.StreamResponse:
+        drive = self._drive(request)
+        profile = drive.profile
+        name = drive.line.name
+        if not profile.capabilities.parameter_backup:
+            raise _fail(
+                404, f"{profile.model} drives (protocol {profile.name}) have no parameter backup"
+            )
+        if name in self._busy:
+            raise _fail(409, f"line {name} is reading a drive's parameters already: wait for it")
+        line = next(line for line in self.gateway.lines if line.config.name == name)
+        target: Any = line.bus.drive(drive.node)
+        codes = list(profile.parameters.addressable())
+        response = web.StreamResponse(
+            headers={"Content-Type": "text/event-stream", "Cache-Control": "no-cache"}
+        )
+        self._busy.add(name)
+        raw: dict[str, int] = {}
+        absent: dict[str, str] = {}
+        try:
+            await response.prepare(request)
+            for done, code in enumerate(codes, start=1):
+                try:
+                    raw[code] = int(await target.read_parameter_raw(code))
+                except NakError as exc:
+                    if not profile.absent(int(exc.code)):
+                        raise
+                    absent[code] = str(exc).partition(" answered ")[2] or f"NAK {int(exc.code)}"
+                await response.write(
+                    sse_frame("progress", {"done": done, "total": len(codes), "code": code})
+                )
+            backup = ParameterBackup(
+                drive.node,
+                line.config.url,
+                raw,
+                absent,
+                utc_now(),
+                profile.name,
+            )
+            await response.write(sse_frame("backup", backup.to_json(profile)))
+        except SJ300Error as exc:
+            message = f"{code}: {exc}" if codes else str(exc)
+            _log.info("line %s node %d: parameter read stopped: %s", name, drive.node, message)
+            await response.write(sse_frame("error", {"error": message, "done": len(raw)}))
+        except (ConnectionError, asyncio.CancelledError):
+            _log.debug("line %s node %d: parameter read abandoned by its client", name, drive.node)
+            raise
+        finally:
+            self._busy.discard(name)
+        await response.write_eof()
+        return response
+
+    async def _check(self, request: web.Request) -> web.Response:
+        """A backup file's parameters as this gateway reads them, or why it cannot."""
+        protocol = request.query.get("protocol", "")
+        profile = next(
+            (line.profile for line in self.gateway.lines if line.config.protocol == protocol),
+            None,
+        )
+        if profile is None:
+            raise _fail(400, f"protocol: none of this gateway's lines speaks {protocol[:32]!r}")
+        if request.content_length is not None and request.content_length > MAX_BACKUP_BYTES:
+            raise _fail(413, f"a backup is at most {MAX_BACKUP_BYTES // 1024} KiB")
+        data = await request.content.read(MAX_BACKUP_BYTES + 1)
+        if len(data) > MAX_BACKUP_BYTES:
+            raise _fail(413, f"a backup is at most {MAX_BACKUP_BYTES // 1024} KiB")
+        try:
+            backup = ParameterBackup.from_bytes(data, profile, source="the file")
+        except BackupFormatError as exc:
+            raise _fail(400, str(exc)) from None
+        return web.json_response(
+            {
+                "node": backup.node,
+                "protocol": backup.protocol,
+                "taken_at": backup.taken_at,
+                "parameters": {
+                    code: {
+                        "raw": raw,
+                        "value": None
+                        if (spec := catalogued(profile, code)) is None
+                        else spec.from_raw(raw),
+                    }
+                    for code, raw in backup.parameters.items()
+                },
+                "absent": dict(backup.absent),
+            }
+        )
