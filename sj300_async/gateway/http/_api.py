@@ -255,8 +255,9 @@ async def _trend_csv(request: web.Request) -> web.Response:
     writer = csv.writer(out, lineterminator="\r\n")
     names = ["output_frequency_hz", "output_current_a", "output_voltage_v"]
     writer.writerow(["time_utc", "time_unix", *names])
-    for row, at in enumerate(columns["time"]):
-        assert at is not None
+    for row, time in enumerate(columns["time"]):
+        assert time is not None
+        at = round(time, 3)  # once, for both columns (isoformat cuts, an f-string rounds)
         stamp = datetime.fromtimestamp(at, UTC).isoformat(timespec="milliseconds")
         values = ["" if columns[name][row] is None else columns[name][row] for name in names]
         writer.writerow([stamp, f"{at:.3f}", *values])

@@ -83,6 +83,9 @@
       const key = driveKey(drive.line, drive.node);
       state.drives.set(key, drive);
       window.workbench.events += 1;
+      // Every sample to the trend now: the redraw below keeps only the latest state of a
+      // drive per animation frame, and a busy or hidden page skips frames.
+      if (view && view.sample) view.sample(key, drive);
       mark("drives", key);
     });
   }
@@ -316,6 +319,7 @@
       const response = await fetch(`${base}/trend`);
       if (!response.ok) throw new Error(`trend: ${response.status}`);
       const trend = await response.json();
+      if (closed) return;  // another page by now: its chart is gone
       capacity = trend.capacity;
       // Samples that came by the event stream while this loaded stay, after these.
       const later = data[0].map((t, i) => [t, data[1][i], data[2][i], data[3][i]])
@@ -336,7 +340,8 @@
       field("trips-info").textContent = log.time === null
         ? "not read yet"
         : `read ${new Date(log.time * 1000).toLocaleTimeString()}` +
-          (log.total_count === null ? "" : `; ${log.total_count} trips counted by the drive`);
+          (log.total_count === null ? ""
+            : `; ${log.total_count} trip${log.total_count === 1 ? "" : "s"} counted by the drive`);
       log.records.forEach((trip, i) => {
         const row = document.createElement("tr");
         cell(row, "index", String(i + 1), "num");
@@ -386,10 +391,9 @@
       trip.textContent = drive.trip ? tripText(drive.trip) : "none";
       trip.className = drive.trip ? "bad" : "";
       renderStatus(drive);
-      append(drive);
       if (drive.trips_time !== tripsTime) {
         tripsTime = drive.trips_time;
-        loadTrips();
+        loadTrips().catch((error) => { field("trips-info").textContent = `not loaded: ${error}`; });
       }
     }
 
@@ -637,12 +641,17 @@
     });
     makeChart();
     render();
+    const now = state.drives.get(key);
+    if (now) append(now);
     showControl();
     loadTrend().catch((error) => { field("trend-info").textContent = String(error); });
     return {
       kind: "drive",
       key,
       data,
+      sample(changed, drive) {
+        if (changed === key && !closed) append(drive);
+      },
       update(kind, changed) {
         if (kind === "drive" && changed === key) {
           render();
