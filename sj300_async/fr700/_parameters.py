@@ -98,6 +98,12 @@ class Fr700ParameterInfo:
     special: Mapping[int, str] = field(default_factory=lambda: _EMPTY, hash=False)
 
     @property
+    def default(self) -> float | None:
+        """None: the reference this catalogue follows lists no factory settings (many
+        depend on the drive's capacity), so none is claimed."""
+        return None
+
+    @property
     def scale(self) -> int:
         """Raw counts per unit: 1, 10 or 100."""
         return int(10**self.decimals)

@@ -98,6 +98,11 @@ class ParameterSpec(Protocol):
     @property
     def maximum(self) -> float: ...
 
+    @property
+    def default(self) -> float | None:
+        """The factory setting in the unit; None where the manual gives none or it depends
+        on the drive (rated current, capacity, country)."""
+
     def to_raw(self, value: float) -> int:
         """The integer the drive holds for *value*.
 

@@ -547,3 +547,27 @@ async def test_a_granted_parameter_is_written_read_back_and_audited(sim_line: Si
         assert (await page.control(3, "parameter", code="F002", value=20))[1]["refusal"] == (
             "not_allowed"
         )
+
+
+async def test_the_factory_defaults_the_catalogue_knows(sim_line: SimLine) -> None:
+    profile = get_profile("sj300")
+    async with (
+        workbench(params_config(sim_line.url)) as (_, page),
+        page.session.get(page.base + "/api/v1/drives/hall/1/defaults") as response,
+    ):
+        assert response.status == 200
+        defaults = await response.json()
+    assert defaults["partial"] is True
+    assert defaults["parameters"]["F002"] == {"raw": 3000, "value": 30.0}
+    known = {
+        code
+        for code in profile.parameters.addressable()
+        if profile.parameters.spec(code).default is not None
+    }
+    assert set(defaults["parameters"]) == known  # every one the catalogue has, no other
+    # The simulated drive starts at its factory settings, but for the frequency and run
+    # command sources, which it sets to the RS-485 line (03) so that the line commands it.
+    drive = sim_line.sim.drives[1].parameters
+    differing = [c for c, d in defaults["parameters"].items() if drive.get(c) != d["raw"]]
+    assert differing == ["A001", "A002"]
+    assert (drive["A001"], drive["A002"]) == (3, 3)

@@ -34,7 +34,7 @@ from typing import Any, Final
 from aiohttp import web
 
 from ...profiles import BackupFormatError, ParameterBackup, catalogued, utc_now
-from ...wire import NakError, SJ300Error
+from ...wire import LocalProtocolError, NakError, SJ300Error
 from .. import GatewayDrive, GatewayView
 from ._events import sse_frame
 
@@ -63,6 +63,7 @@ class ParameterRoutes:
     def add_to(self, app: web.Application) -> None:
         app.router.add_get("/api/v1/drives/{line}/{node}/parameters", self._read)
         app.router.add_post("/api/v1/parameters/check", self._check)
+        app.router.add_get("/api/v1/drives/{line}/{node}/defaults", self._defaults)
 
     def _drive(self, request: web.Request) -> GatewayDrive:
         line, node = request.match_info["line"], request.match_info["node"]
@@ -124,6 +125,24 @@ class ParameterRoutes:
             self._busy.discard(name)
         await response.write_eof()
         return response
+
+    async def _defaults(self, request: web.Request) -> web.Response:
+        """The factory settings the catalogue knows for this drive's protocol, as a check's
+        answer reads (the page compares with them as with a file)."""
+        profile = self._drive(request).profile
+        catalogue = profile.parameters
+        known: dict[str, dict[str, float | int]] = {}
+        for code in catalogue.addressable():
+            spec = catalogued(profile, code)
+            if spec is None or spec.default is None:
+                continue
+            try:
+                known[code] = {"raw": spec.to_raw(spec.default), "value": spec.default}
+            except LocalProtocolError:  # a default outside the catalogue's own range
+                _log.debug("%s: default %r is not a valid setting", code, spec.default)
+        return web.json_response(
+            {"protocol": profile.name, "parameters": known, "absent": {}, "partial": True}
+        )
 
     async def _check(self, request: web.Request) -> web.Response:
         """A backup file's parameters as this gateway reads them, or why it cannot."""

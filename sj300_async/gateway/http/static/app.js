@@ -550,7 +550,10 @@
       for (const p of backup.parameters) {
         const other = compared ? compared.parameters[p.code] : undefined;
         const otherAbsent = compared ? p.code in compared.absent : false;
-        const differs = compared !== null && ((other ? other.raw : null) !== p.raw) && !(otherAbsent && p.raw === null);
+        // Against the defaults (partial: the catalogue knows some), a code without one is
+        // not compared; against a file, a code the file lacks differs.
+        const compares = compared !== null && (!compared.partial || other !== undefined);
+        const differs = compares && ((other ? other.raw : null) !== p.raw) && !(otherAbsent && p.raw === null);
         if (differs) differences += 1;
         if (differs && other && granted(p.code)) restorable += 1;
         if (onlyDiff && !differs) continue;
@@ -562,7 +565,8 @@
         cell(row, "value", p.absent ? "absent" : text(p.value), "num");
         cell(row, "unit", text(p.unit));
         cell(row, "raw", text(p.raw), "num");
-        const shown = !compared ? "" : otherAbsent ? "absent" : other ? text(other.value === null ? other.raw : other.value) : "not in the file";
+        const missing = compared && compared.partial ? "" : "not in the file";
+        const shown = !compared ? "" : otherAbsent ? "absent" : other ? text(other.value === null ? other.raw : other.value) : missing;
         cell(row, "backup", shown, "num");
         const actions = cell(row, "actions", "");
         if (granted(p.code) && p.raw !== null) {
@@ -575,10 +579,13 @@
         }
         body.appendChild(row);
       }
-      if (compared) field("params-info").textContent = `${differences} differences with the file`;
+      if (compared) {
+        const against = compared.partial ? "the factory defaults the catalogue knows" : "the file";
+        field("params-info").textContent = `${differences} differences with ${against}`;
+      }
       const restore = $(main, '[data-action="restore"]');
       restore.hidden = restorable === 0;
-      restore.textContent = `Write the backup's granted values (${restorable})`;
+      restore.textContent = `Write the compared values of granted parameters (${restorable})`;
     }
 
     async function writeParameter(p, body, description) {
@@ -628,6 +635,11 @@
     }
 
     $(main, '[data-action="read-parameters"]').addEventListener("click", readParameters);
+    $(main, '[data-action="defaults"]').addEventListener("click", async () => {
+      const response = await fetch(`${base}/defaults`);
+      compared = await response.json();
+      renderParameters();
+    });
     $(main, '[data-action="restore"]').addEventListener("click", restoreGranted);
     field("only-diff").addEventListener("change", renderParameters);
     field("compare-file").addEventListener("change", (event) => {
