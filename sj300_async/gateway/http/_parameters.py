@@ -155,9 +155,17 @@ class ParameterRoutes:
             raise _fail(400, f"protocol: none of this gateway's lines speaks {protocol[:32]!r}")
         if request.content_length is not None and request.content_length > MAX_BACKUP_BYTES:
             raise _fail(413, f"a backup is at most {MAX_BACKUP_BYTES // 1024} KiB")
-        data = await request.content.read(MAX_BACKUP_BYTES + 1)
-        if len(data) > MAX_BACKUP_BYTES:
+        # read(n) gives what has arrived so far, not n bytes: read to the end (or past
+        # the limit). The application's 64 KiB body limit is for requests, not backups.
+        body = bytearray()
+        while len(body) <= MAX_BACKUP_BYTES:
+            chunk = await request.content.read(64 * 1024)
+            if not chunk:
+                break
+            body += chunk
+        if len(body) > MAX_BACKUP_BYTES:
             raise _fail(413, f"a backup is at most {MAX_BACKUP_BYTES // 1024} KiB")
+        data = bytes(body)
         try:
             backup = ParameterBackup.from_bytes(data, profile, source="the file")
         except BackupFormatError as exc:

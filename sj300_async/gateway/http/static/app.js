@@ -465,7 +465,12 @@
     $(main, '[data-action="reverse"]').addEventListener("click", () => command("run", { direction: "reverse" }));
     $(main, '[data-action="stop"]').addEventListener("click", () => command("stop", {}));
     $(main, '[data-action="frequency"]').addEventListener("click", () => {
-      const hz = Number(field("hz").value);
+      const text = field("hz").value.trim();
+      const hz = Number(text);
+      if (text === "" || !Number.isFinite(hz)) {  // Number("") is 0: never send that
+        field("control-error").textContent = "enter a frequency in Hz first";
+        return;
+      }
       command("frequency", { hz });
     });
 
