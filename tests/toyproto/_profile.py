@@ -42,6 +42,8 @@ class ToyParameter:
     scale: int = 1
     minimum: float = 0
     maximum: float = 99_999
+    #: A toy has no factory settings.
+    default: float | None = None
 
     def to_raw(self, value: float) -> int:
         if not self.minimum <= value <= self.maximum or value != int(value):
