@@ -289,7 +289,7 @@ REFUSALS = [
     pytest.param(
         "[metrics]\nport = 9300\n",
         "gateway.toml:2: metrics.port: unknown key 'port' "
-        "(use listen, max_connections, idle_timeout_s, trend_s)",
+        "(use listen, max_connections, idle_timeout_s, trend_s, users, tokens, tls_cert, tls_key)",
         id="unknown-key-no-close-match",
     ),
     pytest.param(

@@ -19,7 +19,7 @@ from __future__ import annotations
 
 import re
 import ssl
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Final
@@ -100,40 +100,49 @@ class HttpConfig:
         return context
 
 
-def _users(table: ConfigTable) -> tuple[User, ...]:
-    users: dict[str, User] = {}
-    for i, item in enumerate(table.tables("users", "http.users")):
-        user = ConfigTable(table.ctx, f"{table.path}.users[{i}]", item, ("name", "password_hash"))
-        name = user.required_string("name")
+def _named(
+    table: ConfigTable, key: str, noun: str, field: str, check: Callable[[str], str | None]
+) -> dict[str, str]:
+    """``[[http.KEY]]``'s entries: each *field* by its unique ``name``; *check* says what is
+    wrong with a *field*, or None."""
+    found: dict[str, str] = {}
+    for i, item in enumerate(table.tables(key, f"http.{key}")):
+        entry = ConfigTable(table.ctx, f"{table.path}.{key}[{i}]", item, ("name", field))
+        name = entry.required_string("name")
         if not _NAME.match(name):
-            raise user.error("name", f"expected 1..64 of A-Z a-z 0-9 _ . @ -, got {name!r}")
-        if name in users:
-            raise user.error("name", f"user {name!r} is named twice")
-        stored = user.required_string("password_hash")
-        try:
-            parse_password_hash(stored)
-        except ValueError as exc:
-            raise user.error("password_hash", str(exc)) from None
-        users[name] = User(name, stored)
-    return tuple(users.values())
+            raise entry.error("name", f"expected 1..64 of A-Z a-z 0-9 _ . @ -, got {name!r}")
+        if name in found:
+            raise entry.error("name", f"{noun} {name!r} is named twice")
+        stored = entry.required_string(field)
+        problem = check(stored)
+        if problem is not None:
+            raise entry.error(field, problem)
+        found[name] = stored
+    return found
+
+
+def _password_problem(stored: str) -> str | None:
+    try:
+        parse_password_hash(stored)
+    except ValueError as exc:
+        return str(exc)
+    return None
+
+
+def _token_problem(stored: str) -> str | None:
+    if _TOKEN_HASH.match(stored):
+        return None
+    return "expected sha256$ and 64 hex digits (sj300 gateway --new-token)"
+
+
+def _users(table: ConfigTable) -> tuple[User, ...]:
+    found = _named(table, "users", "user", "password_hash", _password_problem)
+    return tuple(User(name, stored) for name, stored in found.items())
 
 
 def _tokens(table: ConfigTable) -> tuple[ApiToken, ...]:
-    tokens: dict[str, ApiToken] = {}
-    for i, item in enumerate(table.tables("tokens", "http.tokens")):
-        token = ConfigTable(table.ctx, f"{table.path}.tokens[{i}]", item, ("name", "token_hash"))
-        name = token.required_string("name")
-        if not _NAME.match(name):
-            raise token.error("name", f"expected 1..64 of A-Z a-z 0-9 _ . @ -, got {name!r}")
-        if name in tokens:
-            raise token.error("name", f"token {name!r} is named twice")
-        stored = token.required_string("token_hash")
-        if not _TOKEN_HASH.match(stored):
-            raise token.error(
-                "token_hash", "expected sha256$ and 64 hex digits (sj300 gateway --new-token)"
-            )
-        tokens[name] = ApiToken(name, stored)
-    return tuple(tokens.values())
+    found = _named(table, "tokens", "token", "token_hash", _token_problem)
+    return tuple(ApiToken(name, stored) for name, stored in found.items())
 
 
 def _tls(table: ConfigTable, base_dir: Path) -> tuple[Path | None, Path | None]:

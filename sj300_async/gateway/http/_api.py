@@ -24,13 +24,12 @@ import asyncio
 import contextlib
 import csv
 import io
-import json
 import logging
 import math
 from collections.abc import Callable
 from datetime import UTC, datetime
 from pathlib import Path
-from typing import Any, Final
+from typing import Final
 
 from aiohttp import web
 from prometheus_client import CollectorRegistry
@@ -40,6 +39,7 @@ from ._events import GATHER_S, KEEPALIVE
 from ._json import trip_log_json, unix_time
 from ._linetrace import KEEP_S, LineTrace
 from ._parameters import ParameterRoutes
+from ._replies import find_drive, json_error, json_reply
 from ._server import HttpServer, health_response, metrics_response, serve_app
 from ._workbench import Workbench
 from ._write_api import WriteRoutes
@@ -120,37 +120,19 @@ async def _security_headers(request: web.Request, response: web.StreamResponse) 
         response.headers.setdefault("Cache-Control", "no-cache")
 
 
-def _json(data: Any, status: int = 200) -> web.Response:
-    return web.json_response(data, status=status, dumps=_dumps)
-
-
-def _dumps(data: Any) -> str:
-    return json.dumps(data, separators=(",", ":"), allow_nan=False)
-
-
-def _error(status: type[web.HTTPException], message: str) -> web.HTTPException:
-    return status(text=_dumps({"error": message}), content_type="application/json")
-
-
 def _bench(request: web.Request) -> Workbench:
     return request.app[_WORKBENCH]
 
 
 def _find(request: web.Request) -> GatewayDrive:
-    line, node = request.match_info["line"], request.match_info["node"]
-    drive = None
-    if node.isascii() and node.isdigit() and len(node) <= 4:
-        drive = _bench(request).gateway.drive(line, int(node))
-    if drive is None:
-        raise _error(web.HTTPNotFound, f"no drive {node[:16]!r} on line {line[:64]!r}")
-    return drive
+    return find_drive(_bench(request).gateway, request)
 
 
 def _trace(request: web.Request) -> LineTrace:
     name = request.match_info["line"]
     trace = _bench(request).traces.get(name)
     if trace is None:
-        raise _error(web.HTTPNotFound, f"no line {name[:64]!r}")
+        raise json_error(404, f"no line {name[:64]!r}")
     return trace
 
 
@@ -163,9 +145,7 @@ def _seconds(request: web.Request, default: float) -> float:
     except ValueError:
         seconds = math.nan
     if not 0 < seconds <= KEEP_S:
-        raise _error(
-            web.HTTPBadRequest, f"seconds: expected 0 < seconds <= {KEEP_S:g}, got {text[:32]!r}"
-        )
+        raise json_error(400, f"seconds: expected 0 < seconds <= {KEEP_S:g}, got {text[:32]!r}")
     return seconds
 
 
@@ -174,7 +154,7 @@ def _node(request: web.Request) -> int | None:
     if text is None or text == "":
         return None
     if not (text.isascii() and text.isdigit() and len(text) <= 3):
-        raise _error(web.HTTPBadRequest, f"node: expected a node number, got {text[:32]!r}")
+        raise json_error(400, f"node: expected a node number, got {text[:32]!r}")
     return int(text)
 
 
@@ -182,7 +162,7 @@ async def _frames(request: web.Request) -> web.Response:
     trace = _trace(request)
     seconds = _seconds(request, 10.0)
     frames = trace.frames(seconds, node=_node(request))
-    return _json({"line": trace.name, "seconds": seconds, "frames": frames})
+    return json_reply({"line": trace.name, "seconds": seconds, "frames": frames})
 
 
 async def _capture(request: web.Request) -> web.Response:
@@ -200,11 +180,11 @@ async def _audit(request: web.Request) -> web.Response:
     """The latest writes, newest first, as the audit log records them."""
     text = request.query.get("limit", "200")
     if not (text.isascii() and text.isdigit() and 1 <= int(text[:5]) <= 1000):
-        raise _error(web.HTTPBadRequest, f"limit: expected 1..1000, got {text[:32]!r}")
+        raise json_error(400, f"limit: expected 1..1000, got {text[:32]!r}")
     recent = _bench(request).gateway.audit.recent
     limit = int(text)
     records = [recent[-i] for i in range(1, min(limit, len(recent)) + 1)]
-    return _json({"records": records, "kept": recent.maxlen})
+    return json_reply({"records": records, "kept": recent.maxlen})
 
 
 async def _index(request: web.Request) -> web.FileResponse:
@@ -212,21 +192,21 @@ async def _index(request: web.Request) -> web.FileResponse:
 
 
 async def _gateway(request: web.Request) -> web.Response:
-    return _json(_bench(request).gateway_json())
+    return json_reply(_bench(request).gateway_json())
 
 
 async def _lines(request: web.Request) -> web.Response:
     bench = _bench(request)
-    return _json([bench.line_json(line) for line in bench.gateway.lines])
+    return json_reply([bench.line_json(line) for line in bench.gateway.lines])
 
 
 async def _drives(request: web.Request) -> web.Response:
     bench = _bench(request)
-    return _json([bench.drive_json(drive.snapshot) for drive in bench.gateway.drives])
+    return json_reply([bench.drive_json(drive.snapshot) for drive in bench.gateway.drives])
 
 
 async def _drive(request: web.Request) -> web.Response:
-    return _json(_bench(request).drive_json(_find(request).snapshot))
+    return json_reply(_bench(request).drive_json(_find(request).snapshot))
 
 
 def _since(request: web.Request) -> float | None:
@@ -238,14 +218,14 @@ def _since(request: web.Request) -> float | None:
     except ValueError:
         since = math.nan
     if not math.isfinite(since):
-        raise _error(web.HTTPBadRequest, f"since: expected Unix seconds, got {text[:32]!r}")
+        raise json_error(400, f"since: expected Unix seconds, got {text[:32]!r}")
     return since
 
 
 async def _trend(request: web.Request) -> web.Response:
     drive = _find(request)
     trend = _bench(request).trends[drive.key]
-    return _json({"capacity": trend.capacity, **trend.columns(_since(request))})
+    return json_reply({"capacity": trend.capacity, **trend.columns(_since(request))})
 
 
 async def _trend_csv(request: web.Request) -> web.Response:
@@ -271,7 +251,7 @@ async def _trend_csv(request: web.Request) -> web.Response:
 
 async def _trips(request: web.Request) -> web.Response:
     snapshot = _find(request).snapshot
-    return _json(trip_log_json(snapshot.trips, unix_time(snapshot, snapshot.trips_at)))
+    return json_reply(trip_log_json(snapshot.trips, unix_time(snapshot, snapshot.trips_at)))
 
 
 async def _events(request: web.Request) -> web.StreamResponse:

@@ -27,7 +27,6 @@ Decisions:
 from __future__ import annotations
 
 import asyncio
-import json
 import logging
 from typing import Any, Final
 
@@ -35,8 +34,9 @@ from aiohttp import web
 
 from ...profiles import BackupFormatError, ParameterBackup, catalogued, utc_now
 from ...wire import LocalProtocolError, NakError, SJ300Error
-from .. import GatewayDrive, GatewayView
+from .. import GatewayView
 from ._events import sse_frame
+from ._replies import find_drive, json_error, json_reply
 
 __all__ = ["MAX_BACKUP_BYTES", "ParameterRoutes"]
 
@@ -44,12 +44,6 @@ _log = logging.getLogger("sj300_async.gateway.http")
 
 #: The largest backup file accepted (an FR-700 one is about 165 kB).
 MAX_BACKUP_BYTES: Final = 1024 * 1024
-
-
-def _fail(status: int, message: str) -> web.HTTPException:
-    error = web.HTTPException(text=json.dumps({"error": message}), content_type="application/json")
-    error.set_status(status)
-    return error
 
 
 class ParameterRoutes:
@@ -65,25 +59,18 @@ class ParameterRoutes:
         app.router.add_post("/api/v1/parameters/check", self._check)
         app.router.add_get("/api/v1/drives/{line}/{node}/defaults", self._defaults)
 
-    def _drive(self, request: web.Request) -> GatewayDrive:
-        line, node = request.match_info["line"], request.match_info["node"]
-        drive = None
-        if node.isascii() and node.isdigit() and len(node) <= 4:
-            drive = self.gateway.drive(line, int(node))
-        if drive is None:
-            raise _fail(404, f"no drive {node[:16]!r} on line {line[:64]!r}")
-        return drive
-
     async def _read(self, request: web.Request) -> web.StreamResponse:
-        drive = self._drive(request)
+        drive = find_drive(self.gateway, request)
         profile = drive.profile
         name = drive.line.name
         if not profile.capabilities.parameter_backup:
-            raise _fail(
+            raise json_error(
                 404, f"{profile.model} drives (protocol {profile.name}) have no parameter backup"
             )
         if name in self._busy:
-            raise _fail(409, f"line {name} is reading a drive's parameters already: wait for it")
+            raise json_error(
+                409, f"line {name} is reading a drive's parameters already: wait for it"
+            )
         line = next(line for line in self.gateway.lines if line.config.name == name)
         target: Any = line.bus.drive(drive.node)
         codes = list(profile.parameters.addressable())
@@ -129,7 +116,7 @@ class ParameterRoutes:
     async def _defaults(self, request: web.Request) -> web.Response:
         """The factory settings the catalogue knows for this drive's protocol, as a check's
         answer reads (the page compares with them as with a file)."""
-        profile = self._drive(request).profile
+        profile = find_drive(self.gateway, request).profile
         catalogue = profile.parameters
         known: dict[str, dict[str, float | int]] = {}
         for code in catalogue.addressable():
@@ -140,7 +127,7 @@ class ParameterRoutes:
                 known[code] = {"raw": spec.to_raw(spec.default), "value": spec.default}
             except LocalProtocolError:  # a default outside the catalogue's own range
                 _log.debug("%s: default %r is not a valid setting", code, spec.default)
-        return web.json_response(
+        return json_reply(
             {"protocol": profile.name, "parameters": known, "absent": {}, "partial": True}
         )
 
@@ -152,9 +139,11 @@ class ParameterRoutes:
             None,
         )
         if profile is None:
-            raise _fail(400, f"protocol: none of this gateway's lines speaks {protocol[:32]!r}")
+            raise json_error(
+                400, f"protocol: none of this gateway's lines speaks {protocol[:32]!r}"
+            )
         if request.content_length is not None and request.content_length > MAX_BACKUP_BYTES:
-            raise _fail(413, f"a backup is at most {MAX_BACKUP_BYTES // 1024} KiB")
+            raise json_error(413, f"a backup is at most {MAX_BACKUP_BYTES // 1024} KiB")
         # read(n) gives what has arrived so far, not n bytes: read to the end (or past
         # the limit). The application's 64 KiB body limit is for requests, not backups.
         body = bytearray()
@@ -164,13 +153,13 @@ class ParameterRoutes:
                 break
             body += chunk
         if len(body) > MAX_BACKUP_BYTES:
-            raise _fail(413, f"a backup is at most {MAX_BACKUP_BYTES // 1024} KiB")
+            raise json_error(413, f"a backup is at most {MAX_BACKUP_BYTES // 1024} KiB")
         data = bytes(body)
         try:
             backup = ParameterBackup.from_bytes(data, profile, source="the file")
         except BackupFormatError as exc:
-            raise _fail(400, str(exc)) from None
-        return web.json_response(
+            raise json_error(400, str(exc)) from None
+        return json_reply(
             {
                 "node": backup.node,
                 "protocol": backup.protocol,

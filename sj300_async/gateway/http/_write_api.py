@@ -60,6 +60,7 @@ from ._auth import (
     verify_password,
     verify_token,
 )
+from ._replies import find_drive, json_error, json_reply
 
 __all__ = ["REFUSAL_STATUS", "SESSION_COOKIE", "WriteRoutes"]
 
@@ -84,22 +85,6 @@ _TAB: Final = re.compile(r"[A-Za-z0-9]{1,16}\Z")
 _DIRECTIONS: Final = {"forward": Direction.FORWARD, "reverse": Direction.REVERSE}
 
 Handler = Callable[[web.Request], Awaitable[web.StreamResponse]]
-
-
-def _dumps(data: Any) -> str:
-    return json.dumps(data, separators=(",", ":"), allow_nan=False)
-
-
-def _json(data: Any, status: int = 200) -> web.Response:
-    return web.json_response(data, status=status, dumps=_dumps)
-
-
-def _fail(status: int, message: str, **extra: Any) -> web.HTTPException:
-    error = web.HTTPException(
-        text=_dumps({"error": message, **extra}), content_type="application/json"
-    )
-    error.set_status(status)
-    return error
 
 
 class WriteRoutes:
@@ -154,12 +139,12 @@ class WriteRoutes:
         _same_origin(request)
         identity = self.identify(request)
         if identity is None:
-            raise _fail(401, "log in first (or send Authorization: Bearer TOKEN)")
+            raise json_error(401, "log in first (or send Authorization: Bearer TOKEN)")
         if identity.kind == "user":
             session = self.sessions.get(identity.session)
             sent = request.headers.get(CSRF_HEADER, "")
             if session is None or not sent or sent != session.csrf:
-                raise _fail(403, f"missing or wrong {CSRF_HEADER}: reload the page")
+                raise json_error(403, f"missing or wrong {CSRF_HEADER}: reload the page")
         return identity
 
     # -- sessions ----------------------------------------------------------------------
@@ -168,20 +153,20 @@ class WriteRoutes:
         _same_origin(request)
         address = request.remote or "?"
         if self.guard.blocked(address):
-            raise _fail(429, "too many failed logins from this address: wait 5 minutes")
+            raise json_error(429, "too many failed logins from this address: wait 5 minutes")
         body = await _body(request)
         name, password = body.get("name"), body.get("password")
         if not isinstance(name, str) or not isinstance(password, str):
-            raise _fail(400, 'expected {"name": ..., "password": ...}')
+            raise json_error(400, 'expected {"name": ..., "password": ...}')
         user = self._users.get(name)
         # The hash is computed for an unknown name too: the time does not tell names apart.
         stored = user.password_hash if user is not None else _DUMMY_HASH
         if not verify_password(password, stored) or user is None:
             self.guard.failed(address)
-            raise _fail(401, "unknown user or wrong password")
+            raise json_error(401, "unknown user or wrong password")
         self.guard.succeeded(address)
         session = self.sessions.create(user.name)
-        response = _json({"user": user.name, "csrf": session.csrf})
+        response = json_reply({"user": user.name, "csrf": session.csrf})
         response.set_cookie(
             SESSION_COOKIE,
             session.id,
@@ -195,7 +180,7 @@ class WriteRoutes:
     async def _logout(self, request: web.Request) -> web.Response:
         identity = self.writer(request)
         self.sessions.end(identity.session)
-        response = _json({"user": None})
+        response = json_reply({"user": None})
         response.del_cookie(SESSION_COOKIE, path="/")
         return response
 
@@ -206,8 +191,8 @@ class WriteRoutes:
         """
         session = self.sessions.get(request.cookies.get(SESSION_COOKIE))
         if session is None:
-            return _json({"user": None, "csrf": None})
-        return _json({"user": session.user, "csrf": session.csrf})
+            return json_reply({"user": None, "csrf": None})
+        return json_reply({"user": session.user, "csrf": session.csrf})
 
     # -- control -----------------------------------------------------------------------
 
@@ -236,7 +221,7 @@ class WriteRoutes:
         return await self._write(request, command)
 
     async def _parameter(self, request: web.Request) -> web.Response:
-        drive = _drive(self.gateway, request)
+        drive = find_drive(self.gateway, request)
 
         def command(body: dict[str, Any]) -> WriteRequest:
             text, raw, value = body.get("code"), body.get("raw"), body.get("value")
@@ -263,7 +248,7 @@ class WriteRoutes:
         self, request: web.Request, command: Callable[[dict[str, Any]], WriteRequest]
     ) -> web.Response:
         identity = self.writer(request)
-        drive = _drive(self.gateway, request)
+        drive = find_drive(self.gateway, request)
         body = await _body(request)
         client = identity.client
         tab = body.get("tab")
@@ -310,21 +295,11 @@ _DUMMY_HASH: Final = (
 def _answer(result: WriteResult, client: str, drive: GatewayDrive) -> web.Response:
     lease = drive.lease
     if result.refusal is None:
-        return _json({"ok": True, "client": client, "lease_s": lease.duration_s})
-    return _json(
+        return json_reply({"ok": True, "client": client, "lease_s": lease.duration_s})
+    return json_reply(
         {"error": result.detail or result.refusal.value, "refusal": result.refusal.value},
         REFUSAL_STATUS[result.refusal],
     )
-
-
-def _drive(gateway: GatewayView, request: web.Request) -> GatewayDrive:
-    line, node = request.match_info["line"], request.match_info["node"]
-    drive = None
-    if node.isascii() and node.isdigit() and len(node) <= 4:
-        drive = gateway.drive(line, int(node))
-    if drive is None:
-        raise _fail(404, f"no drive {node[:16]!r} on line {line[:64]!r}")
-    return drive
 
 
 async def _body(request: web.Request) -> dict[str, Any]:
@@ -336,17 +311,17 @@ async def _body(request: web.Request) -> dict[str, Any]:
     if not request.body_exists:
         return {}
     if request.content_type != "application/json":
-        raise _fail(415, f"expected application/json, got {excerpt(request.content_type)}")
+        raise json_error(415, f"expected application/json, got {excerpt(request.content_type)}")
     try:
         text = await request.text()
     except web.HTTPRequestEntityTooLarge:
-        raise _fail(413, "the body is over 64 KiB") from None
+        raise json_error(413, "the body is over 64 KiB") from None
     try:
         body = json.loads(text)
     except ValueError:
-        raise _fail(400, f"not JSON: {excerpt(text)}") from None
+        raise json_error(400, f"not JSON: {excerpt(text)}") from None
     if not isinstance(body, dict):
-        raise _fail(400, f"expected a JSON object, got {excerpt(text)}")
+        raise json_error(400, f"expected a JSON object, got {excerpt(text)}")
     return body
 
 
@@ -354,6 +329,6 @@ def _same_origin(request: web.Request) -> None:
     """Refuse (403) a request a page of another site made the browser send (CSRF)."""
     origin = request.headers.get("Origin")
     if origin is not None and origin != f"{request.scheme}://{request.host}":
-        raise _fail(403, f"a request from another site ({excerpt(origin)}) is refused")
+        raise json_error(403, f"a request from another site ({excerpt(origin)}) is refused")
     if request.headers.get("Sec-Fetch-Site") == "cross-site":
-        raise _fail(403, "a request from another site is refused")
+        raise json_error(403, "a request from another site is refused")
