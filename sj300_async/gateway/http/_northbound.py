@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import asyncio
-import contextlib
 import logging
 from collections.abc import Iterator
 from typing import TYPE_CHECKING
@@ -100,8 +99,9 @@ class HttpNorthbound:
     async def close(self) -> None:
         if self._ticker is not None:
             self._ticker.cancel()
-            with contextlib.suppress(asyncio.CancelledError):
-                await self._ticker
+            # wait(), not await: the ticker's own cancellation stays its own, and a
+            # cancellation of close() itself is not swallowed with it.
+            await asyncio.wait([self._ticker])
             self._ticker = None
         if self.workbench is not None:
             self.workbench.close()  # the streams end, so the server's shutdown need not wait
