@@ -65,6 +65,14 @@ from ._northbound import (
     register_northbound,
     unregister_northbound,
 )
+from ._passwords import (
+    User,
+    hash_password,
+    named_entries,
+    parse_password_hash,
+    parse_users,
+    verify_password,
+)
 from ._toml import COMMAND_LINE, ConfigContext, ConfigTable, GatewayConfigError
 from ._writes import (
     Heartbeat,
@@ -115,6 +123,7 @@ __all__ = [
     "RunCommand",
     "SectionContext",
     "SetFrequency",
+    "User",
     "WriteGrant",
     "WriteRequest",
     "WriteResult",
@@ -126,13 +135,18 @@ __all__ = [
     "excerpt",
     "gateway_metrics",
     "get_northbound",
+    "hash_password",
     "line_problems",
     "listener_families",
     "load_config",
+    "named_entries",
     "northbound_names",
     "parse_config",
     "parse_endpoint",
+    "parse_password_hash",
+    "parse_users",
     "register_northbound",
     "unregister_northbound",
     "valid_name",
+    "verify_password",
 ]

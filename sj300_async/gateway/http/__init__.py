@@ -19,7 +19,7 @@ from __future__ import annotations
 
 import re
 import ssl
-from collections.abc import Callable, Sequence
+from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Final
@@ -32,8 +32,12 @@ from .. import (
     ListenerLimits,
     Northbound,
     SectionContext,
+    User,
+    hash_password,
+    named_entries,
+    parse_users,
 )
-from ._auth import ApiToken, User, hash_password, hash_token, new_token, parse_password_hash
+from ._auth import ApiToken, hash_token, new_token
 from ._trend import SAMPLE_BYTES, Trend, trend_capacity
 
 __all__ = [
@@ -62,8 +66,6 @@ DEFAULT_TREND_S: Final = 900.0
 MAX_TREND_S: Final = 86_400.0
 
 
-#: A user's or a token's name: it shows in the audit log.
-_NAME: Final = re.compile(r"[A-Za-z0-9_.@-]{1,64}\Z")
 _TOKEN_HASH: Final = re.compile(r"sha256\$[0-9a-f]{64}\Z")
 
 
@@ -100,48 +102,14 @@ class HttpConfig:
         return context
 
 
-def _named(
-    table: ConfigTable, key: str, noun: str, field: str, check: Callable[[str], str | None]
-) -> dict[str, str]:
-    """``[[http.KEY]]``'s entries: each *field* by its unique ``name``; *check* says what is
-    wrong with a *field*, or None."""
-    found: dict[str, str] = {}
-    for i, item in enumerate(table.tables(key, f"http.{key}")):
-        entry = ConfigTable(table.ctx, f"{table.path}.{key}[{i}]", item, ("name", field))
-        name = entry.required_string("name")
-        if not _NAME.match(name):
-            raise entry.error("name", f"expected 1..64 of A-Z a-z 0-9 _ . @ -, got {name!r}")
-        if name in found:
-            raise entry.error("name", f"{noun} {name!r} is named twice")
-        stored = entry.required_string(field)
-        problem = check(stored)
-        if problem is not None:
-            raise entry.error(field, problem)
-        found[name] = stored
-    return found
-
-
-def _password_problem(stored: str) -> str | None:
-    try:
-        parse_password_hash(stored)
-    except ValueError as exc:
-        return str(exc)
-    return None
-
-
 def _token_problem(stored: str) -> str | None:
     if _TOKEN_HASH.match(stored):
         return None
     return "expected sha256$ and 64 hex digits (sj300 gateway --new-token)"
 
 
-def _users(table: ConfigTable) -> tuple[User, ...]:
-    found = _named(table, "users", "user", "password_hash", _password_problem)
-    return tuple(User(name, stored) for name, stored in found.items())
-
-
 def _tokens(table: ConfigTable) -> tuple[ApiToken, ...]:
-    found = _named(table, "tokens", "token", "token_hash", _token_problem)
+    found = named_entries(table, "tokens", "token", "token_hash", _token_problem)
     return tuple(ApiToken(name, stored) for name, stored in found.items())
 
 
@@ -188,7 +156,7 @@ class _Spec:
             table.required_endpoint("listen"),
             DEFAULT_LIMITS.parse(table),
             DEFAULT_TREND_S if trend_s is None else trend_s,
-            users=_users(table),
+            users=parse_users(table),
             tokens=_tokens(table),
             tls_cert=tls_cert,
             tls_key=tls_key,

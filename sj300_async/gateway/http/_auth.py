@@ -17,10 +17,8 @@ every write then needs one of:
 
 Decisions:
 
-- Passwords are stored as scrypt hashes (the standard library's
-  :func:`hashlib.scrypt`, n=2**14, r=8, p=1, 16 random bytes of salt):
-  memory-hard, so a stolen configuration file is slow to attack.
-  ``sj300 gateway --hash-password`` makes one. Tokens are random and
+- Passwords are stored as scrypt hashes, made and checked by the
+  gateway's core (``gateway/_passwords.py``, shared with OPC UA). Tokens are random and
   long (32 bytes), so a plain SHA-256 of one is enough; ``sj300 gateway
   --new-token`` makes a token and its hash. Both are compared in
   constant time.
@@ -36,7 +34,6 @@ Decisions:
 
 from __future__ import annotations
 
-import base64
 import hashlib
 import hmac
 import secrets
@@ -44,6 +41,8 @@ import time
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from typing import Final
+
+from .. import User, hash_password, verify_password
 
 __all__ = [
     "FAILURE_WINDOW_S",
@@ -71,62 +70,6 @@ MAX_SESSIONS: Final = 256
 MAX_FAILURES: Final = 10
 FAILURE_WINDOW_S: Final = 300.0
 
-_SCRYPT_N: Final = 2**14
-_SCRYPT_R: Final = 8
-_SCRYPT_P: Final = 1
-_SALT_BYTES: Final = 16
-_HASH_BYTES: Final = 32
-
-
-def _b64(data: bytes) -> str:
-    return base64.b64encode(data).decode("ascii")
-
-
-def hash_password(password: str, *, salt: bytes | None = None) -> str:
-    """``scrypt$16384$8$1$SALT$HASH`` (base64): what ``password_hash`` holds."""
-    salt = secrets.token_bytes(_SALT_BYTES) if salt is None else salt
-    digest = hashlib.scrypt(
-        password.encode("utf-8"), salt=salt, n=_SCRYPT_N, r=_SCRYPT_R, p=_SCRYPT_P,
-        dklen=_HASH_BYTES,
-    )  # fmt: skip
-    return f"scrypt${_SCRYPT_N}${_SCRYPT_R}${_SCRYPT_P}${_b64(salt)}${_b64(digest)}"
-
-
-def parse_password_hash(stored: str) -> tuple[int, int, int, bytes, bytes]:
-    """The parts of a stored hash.
-
-    Raises:
-        ValueError: not one :func:`hash_password` makes (the message says what).
-    """
-    parts = stored.split("$")
-    if len(parts) != 6 or parts[0] != "scrypt":
-        raise ValueError("expected scrypt$N$R$P$SALT$HASH (sj300 gateway --hash-password)")
-    try:
-        n, r, p = (int(x) for x in parts[1:4])
-        salt = base64.b64decode(parts[4], validate=True)
-        digest = base64.b64decode(parts[5], validate=True)
-    except ValueError:
-        raise ValueError(
-            "a scrypt hash's N, R, P are numbers and its salt and hash base64"
-        ) from None
-    if n < 2**10 or n & (n - 1) or not 1 <= r <= 64 or not 1 <= p <= 16 or len(digest) < 16:
-        raise ValueError("a scrypt hash too weak or malformed (N a power of 2 >= 1024)")
-    return n, r, p, salt, digest
-
-
-def verify_password(password: str, stored: str) -> bool:
-    """True when *password* is the one *stored* was made from (constant-time compare)."""
-    try:
-        n, r, p, salt, digest = parse_password_hash(stored)
-    except ValueError:
-        return False
-    candidate = hashlib.scrypt(
-        password.encode("utf-8"), salt=salt, n=n, r=r, p=p, dklen=len(digest),
-        maxmem=256 * 1024 * 1024,
-    )  # fmt: skip
-    return hmac.compare_digest(candidate, digest)
-
-
 def new_token() -> str:
     """A random API token (32 bytes, URL-safe text)."""
     return secrets.token_urlsafe(32)
@@ -139,14 +82,6 @@ def hash_token(token: str) -> str:
 
 def verify_token(token: str, stored: str) -> bool:
     return hmac.compare_digest(hash_token(token), stored)
-
-
-@dataclass(frozen=True, slots=True)
-class User:
-    """``[[http.users]]``: a person who may log in to the workbench and write."""
-
-    name: str
-    password_hash: str
 
 
 @dataclass(frozen=True, slots=True)
