@@ -38,7 +38,7 @@ $(RUN_STAMP): pyproject.toml | $(BIN)/python
 	touch $@
 
 $(GATEWAY_STAMP): pyproject.toml | $(BIN)/python
-	$(BIN)/python -m pip install --quiet -e '.[gateway]'
+	$(BIN)/python -m pip install --quiet -e '.[gateway,opcua]'
 	touch $@
 
 venv: $(DEV_STAMP)

@@ -38,6 +38,7 @@ from ..gateway import (
     config_from_flags,
     get_northbound,
     load_config,
+    northbound_extra,
     northbound_names,
 )
 from ._demo import DEMO_NODES, DEMO_URL, demo_running
@@ -188,11 +189,13 @@ def _check_requirements(config: GatewayConfig) -> None:
     """Exit 2 naming the extra, and the command that installs it here, when a configured
     northbound's library is missing (:mod:`._install`: a checkout's differs)."""
     for section in config.northbounds:
-        for module in get_northbound(section).requires:
+        spec = get_northbound(section)
+        extra = northbound_extra(spec)
+        for module in spec.requires:
             if importlib.util.find_spec(module) is None:
                 raise CliError(
-                    f"the gateway's {section} needs the gateway extra ({module} is missing): "
-                    + gateway_install_command()
+                    f"the gateway's {section} needs the {extra} extra ({module} is missing): "
+                    + gateway_install_command(extra=extra)
                 )
 
 

@@ -41,20 +41,23 @@ def gateway_install_command(
     prefix: str | None = None,
     executable: str | None = None,
     cwd: Path | None = None,
+    extra: str = "gateway",
 ) -> str:
-    """The one command that installs the ``gateway`` extra where this package runs.
+    """The one command that installs the *extra* (``gateway``, ``opcua``) where this package runs.
+
+    A checkout's ``make gateway`` installs every extra a northbound needs.
 
     The keywords default to this interpreter's (``sys.prefix``,
     ``sys.executable``, the working directory); tests give others.
     """
     root = checkout_of(package_dir)
     if root is None:
-        return f"pip install '{PROJECT}[gateway]'"
+        return f"pip install '{PROJECT}[{extra}]'"
     venv = Path(sys.prefix if prefix is None else prefix).resolve()
     if venv == (root / ".venv").resolve():
         here = (Path.cwd() if cwd is None else cwd).resolve()
         where = "" if here == root.resolve() else f"-C {shlex.quote(str(root))} "
         return f"make {where}gateway (this checkout's .venv)"
     python = sys.executable if executable is None else executable
-    target = shlex.quote(f"{root}[gateway]")
+    target = shlex.quote(f"{root}[{extra}]")
     return f"{shlex.quote(python)} -m pip install -e {target} (this checkout, editable)"

@@ -61,6 +61,7 @@ from ._northbound import (
     NorthboundSpec,
     SectionContext,
     get_northbound,
+    northbound_extra,
     northbound_names,
     register_northbound,
     unregister_northbound,
@@ -73,7 +74,7 @@ from ._passwords import (
     parse_users,
     verify_password,
 )
-from ._toml import COMMAND_LINE, ConfigContext, ConfigTable, GatewayConfigError
+from ._toml import COMMAND_LINE, ConfigContext, ConfigTable, GatewayConfigError, unknown_choice
 from ._writes import (
     Heartbeat,
     ParameterWrite,
@@ -140,12 +141,14 @@ __all__ = [
     "listener_families",
     "load_config",
     "named_entries",
+    "northbound_extra",
     "northbound_names",
     "parse_config",
     "parse_endpoint",
     "parse_password_hash",
     "parse_users",
     "register_northbound",
+    "unknown_choice",
     "unregister_northbound",
     "valid_name",
     "verify_password",

@@ -57,6 +57,7 @@ __all__ = [
     "NorthboundSpec",
     "SectionContext",
     "get_northbound",
+    "northbound_extra",
     "northbound_names",
     "register_northbound",
     "section_aliases",
@@ -184,6 +185,8 @@ class NorthboundSpec(Protocol):
             GatewayConfigError: through *table*'s getters and ``table.error``.
         """
 
+    # Optional: ``extra``, the package extra that brings ``requires`` (default
+    # ``"gateway"``; OPC UA's is ``"opcua"``), read through :func:`northbound_extra`.
     # Optional: ``aliases``, a sequence of older section names the spec still takes
     # (the HTTP northbound's ``[metrics]``); read through :func:`section_aliases`, so a
     # spec written before it existed needs no change.
@@ -193,6 +196,11 @@ class NorthboundSpec(Protocol):
 
     def create(self, config: object) -> Northbound:
         """The northbound for *config*, not started."""
+
+
+def northbound_extra(spec: NorthboundSpec) -> str:
+    """The package extra that brings *spec*'s ``requires`` (optional ``extra``; ``gateway``)."""
+    return str(getattr(spec, "extra", "gateway"))
 
 
 def section_aliases(spec: NorthboundSpec) -> tuple[str, ...]:
@@ -205,6 +213,7 @@ _BUILT_IN: Final = {
     "modbus": "sj300_async.gateway.modbus:NORTHBOUND",
     "http": "sj300_async.gateway.http:NORTHBOUND",
     "mqtt": "sj300_async.gateway.mqtt:NORTHBOUND",
+    "opcua": "sj300_async.gateway.opcua:NORTHBOUND",
 }
 _NAME: Final = re.compile(r"[a-z][a-z0-9_]*\Z")
 _entries: dict[str, str | NorthboundSpec] = dict(_BUILT_IN)

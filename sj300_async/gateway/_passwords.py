@@ -104,7 +104,6 @@ def verify_password(password: str, stored: str) -> bool:
     return hmac.compare_digest(candidate, digest)
 
 
-
 def _password_problem(stored: str) -> str | None:
     try:
         parse_password_hash(stored)

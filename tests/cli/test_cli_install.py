@@ -74,4 +74,4 @@ def test_make_gateway_installs_the_extra_into_the_venv() -> None:
         check=True,
         timeout=30,
     )
-    assert ".venv/bin/python -m pip install --quiet -e '.[gateway]'" in done.stdout
+    assert ".venv/bin/python -m pip install --quiet -e '.[gateway,opcua]'" in done.stdout

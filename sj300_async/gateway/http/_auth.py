@@ -70,6 +70,7 @@ MAX_SESSIONS: Final = 256
 MAX_FAILURES: Final = 10
 FAILURE_WINDOW_S: Final = 300.0
 
+
 def new_token() -> str:
     """A random API token (32 bytes, URL-safe text)."""
     return secrets.token_urlsafe(32)

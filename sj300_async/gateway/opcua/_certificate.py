@@ -1,0 +1,109 @@
+"""The server's application certificate: the configured pair, or one generated at first start.
+
+OPC UA's secure channel (Basic256Sha256) signs and encrypts with the
+application instance certificate, whose subject alternative names carry
+the application URI a client checks against the server's description.
+When neither configured file exists the first start generates a
+self-signed pair (asyncua's generator, which follows OPC 10000-6 6.2.2)
+with the directory made 0700 and the key 0600, and the next start loads
+the same pair: clients that trusted it keep trusting it. A certificate the
+user brings is used as is, and its URI becomes the server's application
+URI.
+"""
+
+from __future__ import annotations
+
+import os
+import socket
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Final
+
+from cryptography import x509
+from cryptography.hazmat.primitives import hashes, serialization
+from cryptography.x509.oid import ExtendedKeyUsageOID
+
+__all__ = ["ServerCertificate", "load_or_generate"]
+
+#: How long a generated certificate is valid.
+GENERATED_DAYS: Final = 3650
+
+
+@dataclass(frozen=True, slots=True)
+class ServerCertificate:
+    """The pair the server uses, and what became of it at start."""
+
+    certificate: Path
+    private_key: Path
+    #: The application URI in the certificate (the server's own).
+    application_uri: str
+    #: True when this start generated the pair.
+    generated: bool
+    #: SHA-1 thumbprint, hex (what clients show to be trusted).
+    thumbprint: str
+
+
+def _uri_of(certificate: x509.Certificate) -> str | None:
+    try:
+        names = certificate.extensions.get_extension_for_class(x509.SubjectAlternativeName)
+    except x509.ExtensionNotFound:
+        return None
+    uris = names.value.get_values_for_type(x509.UniformResourceIdentifier)
+    return uris[0] if uris else None
+
+
+def _load(path: Path) -> x509.Certificate:
+    data = path.read_bytes()
+    if data.lstrip().startswith(b"-----BEGIN"):
+        return x509.load_pem_x509_certificate(data)
+    return x509.load_der_x509_certificate(data)
+
+
+def _generate(certificate: Path, private_key: Path, application_uri: str) -> None:
+    from asyncua.crypto import cert_gen
+
+    host = socket.gethostname()
+    key = cert_gen.generate_private_key()
+    cert = cert_gen.generate_self_signed_app_certificate(
+        key,
+        f"sj300 gateway@{host}",
+        {"organizationName": "sj300-async"},
+        [x509.UniformResourceIdentifier(application_uri), x509.DNSName(host)],
+        [ExtendedKeyUsageOID.SERVER_AUTH, ExtendedKeyUsageOID.CLIENT_AUTH],
+        days=GENERATED_DAYS,
+    )
+    for path in (certificate, private_key):
+        path.parent.mkdir(mode=0o700, parents=True, exist_ok=True)
+    descriptor = os.open(private_key, os.O_WRONLY | os.O_CREAT | os.O_EXCL, 0o600)
+    with os.fdopen(descriptor, "wb") as out:
+        out.write(cert_gen.dump_private_key_as_pem(key))
+    der = cert.public_bytes(serialization.Encoding.DER)
+    if certificate.suffix.lower() == ".pem":
+        der = cert.public_bytes(serialization.Encoding.PEM)
+    certificate.write_bytes(der)
+
+
+def load_or_generate(
+    certificate: Path, private_key: Path, application_uri: str
+) -> ServerCertificate:
+    """The pair at these paths, generated first when neither exists.
+
+    Raises:
+        OSError: a file cannot be read or written.
+        ValueError: a file is not a certificate or a key.
+    """
+    generated = not certificate.exists() and not private_key.exists()
+    if generated:
+        _generate(certificate, private_key, application_uri)
+    cert = _load(certificate)
+    serialization.load_pem_private_key(private_key.read_bytes(), password=None)
+    uri = _uri_of(cert) or application_uri
+    # OPC UA names a certificate by its SHA-1 thumbprint (what clients show to trust).
+    thumbprint = cert.fingerprint(hashes.SHA1()).hex()
+    return ServerCertificate(certificate, private_key, uri, generated, thumbprint)
+
+
+def _sha1() -> object:
+    from cryptography.hazmat.primitives import hashes
+
+    return hashes.SHA1()

@@ -1,0 +1,183 @@
+"""``[opcua]``: where the OPC UA server listens, its security, its certificate, its users.
+
+::
+
+    [opcua]
+    endpoint = "opc.tcp://0.0.0.0:4840"
+    # the default: both Basic256Sha256 modes; "None" only when named here
+    security = ["Basic256Sha256_SignAndEncrypt", "Basic256Sha256_Sign"]
+    certificate = "opcua/cert.der"     # generated at first start when missing
+    private_key = "opcua/key.pem"
+    trusted_clients = "opcua/trusted"  # optional: only these client certificates
+    [[opcua.users]]
+    name = "operator"
+    password_hash = "scrypt$16384$8$1$..."   # sj300 gateway --hash-password
+
+Decisions:
+
+- **Secure by default.** Without ``security`` the server offers
+  Basic256Sha256 with SignAndEncrypt and with Sign, and no unsecured
+  endpoint; ``"None"`` must be named. A configuration naming only
+  ``"None"`` serves reads, never writes (writes need an encrypted channel).
+- **The certificate.** ``certificate`` and ``private_key`` (relative to
+  the configuration file) default to ``opcua/cert.der`` and
+  ``opcua/key.pem``. When neither file exists, the first start generates a
+  self-signed pair there (RSA 2048, SHA-256, ten years, the application
+  URI and the host name in its subject alternative names) and says so;
+  when one exists without the other, the configuration is refused. A
+  user's own certificate is used as is: its application URI becomes the
+  server's.
+- **Client certificates.** With ``trusted_clients`` (a directory of DER or
+  PEM certificates) only those clients may open a session; without it,
+  any client certificate opens the encrypted channel, and the user's
+  password is what authenticates (documented in docs/OPCUA.md).
+- Port 0 picks a free port (the tests' way); the announce line names it.
+"""
+
+from __future__ import annotations
+
+import urllib.parse
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Final
+
+from .. import ConfigTable, Endpoint, SectionContext, User, parse_users, unknown_choice
+
+__all__ = [
+    "DEFAULT_SECURITY",
+    "OPCUA_KEYS",
+    "SECURITY_MODES",
+    "OpcuaConfig",
+    "parse_endpoint_url",
+    "parse_opcua_section",
+]
+
+OPCUA_KEYS: Final = (
+    *("endpoint", "security", "certificate", "private_key", "trusted_clients"),
+    *("users", "namespace", "max_connections"),
+)
+#: The security modes a configuration may name, strongest first.
+SECURITY_MODES: Final = ("Basic256Sha256_SignAndEncrypt", "Basic256Sha256_Sign", "None")
+DEFAULT_SECURITY: Final = SECURITY_MODES[:2]
+DEFAULT_CERTIFICATE: Final = "opcua/cert.der"
+DEFAULT_PRIVATE_KEY: Final = "opcua/key.pem"
+#: Client connections at once, at most (more are refused at accept).
+DEFAULT_MAX_CONNECTIONS: Final = 32
+
+
+@dataclass(frozen=True, slots=True)
+class OpcuaConfig:
+    """``[opcua]`` (see the module docstring)."""
+
+    endpoint: Endpoint
+    #: The endpoint's host as written (a name or an address), for the URL served.
+    host_text: str
+    security: tuple[str, ...] = DEFAULT_SECURITY
+    certificate: Path = Path(DEFAULT_CERTIFICATE)
+    private_key: Path = Path(DEFAULT_PRIVATE_KEY)
+    trusted_clients: Path | None = None
+    users: tuple[User, ...] = ()
+    #: The namespace URI of the drives' nodes (default ``urn:sj300-async:<gateway id>``).
+    namespace: str = ""
+    max_connections: int = DEFAULT_MAX_CONNECTIONS
+
+    @property
+    def url(self) -> str:
+        host = f"[{self.host_text}]" if ":" in self.host_text else self.host_text
+        return f"opc.tcp://{host}:{self.endpoint.port}"
+
+    @property
+    def secure(self) -> bool:
+        """Some endpoint encrypts (writes are possible at all)."""
+        return "Basic256Sha256_SignAndEncrypt" in self.security
+
+
+def parse_endpoint_url(text: str) -> tuple[str, int]:
+    """``opc.tcp://HOST:PORT`` as (host, port).
+
+    Raises:
+        ValueError: not such a URL (the message says what is expected).
+    """
+    expected = f"expected opc.tcp://HOST:PORT, got {text!r}"
+    try:
+        parts = urllib.parse.urlsplit(text.strip())
+        port = parts.port
+    except ValueError:
+        raise ValueError(expected) from None
+    if parts.scheme.lower() != "opc.tcp" or not parts.hostname or port is None:
+        raise ValueError(expected)
+    if parts.username is not None or parts.password is not None:
+        raise ValueError("an OPC UA endpoint carries no credentials: name [[opcua.users]]")
+    if parts.path not in ("", "/") or parts.query or parts.fragment:
+        raise ValueError(expected)
+    return parts.hostname, port
+
+
+def parse_opcua_section(table: ConfigTable, context: SectionContext) -> OpcuaConfig:
+    """``[opcua]`` (see the module docstring).
+
+    Raises:
+        GatewayConfigError: through *table*.
+    """
+    try:
+        host, port = parse_endpoint_url(table.required_string("endpoint"))
+    except ValueError as exc:
+        raise table.error("endpoint", str(exc)) from None
+    security = _security(table)
+    certificate, private_key = _key_pair(table, context.base_dir)
+    trusted = None
+    if (text := table.string("trusted_clients")) is not None:
+        trusted = context.base_dir / text
+        if not text.strip() or not trusted.is_dir():
+            raise table.error("trusted_clients", f"no such directory: {str(trusted)!r}")
+    namespace = table.string("namespace")
+    if namespace is not None and not namespace.strip():
+        raise table.error("namespace", "expected a namespace URI, got an empty string")
+    max_connections = table.integer("max_connections")
+    if max_connections is not None and not 1 <= max_connections <= 1000:
+        raise table.error("max_connections", f"must be 1..1000, got {max_connections}")
+    return OpcuaConfig(
+        endpoint=Endpoint(host, port),
+        host_text=host,
+        security=security,
+        certificate=certificate,
+        private_key=private_key,
+        trusted_clients=trusted,
+        users=parse_users(table),
+        namespace=namespace or f"urn:sj300-async:{context.gateway_id}",
+        max_connections=DEFAULT_MAX_CONNECTIONS if max_connections is None else max_connections,
+    )
+
+
+def _security(table: ConfigTable) -> tuple[str, ...]:
+    modes = table.strings("security")
+    if modes is None:
+        return DEFAULT_SECURITY
+    if not modes:
+        raise table.error("security", "name at least one security mode")
+    for mode in modes:
+        if mode not in SECURITY_MODES:
+            raise table.error("security", unknown_choice("security mode", mode, SECURITY_MODES))
+    if len(set(modes)) != len(modes):
+        raise table.error("security", "a security mode is named twice")
+    return tuple(mode for mode in SECURITY_MODES if mode in modes)
+
+
+def _key_pair(table: ConfigTable, base_dir: Path) -> tuple[Path, Path]:
+    paths = []
+    for key, default in (
+        ("certificate", DEFAULT_CERTIFICATE),
+        ("private_key", DEFAULT_PRIVATE_KEY),
+    ):
+        text = table.string(key)
+        if text is not None and not text.strip():
+            raise table.error(key, "expected a file name, got an empty string")
+        paths.append(base_dir / (default if text is None else text))
+    certificate, private_key = paths
+    if certificate.exists() != private_key.exists():
+        missing = "private_key" if certificate.exists() else "certificate"
+        raise table.error(
+            missing,
+            f"{certificate} and {private_key}: both exist or neither (then both are generated)",
+        )
+    return certificate, private_key

@@ -1,0 +1,361 @@
+"""The gateway's address space: one object per line, one per drive, in OPC 40400's words.
+
+::
+
+    Objects/
+      Lines/                               (folder)
+        <line>/                            line object: the bus health counters
+          Protocol, Url                    properties
+          Connected, DrivesOnline, Utilisation, Requests, Replies, Timeouts, ...
+          Drive<node>/                     drive object (the frequency converter and its axis)
+            Line, Node, Protocol, UnitId   properties
+            Online                         the poller's verdict (always Good)
+            Monitoring/                    OPC 40400-2: IMonitoringElectric,
+                                           PtFrequencyDriveAxisType
+              ConverterOutputFrequency     Hz   (output frequency)
+              FrequencyCommandValue        Hz   (the set frequency, as read back)
+              ConverterOutputCurrent       A
+              ConverterOutputVoltage       V
+              ConverterOutputPower         kW   (where the protocol measures it)
+              OutputTorque                 %    (where measured; no 40400 name in %)
+              ShaftTurningDirection        stopped | forward | reverse
+              Running, Tripped, State
+            Logbook/                       (40400: PtLogbookType)
+              ActiveTrip, TripCount
+              Trip1..Trip8/                newest first: Code, Meaning, OutputFrequency,
+                                           OutputCurrent, OutputVoltage (at the trip)
+            Parameters/                    the polled and the granted parameters, in their units
+              <code>                       writable where the line grants it
+            TakeControl(), Run(Direction), Stop(), SetFrequency(Frequency)
+                                           where the line grants control
+
+docs/OPCUA.md has the table mapping each name to OPC 40400 and saying
+where ours differs. Each variable is a :class:`Binding`: how to read its
+value and read time from a snapshot, and what it last showed; the server
+(:mod:`._server`) serves reads from it and pushes changes to
+subscriptions.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable, Iterator, Sequence
+from dataclasses import dataclass, field
+from typing import Final
+
+from asyncua import ua
+
+from ...profiles import DriveSnapshot, ParameterSpec, Trip
+from .. import GatewayDrive, GatewayLine
+from ._quality import GOOD, quality
+from ._space import Argument, SpaceBuilder
+
+__all__ = [
+    "DIRECTION_STATES",
+    "LINE_COUNTERS",
+    "TRIP_SLOTS",
+    "Binding",
+    "DriveNodes",
+    "LineNodes",
+    "MethodNodes",
+    "build_drive",
+    "build_line",
+]
+
+#: Trip records shown per drive (SJ300 keeps 6, FR-700 8).
+TRIP_SLOTS: Final = 8
+#: ShaftTurningDirection's states, indexed by :class:`~sj300_async.Direction`.
+DIRECTION_STATES: Final = ("stopped", "forward", "reverse")
+
+Reader = Callable[[DriveSnapshot], tuple[object, float]]
+
+
+@dataclass(slots=True, eq=False)
+class Binding:
+    """One variable of a drive: where its value comes from and what it showed last."""
+
+    node: ua.NodeId
+    vtype: ua.VariantType
+    read: Reader
+    #: The Online variable: the verdict itself, Good whatever it says.
+    verdict: bool = False
+    value: object = None
+    #: Loop time the value was read (-inf: never).
+    at: float = -math.inf
+    #: The same instant as Unix time.
+    wall: float = 0.0
+    online: bool = True
+    #: (value, status) last pushed to subscriptions.
+    pushed: tuple[object, int] | None = None
+
+    def take(self, snapshot: DriveSnapshot) -> None:
+        """Take the value and its read time from *snapshot*."""
+        value, at = self.read(snapshot)
+        self.value = value
+        self.at = at
+        self.wall = snapshot.time - (snapshot.taken_at - at) if at > -math.inf else snapshot.time
+        self.online = True if self.verdict else snapshot.online
+
+    def status(self, now: float, stale_after_s: float) -> int:
+        if self.verdict:
+            return GOOD
+        return quality(self.online, self.at, self.value, now, stale_after_s)
+
+
+@dataclass(frozen=True, slots=True)
+class MethodNodes:
+    """A drive's methods' node ids (None: its line grants no control)."""
+
+    take_control: ua.NodeId
+    run: ua.NodeId
+    stop: ua.NodeId
+    set_frequency: ua.NodeId
+
+
+@dataclass(slots=True, eq=False)
+class DriveNodes:
+    """One drive's object: its variables and methods."""
+
+    drive: GatewayDrive
+    node: ua.NodeId
+    bindings: list[Binding] = field(default_factory=list)
+    #: Writable parameter variables: node -> parameter code.
+    writable: dict[ua.NodeId, str] = field(default_factory=dict)
+    methods: MethodNodes | None = None
+
+
+@dataclass(slots=True, eq=False)
+class LineNodes:
+    """One line's object: its counters, by name."""
+
+    line: GatewayLine
+    node: ua.NodeId
+    counters: dict[str, ua.NodeId] = field(default_factory=dict)
+    #: What each counter last showed.
+    shown: dict[str, object] = field(default_factory=dict)
+
+
+#: A line's counters: name, variant type, description, unit.
+LINE_COUNTERS: Final[tuple[tuple[str, ua.VariantType, str, str], ...]] = (
+    ("Connected", ua.VariantType.Boolean, "the link to the line is up", ""),
+    ("DrivesOnline", ua.VariantType.UInt32, "drives the poller hears", ""),
+    ("Utilisation", ua.VariantType.Double, "share of time the line was busy (0..1)", ""),
+    ("Requests", ua.VariantType.UInt64, "requests sent", ""),
+    ("Replies", ua.VariantType.UInt64, "replies received", ""),
+    ("Timeouts", ua.VariantType.UInt64, "requests not answered in time", ""),
+    ("Retries", ua.VariantType.UInt64, "requests sent again", ""),
+    ("Naks", ua.VariantType.UInt64, "requests the drives refused", ""),
+    ("TransportErrors", ua.VariantType.UInt64, "link failures during a request", ""),
+    ("ProtocolErrors", ua.VariantType.UInt64, "replies that broke the protocol", ""),
+    ("BadFrames", ua.VariantType.UInt64, "frames that failed their check", ""),
+    ("EarlyFrames", ua.VariantType.UInt64, "replies before the request ended", ""),
+    ("StrayFrames", ua.VariantType.UInt64, "frames nobody asked for", ""),
+    ("DiscardedBytes", ua.VariantType.UInt64, "bytes that were no frame", ""),
+    ("Connects", ua.VariantType.UInt64, "times the link came up", ""),
+    ("Disconnects", ua.VariantType.UInt64, "times the link went down", ""),
+    ("LatencyMean", ua.VariantType.Double, "mean time from request to reply", "s"),
+)
+
+
+def _status(get: Callable[[DriveSnapshot], object]) -> Reader:
+    return lambda s: (get(s), s.status_at)
+
+
+def _monitor(get: Callable[[DriveSnapshot], object]) -> Reader:
+    return lambda s: (get(s), s.monitor_at)
+
+
+def _trip_slot(index: int, get: Callable[[Trip], object]) -> Reader:
+    def read(s: DriveSnapshot) -> tuple[object, float]:
+        records = s.trips.records if s.trips is not None else ()
+        return (get(records[index]) if index < len(records) else None), s.trips_at
+
+    return read
+
+
+def _parameter(code: str) -> Reader:
+    def read(s: DriveSnapshot) -> tuple[object, float]:
+        reading = s.parameters.get(code)
+        if reading is not None:
+            return reading.value, reading.at
+        if code in s.unavailable_parameters:
+            return None, s.taken_at
+        return None, -math.inf
+
+    return read
+
+
+def _direction(s: DriveSnapshot) -> tuple[object, float]:
+    direction: int | None = None if s.direction is None else int(s.direction)
+    return direction, s.direction_at
+
+
+def _active_trip(s: DriveSnapshot) -> tuple[object, float]:
+    if s.tripped is None:
+        return None, s.status_at
+    return (str(s.trip) if s.tripped and s.trip is not None else ""), s.status_at
+
+
+class _DriveBuilder:
+    """Adds one drive's nodes to a :class:`SpaceBuilder` and binds its variables."""
+
+    def __init__(self, space: SpaceBuilder, nodes: DriveNodes, path: str) -> None:
+        self.space = space
+        self.nodes = nodes
+        self.path = path
+
+    def var(
+        self,
+        parent: ua.NodeId,
+        path: str,
+        name: str,
+        vtype: ua.VariantType,
+        read: Reader,
+        *,
+        verdict: bool = False,
+        description: str = "",
+        unit: str = "",
+        value_range: tuple[float, float] | None = None,
+        states: Sequence[str] = (),
+        writable: bool = False,
+    ) -> ua.NodeId:
+        node = self.space.variable(
+            parent, f"{path}/{name}", name, vtype, description=description, unit=unit,
+            value_range=value_range, states=states, writable=writable,
+        )  # fmt: skip
+        self.nodes.bindings.append(Binding(node, vtype, read, verdict=verdict))
+        return node
+
+
+def build_drive(
+    space: SpaceBuilder, parent: ua.NodeId, parent_path: str, drive: GatewayDrive, *, control: bool
+) -> DriveNodes:
+    """Gather *drive*'s object under its line's object (see the module docstring)."""
+    profile = drive.profile
+    path = f"{parent_path}/Drive{drive.node}"
+    name = f"Drive{drive.node}"
+    node = space.component(
+        parent, path, name, f"{profile.name} drive {drive.node} on line {drive.line.name}"
+    )
+    nodes = DriveNodes(drive, node)
+    b = _DriveBuilder(space, nodes, path)
+    space.property(node, f"{path}/Line", "Line", drive.line.name, ua.VariantType.String)
+    space.property(node, f"{path}/Node", "Node", drive.node, ua.VariantType.Int32)
+    space.property(node, f"{path}/Protocol", "Protocol", drive.line.protocol, ua.VariantType.String)
+    space.property(node, f"{path}/UnitId", "UnitId", drive.unit, ua.VariantType.Int32)
+    b.var(node, path, "Online", ua.VariantType.Boolean, lambda s: (s.online, s.taken_at),
+          verdict=True, description="the poller hears the drive")  # fmt: skip
+
+    hz_range = (0.0, float(profile.max_frequency_hz))
+    monitoring = f"{path}/Monitoring"
+    folder = space.component(node, monitoring, "Monitoring", folder=True)
+    double, boolean = ua.VariantType.Double, ua.VariantType.Boolean
+    b.var(folder, monitoring, "ConverterOutputFrequency", double,
+          _monitor(lambda s: s.output_frequency_hz), unit="Hz", value_range=hz_range,
+          description="output frequency")  # fmt: skip
+    b.var(folder, monitoring, "FrequencyCommandValue", double,
+          lambda s: (s.set_frequency_hz, s.set_frequency_at), unit="Hz", value_range=hz_range,
+          description="the set frequency, as read back from the drive")  # fmt: skip
+    b.var(folder, monitoring, "ConverterOutputCurrent", double,
+          _monitor(lambda s: s.output_current_a), unit="A",
+          description="output current")  # fmt: skip
+    b.var(folder, monitoring, "ConverterOutputVoltage", double,
+          _monitor(lambda s: s.output_voltage_v), unit="V",
+          description="output voltage")  # fmt: skip
+    measures = profile.capabilities.measures
+    if "power_kw" in measures:
+        b.var(folder, monitoring, "ConverterOutputPower", double,
+              _monitor(lambda s: s.power_kw), unit="kW", description="output power")  # fmt: skip
+    if "output_torque_percent" in measures:
+        b.var(folder, monitoring, "OutputTorque", double,
+              _monitor(lambda s: s.output_torque_percent), unit="%",
+              description="output torque, percent of the motor's rated torque")  # fmt: skip
+    b.var(folder, monitoring, "ShaftTurningDirection", ua.VariantType.UInt16, _direction,
+          states=DIRECTION_STATES, description="0 stopped, 1 forward, 2 reverse")  # fmt: skip
+    b.var(folder, monitoring, "Running", boolean, _status(lambda s: s.running),
+          description="the drive runs (accelerating, at speed or decelerating)")  # fmt: skip
+    b.var(folder, monitoring, "Tripped", boolean, _status(lambda s: s.tripped),
+          description="the drive is tripped (a fault stopped it)")  # fmt: skip
+    b.var(folder, monitoring, "State", ua.VariantType.String, _status(lambda s: s.state_text()),
+          description="the state in words, the trip named")  # fmt: skip
+
+    logbook = f"{path}/Logbook"
+    folder = space.component(node, logbook, "Logbook", "the trip history", folder=True)
+    b.var(folder, logbook, "ActiveTrip", ua.VariantType.String, _active_trip,
+          description="the trip the drive is in, code and meaning (empty: none)")  # fmt: skip
+    b.var(folder, logbook, "TripCount", ua.VariantType.UInt32,
+          lambda s: (s.trips.total_count if s.trips else None, s.trips_at),
+          description="trips since the counter was cleared")  # fmt: skip
+    for slot in range(TRIP_SLOTS):
+        slot_path = f"{logbook}/Trip{slot + 1}"
+        trip = space.component(folder, slot_path, f"Trip{slot + 1}",
+                               "newest first" if slot == 0 else "")  # fmt: skip
+        string = ua.VariantType.String
+        b.var(trip, slot_path, "Code", string, _trip_slot(slot, lambda t: t.code))
+        b.var(trip, slot_path, "Meaning", string, _trip_slot(slot, lambda t: t.meaning))
+        b.var(trip, slot_path, "OutputFrequency", double,
+              _trip_slot(slot, lambda t: t.output_frequency_hz), unit="Hz")  # fmt: skip
+        b.var(trip, slot_path, "OutputCurrent", double,
+              _trip_slot(slot, lambda t: t.output_current_a), unit="A")  # fmt: skip
+        b.var(trip, slot_path, "OutputVoltage", double,
+              _trip_slot(slot, lambda t: t.output_voltage_v), unit="V")  # fmt: skip
+
+    granted = drive.line.writable_parameters(drive.node)
+    codes = list(dict.fromkeys((*drive.line.parameters, *sorted(granted))))
+    if codes:
+        parameters = f"{path}/Parameters"
+        folder = space.component(node, parameters, "Parameters", folder=True)
+        for code in codes:
+            spec: ParameterSpec = profile.parameters.spec(code)
+            writable = code in granted
+            variable = b.var(
+                folder, parameters, code, double, _parameter(code), unit=spec.unit,
+                value_range=(float(spec.minimum), float(spec.maximum)),
+                description=spec.name, writable=writable,
+            )  # fmt: skip
+            if writable:
+                nodes.writable[variable] = code
+    if control:
+        nodes.methods = _methods(space, node, path)
+    return nodes
+
+
+def _methods(space: SpaceBuilder, node: ua.NodeId, path: str) -> MethodNodes:
+    lease = Argument(
+        "LeaseSeconds", ua.VariantType.Double, "seconds the lease lasts unless renewed"
+    )
+    return MethodNodes(
+        take_control=space.method(
+            node, f"{path}/TakeControl", "TakeControl",
+            "take or renew the control lease (run and set frequency need it)", (), (lease,),
+        ),
+        run=space.method(
+            node, f"{path}/Run", "Run", "run forward or reverse (needs the lease)",
+            (Argument("Direction", ua.VariantType.String, "forward or reverse"),),
+        ),
+        stop=space.method(node, f"{path}/Stop", "Stop", "stop (needs no lease)"),
+        set_frequency=space.method(
+            node, f"{path}/SetFrequency", "SetFrequency", "set the frequency (needs the lease)",
+            (Argument("Frequency", ua.VariantType.Double, "Hz, 0.01 Hz steps"),),
+        ),
+    )  # fmt: skip
+
+
+def build_line(space: SpaceBuilder, parent: ua.NodeId, line: GatewayLine) -> LineNodes:
+    """Gather *line*'s object under the Lines folder (its drives are added by the caller)."""
+    config = line.config
+    path = config.name
+    node = space.object(parent, path, config.name, f"line {config.name} ({config.protocol})")
+    nodes = LineNodes(line, node)
+    space.property(node, f"{path}/Protocol", "Protocol", config.protocol, ua.VariantType.String)
+    space.property(node, f"{path}/Url", "Url", config.url, ua.VariantType.String)
+    for name, vtype, description, unit in LINE_COUNTERS:
+        nodes.counters[name] = space.variable(
+            node, f"{path}/{name}", name, vtype, description=description, unit=unit
+        )
+    return nodes
+
+
+def drive_bindings(drives: Sequence[DriveNodes]) -> Iterator[Binding]:
+    for nodes in drives:
+        yield from nodes.bindings

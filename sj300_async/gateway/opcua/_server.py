@@ -1,0 +1,478 @@
+"""The OPC UA northbound: an asyncua server over the gateway's drives.
+
+Decisions:
+
+- **Reads never wait for a push.** Each drive variable is served by a
+  read callback from its :class:`~._model.Binding`, which computes the
+  quality at the moment of the read (a value goes Uncertain when it ages
+  past ``stale_after_s`` whether or not a sample arrived). Subscriptions
+  are fed by pushing a value to asyncua only when its value or its status
+  changed: a sample that changes nothing costs no notification, and
+  OPC UA's default trigger (status and value) would drop a
+  timestamp-only change anyway.
+- **publish never blocks.** It compares and leaves the changed values in
+  an outbox (the latest per node); one task pushes them. A ticker (once a
+  second) pushes the quality changes time alone makes (stale,
+  Uncertain) and the lines' counters.
+- **Writes** are :mod:`._calls`'s; asyncua's own write path is kept for
+  nothing of ours (:mod:`._hooks`).
+- **Security**: :mod:`._security`; the certificate: :mod:`._certificate`.
+
+asyncua is imported with this module, when the northbound is created.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import contextlib
+import logging
+import math
+import socket
+import time
+from collections.abc import Iterable, Iterator
+from pathlib import Path
+from typing import TYPE_CHECKING, Any, Final
+
+from asyncua import Server, ua
+from asyncua.crypto import uacrypto
+from asyncua.server.address_space import NodeData
+from cryptography import x509
+
+from ...profiles import DriveSnapshot
+from .. import GatewayLine, GatewayStartError, GatewayView, busy_seconds
+from ._calls import Calls
+from ._certificate import ServerCertificate, load_or_generate
+from ._config import OpcuaConfig
+from ._hooks import on_session_closed, route_writes, rules_per_mode
+from ._model import (
+    LINE_COUNTERS,
+    Binding,
+    DriveNodes,
+    LineNodes,
+    build_drive,
+    build_line,
+)
+from ._quality import GOOD, utc
+from ._security import ChannelRules, Principal, Users
+from ._space import SpaceBuilder
+
+if TYPE_CHECKING:
+    from prometheus_client.core import Metric
+
+__all__ = ["OpcuaServer"]
+
+_log = logging.getLogger("sj300_async.gateway.opcua")
+
+#: How often the quality that time alone changes, and the lines' counters, are pushed.
+TICK_S: Final = 1.0
+_POLICIES: Final = {
+    "Basic256Sha256_SignAndEncrypt": ua.SecurityPolicyType.Basic256Sha256_SignAndEncrypt,
+    "Basic256Sha256_Sign": ua.SecurityPolicyType.Basic256Sha256_Sign,
+    "None": ua.SecurityPolicyType.NoSecurity,
+}
+_LINE_TYPES: Final = {name: vtype for name, vtype, _, _ in LINE_COUNTERS}
+_CONVERT: Final = {
+    ua.VariantType.Double: float,
+    ua.VariantType.Boolean: bool,
+    ua.VariantType.String: str,
+    ua.VariantType.UInt16: int,
+    ua.VariantType.UInt32: int,
+    ua.VariantType.UInt64: int,
+    ua.VariantType.Int32: int,
+}
+
+
+def _free_port(host: str) -> int:
+    """A port the system has free now (``port = 0``: the tests' way)."""
+    family = socket.AF_INET6 if ":" in host else socket.AF_INET
+    with socket.socket(family, socket.SOCK_STREAM) as probe:
+        probe.bind((host, 0))
+        port: int = probe.getsockname()[1]
+        return port
+
+
+def _load_trusted(directory: Path) -> set[bytes]:
+    """The DER bytes of every certificate in *directory* (DER or PEM files)."""
+    trusted = set()
+    for path in sorted(directory.iterdir()):
+        if not path.is_file():
+            continue
+        data = path.read_bytes()
+        try:
+            if data.lstrip().startswith(b"-----BEGIN"):
+                cert = x509.load_pem_x509_certificate(data)
+            else:
+                cert = x509.load_der_x509_certificate(data)
+        except ValueError:
+            _log.warning("opcua: %s is not a certificate; not trusted", path)
+            continue
+        trusted.add(uacrypto.der_from_x509(cert))
+    return trusted
+
+
+class OpcuaServer:
+    """The OPC UA northbound (see the module docstring)."""
+
+    def __init__(self, config: OpcuaConfig) -> None:
+        self.config = config
+        self.url = config.url
+        self.certificate: ServerCertificate | None = None
+        self.namespace = 0
+        self.stale_after_s = math.inf
+        self.startup_s = 0.0
+        #: Values pushed to asyncua for its subscriptions.
+        self.pushed = 0
+        #: Client certificates refused (not in trusted_clients).
+        self.untrusted = 0
+        self._server: Server | None = None
+        self._gateway: GatewayView | None = None
+        self._calls: Calls | None = None
+        self._users = Users(config.users)
+        self._drives: dict[tuple[str, int], DriveNodes] = {}
+        self._lines: list[LineNodes] = []
+        #: Writable parameter variables: node -> (its drive, the parameter's code).
+        self._writable: dict[ua.NodeId, tuple[DriveNodes, str]] = {}
+        self._outbox: dict[ua.NodeId, ua.DataValue] = {}
+        self._wake = asyncio.Event()
+        self._tasks: list[asyncio.Task[None]] = []
+        self._marks: dict[str, tuple[float, float]] = {}
+        self._loop: asyncio.AbstractEventLoop | None = None
+
+    # -- the northbound --------------------------------------------------------------
+
+    async def start(self, gateway: GatewayView) -> None:
+        began = time.perf_counter()
+        self._gateway = gateway
+        self._loop = asyncio.get_running_loop()
+        self.stale_after_s = gateway.config.stale_after_s
+        self._calls = Calls(gateway)
+        config = self.config
+        try:
+            self.certificate = await asyncio.to_thread(
+                load_or_generate,
+                config.certificate,
+                config.private_key,
+                f"urn:sj300-async:{gateway.config.gateway_id}",
+            )
+        except (OSError, ValueError) as exc:
+            raise GatewayStartError(
+                "opcua", (), f"cannot use the certificate {config.certificate}: {exc}"
+            ) from None
+        server = Server(user_manager=self._users)
+        await server.init()
+        self._server = server
+        try:
+            await self._configure(server, gateway)
+            await self._build(server, gateway)
+            await self._listen(server)
+        except BaseException:
+            with contextlib.suppress(Exception):
+                await server.stop()
+            self._server = None
+            raise
+        loop = asyncio.get_running_loop()
+        self._tasks = [
+            loop.create_task(self._push(), name="opcua push"),
+            loop.create_task(self._tick(), name="opcua tick"),
+        ]
+        self.startup_s = time.perf_counter() - began
+
+    async def _configure(self, server: Server, gateway: GatewayView) -> None:
+        config = self.config
+        certificate = self.certificate
+        assert certificate is not None
+        server.set_server_name(f"sj300 gateway {gateway.config.gateway_id}")
+        await server.set_application_uri(certificate.application_uri)
+        server.product_uri = "urn:sj300-async"
+        await server.load_certificate(str(certificate.certificate))
+        await server.load_private_key(str(certificate.private_key))
+        # Until each endpoint's own ruleset is in place, every channel counts as
+        # unencrypted: a request in that moment can read, never write.
+        server.set_security_policy(
+            [_POLICIES[mode] for mode in config.security],
+            permission_ruleset=ChannelRules(ua.MessageSecurityMode.None_),
+        )
+        tokens: list[type] = [ua.AnonymousIdentityToken]
+        if config.users:
+            tokens.append(ua.UserNameIdentityToken)
+        server.set_identity_tokens(tokens)
+        server.iserver.max_connections = config.max_connections
+        if config.trusted_clients is not None:
+            trusted = await asyncio.to_thread(_load_trusted, config.trusted_clients)
+
+            async def validate(cert: x509.Certificate, description: Any) -> None:
+                if uacrypto.der_from_x509(cert) not in trusted:
+                    self.untrusted += 1
+                    _log.info("opcua: refused an untrusted client certificate (%s)", cert.subject)
+                    raise ua.uaerrors.BadCertificateUntrusted
+
+            server.set_certificate_validator(validate)
+        self.namespace = await server.register_namespace(config.namespace)
+
+    async def _build(self, server: Server, gateway: GatewayView) -> None:
+        space = SpaceBuilder(self.namespace)
+        objects = server.nodes.objects.nodeid
+        lines = space.folder(objects, "Lines", "Lines", "the gateway's RS-485 lines")
+        for line in gateway.lines:
+            line_nodes = build_line(space, lines, line)
+            self._lines.append(line_nodes)
+            for drive in line.drives.values():
+                control = line.config.control_allowed(drive.node)
+                self._drives[drive.key] = build_drive(
+                    space, line_nodes.node, line.config.name, drive, control=control
+                )
+        await space.commit(server.nodes.objects.session)
+        for nodes in self._drives.values():
+            self._bind(server, nodes)
+            for node, code in nodes.writable.items():
+                self._writable[node] = (nodes, code)
+        route_writes(server, self.namespace, self._write)
+        on_session_closed(server, self._session_closed)
+
+    def _bind(self, server: Server, nodes: DriveNodes) -> None:
+        drive = nodes.drive
+        for binding in nodes.bindings:
+            binding.take(drive.snapshot)
+            server.set_attribute_value_callback(binding.node, self._reader(binding))
+            server.set_attribute_value_setter(binding.node, _keep)
+        calls = self._calls
+        methods = nodes.methods
+        if methods is None or calls is None:
+            return
+        for node, handler in (
+            (methods.take_control, calls.take_control),
+            (methods.run, calls.run),
+            (methods.stop, calls.stop),
+            (methods.set_frequency, calls.set_frequency),
+        ):
+
+            async def call(parent: ua.NodeId, *args: Any, _handler: Any = handler) -> Any:
+                return await _handler(drive, args)
+
+            server.link_method(server.get_node(node), call)
+
+    async def _listen(self, server: Server) -> None:
+        config = self.config
+        port = config.endpoint.port
+        for attempt in range(3):
+            chosen = port or _free_port(config.endpoint.host)
+            host = f"[{config.host_text}]" if ":" in config.host_text else config.host_text
+            self.url = f"opc.tcp://{host}:{chosen}"
+            server.set_endpoint(self.url)
+            try:
+                await server.start()
+            except OSError as exc:
+                if port == 0 and attempt < 2:  # the free port was taken meanwhile
+                    continue
+                raise GatewayStartError.of("opcua", (config.endpoint,), exc) from None
+            break
+        rules_per_mode(server, ChannelRules)
+
+    def announce(self) -> str | None:
+        certificate = self.certificate
+        modes = ", ".join(self.config.security)
+        line = f"opcua on {self.url} ({modes})"
+        if certificate is not None:
+            made = "generated" if certificate.generated else "certificate"
+            line += f"; {made} {certificate.certificate} (SHA-1 {certificate.thumbprint})"
+        return line
+
+    def publish(self, snapshot: DriveSnapshot) -> None:
+        nodes = self._drives.get((snapshot.line, snapshot.node))
+        if nodes is None or self._server is None:
+            return
+        now = asyncio.get_running_loop().time()
+        changed = False
+        for binding in nodes.bindings:
+            binding.take(snapshot)
+            changed |= self._stage(binding, now)
+        if changed:
+            self._wake.set()
+
+    def metrics(self) -> Iterable[Metric]:
+        from prometheus_client.core import CounterMetricFamily, GaugeMetricFamily
+
+        sessions = GaugeMetricFamily(
+            "sj300_opcua_sessions", "OPC UA sessions open (asyncua's external sessions)."
+        )
+        sessions.add_metric([], self.session_count)
+        yield sessions
+        results = CounterMetricFamily(
+            "sj300_opcua_writes",
+            "Method calls and variable writes, by the status code answered.",
+            labels=["status"],
+        )
+        for status, count in sorted((self._calls.results if self._calls else {}).items()):
+            results.add_metric([status], count)
+        yield results
+        pushed = CounterMetricFamily(
+            "sj300_opcua_values_pushed", "Changed values pushed to subscriptions."
+        )
+        pushed.add_metric([], self.pushed)
+        yield pushed
+        refused = CounterMetricFamily(
+            "sj300_opcua_refused_logins",
+            "Sessions refused: a wrong user or password, an untrusted certificate.",
+            labels=["reason"],
+        )
+        refused.add_metric(["password"], self._users.refused)
+        refused.add_metric(["certificate"], self.untrusted)
+        yield refused
+
+    async def close(self) -> None:
+        for task in self._tasks:
+            task.cancel()
+        for task in self._tasks:
+            with contextlib.suppress(asyncio.CancelledError):
+                await task
+        self._tasks = []
+        server, self._server = self._server, None
+        if server is not None:
+            await server.stop()
+
+    # -- what the tests and the benchmark read ---------------------------------------
+
+    @property
+    def session_count(self) -> int:
+        server = self._server
+        if server is None:
+            return 0
+        return len(server.iserver._external_sessions)
+
+    @property
+    def node_count(self) -> int:
+        server = self._server
+        if server is None:
+            return 0
+        return sum(
+            1
+            for node in server.iserver.aspace.keys()  # noqa: SIM118 - it has no __iter__
+            if node.NamespaceIndex == self.namespace
+        )
+
+    # -- values ----------------------------------------------------------------------
+
+    def _datavalue(self, binding: Binding, status: int) -> ua.DataValue:
+        if status & 0x80000000:  # Bad: no value (Part 4, 7.7.1)
+            variant = ua.Variant(None, ua.VariantType.Null)
+        else:
+            variant = ua.Variant(_CONVERT[binding.vtype](binding.value), binding.vtype)
+        return ua.DataValue(
+            Value=variant,
+            StatusCode=ua.StatusCode(status),
+            SourceTimestamp=utc(binding.wall),
+            ServerTimestamp=utc(time.time()),
+        )
+
+    def _reader(self, binding: Binding) -> Any:
+        def read(node: ua.NodeId, attribute: ua.AttributeIds) -> ua.DataValue:
+            assert self._loop is not None
+            return self._datavalue(binding, binding.status(self._loop.time(), self.stale_after_s))
+
+        return read
+
+    def _stage(self, binding: Binding, now: float) -> bool:
+        """Leave *binding*'s value in the outbox when it or its status changed."""
+        status = binding.status(now, self.stale_after_s)
+        shown = (binding.value, status)
+        if shown == binding.pushed:
+            return False
+        binding.pushed = shown
+        self._outbox[binding.node] = self._datavalue(binding, status)
+        return True
+
+    async def _push(self) -> None:
+        server = self._server
+        assert server is not None
+        while True:
+            await self._wake.wait()
+            self._wake.clear()
+            outbox, self._outbox = self._outbox, {}
+            for node, value in outbox.items():
+                await server.write_attribute_value(node, value)
+            self.pushed += len(outbox)
+
+    async def _tick(self) -> None:
+        while True:
+            await asyncio.sleep(TICK_S)
+            assert self._loop is not None
+            now = self._loop.time()
+            changed = False
+            for nodes in self._drives.values():
+                for binding in nodes.bindings:
+                    changed |= self._stage(binding, now)
+            for line in self._lines:
+                changed |= self._tick_line(line, now)
+            if changed:
+                self._wake.set()
+
+    def _tick_line(self, nodes: LineNodes, now: float) -> bool:
+        values = dict(_line_values(nodes.line))
+        name = nodes.line.config.name
+        busy = busy_seconds(nodes.line.bus)
+        mark = self._marks.get(name)
+        if mark is not None and now > mark[0]:
+            values["Utilisation"] = min(1.0, (busy - mark[1]) / (now - mark[0]))
+        self._marks[name] = (now, busy)
+        changed = False
+        stamp = utc(time.time())
+        for key, value in values.items():
+            if value is None or nodes.shown.get(key) == value:
+                continue
+            nodes.shown[key] = value
+            vtype = _LINE_TYPES[key]
+            self._outbox[nodes.counters[key]] = ua.DataValue(
+                Value=ua.Variant(_CONVERT[vtype](value), vtype),
+                StatusCode=ua.StatusCode(GOOD),
+                SourceTimestamp=stamp,
+                ServerTimestamp=stamp,
+            )
+            changed = True
+        return changed
+
+    # -- writes and sessions ---------------------------------------------------------
+
+    async def _write(self, value: ua.WriteValue, user: Any) -> ua.StatusCode:
+        writable = self._writable.get(value.NodeId)
+        if writable is not None:
+            nodes, code = writable
+            if value.AttributeId != ua.AttributeIds.Value or value.IndexRange:
+                return ua.StatusCode(ua.StatusCodes.BadWriteNotSupported)
+            assert self._calls is not None
+            variant = value.Value.Value if value.Value is not None else None
+            if variant is None:
+                variant = ua.Variant(None, ua.VariantType.Null)
+            return ua.StatusCode(await self._calls.write_parameter(nodes.drive, code, variant))
+        if self._server is not None and value.NodeId in self._server.iserver.aspace:
+            return ua.StatusCode(ua.StatusCodes.BadNotWritable)
+        return ua.StatusCode(ua.StatusCodes.BadNodeIdUnknown)
+
+    def _session_closed(self, user: Any) -> None:
+        if isinstance(user, Principal) and self._gateway is not None and not user.anonymous:
+            self._gateway.disconnected(user.connection)
+
+
+def _keep(node: NodeData, attribute: ua.AttributeIds, value: ua.DataValue) -> None:
+    """The value setter of a drive's variable: its binding holds the value, not asyncua."""
+
+
+def _line_values(line: GatewayLine) -> Iterator[tuple[str, object]]:
+    bus = line.bus
+    stats = bus.stats
+    transactions = stats.transactions
+    yield "Connected", bus.connected
+    yield "DrivesOnline", sum(1 for drive in line.drives.values() if drive.snapshot.available)
+    yield "Requests", transactions.requests
+    yield "Replies", transactions.replies
+    yield "Timeouts", transactions.timeouts
+    yield "Retries", transactions.retries
+    yield "Naks", sum(transactions.naks.values())
+    yield "TransportErrors", transactions.transport_errors
+    yield "ProtocolErrors", transactions.protocol_errors
+    yield "BadFrames", stats.bad_frames
+    yield "EarlyFrames", stats.early_frames
+    yield "StrayFrames", stats.stray_frames
+    yield "DiscardedBytes", stats.discarded_bytes
+    yield "Connects", stats.connects
+    yield "Disconnects", stats.disconnects
+    yield "LatencyMean", transactions.latency_mean_s
