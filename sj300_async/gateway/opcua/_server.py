@@ -52,7 +52,7 @@ from ._model import (
     build_drive,
     build_line,
 )
-from ._quality import GOOD, utc
+from ._quality import BAD_WAITING, GOOD, utc
 from ._security import ChannelRules, Principal, Users
 from ._space import SpaceBuilder
 
@@ -136,6 +136,8 @@ class OpcuaServer:
         self._wake = asyncio.Event()
         self._tasks: list[asyncio.Task[None]] = []
         self._marks: dict[str, tuple[float, float]] = {}
+        #: Each line's share of busy time over the last tick.
+        self._utilisation: dict[str, float] = {}
         self._loop: asyncio.AbstractEventLoop | None = None
 
     # -- the northbound --------------------------------------------------------------
@@ -222,6 +224,10 @@ class OpcuaServer:
                     space, line_nodes.node, line.config.name, drive, control=control
                 )
         await space.commit(server.nodes.objects.session)
+        for line_nodes in self._lines:
+            for name, counter in line_nodes.counters.items():
+                server.set_attribute_value_callback(counter, self._line_reader(line_nodes, name))
+                server.set_attribute_value_setter(counter, _keep)
         for nodes in self._drives.values():
             self._bind(server, nodes)
             for node, code in nodes.writable.items():
@@ -406,27 +412,50 @@ class OpcuaServer:
             if changed:
                 self._wake.set()
 
-    def _tick_line(self, nodes: LineNodes, now: float) -> bool:
+    def _line_values(self, nodes: LineNodes) -> dict[str, object]:
+        """A line's counters now, its utilisation over the last tick."""
         values = dict(_line_values(nodes.line))
+        mark = self._utilisation.get(nodes.line.config.name)
+        if mark is not None:
+            values["Utilisation"] = mark
+        return values
+
+    def _line_datavalue(self, name: str, value: object) -> ua.DataValue:
+        vtype = _LINE_TYPES[name]
+        stamp = utc(time.time())
+        if value is None:
+            return ua.DataValue(
+                Value=ua.Variant(None, ua.VariantType.Null),
+                StatusCode=ua.StatusCode(BAD_WAITING),
+                SourceTimestamp=stamp,
+                ServerTimestamp=stamp,
+            )
+        return ua.DataValue(
+            Value=ua.Variant(_CONVERT[vtype](value), vtype),
+            StatusCode=ua.StatusCode(GOOD),
+            SourceTimestamp=stamp,
+            ServerTimestamp=stamp,
+        )
+
+    def _line_reader(self, nodes: LineNodes, name: str) -> Any:
+        def read(node: ua.NodeId, attribute: ua.AttributeIds) -> ua.DataValue:
+            return self._line_datavalue(name, self._line_values(nodes).get(name))
+
+        return read
+
+    def _tick_line(self, nodes: LineNodes, now: float) -> bool:
         name = nodes.line.config.name
         busy = busy_seconds(nodes.line.bus)
         mark = self._marks.get(name)
         if mark is not None and now > mark[0]:
-            values["Utilisation"] = min(1.0, (busy - mark[1]) / (now - mark[0]))
+            self._utilisation[name] = min(1.0, (busy - mark[1]) / (now - mark[0]))
         self._marks[name] = (now, busy)
         changed = False
-        stamp = utc(time.time())
-        for key, value in values.items():
+        for key, value in self._line_values(nodes).items():
             if value is None or nodes.shown.get(key) == value:
                 continue
             nodes.shown[key] = value
-            vtype = _LINE_TYPES[key]
-            self._outbox[nodes.counters[key]] = ua.DataValue(
-                Value=ua.Variant(_CONVERT[vtype](value), vtype),
-                StatusCode=ua.StatusCode(GOOD),
-                SourceTimestamp=stamp,
-                ServerTimestamp=stamp,
-            )
+            self._outbox[nodes.counters[key]] = self._line_datavalue(key, value)
             changed = True
         return changed
 

@@ -1,0 +1,257 @@
+"""The OPC UA address space through asyncua's client: the model, values, time, quality, changes."""
+
+from __future__ import annotations
+
+import asyncio
+import contextlib
+import time
+from collections.abc import AsyncIterator
+from datetime import datetime
+from pathlib import Path
+from typing import Any
+
+from asyncua import Client, ua
+from waiting import wait_for
+
+from sj300_async.simulator import serve_tcp
+from sj300_async.simulator.sj300 import SimulatedBus
+
+from .conftest import NAMESPACE, PASSWORD, USER, Pair, connected, opcua_gateway, opcua_toml
+
+HZ_UNIT_ID = (ord("H") << 16) | (ord("T") << 8) | ord("Z")
+
+
+@contextlib.asynccontextmanager
+async def tcp_line() -> AsyncIterator[tuple[SimulatedBus, str]]:
+    """Drives 1..4 simulated behind TCP: the test reaches the simulated line."""
+    sim = SimulatedBus(range(1, 5))
+    server = await serve_tcp(sim)
+    async with server:
+        yield sim, f"tcp://127.0.0.1:{server.port}"
+
+
+async def _namespace(client: Client) -> int:
+    index: int = await client.get_namespace_index(NAMESPACE)
+    return index
+
+
+def _var(client: Client, ns: int, path: str) -> Any:
+    return client.get_node(ua.NodeId(path, ns))
+
+
+async def _names(node: Any) -> set[str]:
+    return {(await child.read_browse_name()).Name for child in await node.get_children()}
+
+
+async def test_the_model_follows_opc_40400_with_units_and_ranges(tmp_path: Path) -> None:
+    async with (
+        opcua_gateway(opcua_toml(tmp_path)) as (_, server),
+        connected(server.url) as client,
+    ):
+        ns = await _namespace(client)
+        lines = await client.nodes.objects.get_child([f"{ns}:Lines"])
+        assert await _names(lines) == {"hall"}
+        hall = await lines.get_child([f"{ns}:hall"])
+        assert {"Drive1", "Drive2", "Drive3", "Drive4", "Protocol", "Url", "Requests"} <= (
+            await _names(hall)
+        )
+        drive = _var(client, ns, "hall/Drive1")
+        assert {"Monitoring", "Logbook", "Parameters", "Online", "Line", "Node", "Protocol"} <= (
+            await _names(drive)
+        )
+        assert {"TakeControl", "Run", "Stop", "SetFrequency"} <= await _names(drive)
+        # Drive 3's line grants it nothing: no methods, no writable parameter.
+        assert not {"TakeControl", "Run", "Stop", "SetFrequency"} & await _names(
+            _var(client, ns, "hall/Drive3")
+        )
+        monitoring = _var(client, ns, "hall/Drive1/Monitoring")
+        assert {
+            "ConverterOutputFrequency", "FrequencyCommandValue", "ConverterOutputCurrent",
+            "ConverterOutputVoltage", "ShaftTurningDirection", "Running", "Tripped", "State",
+        } <= await _names(monitoring)  # fmt: skip
+        frequency = _var(client, ns, "hall/Drive1/Monitoring/ConverterOutputFrequency")
+        eu = await (await frequency.get_child(["0:EngineeringUnits"])).read_value()
+        assert (eu.UnitId, eu.DisplayName.Text) == (HZ_UNIT_ID, "Hz")
+        assert eu.NamespaceUri == "http://www.opcfoundation.org/UA/units/un/cefact"
+        hz_range = await (await frequency.get_child(["0:EURange"])).read_value()
+        assert (hz_range.Low, hz_range.High) == (0.0, 400.0)  # SJ300's highest
+        assert await frequency.read_type_definition() == ua.NodeId(17497)  # AnalogUnitType
+        assert await frequency.read_data_type() == ua.NodeId(ua.ObjectIds.Double)
+        amps = await _var(client, ns, "hall/Drive1/Monitoring/ConverterOutputCurrent").get_child(
+            ["0:EngineeringUnits"]
+        )
+        assert (await amps.read_value()).DisplayName.Text == "A"
+        direction = _var(client, ns, "hall/Drive1/Monitoring/ShaftTurningDirection")
+        states = await (await direction.get_child(["0:EnumStrings"])).read_value()
+        assert [text.Text for text in states] == ["stopped", "forward", "reverse"]
+        # The parameters in their units, with the catalogue's range; F002 granted.
+        a004 = _var(client, ns, "hall/Drive1/Parameters/A004")
+        assert (await (await a004.get_child(["0:EngineeringUnits"])).read_value()).UnitId == (
+            HZ_UNIT_ID
+        )
+        access = await _var(client, ns, "hall/Drive1/Parameters/F002").read_attribute(
+            ua.AttributeIds.AccessLevel
+        )
+        assert access.Value.Value & ua.AccessLevel.CurrentWrite.mask
+        access = await a004.read_attribute(ua.AttributeIds.AccessLevel)
+        assert not access.Value.Value & ua.AccessLevel.CurrentWrite.mask
+        # The trip history, one object per record.
+        logbook = _var(client, ns, "hall/Drive1/Logbook")
+        assert {"ActiveTrip", "TripCount", "Trip1", "Trip8"} <= await _names(logbook)
+        assert await _names(_var(client, ns, "hall/Drive1/Logbook/Trip1")) == {
+            "Code", "Meaning", "OutputFrequency", "OutputCurrent", "OutputVoltage",
+        }  # fmt: skip
+        assert server.node_count > 4 * 80
+
+
+async def test_values_carry_the_time_they_were_read_and_good_quality(tmp_path: Path) -> None:
+    async with opcua_gateway(opcua_toml(tmp_path)) as (gateway, server):
+        drive = gateway.drive("hall", 1)
+        assert drive is not None
+        await wait_for(lambda: drive.snapshot.last_ok is not None, "a first sample")
+        async with connected(server.url) as client:
+            ns = await _namespace(client)
+            before = time.time()
+            value = await _var(
+                client, ns, "hall/Drive1/Monitoring/ConverterOutputVoltage"
+            ).read_data_value()
+            snapshot = drive.snapshot
+            assert value.StatusCode.is_good()
+            assert value.Value.Value == snapshot.output_voltage_v
+            source: datetime = value.SourceTimestamp
+            served: datetime = value.ServerTimestamp
+            # Read from the drive at the monitor read, before it was served.
+            assert source.timestamp() <= served.timestamp()
+            assert source.timestamp() <= before
+            assert before - source.timestamp() < 1.0
+            assert (await _var(client, ns, "hall/Drive1/Online").read_value()) is True
+            state = await _var(client, ns, "hall/Drive1/Monitoring/State").read_value()
+            assert state == snapshot.state_text() == "stopped"
+            properties = [
+                await _var(client, ns, f"hall/Drive1/{name}").read_value()
+                for name in ("Line", "Node", "Protocol", "UnitId")
+            ]
+            assert properties == ["hall", 1, "sj300", 1]
+            requests = await _var(client, ns, "hall/Requests").read_value()
+            assert requests > 0
+            # A polled parameter in its unit.
+            a004 = await _var(client, ns, "hall/Drive1/Parameters/A004").read_data_value()
+            assert a004.StatusCode.is_good()
+            assert a004.Value.Value == snapshot.parameters["A004"].value
+            # An empty trip slot has no value and says so.
+            slot = await _var(client, ns, "hall/Drive1/Logbook/Trip8/Code").read_data_value(
+                raise_on_bad_status=False
+            )
+            assert slot.StatusCode.value in (
+                ua.StatusCodes.BadDataUnavailable, ua.StatusCodes.BadWaitingForInitialData,
+            )  # fmt: skip
+            assert slot.Value.Value is None
+
+
+async def test_a_silent_drive_goes_uncertain_then_bad_no_communication(tmp_path: Path) -> None:
+    """Stale past stale_after_s while the poller still waits for it; offline once it gives up."""
+    async with tcp_line() as (sim, url):
+        text = opcua_toml(
+            tmp_path, url=url, gateway_extra="stale_after_s = 0.3", line_extra="timeout_s = 0.6"
+        )
+        async with opcua_gateway(text) as (gateway, server), connected(server.url) as client:
+            ns = await _namespace(client)
+            drive = gateway.drive("hall", 3)
+            assert drive is not None
+            await wait_for(lambda: drive.snapshot.last_ok is not None, "a first sample")
+            voltage = _var(client, ns, "hall/Drive3/Monitoring/ConverterOutputVoltage")
+            assert (await voltage.read_data_value()).StatusCode.is_good()
+            last = drive.snapshot.output_voltage_v
+            sim.faults.silence(3)
+            seen: list[ua.DataValue] = []
+
+            async def status_is(code: int) -> bool:
+                value = await voltage.read_data_value(raise_on_bad_status=False)
+                seen.append(value)
+                return bool(value.StatusCode.value == code)
+
+            deadline = asyncio.get_running_loop().time() + 10
+            while not await status_is(ua.StatusCodes.UncertainLastUsableValue):
+                assert asyncio.get_running_loop().time() < deadline, seen[-1]
+                await asyncio.sleep(0.02)
+            assert seen[-1].Value.Value == last  # the last usable value, flagged
+            uncertain = len(seen) - 1
+            assert drive.snapshot.online  # the poller has not given up yet
+            deadline = asyncio.get_running_loop().time() + 20
+            while not await status_is(ua.StatusCodes.BadNoCommunication):
+                assert asyncio.get_running_loop().time() < deadline, seen[-1]
+                await asyncio.sleep(0.05)
+            assert seen[-1].Value.Value is None
+            assert not drive.snapshot.online
+            online = await _var(client, ns, "hall/Drive3/Online").read_data_value()
+            assert (online.Value.Value, online.StatusCode.is_good()) == (False, True)
+            # Never served as Good again meanwhile.
+            assert all(v.StatusCode.value != ua.StatusCodes.Good for v in seen[uncertain:]), [
+                (hex(v.StatusCode.value), v.Value.Value) for v in seen[uncertain:]
+            ]
+            # The others stay online (their values may age while node 3's time-outs
+            # hold the line, past this test's short stale_after_s: Uncertain, not Bad).
+            other = await _var(client, ns, "hall/Drive2/Monitoring/State").read_data_value(
+                raise_on_bad_status=False
+            )
+            assert not other.StatusCode.is_bad()
+            # It comes back.
+            sim.faults.silence(3, False)
+            await wait_for(lambda: drive.snapshot.online, "node 3 back", timeout=10)
+            await wait_for(lambda: drive.snapshot.online and drive.snapshot.monitor_at > 0)
+            deadline = asyncio.get_running_loop().time() + 10
+            while not await status_is(ua.StatusCodes.Good):
+                assert asyncio.get_running_loop().time() < deadline, seen[-1]
+                await asyncio.sleep(0.05)
+
+
+class _Notifications:
+    """asyncua's subscription handler: every data change with its receive time."""
+
+    def __init__(self) -> None:
+        self.changes: list[tuple[Any, float, ua.DataValue]] = []
+
+    def datachange_notification(self, node: Any, value: Any, data: Any) -> None:
+        self.changes.append((value, time.time(), data.monitored_item.Value))
+
+
+async def test_a_subscription_follows_a_running_drive(tmp_path: Path, client_pair: Pair) -> None:
+    async with (
+        opcua_gateway(opcua_toml(tmp_path)) as (gateway, server),
+        connected(server.url, pair=client_pair, user=USER, password=PASSWORD) as client,
+    ):
+        ns = await _namespace(client)
+        drive = gateway.drive("hall", 1)
+        assert drive is not None
+        await wait_for(lambda: drive.snapshot.last_ok is not None, "a first sample")
+        handler = _Notifications()
+        subscription = await client.create_subscription(50, handler)
+        frequency = _var(client, ns, "hall/Drive1/Monitoring/ConverterOutputFrequency")
+        running = _var(client, ns, "hall/Drive1/Monitoring/Running")
+        await subscription.subscribe_data_change([frequency, running])
+        await wait_for(lambda: len(handler.changes) >= 2, "the initial values")
+        assert {change[0] for change in handler.changes} == {0.0}
+        count = len(handler.changes)
+        node = _var(client, ns, "hall/Drive1")
+        assert await node.call_method(f"{ns}:TakeControl") == 5.0
+        await node.call_method(f"{ns}:SetFrequency", ua.Variant(3.0, ua.VariantType.Double))
+        await node.call_method(f"{ns}:Run", "forward")
+        await wait_for(lambda: any(c[0] is True for c in handler.changes[count:]), "Running: true")
+        await wait_for(
+            lambda: any(isinstance(c[0], float) and c[0] >= 2.99 for c in handler.changes),
+            "the frequency ramped to 3 Hz",
+            timeout=15,
+        )
+        rising = [c for c in handler.changes[count:] if isinstance(c[0], float)]
+        assert len(rising) >= 3  # followed, not only the end
+        values = [c[0] for c in rising]
+        assert values == sorted(values)
+        for _, received, data in rising:
+            # Each notification's source time is its sample's, before it was received.
+            assert data.SourceTimestamp.timestamp() <= received
+        # A sample that changes nothing notifies nothing: at 3 Hz the value stands.
+        settled = len(handler.changes)
+        polls = drive.snapshot.taken_at
+        await wait_for(lambda: drive.snapshot.taken_at > polls + 0.3, "three more samples")
+        assert [c[0] for c in handler.changes[settled:] if isinstance(c[0], float)] == []
+        await node.call_method(f"{ns}:Stop")
