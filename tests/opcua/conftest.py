@@ -25,6 +25,8 @@ from cryptography.x509.oid import ExtendedKeyUsageOID
 
 from sj300_async.gateway import Gateway, hash_password, parse_config
 from sj300_async.gateway.opcua._server import OpcuaServer
+from sj300_async.simulator import serve_tcp
+from sj300_async.simulator.sj300 import SimulatedBus
 
 #: The user every secure test logs in as, and the password.
 USER = "operator"
@@ -163,3 +165,12 @@ async def connected(
 def node(client: Client, namespace: int, path: str) -> object:
     """The client's node of a drive variable by its path (``hall/Drive1/Monitoring/State``)."""
     return client.get_node(ua.NodeId(path, namespace))
+
+
+@contextlib.asynccontextmanager
+async def tcp_line() -> AsyncIterator[tuple[SimulatedBus, str]]:
+    """Drives 1..4 simulated behind TCP (``url``): the test reaches the simulated line."""
+    sim = SimulatedBus(range(1, 5))
+    server = await serve_tcp(sim)
+    async with server:
+        yield sim, f"tcp://127.0.0.1:{server.port}"

@@ -3,9 +3,7 @@
 from __future__ import annotations
 
 import asyncio
-import contextlib
 import time
-from collections.abc import AsyncIterator
 from datetime import datetime
 from pathlib import Path
 from typing import Any
@@ -13,21 +11,18 @@ from typing import Any
 from asyncua import Client, ua
 from waiting import wait_for
 
-from sj300_async.simulator import serve_tcp
-from sj300_async.simulator.sj300 import SimulatedBus
-
-from .conftest import NAMESPACE, PASSWORD, USER, Pair, connected, opcua_gateway, opcua_toml
+from .conftest import (
+    NAMESPACE,
+    PASSWORD,
+    USER,
+    Pair,
+    connected,
+    opcua_gateway,
+    opcua_toml,
+    tcp_line,
+)
 
 HZ_UNIT_ID = (ord("H") << 16) | (ord("T") << 8) | ord("Z")
-
-
-@contextlib.asynccontextmanager
-async def tcp_line() -> AsyncIterator[tuple[SimulatedBus, str]]:
-    """Drives 1..4 simulated behind TCP: the test reaches the simulated line."""
-    sim = SimulatedBus(range(1, 5))
-    server = await serve_tcp(sim)
-    async with server:
-        yield sim, f"tcp://127.0.0.1:{server.port}"
 
 
 async def _namespace(client: Client) -> int:

@@ -128,7 +128,9 @@ class Calls:
         #: Calls and writes by their status code's name (``Good``, ``BadLocked``...).
         self.results: Counter[str] = Counter()
 
-    def _caller(self, drive: GatewayDrive, what: str, value: object) -> Caller:
+    @staticmethod
+    def _caller() -> Caller:
+        """The caller, who may write (else refused: anonymous, or not encrypted)."""
         caller = current_caller()
         if caller is None or caller.principal.anonymous:
             raise _Refused(
@@ -148,10 +150,8 @@ class Calls:
         self, drive: GatewayDrive, what: str, value: object, request: WriteRequest
     ) -> int:
         """Refuse here or hand *request* to the gateway; the status code of the outcome."""
-        client = "opcua:anonymous"
         try:
-            caller = self._caller(drive, what, value)
-            client = caller.principal.client
+            caller = self._caller()
             if _moves(request) and not drive.snapshot.online:
                 raise _Refused(
                     ua.StatusCodes.BadNoCommunication,
@@ -159,12 +159,9 @@ class Calls:
                     "the drive is offline: nothing was sent",
                 )
         except _Refused as refused:
-            self.gateway.refused(client, drive, f"opcua {what}", value, refused.result)
-            _log.debug("opcua %s to %s %s refused: %s", what, *drive.key, refused.result)
-            self.results[_status_name(refused.status)] += 1
-            return refused.status
+            return self._refuse(drive, what, value, refused)
         result = await self.gateway.write(
-            client, drive, request, connection=caller.principal.connection
+            caller.principal.client, drive, request, connection=caller.principal.connection
         )
         status = refusal_status(result.refusal)
         self.results[_status_name(status)] += 1
@@ -184,9 +181,12 @@ class Calls:
             return self._refuse(drive, what, args, refused)
 
     def _refuse(self, drive: GatewayDrive, what: str, value: object, refused: _Refused) -> int:
+        """Audit and count a refusal made here; its status code."""
         caller = current_caller()
         client = caller.principal.client if caller is not None else "opcua:anonymous"
-        self.gateway.refused(client, drive, f"opcua {what}", excerpt(repr(value)), refused.result)
+        shown = None if value is None else excerpt(repr(value))
+        self.gateway.refused(client, drive, f"opcua {what}", shown, refused.result)
+        _log.debug("opcua %s to %s %s refused: %s", what, *drive.key, refused.result)
         self.results[_status_name(refused.status)] += 1
         return refused.status
 
@@ -242,7 +242,20 @@ class Calls:
             return ua.StatusCode(self._refuse(drive, "SetFrequency", hz, refused))
         return ua.StatusCode(await self._judge(drive, "SetFrequency", hz, SetFrequency(hz)))
 
-    # -- the writable parameter variables -------------------------------------------
+    # -- the variables ----------------------------------------------------------------
+
+    def count(self, status: int) -> None:
+        """Count a refusal made without a drive to audit it against (an unknown node)."""
+        self.results[_status_name(status)] += 1
+
+    def not_writable(self, drive: GatewayDrive, name: str) -> int:
+        """A write to one of *drive*'s read-only variables: refused and audited."""
+        refused = _Refused(
+            ua.StatusCodes.BadNotWritable,
+            Refusal.NOT_ALLOWED,
+            f"{name} is read-only here (granted parameters are the writable ones)",
+        )
+        return self._refuse(drive, name, None, refused)
 
     async def write_parameter(self, drive: GatewayDrive, code: str, variant: ua.Variant) -> int:
         """A client's write of parameter *code*'s variable: the status code of the outcome."""

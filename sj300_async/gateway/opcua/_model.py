@@ -77,6 +77,8 @@ class Binding:
     node: ua.NodeId
     vtype: ua.VariantType
     read: Reader
+    #: Its path below the drive object (``Monitoring/State``): the audit log's name.
+    name: str = ""
     #: The Online variable: the verdict itself, Good whatever it says.
     verdict: bool = False
     value: object = None
@@ -223,7 +225,8 @@ class _DriveBuilder:
             parent, f"{path}/{name}", name, vtype, description=description, unit=unit,
             value_range=value_range, states=states, writable=writable,
         )  # fmt: skip
-        self.nodes.bindings.append(Binding(node, vtype, read, verdict=verdict))
+        relative = f"{path}/{name}".removeprefix(f"{self.path}/")
+        self.nodes.bindings.append(Binding(node, vtype, read, relative, verdict=verdict))
         return node
 
 

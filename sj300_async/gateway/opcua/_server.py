@@ -132,6 +132,8 @@ class OpcuaServer:
         self._lines: list[LineNodes] = []
         #: Writable parameter variables: node -> (its drive, the parameter's code).
         self._writable: dict[ua.NodeId, tuple[DriveNodes, str]] = {}
+        #: Every drive variable: node -> (its drive, its name for the audit log).
+        self._owners: dict[ua.NodeId, tuple[DriveNodes, str]] = {}
         self._outbox: dict[ua.NodeId, ua.DataValue] = {}
         self._wake = asyncio.Event()
         self._tasks: list[asyncio.Task[None]] = []
@@ -232,6 +234,8 @@ class OpcuaServer:
             self._bind(server, nodes)
             for node, code in nodes.writable.items():
                 self._writable[node] = (nodes, code)
+            for binding in nodes.bindings:
+                self._owners[binding.node] = (nodes, binding.name)
         route_writes(server, self.namespace, self._write)
         on_session_closed(server, self._session_closed)
 
@@ -472,9 +476,15 @@ class OpcuaServer:
             if variant is None:
                 variant = ua.Variant(None, ua.VariantType.Null)
             return ua.StatusCode(await self._calls.write_parameter(nodes.drive, code, variant))
-        if self._server is not None and value.NodeId in self._server.iserver.aspace:
-            return ua.StatusCode(ua.StatusCodes.BadNotWritable)
-        return ua.StatusCode(ua.StatusCodes.BadNodeIdUnknown)
+        assert self._calls is not None
+        owner = self._owners.get(value.NodeId)
+        if owner is not None:  # a drive's read-only variable: a refused write, audited
+            return ua.StatusCode(self._calls.not_writable(owner[0].drive, owner[1]))
+        known = self._server is not None and value.NodeId in self._server.iserver.aspace
+        status = ua.StatusCodes.BadNotWritable if known else ua.StatusCodes.BadNodeIdUnknown
+        self._calls.count(status)
+        _log.debug("opcua: a write to %s refused: %s", value.NodeId, ua.StatusCode(status).name)
+        return ua.StatusCode(status)
 
     def _session_closed(self, user: Any) -> None:
         if isinstance(user, Principal) and self._gateway is not None and not user.anonymous:
