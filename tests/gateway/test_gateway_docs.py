@@ -63,8 +63,10 @@ def test_every_key_of_the_configuration_file_is_in_its_example() -> None:
             if key == "writes":
                 assert "[[lines.writes]]" in example
                 continue
-            if (section, key) in (("http", "users"), ("http", "tokens")):  # arrays of tables
-                assert f"[[http.{key}]]" in example, f"[[http.{key}]] is not in the example"
+            arrays = (("http", "users"), ("http", "tokens"), ("opcua", "users"))
+            if (section, key) in arrays:  # arrays of tables
+                table = f"[[{section}.{key}]]"
+                assert re.search(rf"^ *(# )?{re.escape(table)}", example, re.M), table
                 continue
             written = re.search(rf"^ *(# )?{key} = ", example, re.M)
             assert written, f"[{section}] {key} is not in docs/GATEWAY.md's configuration file"
@@ -83,9 +85,13 @@ def _documented_metrics() -> set[str]:
     return names
 
 
-async def test_every_metric_the_gateway_exports_is_in_the_metrics_table() -> None:
+async def test_every_metric_the_gateway_exports_is_in_the_metrics_table(tmp_path: Path) -> None:
     """Every family of a gateway with each built-in northbound (the broker need not answer)."""
-    text = """
+    text = f"""
+        [opcua]
+        endpoint = "opc.tcp://127.0.0.1:0"
+        certificate = "{tmp_path / "cert.der"}"
+        private_key = "{tmp_path / "key.pem"}"
         [modbus]
         listen = "127.0.0.1:0"
         [metrics]
@@ -103,5 +109,6 @@ async def test_every_metric_the_gateway_exports_is_in_the_metrics_table() -> Non
     suffix = {"counter": "_total", "gauge": "", "histogram": "", "summary": ""}
     exported = {family.name + suffix[family.type] for family in families}
     assert {"sj300_gateway_read_errors_total", "sj300_mqtt_commands_total"} <= exported
+    assert "sj300_opcua_writes_total" in exported
     missing = exported - _documented_metrics()
     assert not missing, f"metrics missing from docs/GATEWAY.md's table: {sorted(missing)}"
