@@ -150,6 +150,9 @@ async def test_run_and_frequency_need_the_lease_and_stop_does_not(
             # Drive 3: its line grants it no control: it has no methods at all.
             stop_3 = ua.NodeId("hall/Drive3/Stop", ns)
             assert await _status(_drive(first, ns, 3).call_method(stop_3)) == "BadNodeIdInvalid"
+            # A drive's method called on another object is not that object's method.
+            stop_1 = ua.NodeId("hall/Drive1/Stop", ns)
+            assert await _status(_drive(first, ns, 2).call_method(stop_1)) == "BadMethodInvalid"
 
 
 async def test_a_closed_session_lapses_its_connection_scoped_lease(

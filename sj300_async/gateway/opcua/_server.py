@@ -122,6 +122,8 @@ class OpcuaServer:
         self.startup_s = 0.0
         #: Values pushed to asyncua for its subscriptions.
         self.pushed = 0
+        #: Values that could not be pushed (a bug: logged with its traceback).
+        self.push_errors = 0
         #: Client certificates refused (not in trusted_clients).
         self.untrusted = 0
         self._server: Server | None = None
@@ -257,6 +259,8 @@ class OpcuaServer:
         ):
 
             async def call(parent: ua.NodeId, *args: Any, _handler: Any = handler) -> Any:
+                if parent != nodes.node:  # the method of another object (Part 4, 5.11.2)
+                    return ua.StatusCode(ua.StatusCodes.BadMethodInvalid)
                 return await _handler(drive, args)
 
             server.link_method(server.get_node(node), call)
@@ -399,7 +403,11 @@ class OpcuaServer:
             self._wake.clear()
             outbox, self._outbox = self._outbox, {}
             for node, value in outbox.items():
-                await server.write_attribute_value(node, value)
+                try:
+                    await server.write_attribute_value(node, value)
+                except Exception:  # one bad value must not stop every subscription
+                    self.push_errors += 1
+                    _log.exception("opcua: cannot push %s to its subscriptions", node)
             self.pushed += len(outbox)
 
     async def _tick(self) -> None:
