@@ -237,8 +237,9 @@ def build_drive(
     profile = drive.profile
     path = f"{parent_path}/Drive{drive.node}"
     name = f"Drive{drive.node}"
-    node = space.component(
-        parent, path, name, f"{profile.name} drive {drive.node} on line {drive.line.name}"
+    described = f"{profile.manufacturer} {profile.model}, {profile.node_noun} {drive.node}"
+    node = space.object(
+        parent, path, name, f"{described} on line {drive.line.name}", component=True
     )
     nodes = DriveNodes(drive, node)
     b = _DriveBuilder(space, nodes, path)
@@ -251,7 +252,7 @@ def build_drive(
 
     hz_range = (0.0, float(profile.max_frequency_hz))
     monitoring = f"{path}/Monitoring"
-    folder = space.component(node, monitoring, "Monitoring", folder=True)
+    folder = space.object(node, monitoring, "Monitoring", folder=True, component=True)
     double, boolean = ua.VariantType.Double, ua.VariantType.Boolean
     b.var(folder, monitoring, "ConverterOutputFrequency", double,
           _monitor(lambda s: s.output_frequency_hz), unit="Hz", value_range=hz_range,
@@ -283,7 +284,7 @@ def build_drive(
           description="the state in words, the trip named")  # fmt: skip
 
     logbook = f"{path}/Logbook"
-    folder = space.component(node, logbook, "Logbook", "the trip history", folder=True)
+    folder = space.object(node, logbook, "Logbook", "the trip history", folder=True, component=True)
     b.var(folder, logbook, "ActiveTrip", ua.VariantType.String, _active_trip,
           description="the trip the drive is in, code and meaning (empty: none)")  # fmt: skip
     b.var(folder, logbook, "TripCount", ua.VariantType.UInt32,
@@ -291,8 +292,8 @@ def build_drive(
           description="trips since the counter was cleared")  # fmt: skip
     for slot in range(TRIP_SLOTS):
         slot_path = f"{logbook}/Trip{slot + 1}"
-        trip = space.component(folder, slot_path, f"Trip{slot + 1}",
-                               "newest first" if slot == 0 else "")  # fmt: skip
+        first = "the newest trip" if slot == 0 else ""
+        trip = space.object(folder, slot_path, f"Trip{slot + 1}", first, component=True)
         string = ua.VariantType.String
         b.var(trip, slot_path, "Code", string, _trip_slot(slot, lambda t: t.code))
         b.var(trip, slot_path, "Meaning", string, _trip_slot(slot, lambda t: t.meaning))
@@ -307,7 +308,7 @@ def build_drive(
     codes = list(dict.fromkeys((*drive.line.parameters, *sorted(granted))))
     if codes:
         parameters = f"{path}/Parameters"
-        folder = space.component(node, parameters, "Parameters", folder=True)
+        folder = space.object(node, parameters, "Parameters", folder=True, component=True)
         for code in codes:
             spec: ParameterSpec = profile.parameters.spec(code)
             writable = code in granted

@@ -218,7 +218,7 @@ class OpcuaServer:
     async def _build(self, server: Server, gateway: GatewayView) -> None:
         space = SpaceBuilder(self.namespace)
         objects = server.nodes.objects.nodeid
-        lines = space.folder(objects, "Lines", "Lines", "the gateway's RS-485 lines")
+        lines = space.object(objects, "Lines", "Lines", "the gateway's RS-485 lines", folder=True)
         for line in gateway.lines:
             line_nodes = build_line(space, lines, line)
             self._lines.append(line_nodes)

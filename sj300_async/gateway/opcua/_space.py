@@ -114,14 +114,7 @@ class SpaceBuilder:
         self._items.append(item)
         return node
 
-    def folder(self, parent: ua.NodeId, path: str, name: str, description: str = "") -> ua.NodeId:
-        attributes = ua.ObjectAttributes(EventNotifier=0)
-        return self._add(
-            ua.NodeClass.Object, parent, path, name, ua.ObjectIds.Organizes,
-            ua.NodeId(ua.ObjectIds.FolderType), attributes, description,
-        )  # fmt: skip
-
-    def component(
+    def object(
         self,
         parent: ua.NodeId,
         path: str,
@@ -129,21 +122,15 @@ class SpaceBuilder:
         description: str = "",
         *,
         folder: bool = False,
+        component: bool = False,
     ) -> ua.NodeId:
-        """An object that is a component of *parent* (a folder when *folder*)."""
-        attributes = ua.ObjectAttributes(EventNotifier=0)
+        """An object (a folder when *folder*): a component of *parent* when *component*,
+        else organised by it (*parent* is a folder)."""
         kind = ua.ObjectIds.FolderType if folder else ua.ObjectIds.BaseObjectType
+        reference = ua.ObjectIds.HasComponent if component else ua.ObjectIds.Organizes
         return self._add(
-            ua.NodeClass.Object, parent, path, name, ua.ObjectIds.HasComponent,
-            ua.NodeId(kind), attributes, description,
-        )  # fmt: skip
-
-    def object(self, parent: ua.NodeId, path: str, name: str, description: str = "") -> ua.NodeId:
-        """An object organised by the folder *parent*."""
-        attributes = ua.ObjectAttributes(EventNotifier=0)
-        return self._add(
-            ua.NodeClass.Object, parent, path, name, ua.ObjectIds.Organizes,
-            ua.NodeId(ua.ObjectIds.BaseObjectType), attributes, description,
+            ua.NodeClass.Object, parent, path, name, reference, ua.NodeId(kind),
+            ua.ObjectAttributes(EventNotifier=0), description,
         )  # fmt: skip
 
     def variable(
