@@ -30,6 +30,7 @@ BENCHMARKS: dict[str, str] = {
     "gateway": "benchmarks.bench_gateway",
     "mqtt": "benchmarks.bench_mqtt",
     "workbench": "benchmarks.bench_workbench",
+    "opcua": "benchmarks.bench_opcua",
 }
 
 

@@ -254,7 +254,7 @@ def test_best_time_runs_once_untimed_then_each_repeat(harness: ModuleType) -> No
 
 #: Every benchmark, in the order they run and print.
 ALL_BENCHMARKS = ("codec", "tcp", "loopback", "latency", "wire", "scale", "gateway", "mqtt",
-                  "workbench")  # fmt: skip
+                  "workbench", "opcua")  # fmt: skip
 
 
 def test_every_registered_benchmark_has_the_module_contract(harness: ModuleType) -> None:
@@ -588,6 +588,54 @@ def test_workbench_streams_every_sample_and_times_the_overview(harness: ModuleTy
     ]
 
 
+def test_opcua_matches_every_notification_and_times_the_start_up(harness: ModuleType) -> None:
+    bench = importlib.import_module("benchmarks.bench_opcua")
+    config = _quick(harness)
+    # Raises on a child that did not start, a monitored item refused, a first value that
+    # never came, or a window whose notifications matched no published sample.
+    result = bench.measure(config)
+    cpu, big = result.cpu, result.big
+    assert len(cpu.windows) == 1  # one timed window after the untimed one
+    for window in cpu.windows:
+        assert window.bare_polls > 0
+        assert window.mqtt_polls > 0
+        assert window.opcua_polls > 0
+        assert window.states > 0  # MQTT states acknowledged by the broker
+        assert window.pushed > 0  # the running drives' values changed at every poll
+        assert window.notifications > 0
+    assert cpu.drives == big.drives == bench.QUICK_DRIVES
+    assert cpu.items > big.small_items
+    # One start-up round (no untimed one in --quick), the gateway's own and asyncua's parts.
+    assert len(big.startups) == bench.QUICK_STARTUP_REPEATS
+    for startup in big.startups:
+        assert 0 < startup.gateway_s < startup.with_opcua_s
+        assert 0 < startup.init_s < startup.startup_s <= startup.with_opcua_s
+        assert 0 < startup.commit_s < startup.startup_s
+        assert startup.init_alone_s > 0
+        assert startup.nodes > big.big_items
+    # One frequency item per drive; then every variable of the namespace.
+    assert big.small_items == bench.QUICK_DRIVES
+    assert big.big_items > big.big_data_items > 0
+    assert big.subscriptions == 1
+    for delays in (big.alone, big.with_all):
+        assert 0 < delays.matched <= delays.published
+        assert len(delays.delays_s) == delays.matched
+        assert list(delays.delays_s) == sorted(delays.delays_s)
+        assert delays.delays_s[0] > 0  # the sample came before its notification
+    section = bench.report(result, config)
+    assert [(r.unit, r.target, r.against, r.as_multiple) for r in section.results] == [
+        ("ms", None, "poll interval", True),
+        ("ms", None, "poll interval", True),
+        ("µs", bench.TARGET_CPU_RATIO, "MQTT bridge", True),
+        ("µs", None, "bare poll", True),
+        ("µs", None, "bare poll", True),
+        ("ms", None, "gateway start", True),
+        ("ms", None, "OPC UA start-up", True),
+        ("µs", None, f"{bench.QUICK_DRIVES} items", True),
+        ("ms", None, f"{bench.QUICK_DRIVES} items", True),
+    ]
+
+
 # -- the command line ----------------------------------------------------------------
 
 
@@ -615,8 +663,8 @@ def test_cli_quick_runs_every_benchmark_into_one_table() -> None:
     table = out.split("\n## results\n", 1)[1]
     rows = [line for line in table.splitlines() if line.startswith("| ") and "---" not in line]
     # header + rows of each benchmark: codec, tcp, loopback, latency, wire, scale, gateway,
-    # mqtt, workbench
-    assert len(rows) == 1 + 3 + 10 + 4 + 3 + 2 + 5 + 3 + 3 + 5
+    # mqtt, workbench, opcua
+    assert len(rows) == 1 + 3 + 10 + 4 + 3 + 2 + 5 + 3 + 3 + 5 + 9
     assert "**failed**" not in out
 
 
