@@ -9,8 +9,9 @@ from pathlib import Path
 import asyncua
 import pytest
 from asyncua import Server, ua
-from asyncua.ua.uaerrors import UaStatusCodeError
+from asyncua.ua.uaerrors import UaError, UaStatusCodeError
 from cryptography import x509
+from waiting import wait_for
 
 from sj300_async.gateway import GatewayConfigError, config_from_flags, parse_config
 from sj300_async.gateway.opcua import DEFAULT_SECURITY, OpcuaConfig
@@ -150,26 +151,26 @@ async def test_only_trusted_client_certificates_open_a_session(
     async with opcua_gateway(text) as (_, server):
         async with connected(server.url, pair=client_pair, user=USER, password=PASSWORD) as ok:
             assert await ok.get_namespace_index(NAMESPACE) > 0
-        with pytest.raises(UaStatusCodeError) as refused:
+        # Refused when its channel opens: the connection is closed before any session.
+        with pytest.raises((UaError, ConnectionError)):
             async with connected(server.url, pair=other_pair, user=USER, password=PASSWORD):
                 pass
-        assert ua.StatusCode(refused.value.code).name == "BadCertificateUntrusted"
-        assert server.untrusted == 1
+        assert server.untrusted >= 1
+        assert server.session_count == 0
 
 
 async def test_an_unsecured_only_server_reads_but_never_writes(
     tmp_path: Path, client_pair: Pair
 ) -> None:
     text = opcua_toml(tmp_path, security='["None"]')
-    async with opcua_gateway(text) as (_, server):
+    async with opcua_gateway(text) as (gateway, server):
+        await wait_for(lambda: all(d.snapshot.available for d in gateway.drives), "samples")
         assert server.announce() is not None
         assert "(None)" in str(server.announce())
         async with connected(server.url, user=USER, password=PASSWORD) as client:
             ns = await client.get_namespace_index(NAMESPACE)
             drive = client.get_node(ua.NodeId("hall/Drive1", ns))
-            assert (await client.get_node(ua.NodeId("hall/Drive1/Online", ns)).read_value()) in (
-                True, False,
-            )  # fmt: skip
+            assert await client.get_node(ua.NodeId("hall/Drive1/Online", ns)).read_value()
             with pytest.raises(UaStatusCodeError) as refused:
                 await drive.call_method(f"{ns}:Stop")
             assert ua.StatusCode(refused.value.code).name == "BadSecurityModeInsufficient"

@@ -107,6 +107,7 @@ async def test_a_wrong_password_and_an_unknown_user_are_refused(
             assert ua.StatusCode(refused.value.code).name == "BadUserAccessDenied"
         assert dict(_families(server))["sj300_opcua_refused_logins"] == {
             "password": 2.0,
+            "rate": 0.0,
             "certificate": 0.0,
         }
 

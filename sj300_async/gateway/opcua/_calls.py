@@ -4,8 +4,10 @@ Every write that arrives over OPC UA goes through the gateway's
 controller like every other door's: grants, the control lease, the
 value's validation, the read-back, the audit log. Before that, this
 module refuses, with a status code of its own and an audit line, what
-the gateway need not see:
+the gateway need not see, in this order:
 
+- more than :data:`~._security.MAX_OPERATIONS` writes in one request
+  (``BadTooManyOperations``: counted, not audited one by one);
 - an anonymous session (``BadUserAccessDenied``) or a channel that does
   not encrypt (``BadSecurityModeInsufficient``): writes need a named user
   over SignAndEncrypt;
@@ -13,6 +15,8 @@ the gateway need not see:
   ``BadTooManyArguments``) or type (``BadTypeMismatch``), a direction
   other than ``forward`` or ``reverse`` (``BadInvalidArgument``), a
   number that is NaN, infinite or out of range (``BadOutOfRange``),
+  an array where one value is expected (``BadTypeMismatch``), a value
+  written with a status code other than Good (``BadWriteNotSupported``),
   nothing of it sent;
 - a run, a frequency or a parameter for a drive the poller holds offline
   (``BadNoCommunication``): nothing is sent. A stop is always tried.
@@ -29,6 +33,7 @@ from __future__ import annotations
 import logging
 import math
 from collections import Counter
+from collections.abc import Callable
 from typing import Any, Final
 
 from asyncua import ua
@@ -85,7 +90,7 @@ def _arguments(args: tuple[Any, ...], types: tuple[ua.VariantType, ...]) -> list
     values = []
     for arg, expected in zip(args, types, strict=True):
         variant = arg if isinstance(arg, ua.Variant) else ua.Variant(arg)
-        if variant.VariantType != expected:
+        if variant.VariantType != expected or variant.is_array or isinstance(variant.Value, list):
             raise _Refused(
                 ua.StatusCodes.BadTypeMismatch,
                 Refusal.MALFORMED,
@@ -95,13 +100,17 @@ def _arguments(args: tuple[Any, ...], types: tuple[ua.VariantType, ...]) -> list
     return values
 
 
-def number(variant: ua.Variant) -> float:
+def _number(variant: ua.Variant) -> float:
     """A written number (any numeric type), finite.
 
     Raises:
         _Refused: not a number (BadTypeMismatch), NaN or infinite (BadOutOfRange).
     """
-    if variant.VariantType not in _NUMBERS or isinstance(variant.Value, bool | list):
+    if (
+        variant.VariantType not in _NUMBERS
+        or variant.is_array
+        or isinstance(variant.Value, bool | list)
+    ):
         raise _Refused(
             ua.StatusCodes.BadTypeMismatch,
             Refusal.MALFORMED,
@@ -120,6 +129,9 @@ def _moves(request: WriteRequest) -> bool:
     return not isinstance(request, Heartbeat)
 
 
+Build = Callable[[list[object]], WriteRequest]
+
+
 class Calls:
     """The methods' and the writable variables' handlers of one server."""
 
@@ -128,8 +140,12 @@ class Calls:
         #: Calls and writes by their status code's name (``Good``, ``BadLocked``...).
         self.results: Counter[str] = Counter()
 
+    def count(self, status: int) -> None:
+        """Count an answer given without a drive to audit it against (an unknown node)."""
+        self.results[_status_name(status)] += 1
+
     @staticmethod
-    def _caller() -> Caller:
+    def _writer() -> Caller:
         """The caller, who may write (else refused: anonymous, or not encrypted)."""
         caller = current_caller()
         if caller is None or caller.principal.anonymous:
@@ -146,12 +162,24 @@ class Calls:
             )
         return caller
 
-    async def _judge(
-        self, drive: GatewayDrive, what: str, value: object, request: WriteRequest
+    async def _handle(
+        self, drive: GatewayDrive, what: str, shown: object, build: Callable[[], WriteRequest]
     ) -> int:
-        """Refuse here or hand *request* to the gateway; the status code of the outcome."""
+        """Judge the caller, then the request *build* makes, then hand it to the gateway.
+
+        The caller first: an anonymous client learns nothing of what it sent. One
+        request carries at most MAX_OPERATIONS writes; the rest are answered
+        BadTooManyOperations, counted and not audited one by one (a flood would
+        otherwise write the audit log full). A failure of our own is audited too.
+        """
+        caller = current_caller()
+        if caller is not None and not caller.operation():
+            self.count(ua.StatusCodes.BadTooManyOperations)
+            _log.debug("opcua %s to %s %s refused: too many in one request", what, *drive.key)
+            return int(ua.StatusCodes.BadTooManyOperations)
         try:
-            caller = self._caller()
+            writer = self._writer()
+            request = build()
             if _moves(request) and not drive.snapshot.online:
                 raise _Refused(
                     ua.StatusCodes.BadNoCommunication,
@@ -159,26 +187,18 @@ class Calls:
                     "the drive is offline: nothing was sent",
                 )
         except _Refused as refused:
-            return self._refuse(drive, what, value, refused)
+            return self._refuse(drive, what, shown, refused)
+        except Exception:  # a bug of ours: audited, answered, logged with its traceback
+            _log.exception("opcua %s to %s %s failed", what, *drive.key)
+            failed = _Refused(ua.StatusCodes.BadInternalError, Refusal.MALFORMED, "internal error")
+            return self._refuse(drive, what, shown, failed)
+        principal = writer.principal
         result = await self.gateway.write(
-            caller.principal.client, drive, request, connection=caller.principal.connection
+            principal.client, drive, request, connection=principal.connection
         )
         status = refusal_status(result.refusal)
         self.results[_status_name(status)] += 1
         return status
-
-    async def _checked(
-        self,
-        drive: GatewayDrive,
-        what: str,
-        args: tuple[Any, ...],
-        types: tuple[ua.VariantType, ...],
-    ) -> list[object] | int:
-        """The arguments' values, or the status code of their refusal (audited)."""
-        try:
-            return _arguments(args, types)
-        except _Refused as refused:
-            return self._refuse(drive, what, args, refused)
 
     def _refuse(self, drive: GatewayDrive, what: str, value: object, refused: _Refused) -> int:
         """Audit and count a refusal made here; its status code."""
@@ -190,63 +210,38 @@ class Calls:
         self.results[_status_name(refused.status)] += 1
         return refused.status
 
+    async def _call(
+        self,
+        drive: GatewayDrive,
+        what: str,
+        args: tuple[Any, ...],
+        types: tuple[ua.VariantType, ...],
+        build: Build,
+    ) -> int:
+        shown = [arg.Value if isinstance(arg, ua.Variant) else arg for arg in args] or None
+        return await self._handle(drive, what, shown, lambda: build(_arguments(args, types)))
+
     # -- the methods ----------------------------------------------------------------
 
     async def take_control(self, drive: GatewayDrive, args: tuple[Any, ...]) -> Any:
-        checked = await self._checked(drive, "TakeControl", args, ())
-        if isinstance(checked, int):
-            return ua.StatusCode(checked)
-        status = await self._judge(drive, "TakeControl", None, Heartbeat())
+        status = await self._call(drive, "TakeControl", args, (), lambda _: Heartbeat())
         if status != GOOD:
             return ua.StatusCode(status)
         return [ua.Variant(float(drive.lease.duration_s), ua.VariantType.Double)]
 
     async def run(self, drive: GatewayDrive, args: tuple[Any, ...]) -> Any:
-        checked = await self._checked(drive, "Run", args, (ua.VariantType.String,))
-        if isinstance(checked, int):
-            return ua.StatusCode(checked)
-        text = str(checked[0]).strip().lower()
-        direction = _DIRECTIONS.get(text)
-        if direction is None:
-            refused = _Refused(
-                ua.StatusCodes.BadInvalidArgument,
-                Refusal.MALFORMED,
-                f"expected forward or reverse, got {excerpt(str(checked[0]))!r}",
-            )
-            return ua.StatusCode(self._refuse(drive, "Run", checked[0], refused))
-        return ua.StatusCode(await self._judge(drive, "Run", text, RunCommand(direction)))
+        string = (ua.VariantType.String,)
+        return ua.StatusCode(await self._call(drive, "Run", args, string, _run))
 
     async def stop(self, drive: GatewayDrive, args: tuple[Any, ...]) -> Any:
-        checked = await self._checked(drive, "Stop", args, ())
-        if isinstance(checked, int):
-            return ua.StatusCode(checked)
-        return ua.StatusCode(await self._judge(drive, "Stop", None, RunCommand(Direction.STOP)))
+        stop = RunCommand(Direction.STOP)
+        return ua.StatusCode(await self._call(drive, "Stop", args, (), lambda _: stop))
 
     async def set_frequency(self, drive: GatewayDrive, args: tuple[Any, ...]) -> Any:
-        checked = await self._checked(drive, "SetFrequency", args, (ua.VariantType.Double,))
-        if isinstance(checked, int):
-            return ua.StatusCode(checked)
-        hz = float(checked[0])  # type: ignore[arg-type]
-        if not math.isfinite(hz):
-            refused = _Refused(
-                ua.StatusCodes.BadOutOfRange, Refusal.INVALID_VALUE, f"{hz} Hz is no frequency"
-            )
-            return ua.StatusCode(self._refuse(drive, "SetFrequency", hz, refused))
-        # The set frequency's step, every protocol (the MQTT command's rule).
-        if abs(hz) <= 1e6 and abs(round(hz * 100) - hz * 100) > 1e-6:
-            refused = _Refused(
-                ua.StatusCodes.BadOutOfRange,
-                Refusal.INVALID_VALUE,
-                f"{hz} Hz is finer than 0.01 Hz",
-            )
-            return ua.StatusCode(self._refuse(drive, "SetFrequency", hz, refused))
-        return ua.StatusCode(await self._judge(drive, "SetFrequency", hz, SetFrequency(hz)))
+        double = (ua.VariantType.Double,)
+        return ua.StatusCode(await self._call(drive, "SetFrequency", args, double, _frequency))
 
     # -- the variables ----------------------------------------------------------------
-
-    def count(self, status: int) -> None:
-        """Count a refusal made without a drive to audit it against (an unknown node)."""
-        self.results[_status_name(status)] += 1
 
     def not_writable(self, drive: GatewayDrive, name: str) -> int:
         """A write to one of *drive*'s read-only variables: refused and audited."""
@@ -257,16 +252,56 @@ class Calls:
         )
         return self._refuse(drive, name, None, refused)
 
-    async def write_parameter(self, drive: GatewayDrive, code: str, variant: ua.Variant) -> int:
+    async def write_parameter(self, drive: GatewayDrive, code: str, value: ua.DataValue) -> int:
         """A client's write of parameter *code*'s variable: the status code of the outcome."""
-        try:
-            value = number(variant)
+
+        def build() -> WriteRequest:
+            # A value its writer flags as not Good is not sent to a drive (Part 4,
+            # 5.10.4: BadWriteNotSupported). A written timestamp is ignored: clients
+            # send their own clock (asyncua's write_value does), and the variable's
+            # timestamp is the read-back's.
+            status = value.StatusCode
+            if status is not None and not status.is_good():
+                raise _Refused(
+                    ua.StatusCodes.BadWriteNotSupported,
+                    Refusal.MALFORMED,
+                    "a value written with a status code other than Good is not sent",
+                )
+            variant = value.Value if value.Value is not None else ua.Variant(None)
+            number = _number(variant)
             try:
-                raw = drive.profile.parameters.spec(code).to_raw(value)
+                raw = drive.profile.parameters.spec(code).to_raw(number)
             except LocalProtocolError as exc:
                 raise _Refused(
                     ua.StatusCodes.BadOutOfRange, Refusal.INVALID_VALUE, str(exc)
                 ) from None
-        except _Refused as refused:
-            return self._refuse(drive, code, variant.Value, refused)
-        return await self._judge(drive, code, value, ParameterWrite(code, int(raw)))
+            return ParameterWrite(code, int(raw))
+
+        shown = value.Value.Value if value.Value is not None else None
+        return await self._handle(drive, code, shown, build)
+
+
+def _run(values: list[object]) -> WriteRequest:
+    text = str(values[0]).strip().lower()
+    direction = _DIRECTIONS.get(text)
+    if direction is None:
+        raise _Refused(
+            ua.StatusCodes.BadInvalidArgument,
+            Refusal.MALFORMED,
+            f"expected forward or reverse, got {excerpt(str(values[0]))!r}",
+        )
+    return RunCommand(direction)
+
+
+def _frequency(values: list[object]) -> WriteRequest:
+    hz = float(values[0])  # type: ignore[arg-type]
+    if not math.isfinite(hz):
+        raise _Refused(
+            ua.StatusCodes.BadOutOfRange, Refusal.INVALID_VALUE, f"{hz} Hz is no frequency"
+        )
+    # The set frequency's step, every protocol (the MQTT command's rule).
+    if abs(hz) <= 1e6 and abs(round(hz * 100) - hz * 100) > 1e-6:
+        raise _Refused(
+            ua.StatusCodes.BadOutOfRange, Refusal.INVALID_VALUE, f"{hz} Hz is finer than 0.01 Hz"
+        )
+    return SetFrequency(hz)

@@ -1,54 +1,190 @@
 """Every place the OPC UA northbound reaches past asyncua's public API, in one module.
 
-asyncua's server has no public way to do three things the gateway needs,
-so they are done here, each on the one server instance, and checked by
+asyncua's server has no public way to do what the gateway needs below,
+and in places its defaults are unsafe for a server that spins motors, so
+it is done here, each on the one server instance, and checked by
 ``tests/opcua/test_opcua_hooks.py`` against the installed asyncua (the
 ``opcua`` extra pins the major version):
 
-- **A ruleset per security mode.** The server gives every endpoint's
-  policy factory the same permission ruleset; the handlers need to know
+- **Channels** (:func:`guard_channels`). The server gives every
+  endpoint's policy factory the same permission ruleset; the handlers need
   the mode of the channel a request came by, so each factory gets a
-  ruleset of its own mode (:func:`rules_per_mode`).
-- **Sessions closing.** A connection-scoped lease lapses when its OPC UA
-  session closes (CloseSession, its timeout, or the transport lost with no
-  subscription left): the server's unregistering of an external session is
-  wrapped (:func:`on_session_closed`).
-- **Writes that wait for the line.** asyncua's write service stores a
-  value and returns; a parameter write must go to the drive and answer
-  with what became of it. The attribute service is wrapped
-  (:func:`route_writes`): writes to the gateway's namespace go to the
-  northbound's handler (awaited, one status per node), the rest to asyncua.
+  ruleset of its own mode. A client certificate outside
+  ``trusted_clients`` is refused when the channel opens (asyncua checks
+  it only at CreateSession, and only when the request carries one). And
+  asyncua falls back to an unsecured channel when a client asks for
+  SecurityPolicy None that no endpoint offers. Such a channel (and, with
+  ``trusted_clients``, every unsecured one, which carries no certificate)
+  serves discovery only: GetEndpoints and FindServers, which every client
+  asks over an unsecured channel before it opens a secure one (OPC UA
+  Part 4, 5.4), and no request of a session.
+- **Sessions** (:func:`guard_sessions`). asyncua numbers authentication
+  tokens 1000, 1001, ...: a client that guesses another's could activate
+  that session on its own channel. Each session gets 32 random bytes
+  instead. A session never activated is closed after
+  :data:`ACTIVATE_WITHIN_S` (asyncua would keep it forever), sessions are
+  capped, and the northbound hears each session's creation and
+  activation (its lease's connection is the session).
+- **Sessions closing** (:func:`on_session_closed`): a connection-scoped
+  lease lapses when its OPC UA session closes.
+- **Writes that wait for the line** (:func:`route_writes`): asyncua's
+  write service stores a value and returns; a parameter write must go to
+  the drive and answer with what became of it.
+- **Discovery registration** (:func:`refuse_registration`): asyncua
+  lets any client, without a session, register servers that FindServers
+  then lists; the gateway is no discovery server.
 """
 
 from __future__ import annotations
 
+import asyncio
+import logging
+import secrets
 from collections.abc import Awaitable, Callable
-from typing import Any
+from typing import Any, Final
 
 from asyncua import Server, ua
+from asyncua.common.utils import ServiceError
 from asyncua.crypto.permission_rules import PermissionRuleset
+from asyncua.crypto.security_policies import SecurityPolicyNone
 
-__all__ = ["on_session_closed", "route_writes", "rules_per_mode"]
+__all__ = [
+    "ACTIVATE_WITHIN_S",
+    "guard_channels",
+    "guard_sessions",
+    "on_session_closed",
+    "refuse_registration",
+    "route_writes",
+]
+
+_log = logging.getLogger("sj300_async.gateway.opcua")
+
+#: Seconds a created session may wait for its activation before it is closed.
+ACTIVATE_WITHIN_S: Final = 30.0
 
 WriteHandler = Callable[[ua.WriteValue, Any], Awaitable[ua.StatusCode]]
 
 
-def rules_per_mode(
-    server: Server, rules: Callable[[ua.MessageSecurityMode], PermissionRuleset]
+class _Admitted:
+    """A policy factory whose channels only admitted client certificates open.
+
+    An unsecured channel carries no certificate to admit: it serves discovery only.
+    """
+
+    def __init__(
+        self, inner: Any, admit: Callable[[bytes | None], bool], discovery: PermissionRuleset
+    ) -> None:
+        self._inner = inner
+        self._admit = admit
+        self._discovery = discovery
+
+    def __getattr__(self, name: str) -> Any:
+        return getattr(self._inner, name)
+
+    def matches(self, uri: str, mode: Any = None) -> bool:
+        return bool(self._inner.matches(uri, mode))
+
+    def create(self, peer_certificate: bytes | None) -> Any:
+        if self._inner.mode == ua.MessageSecurityMode.None_:
+            policy = self._inner.create(peer_certificate)
+            policy.permissions = self._discovery
+            return policy
+        if not self._admit(peer_certificate):
+            raise ua.uaerrors.BadUserAccessDenied  # asyncua closes the connection
+        return self._inner.create(peer_certificate)
+
+
+class _Unoffered:
+    """Stands for SecurityPolicy None when no endpoint offers it: discovery only."""
+
+    mode = ua.MessageSecurityMode.None_
+
+    def __init__(self, discovery: PermissionRuleset) -> None:
+        self.permission_ruleset = discovery
+
+    def matches(self, uri: str, mode: Any = None) -> bool:
+        return bool(uri == SecurityPolicyNone.URI)
+
+    def create(self, peer_certificate: bytes | None) -> Any:
+        return SecurityPolicyNone(permission_ruleset=self.permission_ruleset)
+
+
+def guard_channels(
+    server: Server,
+    rules: Callable[[ua.MessageSecurityMode], PermissionRuleset],
+    admit: Callable[[bytes | None], bool] | None,
+    discovery: PermissionRuleset,
 ) -> None:
-    """Give each endpoint's policy factory the ruleset of its own security mode."""
-    for factory in server._policies:
+    """Per-mode rulesets, admitted certificates only, unoffered None for discovery only
+    (*discovery*: the ruleset that refuses every request of a session; module docstring).
+
+    Runs after ``server.start()``: the factories are made there. The list is the
+    one every connection's processor selects from, so it is changed in place.
+    """
+    factories = server._policies
+    offers_none = False
+    for index, factory in enumerate(factories):
         factory.permission_ruleset = rules(factory.mode)
+        offers_none |= factory.mode == ua.MessageSecurityMode.None_
+        if admit is not None:
+            factories[index] = _Admitted(factory, admit, discovery)
+    if not offers_none:
+        factories.append(_Unoffered(discovery))
+
+
+def guard_sessions(
+    server: Server,
+    *,
+    limit: int,
+    created: Callable[[Any], None],
+    activated: Callable[[Any], None],
+) -> None:
+    """Random tokens, activation in time, at most *limit* sessions (module docstring)."""
+    iserver = server.iserver
+    create = iserver.create_session
+
+    def create_session(name: Any, user: Any = None, external: bool = False) -> Any:
+        if external and len(iserver._external_sessions) >= limit:
+            raise ServiceError(ua.StatusCodes.BadTooManySessions)
+        session = create(name, external=external) if user is None else create(name, user, external)
+        if not external:
+            return session
+        iserver.unregister_external_session(session)
+        session.auth_token = ua.NodeId(secrets.token_bytes(32), 0, ua.NodeIdType.ByteString)
+        iserver.register_external_session(session)
+        activate = session.activate_session
+
+        def activate_session(params: Any, peer_certificate: Any) -> Any:
+            result = activate(params, peer_certificate)
+            activated(session)
+            return result
+
+        session.activate_session = activate_session
+        asyncio.get_running_loop().call_later(ACTIVATE_WITHIN_S, _unactivated, session)
+        created(session)
+        return session
+
+    iserver.create_session = create_session
+
+
+def _unactivated(session: Any) -> None:
+    """Close *session* if it was never activated (its creator went away or never meant to)."""
+    if session.is_activated() or session.state.name == "Closed":
+        return
+    _log.info("opcua: closing a session never activated (%s)", session.name)
+    task = asyncio.get_running_loop().create_task(session.close_session(True))
+    task.add_done_callback(lambda done: done.cancelled() or done.exception())
 
 
 def on_session_closed(server: Server, closed: Callable[[Any], None]) -> None:
-    """Call *closed* with each external session's user as the session closes."""
+    """Call *closed* with each external session as it closes."""
     iserver = server.iserver
     unregister = iserver.unregister_external_session
 
     def unregistered(session: Any) -> None:
         unregister(session)
-        closed(session.user)
+        if session.state.name == "Closed":  # not the re-keying of guard_sessions
+            closed(session)
 
     iserver.unregister_external_session = unregistered
 
@@ -82,3 +218,13 @@ def route_writes(server: Server, namespace: int, handler: WriteHandler) -> None:
     """Hand every write to a node of *namespace* to *handler* (see the module docstring)."""
     iserver = server.iserver
     iserver.attribute_service = _RoutedWrites(iserver.attribute_service, namespace, handler)
+
+
+def refuse_registration(server: Server) -> None:
+    """RegisterServer and RegisterServer2 answer BadServiceUnsupported (module docstring)."""
+
+    def refuse(*args: Any, **kwargs: Any) -> Any:
+        raise ServiceError(ua.StatusCodes.BadServiceUnsupported)
+
+    server.iserver.register_server = refuse
+    server.iserver.register_server2 = refuse

@@ -39,7 +39,7 @@ subscriptions.
 from __future__ import annotations
 
 import math
-from collections.abc import Callable, Iterator, Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 from typing import Final
 
@@ -47,7 +47,7 @@ from asyncua import ua
 
 from ...profiles import DriveSnapshot, ParameterSpec, Trip
 from .. import GatewayDrive, GatewayLine
-from ._quality import GOOD, quality
+from ._quality import quality
 from ._space import Argument, SpaceBuilder
 
 __all__ = [
@@ -79,7 +79,7 @@ class Binding:
     read: Reader
     #: Its path below the drive object (``Monitoring/State``): the audit log's name.
     name: str = ""
-    #: The Online variable: the verdict itself, Good whatever it says.
+    #: The Online variable: the verdict itself, not judged by it (never offline).
     verdict: bool = False
     value: object = None
     #: Loop time the value was read (-inf: never).
@@ -99,8 +99,7 @@ class Binding:
         self.online = True if self.verdict else snapshot.online
 
     def status(self, now: float, stale_after_s: float) -> int:
-        if self.verdict:
-            return GOOD
+        # The verdict is Good while verdicts keep coming; a stalled poller's last one ages.
         return quality(self.online, self.at, self.value, now, stale_after_s)
 
 
@@ -358,8 +357,3 @@ def build_line(space: SpaceBuilder, parent: ua.NodeId, line: GatewayLine) -> Lin
             node, f"{path}/{name}", name, vtype, description=description, unit=unit
         )
     return nodes
-
-
-def drive_bindings(drives: Sequence[DriveNodes]) -> Iterator[Binding]:
-    for nodes in drives:
-        yield from nodes.bindings

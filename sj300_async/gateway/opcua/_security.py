@@ -20,12 +20,19 @@ SignAndEncrypt channel; everything else (browse, read, subscribe) is open
 to every session, anonymous included. The handlers judge that, so each
 refused call gets its own status code instead of the whole request
 failing.
+
+Password checks are scrypt (about 65 ms of the event loop each, the loop
+that also polls the lines and runs the lapse stops), and asyncua asks for
+them synchronously. A client repeating wrong passwords must not stall the
+gateway, so the checks have a budget (:data:`CHECKS_BURST` at once,
+:data:`CHECKS_PER_S` after): past it a login is refused unchecked and
+counted (``reason="rate"``), whoever sends it.
 """
 
 from __future__ import annotations
 
 import contextvars
-import itertools
+import time
 from dataclasses import dataclass
 from typing import Any, Final
 
@@ -35,7 +42,15 @@ from asyncua.crypto.permission_rules import User as UaUser
 
 from .. import User, verify_password
 
-__all__ = ["Caller", "ChannelRules", "Principal", "Users", "current_caller"]
+__all__ = [
+    "MAX_OPERATIONS",
+    "Caller",
+    "ChannelRules",
+    "DiscoveryOnly",
+    "Principal",
+    "Users",
+    "current_caller",
+]
 
 _NODE_MANAGEMENT: Final = frozenset(
     ua.NodeId(identifier)
@@ -46,14 +61,19 @@ _NODE_MANAGEMENT: Final = frozenset(
         ua.ObjectIds.DeleteReferencesRequest_Encoding_DefaultBinary,
     )
 )
-_sessions = itertools.count(1)
+#: Password checks allowed at once, and per second after.
+CHECKS_BURST: Final = 3
+CHECKS_PER_S: Final = 1.0
+#: Operations (method calls, variable writes) one request may carry.
+MAX_OPERATIONS: Final = 64
 
 
 @dataclass(eq=False)
 class Principal(UaUser):  # type: ignore[misc]
     """An activated session's user: a configured name, or anonymous (``name`` None)."""
 
-    #: Unique per activation: names the session's connection for a connection-scoped lease.
+    #: The session's number (set when the session is activated): a connection-scoped
+    #: lease names the session it was renewed by.
     key: int = 0
 
     @property
@@ -76,6 +96,13 @@ class Caller:
 
     principal: Principal
     mode: ua.MessageSecurityMode
+    #: Operations of this request so far (see :data:`MAX_OPERATIONS`).
+    operations: list[int]
+
+    def operation(self) -> bool:
+        """Count one operation of the request; False past :data:`MAX_OPERATIONS`."""
+        self.operations[0] += 1
+        return self.operations[0] <= MAX_OPERATIONS
 
     @property
     def encrypted(self) -> bool:
@@ -99,6 +126,19 @@ class Users:
         self._hashes = {user.name: user.password_hash for user in users}
         #: Failed password checks (each is also asyncua's BadUserAccessDenied).
         self.refused = 0
+        #: Logins refused unchecked: the checks' budget was spent.
+        self.throttled = 0
+        self._budget = float(CHECKS_BURST)
+        self._budget_at = time.monotonic()
+
+    def _afford(self) -> bool:
+        now = time.monotonic()
+        self._budget = min(CHECKS_BURST, self._budget + (now - self._budget_at) * CHECKS_PER_S)
+        self._budget_at = now
+        if self._budget < 1.0:
+            return False
+        self._budget -= 1.0
+        return True
 
     def get_user(
         self,
@@ -107,9 +147,11 @@ class Users:
         password: str | None = None,
         certificate: Any = None,
     ) -> Principal | None:
-        key = next(_sessions)
         if username is None:
-            return Principal(role=UserRole.Anonymous, name=None, key=key)
+            return Principal(role=UserRole.Anonymous, name=None)
+        if not self._afford():
+            self.throttled += 1
+            return None
         stored = self._hashes.get(username)
         # The hash is checked for unknown names too (against a fixed one): the time
         # a refusal takes does not tell which names exist.
@@ -117,7 +159,7 @@ class Users:
         if stored is None or not verified:
             self.refused += 1
             return None
-        return Principal(role=UserRole.User, name=username, key=key)
+        return Principal(role=UserRole.User, name=username)
 
 
 class ChannelRules(PermissionRuleset):  # type: ignore[misc]
@@ -130,7 +172,7 @@ class ChannelRules(PermissionRuleset):  # type: ignore[misc]
         if action_type_id in _NODE_MANAGEMENT:
             return False
         principal = user if isinstance(user, Principal) else Principal(name=None)
-        _caller.set(Caller(principal, self.mode))
+        _caller.set(Caller(principal, self.mode, [0]))
         return True
 
 
@@ -138,3 +180,14 @@ class ChannelRules(PermissionRuleset):  # type: ignore[misc]
 _DUMMY_HASH: Final = (
     "scrypt$16384$8$1$c2ozMDAtYXN5bmMtZHVtbXk=$2xJ1dWJXKYvTgvtn0hvDxrxAgG2o1vXjS3Tm2v0Mrjk="
 )
+
+
+class DiscoveryOnly(PermissionRuleset):  # type: ignore[misc]
+    """The ruleset of a channel that may only discover the server (see _hooks.guard_channels).
+
+    asyncua checks no ruleset for GetEndpoints, FindServers, CreateSession and
+    ActivateSession; every other request, a session's, is refused here.
+    """
+
+    def check_validity(self, user: Any, action_type_id: Any, body: Any) -> bool:
+        return False

@@ -25,6 +25,7 @@ from __future__ import annotations
 
 import asyncio
 import contextlib
+import itertools
 import logging
 import math
 import socket
@@ -34,6 +35,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Any, Final
 
 from asyncua import Server, ua
+from asyncua.common.connection import TransportLimits
 from asyncua.crypto import uacrypto
 from asyncua.server.address_space import NodeData
 from cryptography import x509
@@ -43,7 +45,13 @@ from .. import GatewayLine, GatewayStartError, GatewayView, busy_seconds
 from ._calls import Calls
 from ._certificate import ServerCertificate, load_or_generate
 from ._config import OpcuaConfig
-from ._hooks import on_session_closed, route_writes, rules_per_mode
+from ._hooks import (
+    guard_channels,
+    guard_sessions,
+    on_session_closed,
+    refuse_registration,
+    route_writes,
+)
 from ._model import (
     LINE_COUNTERS,
     Binding,
@@ -53,7 +61,7 @@ from ._model import (
     build_line,
 )
 from ._quality import BAD_WAITING, GOOD, utc
-from ._security import ChannelRules, Principal, Users
+from ._security import ChannelRules, DiscoveryOnly, Principal, Users
 from ._space import SpaceBuilder
 
 if TYPE_CHECKING:
@@ -65,6 +73,10 @@ _log = logging.getLogger("sj300_async.gateway.opcua")
 
 #: How often the quality that time alone changes, and the lines' counters, are pushed.
 TICK_S: Final = 1.0
+#: The largest request taken (asyncua's default is 100 MB).
+MAX_MESSAGE_BYTES: Final = 4 * 1024 * 1024
+#: Requests queued per connection while one is served (asyncua's default is 500).
+MAX_PENDING_MESSAGES: Final = 64
 _POLICIES: Final = {
     "Basic256Sha256_SignAndEncrypt": ua.SecurityPolicyType.Basic256Sha256_SignAndEncrypt,
     "Basic256Sha256_Sign": ua.SecurityPolicyType.Basic256Sha256_Sign,
@@ -130,6 +142,11 @@ class OpcuaServer:
         self._gateway: GatewayView | None = None
         self._calls: Calls | None = None
         self._users = Users(config.users)
+        #: The DER bytes of every trusted client certificate (``trusted_clients``).
+        self._trusted: set[bytes] = set()
+        #: Each open session's number (its connection-scoped leases' connection).
+        self._session_keys: dict[int, int] = {}
+        self._keys = itertools.count(1)
         self._drives: dict[tuple[str, int], DriveNodes] = {}
         self._lines: list[LineNodes] = []
         #: Writable parameter variables: node -> (its drive, the parameter's code).
@@ -203,17 +220,28 @@ class OpcuaServer:
             tokens.append(ua.UserNameIdentityToken)
         server.set_identity_tokens(tokens)
         server.iserver.max_connections = config.max_connections
+        # asyncua's defaults take 100 MB requests and 500 queued messages per connection:
+        # our largest request (monitored items for every variable) is far below 4 MiB.
+        server.limits = TransportLimits(
+            max_chunk_count=MAX_MESSAGE_BYTES // 65535 + 1, max_message_size=MAX_MESSAGE_BYTES
+        )
+        server.iserver.max_pending_messages_per_connection = MAX_PENDING_MESSAGES
         if config.trusted_clients is not None:
-            trusted = await asyncio.to_thread(_load_trusted, config.trusted_clients)
+            self._trusted = await asyncio.to_thread(_load_trusted, config.trusted_clients)
 
             async def validate(cert: x509.Certificate, description: Any) -> None:
-                if uacrypto.der_from_x509(cert) not in trusted:
-                    self.untrusted += 1
-                    _log.info("opcua: refused an untrusted client certificate (%s)", cert.subject)
+                if not self._admit(uacrypto.der_from_x509(cert)):
                     raise ua.uaerrors.BadCertificateUntrusted
 
             server.set_certificate_validator(validate)
         self.namespace = await server.register_namespace(config.namespace)
+        grants = any(line.config.grants for line in gateway.lines)
+        if grants and not config.secure:
+            _log.warning(
+                "opcua: writes need a SignAndEncrypt channel and no endpoint offers one: "
+                "nothing can be written over OPC UA (security = %s)",
+                list(config.security),
+            )
 
     async def _build(self, server: Server, gateway: GatewayView) -> None:
         space = SpaceBuilder(self.namespace)
@@ -239,7 +267,14 @@ class OpcuaServer:
             for binding in nodes.bindings:
                 self._owners[binding.node] = (nodes, binding.name)
         route_writes(server, self.namespace, self._write)
+        guard_sessions(
+            server,
+            limit=self.config.max_connections,
+            created=self._session_created,
+            activated=self._session_activated,
+        )
         on_session_closed(server, self._session_closed)
+        refuse_registration(server)
 
     def _bind(self, server: Server, nodes: DriveNodes) -> None:
         drive = nodes.drive
@@ -260,6 +295,7 @@ class OpcuaServer:
 
             async def call(parent: ua.NodeId, *args: Any, _handler: Any = handler) -> Any:
                 if parent != nodes.node:  # the method of another object (Part 4, 5.11.2)
+                    calls.count(ua.StatusCodes.BadMethodInvalid)
                     return ua.StatusCode(ua.StatusCodes.BadMethodInvalid)
                 return await _handler(drive, args)
 
@@ -267,20 +303,16 @@ class OpcuaServer:
 
     async def _listen(self, server: Server) -> None:
         config = self.config
-        port = config.endpoint.port
-        for attempt in range(3):
-            chosen = port or _free_port(config.endpoint.host)
-            host = f"[{config.host_text}]" if ":" in config.host_text else config.host_text
-            self.url = f"opc.tcp://{host}:{chosen}"
-            server.set_endpoint(self.url)
-            try:
-                await server.start()
-            except OSError as exc:
-                if port == 0 and attempt < 2:  # the free port was taken meanwhile
-                    continue
-                raise GatewayStartError.of("opcua", (config.endpoint,), exc) from None
-            break
-        rules_per_mode(server, ChannelRules)
+        port = config.endpoint.port or _free_port(config.endpoint.host)
+        host = f"[{config.host_text}]" if ":" in config.host_text else config.host_text
+        self.url = f"opc.tcp://{host}:{port}"
+        server.set_endpoint(self.url)
+        try:
+            await server.start()
+        except OSError as exc:
+            raise GatewayStartError.of("opcua", (config.endpoint,), exc) from None
+        admit = self._admit if config.trusted_clients is not None else None
+        guard_channels(server, ChannelRules, admit, DiscoveryOnly())
 
     def announce(self) -> str | None:
         certificate = self.certificate
@@ -326,23 +358,25 @@ class OpcuaServer:
         yield pushed
         refused = CounterMetricFamily(
             "sj300_opcua_refused_logins",
-            "Sessions refused: a wrong user or password, an untrusted certificate.",
+            "Sessions refused: a wrong user or password, too many password checks at once, "
+            "an untrusted certificate.",
             labels=["reason"],
         )
         refused.add_metric(["password"], self._users.refused)
+        refused.add_metric(["rate"], self._users.throttled)
         refused.add_metric(["certificate"], self.untrusted)
         yield refused
 
     async def close(self) -> None:
-        for task in self._tasks:
-            task.cancel()
-        for task in self._tasks:
-            with contextlib.suppress(asyncio.CancelledError):
-                await task
-        self._tasks = []
+        tasks, self._tasks = self._tasks, []
         server, self._server = self._server, None
-        if server is not None:
-            await server.stop()
+        try:
+            for task in tasks:
+                task.cancel()
+            await asyncio.gather(*tasks, return_exceptions=True)
+        finally:
+            if server is not None:
+                await server.stop()
 
     # -- what the tests and the benchmark read ---------------------------------------
 
@@ -381,7 +415,14 @@ class OpcuaServer:
     def _reader(self, binding: Binding) -> Any:
         def read(node: ua.NodeId, attribute: ua.AttributeIds) -> ua.DataValue:
             assert self._loop is not None
-            return self._datavalue(binding, binding.status(self._loop.time(), self.stale_after_s))
+            try:
+                return self._datavalue(
+                    binding, binding.status(self._loop.time(), self.stale_after_s)
+                )
+            except Exception:  # a bug of ours: this node fails, not the client's whole read
+                self.push_errors += 1
+                _log.exception("opcua: cannot serve %s", node)
+                return ua.DataValue(StatusCode=ua.StatusCode(ua.StatusCodes.BadInternalError))
 
         return read
 
@@ -391,8 +432,13 @@ class OpcuaServer:
         shown = (binding.value, status)
         if shown == binding.pushed:
             return False
+        try:
+            self._outbox[binding.node] = self._datavalue(binding, status)
+        except Exception:  # a bug of ours: logged; the value is tried again next time
+            self.push_errors += 1
+            _log.exception("opcua: cannot push %s", binding.node)
+            return False
         binding.pushed = shown
-        self._outbox[binding.node] = self._datavalue(binding, status)
         return True
 
     async def _push(self) -> None:
@@ -413,16 +459,23 @@ class OpcuaServer:
     async def _tick(self) -> None:
         while True:
             await asyncio.sleep(TICK_S)
-            assert self._loop is not None
-            now = self._loop.time()
-            changed = False
-            for nodes in self._drives.values():
-                for binding in nodes.bindings:
-                    changed |= self._stage(binding, now)
-            for line in self._lines:
-                changed |= self._tick_line(line, now)
-            if changed:
-                self._wake.set()
+            try:
+                self._tick_once()
+            except Exception:  # a bug of ours must not end the ticks: logged, tried again
+                self.push_errors += 1
+                _log.exception("opcua: a tick failed")
+
+    def _tick_once(self) -> None:
+        assert self._loop is not None
+        now = self._loop.time()
+        changed = False
+        for nodes in self._drives.values():
+            for binding in nodes.bindings:
+                changed |= self._stage(binding, now)
+        for line in self._lines:
+            changed |= self._tick_line(line, now)
+        if changed:
+            self._wake.set()
 
     def _line_values(self, nodes: LineNodes) -> dict[str, object]:
         """A line's counters now, its utilisation over the last tick."""
@@ -480,10 +533,8 @@ class OpcuaServer:
             if value.AttributeId != ua.AttributeIds.Value or value.IndexRange:
                 return ua.StatusCode(ua.StatusCodes.BadWriteNotSupported)
             assert self._calls is not None
-            variant = value.Value.Value if value.Value is not None else None
-            if variant is None:
-                variant = ua.Variant(None, ua.VariantType.Null)
-            return ua.StatusCode(await self._calls.write_parameter(nodes.drive, code, variant))
+            written = value.Value if value.Value is not None else ua.DataValue()
+            return ua.StatusCode(await self._calls.write_parameter(nodes.drive, code, written))
         assert self._calls is not None
         owner = self._owners.get(value.NodeId)
         if owner is not None:  # a drive's read-only variable: a refused write, audited
@@ -494,9 +545,27 @@ class OpcuaServer:
         _log.debug("opcua: a write to %s refused: %s", value.NodeId, ua.StatusCode(status).name)
         return ua.StatusCode(status)
 
-    def _session_closed(self, user: Any) -> None:
-        if isinstance(user, Principal) and self._gateway is not None and not user.anonymous:
-            self._gateway.disconnected(user.connection)
+    def _admit(self, certificate: bytes | None) -> bool:
+        """True when *certificate* (DER) is one of ``trusted_clients`` (counted when not)."""
+        if certificate is not None and certificate in self._trusted:
+            return True
+        self.untrusted += 1
+        _log.info("opcua: refused a client certificate not in trusted_clients")
+        return False
+
+    def _session_created(self, session: Any) -> None:
+        self._session_keys[id(session)] = next(self._keys)
+
+    def _session_activated(self, session: Any) -> None:
+        """The session's user names the session: its lease's connection (re-activation too)."""
+        user = session.user
+        if isinstance(user, Principal):
+            user.key = self._session_keys.get(id(session), 0)
+
+    def _session_closed(self, session: Any) -> None:
+        key = self._session_keys.pop(id(session), None)
+        if key is not None and self._gateway is not None:
+            self._gateway.disconnected(Principal(key=key).connection)
 
 
 def _keep(node: NodeData, attribute: ua.AttributeIds, value: ua.DataValue) -> None:

@@ -82,9 +82,6 @@ class SpaceBuilder:
         self.namespace = namespace
         self._items: list[ua.AddNodesItem] = []
 
-    def __len__(self) -> int:
-        return len(self._items)
-
     def node_id(self, path: str) -> ua.NodeId:
         return ua.NodeId(path, self.namespace)
 

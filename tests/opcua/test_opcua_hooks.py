@@ -1,0 +1,384 @@
+"""What gateway/opcua/_hooks.py changes in asyncua's server, each shown by a client doing it.
+
+Each test is a way in that asyncua's defaults left open (an adversarial
+review found them): an unoffered unsecured channel, a certificate left out
+of CreateSession past ``trusted_clients``, a guessed session token, a
+session re-activated and its lease, logins that stall the loop, a flood of
+calls, discovery registration, a written status code, and our own bugs
+(a value that cannot be served, a tick that fails) kept from spreading.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import contextlib
+import shutil
+import socket
+from collections.abc import AsyncIterator
+from pathlib import Path
+from typing import Any
+
+import pytest
+from asyncua import Client, ua
+from asyncua.client.ua_client import UaClient
+from asyncua.ua.uaerrors import UaError, UaStatusCodeError
+from waiting import wait_for
+
+from sj300_async.gateway import Gateway
+from sj300_async.gateway.opcua import _hooks
+
+from .conftest import (
+    CLIENT_URI,
+    NAMESPACE,
+    PASSWORD,
+    USER,
+    Pair,
+    connected,
+    opcua_gateway,
+    opcua_toml,
+    tcp_line,
+)
+
+SECURE_ONLY = '["Basic256Sha256_SignAndEncrypt", "Basic256Sha256_Sign"]'
+
+
+async def _polled(gateway: Gateway) -> None:
+    await wait_for(lambda: all(d.snapshot.available for d in gateway.drives), "first samples")
+
+
+@contextlib.asynccontextmanager
+async def _unsecured_channel(url: str) -> AsyncIterator[UaClient]:
+    """A raw client on a SecurityPolicy None channel with no certificate at all."""
+    client = UaClient(timeout=5)
+    await client.connect_socket("127.0.0.1", int(url.rsplit(":", 1)[1]))
+    try:
+        await client.send_hello(url)
+        params = ua.OpenSecureChannelParameters(
+            RequestType=ua.SecurityTokenRequestType.Issue,
+            SecurityMode=ua.MessageSecurityMode.None_,
+            ClientNonce=b"",
+            RequestedLifetime=3_600_000,
+        )
+        await client.open_secure_channel(params)
+        yield client
+    finally:
+        with contextlib.suppress(Exception):
+            await client.disconnect_socket()
+
+
+async def _session_on(client: UaClient, url: str) -> None:
+    """Create and activate an anonymous session on *client*'s channel."""
+    params = ua.CreateSessionParameters(
+        ClientNonce=b"\0" * 32,
+        SessionName="probe",
+        RequestedSessionTimeout=60_000,
+        EndpointUrl=url,
+        MaxResponseMessageSize=0,
+    )
+    await client.create_session(params)
+    activate = ua.ActivateSessionParameters(
+        UserIdentityToken=ua.AnonymousIdentityToken(PolicyId="anonymous")
+    )
+    await client.activate_session(activate)
+
+
+async def _read_state(client: UaClient, ns: int) -> ua.DataValue:
+    read = ua.ReadValueId(
+        NodeId=ua.NodeId("hall/Drive1/Monitoring/State", ns), AttributeId=ua.AttributeIds.Value
+    )
+    (value,) = await client.read(ua.ReadParameters(NodesToRead=[read]))
+    return value
+
+
+@pytest.mark.parametrize("trusted", [False, True], ids=["secure-only", "trusted-clients"])
+async def test_an_unoffered_or_uncertified_unsecured_channel_only_discovers(
+    tmp_path: Path, client_pair: Pair, trusted: bool
+) -> None:
+    """No session's request on it: discovery (GetEndpoints, FindServers) only."""
+    extra = ""
+    if trusted:  # None offered, but it carries no certificate to trust
+        (tmp_path / "trusted").mkdir()
+        shutil.copy(client_pair.certificate, tmp_path / "trusted" / "client.der")
+        extra = f'trusted_clients = "{tmp_path / "trusted"}"'
+    security = '["Basic256Sha256_SignAndEncrypt", "None"]' if trusted else SECURE_ONLY
+    text = opcua_toml(tmp_path, security=security, opcua_extra=extra)
+    async with opcua_gateway(text) as (_, server), _unsecured_channel(server.url) as client:
+        endpoints = await client.get_endpoints(ua.GetEndpointsParameters(EndpointUrl=server.url))
+        assert ua.MessageSecurityMode.SignAndEncrypt in {e.SecurityMode for e in endpoints}
+        await _session_on(client, server.url)
+        with pytest.raises(UaStatusCodeError) as refused:
+            await _read_state(client, 1)
+        assert ua.StatusCode(refused.value.code).name == "BadUserAccessDenied"
+
+
+async def test_an_offered_unsecured_channel_reads(tmp_path: Path) -> None:
+    text = opcua_toml(tmp_path, security='["None"]')
+    async with opcua_gateway(text) as (gateway, server), _unsecured_channel(server.url) as client:
+        await _polled(gateway)
+        await _session_on(client, server.url)
+        assert (await _read_state(client, 1)).Value.Value == "stopped"
+
+
+async def test_an_untrusted_certificate_cannot_skip_the_check_by_leaving_it_out(
+    tmp_path: Path, client_pair: Pair, other_pair: Pair
+) -> None:
+    trusted = tmp_path / "trusted"
+    trusted.mkdir()
+    shutil.copy(client_pair.certificate, trusted / "client.der")
+    text = opcua_toml(tmp_path, opcua_extra=f'trusted_clients = "{trusted}"')
+    async with opcua_gateway(text) as (gateway, server):
+        await _polled(gateway)
+        client = Client(server.url, timeout=5)
+        client.application_uri = "urn:sj300-async:other-client"
+        await client.set_security_string(
+            f"Basic256Sha256,SignAndEncrypt,{other_pair.certificate},{other_pair.key}"
+        )
+        client.set_user(USER)
+        client.set_password(PASSWORD)
+        create = client.uaclient.create_session
+
+        async def without_certificate(params: Any) -> Any:
+            params.ClientCertificate = None  # the session's check would not run
+            return await create(params)
+
+        client.uaclient.create_session = without_certificate
+        with pytest.raises((UaError, OSError, TimeoutError, ConnectionError)):
+            await client.connect()  # refused when the channel opens
+        with contextlib.suppress(Exception):
+            await client.disconnect()
+        drive = gateway.drive("hall", 1)
+        assert drive is not None
+        assert drive.lease.holder is None
+        assert server.untrusted >= 1
+
+
+async def test_session_tokens_are_random_and_another_s_cannot_be_activated(
+    tmp_path: Path, client_pair: Pair
+) -> None:
+    async with (
+        opcua_gateway(opcua_toml(tmp_path)) as (gateway, server),
+        connected(server.url, pair=client_pair, user=USER, password=PASSWORD) as operator,
+    ):
+        await _polled(gateway)
+        token = operator.uaclient.protocol.authentication_token
+        assert token.NodeIdType == ua.NodeIdType.ByteString
+        assert len(token.Identifier) == 32
+        # A client that guesses asyncua's counter (1000, 1001...) finds nothing to take over.
+        async with _unsecured_channel(server.url) as intruder:
+            for guess in range(1000, 1010):
+                intruder.protocol.authentication_token = ua.NodeId(guess)
+                params = ua.ActivateSessionParameters(
+                    UserIdentityToken=ua.AnonymousIdentityToken(PolicyId="anonymous")
+                )
+                with pytest.raises(UaStatusCodeError):
+                    await intruder.activate_session(params)
+        ns = await operator.get_namespace_index(NAMESPACE)
+        drive = operator.get_node(ua.NodeId("hall/Drive1", ns))
+        assert await drive.call_method(f"{ns}:TakeControl") == 5.0
+
+
+async def test_a_reactivated_session_still_lapses_its_lease_when_it_closes(
+    tmp_path: Path, client_pair: Pair
+) -> None:
+    async with tcp_line() as (sim, url):
+        text = opcua_toml(tmp_path, url=url, line_extra='lease_s = 60\nlease_scope = "connection"')
+        async with opcua_gateway(text) as (gateway, server):
+            await _polled(gateway)
+            drive = gateway.drive("hall", 1)
+            assert drive is not None
+            async with connected(
+                server.url, pair=client_pair, user=USER, password=PASSWORD
+            ) as client:
+                ns = await client.get_namespace_index(NAMESPACE)
+                node = client.get_node(ua.NodeId("hall/Drive1", ns))
+                assert await node.call_method(f"{ns}:TakeControl") == 60.0
+                await client.activate_session(USER, PASSWORD)  # the same session, again
+                await node.call_method(f"{ns}:SetFrequency", ua.Variant(5.0, ua.VariantType.Double))
+                await node.call_method(f"{ns}:Run", "forward")
+                loop = asyncio.get_running_loop()
+                assert sim.drives[1].state(loop.time()).outputting
+            await wait_for(lambda: drive.lease.holder is None, "the lease lapsed", timeout=5)
+            await wait_for(
+                lambda: not sim.drives[1].state(asyncio.get_running_loop().time()).outputting,
+                "the drive stopped",
+                timeout=10,
+            )
+
+
+async def test_an_unactivated_session_is_closed(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    monkeypatch.setattr(_hooks, "ACTIVATE_WITHIN_S", 0.3)
+    text = opcua_toml(tmp_path, security='["None"]')
+    async with opcua_gateway(text) as (_, server), _unsecured_channel(server.url) as client:
+        params = ua.CreateSessionParameters(
+            ClientNonce=b"\0" * 32,
+            SessionName="never activated",
+            RequestedSessionTimeout=60_000,
+            EndpointUrl=server.url,
+            MaxResponseMessageSize=0,
+        )
+        await client.create_session(params)
+        assert server.session_count == 1
+        await wait_for(lambda: server.session_count == 0, "the session closed", timeout=5)
+
+
+async def test_failed_logins_are_throttled_and_never_stall_the_loop(tmp_path: Path) -> None:
+    async with opcua_gateway(opcua_toml(tmp_path)) as (_, server):
+        loop = asyncio.get_running_loop()
+        stalls: list[float] = []
+
+        async def watch() -> None:
+            while True:
+                before = loop.time()
+                await asyncio.sleep(0.01)
+                stalls.append(loop.time() - before - 0.01)
+
+        watcher = asyncio.create_task(watch())
+        client = Client(server.url, timeout=30)
+        client.application_uri = CLIENT_URI
+        await client.connect()  # anonymous, unsecured (the test's server offers None)
+        try:
+
+            async def wrong() -> None:
+                with contextlib.suppress(UaStatusCodeError):
+                    await client.activate_session(USER, "wrong")
+
+            await asyncio.gather(*(wrong() for _ in range(30)))
+        finally:
+            watcher.cancel()
+            with contextlib.suppress(Exception):
+                await client.disconnect()
+        # 30 scrypt checks in a row would hold the loop ~2 s; the budget allows 3 at once.
+        assert server._users.refused + server._users.throttled == 30
+        assert server._users.throttled >= 25
+        assert max(stalls) < 0.5, f"the loop stood still {max(stalls):.2f} s"
+        families = {f.name: f for f in server.metrics()}
+        rate = [s for s in families["sj300_opcua_refused_logins"].samples if s.labels]
+        assert {s.labels["reason"]: s.value for s in rate}["rate"] == server._users.throttled
+
+
+async def test_one_request_carries_at_most_64_writes(tmp_path: Path, client_pair: Pair) -> None:
+    async with (
+        opcua_gateway(opcua_toml(tmp_path)) as (gateway, server),
+        connected(server.url, pair=client_pair, user=USER, password=PASSWORD) as client,
+    ):
+        await _polled(gateway)
+        ns = await client.get_namespace_index(NAMESPACE)
+        stop = ua.CallMethodRequest(
+            ObjectId=ua.NodeId("hall/Drive1", ns), MethodId=ua.NodeId("hall/Drive1/Stop", ns)
+        )
+        before = len(gateway.audit.recent)
+        results = await client.uaclient.call([stop] * 100)
+        names = [result.StatusCode.name for result in results]
+        assert names == ["Good"] * 64 + ["BadTooManyOperations"] * 36
+        assert len(gateway.audit.recent) - before == 64
+
+
+async def test_an_array_argument_is_a_type_mismatch_and_audited(
+    tmp_path: Path, client_pair: Pair
+) -> None:
+    async with (
+        opcua_gateway(opcua_toml(tmp_path)) as (gateway, server),
+        connected(server.url, pair=client_pair, user=USER, password=PASSWORD) as client,
+    ):
+        await _polled(gateway)
+        ns = await client.get_namespace_index(NAMESPACE)
+        for argument in (
+            ua.Variant([5.0], ua.VariantType.Double, is_array=True),
+            ua.Variant([], ua.VariantType.Double, is_array=True),
+            ua.Variant(["forward"], ua.VariantType.String, is_array=True),
+        ):
+            method = "Run" if argument.VariantType == ua.VariantType.String else "SetFrequency"
+            call = ua.CallMethodRequest(
+                ObjectId=ua.NodeId("hall/Drive1", ns),
+                MethodId=ua.NodeId(f"hall/Drive1/{method}", ns),
+                InputArguments=[argument],
+            )
+            before = len(gateway.audit.recent)
+            (result,) = await client.uaclient.call([call])
+            assert result.StatusCode.name == "BadTypeMismatch"
+            assert len(gateway.audit.recent) == before + 1
+
+
+async def test_discovery_registration_is_refused(tmp_path: Path) -> None:
+    text = opcua_toml(tmp_path, security='["None"]')
+    async with opcua_gateway(text) as (_, server), _unsecured_channel(server.url) as client:
+        registered = ua.RegisteredServer(
+            ServerUri="urn:someone:else",
+            ServerNames=[ua.LocalizedText("else")],
+            DiscoveryUrls=["opc.tcp://10.6.6.6:4840"],
+            IsOnline=True,
+        )
+        with pytest.raises(UaStatusCodeError) as refused:
+            await client.register_server(registered)
+        assert ua.StatusCode(refused.value.code).name == "BadServiceUnsupported"
+        found = await client.find_servers(ua.FindServersParameters(EndpointUrl=server.url))
+        assert [s.ApplicationUri for s in found] == [NAMESPACE]
+
+
+async def test_a_value_written_with_a_bad_status_is_refused_unsent(
+    tmp_path: Path, client_pair: Pair
+) -> None:
+    async with (
+        tcp_line() as (sim, url),
+        opcua_gateway(opcua_toml(tmp_path, url=url)) as (gateway, server),
+        connected(server.url, pair=client_pair, user=USER, password=PASSWORD) as client,
+    ):
+        await _polled(gateway)
+        ns = await client.get_namespace_index(NAMESPACE)
+        before = dict(sim.drives[1].parameters)
+        flagged = ua.DataValue(
+            ua.Variant(5.0, ua.VariantType.Double),
+            StatusCode=ua.StatusCode(ua.StatusCodes.BadNoCommunication),
+        )
+        write = ua.WriteValue(
+            NodeId=ua.NodeId("hall/Drive1/Parameters/F002", ns),
+            AttributeId=ua.AttributeIds.Value,
+            Value=flagged,
+        )
+        (status,) = await client.uaclient.write(ua.WriteParameters(NodesToWrite=[write]))
+        assert status.name == "BadWriteNotSupported"
+        assert dict(sim.drives[1].parameters) == before
+        assert gateway.audit.recent[-1]["result"] == "refused"
+
+
+async def test_a_value_that_cannot_be_served_fails_alone(tmp_path: Path) -> None:
+    async with opcua_gateway(opcua_toml(tmp_path)) as (gateway, server):
+        await _polled(gateway)
+        binding = next(
+            b for b in server._drives[("hall", 1)].bindings
+            if b.name == "Monitoring/ConverterOutputCurrent"
+        )  # fmt: skip
+        binding.value = "not a number"  # as a bug of ours would leave it
+        binding.read = lambda s: ("not a number", s.monitor_at)
+        async with connected(server.url) as client:
+            ns = await client.get_namespace_index(NAMESPACE)
+            nodes = [
+                ua.ReadValueId(
+                    NodeId=ua.NodeId(f"hall/Drive1/Monitoring/{name}", ns),
+                    AttributeId=ua.AttributeIds.Value,
+                )
+                for name in ("ConverterOutputFrequency", "ConverterOutputCurrent")
+            ]
+            good, bad = await client.uaclient.read(ua.ReadParameters(NodesToRead=nodes))
+            assert good.StatusCode.is_good()
+            assert bad.StatusCode.name == "BadInternalError"
+        assert server.push_errors >= 1
+
+
+async def test_close_stops_the_server_even_after_a_tick_failed(tmp_path: Path) -> None:
+    async with opcua_gateway(opcua_toml(tmp_path)) as (_, server):
+        port = int(server.url.rsplit(":", 1)[1])
+        errors = server.push_errors
+
+        def boom(*args: Any) -> bool:
+            raise ZeroDivisionError("injected")
+
+        server._tick_line = boom  # type: ignore[assignment]
+        await wait_for(lambda: server.push_errors > errors, "a failed tick", timeout=5)
+        await wait_for(lambda: server.push_errors > errors + 1, "the ticks go on", timeout=5)
+    with socket.socket() as probe:
+        probe.settimeout(1)
+        with pytest.raises(ConnectionRefusedError):  # closed: nothing listens any more
+            probe.connect(("127.0.0.1", port))
