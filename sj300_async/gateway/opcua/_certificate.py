@@ -101,9 +101,3 @@ def load_or_generate(
     # OPC UA names a certificate by its SHA-1 thumbprint (what clients show to trust).
     thumbprint = cert.fingerprint(hashes.SHA1()).hex()
     return ServerCertificate(certificate, private_key, uri, generated, thumbprint)
-
-
-def _sha1() -> object:
-    from cryptography.hazmat.primitives import hashes
-
-    return hashes.SHA1()
