@@ -56,6 +56,7 @@ __all__ = [
     "TRIP_SLOTS",
     "Binding",
     "DriveNodes",
+    "Group",
     "LineNodes",
     "MethodNodes",
     "build_drive",
@@ -68,6 +69,31 @@ TRIP_SLOTS: Final = 8
 DIRECTION_STATES: Final = ("stopped", "forward", "reverse")
 
 Reader = Callable[[DriveSnapshot], tuple[object, float]]
+#: What changes when a group's values were read again (a read time, or a pair of them).
+Stamp = Callable[[DriveSnapshot], object]
+#: How a variable is read: its reader, and its group's stamp.
+Source = tuple[Reader, Stamp]
+
+
+def _status_at(s: DriveSnapshot) -> object:
+    return s.status_at
+
+
+def _status_or_trips_at(s: DriveSnapshot) -> object:
+    # The state in words and the active trip name the trip the history read found.
+    return s.status_at, s.trips_at
+
+
+def _monitor_at(s: DriveSnapshot) -> object:
+    return s.monitor_at
+
+
+def _trips_at(s: DriveSnapshot) -> object:
+    return s.trips_at
+
+
+def _sample_at(s: DriveSnapshot) -> object:
+    return s.taken_at
 
 
 @dataclass(slots=True, eq=False)
@@ -114,12 +140,23 @@ class MethodNodes:
 
 
 @dataclass(slots=True, eq=False)
+class Group:
+    """Variables read together: taken again only when their stamp or the verdict changed."""
+
+    stamp: Stamp
+    bindings: list[Binding] = field(default_factory=list)
+    #: (stamp, online) when last taken.
+    seen: object = None
+
+
+@dataclass(slots=True, eq=False)
 class DriveNodes:
     """One drive's object: its variables and methods."""
 
     drive: GatewayDrive
     node: ua.NodeId
     bindings: list[Binding] = field(default_factory=list)
+    groups: list[Group] = field(default_factory=list)
     #: Writable parameter variables: node -> parameter code.
     writable: dict[ua.NodeId, str] = field(default_factory=dict)
     methods: MethodNodes | None = None
@@ -158,23 +195,23 @@ LINE_COUNTERS: Final[tuple[tuple[str, ua.VariantType, str, str], ...]] = (
 )
 
 
-def _status(get: Callable[[DriveSnapshot], object]) -> Reader:
-    return lambda s: (get(s), s.status_at)
+def _status(get: Callable[[DriveSnapshot], object]) -> Source:
+    return (lambda s: (get(s), s.status_at)), _status_at
 
 
-def _monitor(get: Callable[[DriveSnapshot], object]) -> Reader:
-    return lambda s: (get(s), s.monitor_at)
+def _monitor(get: Callable[[DriveSnapshot], object]) -> Source:
+    return (lambda s: (get(s), s.monitor_at)), _monitor_at
 
 
-def _trip_slot(index: int, get: Callable[[Trip], object]) -> Reader:
+def _trip_slot(index: int, get: Callable[[Trip], object]) -> Source:
     def read(s: DriveSnapshot) -> tuple[object, float]:
         records = s.trips.records if s.trips is not None else ()
         return (get(records[index]) if index < len(records) else None), s.trips_at
 
-    return read
+    return read, _trips_at
 
 
-def _parameter(code: str) -> Reader:
+def _parameter(code: str) -> Source:
     def read(s: DriveSnapshot) -> tuple[object, float]:
         reading = s.parameters.get(code)
         if reading is not None:
@@ -183,18 +220,32 @@ def _parameter(code: str) -> Reader:
             return None, s.taken_at
         return None, -math.inf
 
-    return read
+    return read, lambda s: read(s)[1]
 
 
-def _direction(s: DriveSnapshot) -> tuple[object, float]:
+def _read_direction(s: DriveSnapshot) -> tuple[object, float]:
     direction: int | None = None if s.direction is None else int(s.direction)
     return direction, s.direction_at
 
 
-def _active_trip(s: DriveSnapshot) -> tuple[object, float]:
+def _read_active_trip(s: DriveSnapshot) -> tuple[object, float]:
     if s.tripped is None:
         return None, s.status_at
     return (str(s.trip) if s.tripped and s.trip is not None else ""), s.status_at
+
+
+_DIRECTION: Final[Source] = (_read_direction, lambda s: s.direction_at)
+_ACTIVE_TRIP: Final[Source] = (_read_active_trip, _status_or_trips_at)
+_STATE: Final[Source] = ((lambda s: (s.state_text(), s.status_at)), _status_or_trips_at)
+_ONLINE: Final[Source] = ((lambda s: (s.online, s.taken_at)), _sample_at)
+_SETPOINT: Final[Source] = (
+    (lambda s: (s.set_frequency_hz, s.set_frequency_at)),
+    lambda s: s.set_frequency_at,
+)
+_TRIP_COUNT: Final[Source] = (
+    (lambda s: (s.trips.total_count if s.trips else None, s.trips_at)),
+    _trips_at,
+)
 
 
 class _DriveBuilder:
@@ -204,6 +255,7 @@ class _DriveBuilder:
         self.space = space
         self.nodes = nodes
         self.path = path
+        self._groups: dict[int, Group] = {}
 
     def var(
         self,
@@ -211,7 +263,7 @@ class _DriveBuilder:
         path: str,
         name: str,
         vtype: ua.VariantType,
-        read: Reader,
+        source: Source,
         *,
         verdict: bool = False,
         description: str = "",
@@ -224,8 +276,15 @@ class _DriveBuilder:
             parent, f"{path}/{name}", name, vtype, description=description, unit=unit,
             value_range=value_range, states=states, writable=writable,
         )  # fmt: skip
+        read, stamp = source
         relative = f"{path}/{name}".removeprefix(f"{self.path}/")
-        self.nodes.bindings.append(Binding(node, vtype, read, relative, verdict=verdict))
+        binding = Binding(node, vtype, read, relative, verdict=verdict)
+        self.nodes.bindings.append(binding)
+        group = self._groups.get(id(stamp))
+        if group is None:
+            group = self._groups[id(stamp)] = Group(stamp)
+            self.nodes.groups.append(group)
+        group.bindings.append(binding)
         return node
 
 
@@ -246,7 +305,7 @@ def build_drive(
     space.property(node, f"{path}/Node", "Node", drive.node, ua.VariantType.Int32)
     space.property(node, f"{path}/Protocol", "Protocol", drive.line.protocol, ua.VariantType.String)
     space.property(node, f"{path}/UnitId", "UnitId", drive.unit, ua.VariantType.Int32)
-    b.var(node, path, "Online", ua.VariantType.Boolean, lambda s: (s.online, s.taken_at),
+    b.var(node, path, "Online", ua.VariantType.Boolean, _ONLINE,
           verdict=True, description="the poller hears the drive")  # fmt: skip
 
     hz_range = (0.0, float(profile.max_frequency_hz))
@@ -257,7 +316,7 @@ def build_drive(
           _monitor(lambda s: s.output_frequency_hz), unit="Hz", value_range=hz_range,
           description="output frequency")  # fmt: skip
     b.var(folder, monitoring, "FrequencyCommandValue", double,
-          lambda s: (s.set_frequency_hz, s.set_frequency_at), unit="Hz", value_range=hz_range,
+          _SETPOINT, unit="Hz", value_range=hz_range,
           description="the set frequency, as read back from the drive")  # fmt: skip
     b.var(folder, monitoring, "ConverterOutputCurrent", double,
           _monitor(lambda s: s.output_current_a), unit="A",
@@ -273,21 +332,20 @@ def build_drive(
         b.var(folder, monitoring, "OutputTorque", double,
               _monitor(lambda s: s.output_torque_percent), unit="%",
               description="output torque, percent of the motor's rated torque")  # fmt: skip
-    b.var(folder, monitoring, "ShaftTurningDirection", ua.VariantType.UInt16, _direction,
+    b.var(folder, monitoring, "ShaftTurningDirection", ua.VariantType.UInt16, _DIRECTION,
           states=DIRECTION_STATES, description="0 stopped, 1 forward, 2 reverse")  # fmt: skip
     b.var(folder, monitoring, "Running", boolean, _status(lambda s: s.running),
           description="the drive runs (accelerating, at speed or decelerating)")  # fmt: skip
     b.var(folder, monitoring, "Tripped", boolean, _status(lambda s: s.tripped),
           description="the drive is tripped (a fault stopped it)")  # fmt: skip
-    b.var(folder, monitoring, "State", ua.VariantType.String, _status(lambda s: s.state_text()),
+    b.var(folder, monitoring, "State", ua.VariantType.String, _STATE,
           description="the state in words, the trip named")  # fmt: skip
 
     logbook = f"{path}/Logbook"
     folder = space.object(node, logbook, "Logbook", "the trip history", folder=True, component=True)
-    b.var(folder, logbook, "ActiveTrip", ua.VariantType.String, _active_trip,
+    b.var(folder, logbook, "ActiveTrip", ua.VariantType.String, _ACTIVE_TRIP,
           description="the trip the drive is in, code and meaning (empty: none)")  # fmt: skip
-    b.var(folder, logbook, "TripCount", ua.VariantType.UInt32,
-          lambda s: (s.trips.total_count if s.trips else None, s.trips_at),
+    b.var(folder, logbook, "TripCount", ua.VariantType.UInt32, _TRIP_COUNT,
           description="trips since the counter was cleared")  # fmt: skip
     for slot in range(TRIP_SLOTS):
         slot_path = f"{logbook}/Trip{slot + 1}"

@@ -46,11 +46,13 @@ from ._calls import Calls
 from ._certificate import ServerCertificate, load_or_generate
 from ._config import OpcuaConfig
 from ._hooks import (
+    FrozenDataValue,
     guard_channels,
     guard_sessions,
     on_session_closed,
     refuse_registration,
     route_writes,
+    share_frozen_values,
 )
 from ._model import (
     LINE_COUNTERS,
@@ -267,6 +269,7 @@ class OpcuaServer:
             for binding in nodes.bindings:
                 self._owners[binding.node] = (nodes, binding.name)
         route_writes(server, self.namespace, self._write)
+        share_frozen_values()
         guard_sessions(
             server,
             limit=self.config.max_connections,
@@ -329,9 +332,15 @@ class OpcuaServer:
             return
         now = asyncio.get_running_loop().time()
         changed = False
-        for binding in nodes.bindings:
-            binding.take(snapshot)
-            changed |= self._stage(binding, now)
+        online = snapshot.online
+        for group in nodes.groups:  # only the groups read again (the tick ages the rest)
+            seen = (group.stamp(snapshot), online)
+            if seen == group.seen:
+                continue
+            group.seen = seen
+            for binding in group.bindings:
+                binding.take(snapshot)
+                changed |= self._stage(binding, now)
         if changed:
             self._wake.set()
 
@@ -405,7 +414,7 @@ class OpcuaServer:
             variant = ua.Variant(None, ua.VariantType.Null)
         else:
             variant = ua.Variant(_CONVERT[binding.vtype](binding.value), binding.vtype)
-        return ua.DataValue(
+        return FrozenDataValue(
             Value=variant,
             StatusCode=ua.StatusCode(status),
             SourceTimestamp=utc(binding.wall),
@@ -489,13 +498,13 @@ class OpcuaServer:
         vtype = _LINE_TYPES[name]
         stamp = utc(time.time())
         if value is None:
-            return ua.DataValue(
+            return FrozenDataValue(
                 Value=ua.Variant(None, ua.VariantType.Null),
                 StatusCode=ua.StatusCode(BAD_WAITING),
                 SourceTimestamp=stamp,
                 ServerTimestamp=stamp,
             )
-        return ua.DataValue(
+        return FrozenDataValue(
             Value=ua.Variant(_CONVERT[vtype](value), vtype),
             StatusCode=ua.StatusCode(GOOD),
             SourceTimestamp=stamp,
