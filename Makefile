@@ -1,5 +1,6 @@
 # Every target creates .venv when it is missing, so a fresh machine needs only
-# Python >= 3.11 and make (and, for the tests, the system packages below).
+# Python >= 3.11 and make (and, for the tests, the system packages below and Node.js
+# >= 20 with npm, for node-packages).
 PYTHON ?= python3
 VENV := .venv
 BIN := $(VENV)/bin
@@ -21,8 +22,15 @@ GATEWAY_STAMP := $(VENV)/.installed-gateway
 SYSTEM_PACKAGES := socat:socat ser2net:ser2net mbpoll:mbpoll mosquitto:mosquitto \
 	mosquitto-clients:mosquitto_sub tshark:tshark chromium:chromium openssl:openssl
 
-.PHONY: demo gateway examples test lint typecheck lint-imports docs system-packages pytest bench \
-	bench-compare soak clean venv
+# The npm packages of the OPC UA tests' independent client (tests/opcua/node: node-opcua,
+# from its package-lock.json; tests/test_readme.py checks README.md against package.json).
+# npm ci runs when node_modules is missing or older than the lockfile; the stamp is
+# inside node_modules, so deleting node_modules installs again.
+NODE_DIR := tests/opcua/node
+NODE_STAMP := $(NODE_DIR)/node_modules/.installed
+
+.PHONY: demo gateway examples test lint typecheck lint-imports docs system-packages \
+	node-packages pytest bench bench-compare soak clean venv
 
 # No pip self-upgrade: the venv's pip installs the package (editable, PEP 660) as it
 # is, and upgrading it costs 1.5 s of the demo's first screen.
@@ -91,12 +99,25 @@ system-packages:
 	export DEBIAN_FRONTEND=noninteractive; \
 	apt-get update -qq && apt-get install -y -qq $$missing >/dev/null
 
+# Names Node.js >= 20 and npm in one line and fails (exit 2) when either is missing (or
+# node is older): not installed from Debian, whose nodejs may be older than node-opcua needs.
+node-packages: $(NODE_STAMP)
+
+$(NODE_STAMP): $(NODE_DIR)/package-lock.json $(NODE_DIR)/package.json
+	@command -v npm >/dev/null 2>&1 \
+		&& node -e 'process.exit(parseInt(process.versions.node) >= 20 ? 0 : 1)' 2>/dev/null || { \
+		echo "the OPC UA tests need Node.js >= 20 and npm: install them, then make node-packages" >&2; \
+		exit 2; \
+	}
+	npm ci --prefix $(NODE_DIR) --no-audit --no-fund --loglevel=error
+	touch $@
+
 # The suite in this many worker processes (pytest-xdist; 0: all in one process, as a
 # plain `pytest FILE` runs). Most tests wait on sockets, ptys and subprocesses:
 # on 2 cores, 2 workers take the default suite from 536 s to 294 s.
 PYTEST_WORKERS ?= 2
 
-pytest: $(DEV_STAMP) system-packages
+pytest: $(DEV_STAMP) system-packages node-packages
 	$(BIN)/pytest -n $(PYTEST_WORKERS) --dist worksteal $(PYTEST_ARGS)
 
 bench: $(DEV_STAMP)

@@ -1,7 +1,8 @@
-"""README.md says what the Makefile does (they cannot drift apart)."""
+"""README.md says what the Makefile and the npm packages file install (they cannot drift apart)."""
 
 from __future__ import annotations
 
+import json
 import re
 from pathlib import Path
 
@@ -21,3 +22,11 @@ def test_the_readme_lists_every_system_package_the_tests_need() -> None:
     found = re.search(r"the Debian packages its real-part tests use \(([^:)]+)", readme)
     assert found is not None, "README.md no longer lists the Debian packages"
     assert found[1].split(", ") == _system_packages()
+
+
+def test_the_readme_lists_every_npm_package_the_tests_need() -> None:
+    readme = " ".join((ROOT / "README.md").read_text(encoding="utf-8").split())
+    found = re.search(r"the npm packages its OPC UA tests use \(([^:)]+)", readme)
+    assert found is not None, "README.md no longer lists the npm packages"
+    package = json.loads((ROOT / "tests/opcua/node/package.json").read_text(encoding="utf-8"))
+    assert found[1].split(", ") == list(package["dependencies"])
