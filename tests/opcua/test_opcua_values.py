@@ -250,3 +250,22 @@ async def test_a_subscription_follows_a_running_drive(tmp_path: Path, client_pai
         await wait_for(lambda: drive.snapshot.taken_at > polls + 0.3, "three more samples")
         assert [c[0] for c in handler.changes[settled:] if isinstance(c[0], float)] == []
         await node.call_method(f"{ns}:Stop")
+
+
+async def test_the_trip_history_is_not_stale_within_its_own_read_interval(tmp_path: Path) -> None:
+    """Read every trips_interval_s by plan: older than stale_after_s, yet not stale."""
+    text = opcua_toml(
+        tmp_path, gateway_extra="stale_after_s = 0.3", line_extra="trips_interval_s = 30"
+    )
+    async with opcua_gateway(text) as (gateway, server), connected(server.url) as client:
+        ns = await _namespace(client)
+        drive = gateway.drive("hall", 1)
+        assert drive is not None
+        await wait_for(lambda: drive.snapshot.trips is not None, "a trip history read")
+        read_at = drive.snapshot.trips_at
+        loop = asyncio.get_running_loop()
+        await wait_for(lambda: loop.time() > read_at + 0.6, "the history older than 0.3 s")
+        count = await _var(client, ns, "hall/Drive1/Logbook/TripCount").read_data_value()
+        assert count.StatusCode.is_good()
+        assert count.Value.Value == drive.snapshot.trips.total_count  # type: ignore[union-attr]
+        assert drive.snapshot.trips_at == read_at  # not read again meanwhile

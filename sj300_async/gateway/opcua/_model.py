@@ -107,6 +107,10 @@ class Binding:
     name: str = ""
     #: The Online variable: the verdict itself, not judged by it (never offline).
     verdict: bool = False
+    #: Seconds its group may wait between reads by plan, beyond stale_after_s: the trip
+    #: history is read every trips_interval_s, the set frequency every
+    #: setpoint_interval_s; a value read on time is not stale.
+    allowance: float = 0.0
     value: object = None
     #: Loop time the value was read (-inf: never).
     at: float = -math.inf
@@ -126,7 +130,7 @@ class Binding:
 
     def status(self, now: float, stale_after_s: float) -> int:
         # The verdict is Good while verdicts keep coming; a stalled poller's last one ages.
-        return quality(self.online, self.at, self.value, now, stale_after_s)
+        return quality(self.online, self.at, self.value, now, stale_after_s + self.allowance)
 
 
 @dataclass(frozen=True, slots=True)
@@ -234,6 +238,14 @@ def _read_active_trip(s: DriveSnapshot) -> tuple[object, float]:
     return (str(s.trip) if s.tripped and s.trip is not None else ""), s.status_at
 
 
+#: A trip record's variables: name, type, value, unit.
+_TRIP_FIELDS: Final[tuple[tuple[str, ua.VariantType, Callable[[Trip], object], str], ...]] = (
+    ("Code", ua.VariantType.String, lambda t: t.code, ""),
+    ("Meaning", ua.VariantType.String, lambda t: t.meaning, ""),
+    ("OutputFrequency", ua.VariantType.Double, lambda t: t.output_frequency_hz, "Hz"),
+    ("OutputCurrent", ua.VariantType.Double, lambda t: t.output_current_a, "A"),
+    ("OutputVoltage", ua.VariantType.Double, lambda t: t.output_voltage_v, "V"),
+)
 _DIRECTION: Final[Source] = (_read_direction, lambda s: s.direction_at)
 _ACTIVE_TRIP: Final[Source] = (_read_active_trip, _status_or_trips_at)
 _STATE: Final[Source] = ((lambda s: (s.state_text(), s.status_at)), _status_or_trips_at)
@@ -266,6 +278,7 @@ class _DriveBuilder:
         source: Source,
         *,
         verdict: bool = False,
+        allowance: float = 0.0,
         description: str = "",
         unit: str = "",
         value_range: tuple[float, float] | None = None,
@@ -278,7 +291,7 @@ class _DriveBuilder:
         )  # fmt: skip
         read, stamp = source
         relative = f"{path}/{name}".removeprefix(f"{self.path}/")
-        binding = Binding(node, vtype, read, relative, verdict=verdict)
+        binding = Binding(node, vtype, read, relative, verdict=verdict, allowance=allowance)
         self.nodes.bindings.append(binding)
         group = self._groups.get(id(stamp))
         if group is None:
@@ -317,6 +330,7 @@ def build_drive(
           description="output frequency")  # fmt: skip
     b.var(folder, monitoring, "FrequencyCommandValue", double,
           _SETPOINT, unit="Hz", value_range=hz_range,
+          allowance=drive.line.setpoint_interval_s,
           description="the set frequency, as read back from the drive")  # fmt: skip
     b.var(folder, monitoring, "ConverterOutputCurrent", double,
           _monitor(lambda s: s.output_current_a), unit="A",
@@ -345,21 +359,16 @@ def build_drive(
     folder = space.object(node, logbook, "Logbook", "the trip history", folder=True, component=True)
     b.var(folder, logbook, "ActiveTrip", ua.VariantType.String, _ACTIVE_TRIP,
           description="the trip the drive is in, code and meaning (empty: none)")  # fmt: skip
-    b.var(folder, logbook, "TripCount", ua.VariantType.UInt32, _TRIP_COUNT,
+    trips = drive.line.trips_interval_s
+    b.var(folder, logbook, "TripCount", ua.VariantType.UInt32, _TRIP_COUNT, allowance=trips,
           description="trips since the counter was cleared")  # fmt: skip
     for slot in range(TRIP_SLOTS):
         slot_path = f"{logbook}/Trip{slot + 1}"
         first = "the newest trip" if slot == 0 else ""
         trip = space.object(folder, slot_path, f"Trip{slot + 1}", first, component=True)
-        string = ua.VariantType.String
-        b.var(trip, slot_path, "Code", string, _trip_slot(slot, lambda t: t.code))
-        b.var(trip, slot_path, "Meaning", string, _trip_slot(slot, lambda t: t.meaning))
-        b.var(trip, slot_path, "OutputFrequency", double,
-              _trip_slot(slot, lambda t: t.output_frequency_hz), unit="Hz")  # fmt: skip
-        b.var(trip, slot_path, "OutputCurrent", double,
-              _trip_slot(slot, lambda t: t.output_current_a), unit="A")  # fmt: skip
-        b.var(trip, slot_path, "OutputVoltage", double,
-              _trip_slot(slot, lambda t: t.output_voltage_v), unit="V")  # fmt: skip
+        for field_name, vtype, get, unit in _TRIP_FIELDS:
+            b.var(trip, slot_path, field_name, vtype, _trip_slot(slot, get), unit=unit,
+                  allowance=trips)  # fmt: skip
 
     granted = drive.line.writable_parameters(drive.node)
     codes = list(dict.fromkeys((*drive.line.parameters, *sorted(granted))))
