@@ -856,9 +856,9 @@ def test_a_multi_line_array_does_not_confuse_the_lines_after_it() -> None:
 def test_a_key_inside_an_inline_table_points_at_its_first_line() -> None:
     text = 'x = 1\nlines = [\n  { url = "sim://", nodes = "40" },\n]\n'
 
-    assert (
-        refusal(text)
-        == "gateway.toml:1: x: unknown key 'x' (use gateway, modbus, http, metrics, mqtt, opcua, lines)"
+    assert refusal(text) == (
+        "gateway.toml:1: x: unknown key 'x' "
+        "(use gateway, modbus, http, metrics, mqtt, opcua, lines)"
     )
     assert refusal(text[6:]) == (
         "gateway.toml:1: lines[0].nodes: bad node list '40': nodes are 1..32, got '40'"
