@@ -135,6 +135,11 @@ GATEWAY_NAMES = (
     "gateway_metrics", "get_northbound", "line_problems", "load_config", "northbound_names",
     "parse_config", "parse_endpoint", "register_northbound", "unregister_northbound",
     "valid_name",
+    # who may write, shared by the HTTP and OPC UA northbounds (issue 29)
+    "User", "hash_password", "named_entries", "parse_password_hash", "parse_users",
+    "verify_password",
+    # a northbound's own section checks and extra (issue 29)
+    "unknown_choice", "northbound_extra",
 )  # fmt: skip
 GATEWAY_MODBUS_NAMES = (
     "ClientCounters", "DEFAULT_LIMITS", "Exc", "Field", "MAX_CLIENTS", "ModbusConfig",
@@ -156,6 +161,10 @@ GATEWAY_HTTP_NAMES = (
     # each drive's trend (its memory is a benchmark's figure)
     "SAMPLE_BYTES", "Trend", "trend_capacity",
 )  # fmt: skip
+GATEWAY_OPCUA_NAMES = (
+    "DEFAULT_SECURITY", "NORTHBOUND", "OPCUA_KEYS", "SECURITY_MODES", "OpcuaConfig",
+    "parse_endpoint_url",
+)  # fmt: skip
 
 #: Every package's pinned ``__all__``.
 PINNED = {
@@ -171,6 +180,7 @@ PINNED = {
     "sj300_async.gateway.modbus": GATEWAY_MODBUS_NAMES,
     "sj300_async.gateway.mqtt": GATEWAY_MQTT_NAMES,
     "sj300_async.gateway.http": GATEWAY_HTTP_NAMES,
+    "sj300_async.gateway.opcua": GATEWAY_OPCUA_NAMES,
 }
 
 CORE_NAMES = {

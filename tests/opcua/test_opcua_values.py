@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import asyncio
+import math
 import time
 from datetime import datetime
 from pathlib import Path
@@ -269,3 +270,17 @@ async def test_the_trip_history_is_not_stale_within_its_own_read_interval(tmp_pa
         assert count.StatusCode.is_good()
         assert count.Value.Value == drive.snapshot.trips.total_count  # type: ignore[union-attr]
         assert drive.snapshot.trips_at == read_at  # not read again meanwhile
+
+
+async def test_before_the_first_sample_values_wait_rather_than_say_offline(tmp_path: Path) -> None:
+    async with tcp_line() as (sim, url):
+        for node in range(1, 5):
+            sim.faults.silence(node)  # the first poll cannot end in a sample yet
+        text = opcua_toml(tmp_path, url=url, line_extra="timeout_s = 5.0")
+        async with opcua_gateway(text) as (gateway, server), connected(server.url) as client:
+            ns = await _namespace(client)
+            assert all(d.snapshot.taken_at == -math.inf for d in gateway.drives)
+            value = await _var(client, ns, "hall/Drive1/Monitoring/State").read_data_value(
+                raise_on_bad_status=False
+            )
+            assert value.StatusCode.name == "BadWaitingForInitialData"

@@ -70,6 +70,7 @@ async def test_writes_need_a_named_user_over_an_encrypted_channel(
     tmp_path: Path, client_pair: Pair
 ) -> None:
     async with opcua_gateway(opcua_toml(tmp_path)) as (gateway, server):
+        await _polled(gateway)
         async with connected(server.url) as anonymous:
             ns = await anonymous.get_namespace_index(NAMESPACE)
             assert await _status(_call(anonymous, ns, "Stop")) == "BadUserAccessDenied"

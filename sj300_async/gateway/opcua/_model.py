@@ -126,7 +126,8 @@ class Binding:
         self.value = value
         self.at = at
         self.wall = snapshot.time - (snapshot.taken_at - at) if at > -math.inf else snapshot.time
-        self.online = True if self.verdict else snapshot.online
+        # Before the first sample there is no verdict yet: waiting, not offline.
+        self.online = self.verdict or snapshot.taken_at == -math.inf or snapshot.online
 
     def status(self, now: float, stale_after_s: float) -> int:
         # The verdict is Good while verdicts keep coming; a stalled poller's last one ages.
