@@ -22,9 +22,13 @@ Decisions:
 - A relative ``audit_log`` is relative to the configuration file's
   directory, so the gateway can be started from anywhere.
 - Writes are confirmed against the poll cache, so a write grant may only
-  name parameters the line polls; unit ids must be unique across all
-  lines, since one Modbus server serves them all; no two northbounds may
-  listen on the same socket.
+  name parameters the line polls; unit ids must be in 1..247 and unique
+  across all lines where a northbound addresses drives by them (Modbus:
+  one server serves them all), and bind nothing without one, so a plant
+  of 2,048 drives on MQTT or OPC UA needs no offsets; two lines may not
+  share a TCP endpoint or a serial device, but each ``sim://`` line is a
+  simulator of its own whatever its URL; no two northbounds may listen on
+  the same socket.
 - The gateway id and the line names are topic levels on MQTT (letters,
   digits, ``_``, ``.``, ``-``), whether or not MQTT is configured: adding
   a broker later never means renaming a line.
@@ -66,6 +70,7 @@ from ._model import (
 )
 from ._northbound import (
     RESERVED_SECTIONS,
+    NorthboundSpec,
     SectionContext,
     get_northbound,
     northbound_names,
@@ -228,8 +233,11 @@ def _build(ctx: ConfigContext, data: object, *, base_dir: Path) -> GatewayConfig
                 if _same_socket(endpoint, other):
                     raise table.error(key, f"{where} already listens on {other}")
             listening[endpoint] = ctx.display(f"{section}.{key}")
+    # Unit ids matter only to a northbound that addresses drives by them (Modbus): a plant
+    # of more than 247 drives without one is not held to them.
+    units = any(_needs_unit_ids(get_northbound(section)) for section in northbounds)
     return GatewayConfig(
-        lines=_lines(ctx, root),
+        lines=_lines(ctx, root, units=units),
         northbounds=northbounds,
         stale_after_s=or_default(stale_after_s, DEFAULT_STALE_AFTER_S),
         audit_log=audit_log,
@@ -258,6 +266,11 @@ def _gateway_id(gateway: ConfigTable) -> str:
     return name
 
 
+def _needs_unit_ids(spec: NorthboundSpec) -> bool:
+    """True when *spec* addresses drives by unit id (its optional ``unit_ids``)."""
+    return bool(getattr(spec, "unit_ids", False))
+
+
 def _same_socket(a: Endpoint, b: Endpoint) -> bool:
     """Would binding both fail? (Port 0 never collides: each gets its own free port.)"""
     if a.port != b.port or a.port == 0:
@@ -278,13 +291,15 @@ class _Claims:
     transports: dict[str, str] = field(default_factory=dict)
     #: Modbus unit id → (line name, ``"node 5"``)
     units: dict[int, tuple[str, str]] = field(default_factory=dict)
+    #: Unit ids are checked (in range, unique): some northbound addresses drives by them.
+    check_units: bool = True
 
 
-def _lines(ctx: ConfigContext, root: ConfigTable) -> tuple[LineConfig, ...]:
+def _lines(ctx: ConfigContext, root: ConfigTable, *, units: bool) -> tuple[LineConfig, ...]:
     items = root.tables("lines", "lines")
     if not items:
         raise ctx.error("lines", "no lines: add a [[lines]] table with a url and nodes")
-    claims = _Claims()
+    claims = _Claims(check_units=units)
     return tuple(_line(ctx, index, item, claims) for index, item in enumerate(items))
 
 
@@ -352,6 +367,8 @@ def _transport(table: ConfigTable, name: str, claims: _Claims) -> tuple[str, str
     except LocalProtocolError as exc:
         raise table.error("url", str(exc)) from None
     transport = _transport_id(address, url)
+    if transport is None:
+        return url, address.protocol or DEFAULT_PROTOCOL
     if transport in claims.transports:
         raise table.error(
             "url",
@@ -362,9 +379,10 @@ def _transport(table: ConfigTable, name: str, claims: _Claims) -> tuple[str, str
     return url, address.protocol or DEFAULT_PROTOCOL
 
 
-def _transport_id(address: BusAddress, url: str) -> str:
-    """What two lines may not share: a TCP endpoint, a serial device (each sim:// is its own)."""
-    return url.strip() if address.scheme == "sim" else address.description
+def _transport_id(address: BusAddress, url: str) -> str | None:
+    """What two lines may not share: a TCP endpoint, a serial device; None for ``sim://``,
+    which is a simulator of its own on every line, whatever its URL."""
+    return None if address.scheme == "sim" else address.description
 
 
 def _nodes(table: ConfigTable, name: str, profile: Profile) -> tuple[int, ...]:
@@ -434,8 +452,11 @@ def _parameter_codes(table: ConfigTable, profile: Profile) -> tuple[str, ...]:
 def _unit_offset(
     table: ConfigTable, name: str, nodes: tuple[int, ...], profile: Profile, claims: _Claims
 ) -> int:
-    """unit = node + offset: every unit a valid Modbus id, none taken by another line."""
+    """unit = node + offset: every unit a valid Modbus id, none taken by another line
+    (checked only when a northbound addresses drives by unit id)."""
     offset = or_default(table.integer("unit_offset"), profile.unit_offset)
+    if not claims.check_units:
+        return offset
     # Blame the offset when the file sets it, else the nodes.
     key = "unit_offset" if table.has("unit_offset") else "nodes"
     low, high = UNIT_RANGE[0], UNIT_RANGE[-1]

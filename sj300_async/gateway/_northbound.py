@@ -185,6 +185,8 @@ class NorthboundSpec(Protocol):
             GatewayConfigError: through *table*'s getters and ``table.error``.
         """
 
+    # Optional: ``unit_ids = True`` when it addresses drives by unit id (Modbus): only
+    # then does the configuration hold every drive to a unique id in 1..247.
     # Optional: ``extra``, the package extra that brings ``requires`` (default
     # ``"gateway"``; OPC UA's is ``"opcua"``), read through :func:`northbound_extra`.
     # Optional: ``aliases``, a sequence of older section names the spec still takes

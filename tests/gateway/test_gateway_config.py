@@ -8,9 +8,11 @@ import textwrap
 from pathlib import Path
 
 import pytest
+from waiting import wait_for
 
 from sj300_async.gateway import (
     Endpoint,
+    Gateway,
     GatewayConfig,
     GatewayConfigError,
     LineConfig,
@@ -264,6 +266,8 @@ def test_a_byte_order_mark_is_tolerated(tmp_path: Path) -> None:
 # -- refusals: every message is exact, with its line and key ----------------------------------
 
 LINE = '[[lines]]\nurl = "tcp://10.0.0.5:4001"\nnodes = "1-8"\n'
+#: A Modbus server: only then are unit ids checked (1..247, unique across lines).
+MODBUS = '[modbus]\nlisten = "127.0.0.1:0"\n'
 
 REFUSALS = [
     pytest.param(
@@ -559,13 +563,13 @@ REFUSALS = [
         id="unit-offset-not-an-integer",
     ),
     pytest.param(
-        '[[lines]]\nurl = "sim://"\nnodes = "1-32"\nunit_offset = 220\n',
-        "gateway.toml:4: lines[0].unit_offset: node 28 would be Modbus unit 248, outside 1..247",
+        MODBUS + '[[lines]]\nurl = "sim://"\nnodes = "1-32"\nunit_offset = 220\n',
+        "gateway.toml:6: lines[0].unit_offset: node 28 would be Modbus unit 248, outside 1..247",
         id="unit-above-247",
     ),
     pytest.param(
-        LINE + "unit_offset = -1\n",
-        "gateway.toml:4: lines[0].unit_offset: node 1 would be Modbus unit 0, outside 1..247",
+        MODBUS + LINE + "unit_offset = -1\n",
+        "gateway.toml:6: lines[0].unit_offset: node 1 would be Modbus unit 0, outside 1..247",
         id="unit-zero-is-broadcast",
     ),
     pytest.param(
@@ -750,6 +754,8 @@ def test_refusal(text: str, message: str) -> None:
 
 def test_unit_ids_collide_across_lines() -> None:
     text = """\
+        [modbus]
+        listen = "127.0.0.1:0"
         [[lines]]
         name = "hall-a"
         url = "tcp://10.0.0.5:4001"
@@ -762,13 +768,15 @@ def test_unit_ids_collide_across_lines() -> None:
         """
 
     assert refusal(text) == (
-        "gateway.toml:9: lines[1].nodes: Modbus unit 8 (node 8) is also line hall-a's (node 8): "
+        "gateway.toml:11: lines[1].nodes: Modbus unit 8 (node 8) is also line hall-a's (node 8): "
         "set unit_offset on one of them"
     )
 
 
 def test_unit_ids_collide_across_protocols_when_the_offset_says_so() -> None:
     text = """\
+        [modbus]
+        listen = "127.0.0.1:0"
         [[lines]]
         name = "sj"
         url = "tcp://10.0.0.5:4001"
@@ -783,7 +791,7 @@ def test_unit_ids_collide_across_protocols_when_the_offset_says_so() -> None:
         """
 
     assert refusal(text) == (
-        "gateway.toml:11: lines[1].unit_offset: Modbus unit 1 (station 1) is also line sj's "
+        "gateway.toml:13: lines[1].unit_offset: Modbus unit 1 (station 1) is also line sj's "
         "(node 1): set unit_offset on one of them"
     )
 
@@ -1105,3 +1113,36 @@ def test_parse_endpoint_refuses(text: str, message: str) -> None:
         parse_endpoint(text)
 
     assert str(caught.value) == message
+
+
+def test_without_modbus_unit_ids_bind_nothing_and_a_plant_may_have_2048_drives() -> None:
+    """Unit ids are Modbus's: 64 lines of 32 drives, each line's nodes 1..32, no offsets."""
+    lines = "".join(
+        f'[[lines]]\nname = "l{i}"\nurl = "tcp://10.0.{i // 250}.{i % 250 + 1}:4001"\n'
+        'nodes = "1-32"\n'
+        for i in range(64)
+    )
+    config = parse('[mqtt]\nurl = "mqtt://127.0.0.1:1"\n' + lines)
+    assert sum(len(line.nodes) for line in config.lines) == 2048
+    assert {line.unit(1) for line in config.lines} == {1}
+    # The same plant with a Modbus server: refused, naming the first collision.
+    message = refusal(MODBUS + lines)
+    assert "lines[1].nodes: Modbus unit 1 (node 1) is also line l0's (node 1)" in message
+
+
+def test_two_lines_may_each_simulate_the_same_url() -> None:
+    """Each sim:// line is a simulator of its own: the URL names no shared transport."""
+    simulated = '[[lines]]\nurl = "sim://?nodes=1-8"\nnodes = "1-8"\n'
+    config = parse(simulated * 2)
+    assert [line.url for line in config.lines] == ["sim://?nodes=1-8"] * 2
+    assert [line.name for line in config.lines] == ["line1", "line2"]
+
+
+async def test_two_lines_of_the_same_simulated_url_poll_drives_of_their_own() -> None:
+    simulated = '[[lines]]\nurl = "sim://?nodes=1-2"\nnodes = "1-2"\ninterval_s = 0.05\n'
+    async with Gateway(parse(simulated * 2)) as gateway:
+        await wait_for(lambda: all(d.snapshot.available for d in gateway.drives), "samples")
+        assert [d.key for d in gateway.drives] == [
+            ("line1", 1), ("line1", 2), ("line2", 1), ("line2", 2),
+        ]  # fmt: skip
+        assert gateway.lines[0].bus is not gateway.lines[1].bus

@@ -66,6 +66,8 @@ class _Spec:
     keys = ("listen", *LIMIT_KEYS)
     flag = Flag("--modbus", "listen", "HOST:PORT", "serve Modbus TCP there (port 0: any)")
     requires = ()
+    #: Drives are Modbus units: the configuration checks every unit id (1..247, unique).
+    unit_ids = True
 
     def parse(self, table: ConfigTable, context: SectionContext) -> ModbusConfig:
         return ModbusConfig(table.required_endpoint("listen"), DEFAULT_LIMITS.parse(table))
