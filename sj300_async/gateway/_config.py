@@ -38,7 +38,7 @@ from __future__ import annotations
 
 import os
 import re
-from collections.abc import Mapping
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Final
@@ -70,11 +70,12 @@ from ._model import (
 )
 from ._northbound import (
     RESERVED_SECTIONS,
-    NorthboundSpec,
     SectionContext,
+    UnitScope,
     get_northbound,
     northbound_names,
     section_aliases,
+    unit_scopes,
 )
 from ._toml import (
     COMMAND_LINE,
@@ -231,13 +232,18 @@ def _build(ctx: ConfigContext, data: object, *, base_dir: Path) -> GatewayConfig
         for key, endpoint in spec.endpoints(config):
             for other, where in listening.items():
                 if _same_socket(endpoint, other):
-                    raise table.error(key, f"{where} already listens on {other}")
+                    # A key may be a path within the section (listeners[0].listen).
+                    raise ctx.error(f"{given[0]}.{key}", f"{where} already listens on {other}")
             listening[endpoint] = ctx.display(f"{section}.{key}")
-    # Unit ids matter only to a northbound that addresses drives by them (Modbus): a plant
-    # of more than 247 drives without one is not held to them.
-    units = any(_needs_unit_ids(get_northbound(section)) for section in northbounds)
+    # Unit ids matter only to a northbound that addresses drives by them (Modbus), within
+    # each of its scopes (a listener): a plant without one is not held to them.
+    scopes = [
+        scope
+        for section, config in northbounds.items()
+        for scope in unit_scopes(get_northbound(section), config)
+    ]
     return GatewayConfig(
-        lines=_lines(ctx, root, units=units),
+        lines=_lines(ctx, root, scopes),
         northbounds=northbounds,
         stale_after_s=or_default(stale_after_s, DEFAULT_STALE_AFTER_S),
         audit_log=audit_log,
@@ -266,11 +272,6 @@ def _gateway_id(gateway: ConfigTable) -> str:
     return name
 
 
-def _needs_unit_ids(spec: NorthboundSpec) -> bool:
-    """True when *spec* addresses drives by unit id (its optional ``unit_ids``)."""
-    return bool(getattr(spec, "unit_ids", False))
-
-
 def _same_socket(a: Endpoint, b: Endpoint) -> bool:
     """Would binding both fail? (Port 0 never collides: each gets its own free port.)"""
     if a.port != b.port or a.port == 0:
@@ -289,18 +290,30 @@ class _Claims:
     names: dict[str, str] = field(default_factory=dict)
     #: transport (``tcp://HOST:PORT``, a serial device) → line name
     transports: dict[str, str] = field(default_factory=dict)
-    #: Modbus unit id → (line name, ``"node 5"``)
-    units: dict[int, tuple[str, str]] = field(default_factory=dict)
-    #: Unit ids are checked (in range, unique): some northbound addresses drives by them.
-    check_units: bool = True
+    #: The scopes within which unit ids are checked (a Modbus listener each).
+    scopes: Sequence[UnitScope] = ()
+    #: Per scope: Modbus unit id → (line name, ``"node 5"``)
+    units: dict[int, dict[int, tuple[str, str]]] = field(default_factory=dict)
+
+    def scopes_of(self, line: str) -> list[tuple[int, UnitScope]]:
+        """The scopes whose unit ids *line*'s drives take (a named one, else the rest's)."""
+        named = [(i, s) for i, s in enumerate(self.scopes) if s.lines and line in s.lines]
+        rest = [(i, s) for i, s in enumerate(self.scopes) if s.lines is None]
+        return named or rest
 
 
-def _lines(ctx: ConfigContext, root: ConfigTable, *, units: bool) -> tuple[LineConfig, ...]:
+def _lines(
+    ctx: ConfigContext, root: ConfigTable, scopes: Sequence[UnitScope]
+) -> tuple[LineConfig, ...]:
     items = root.tables("lines", "lines")
     if not items:
         raise ctx.error("lines", "no lines: add a [[lines]] table with a url and nodes")
-    claims = _Claims(check_units=units)
-    return tuple(_line(ctx, index, item, claims) for index, item in enumerate(items))
+    claims = _Claims(scopes=scopes)
+    lines = tuple(_line(ctx, index, item, claims) for index, item in enumerate(items))
+    for scope in scopes:  # a scope naming a line that is not there is a typo
+        for name in sorted((scope.lines or frozenset()) - {line.name for line in lines}):
+            raise ctx.error(f"{scope.where}.lines", f"no line named {name!r}")
+    return lines
 
 
 def _line(ctx: ConfigContext, index: int, data: object, claims: _Claims) -> LineConfig:
@@ -452,26 +465,31 @@ def _parameter_codes(table: ConfigTable, profile: Profile) -> tuple[str, ...]:
 def _unit_offset(
     table: ConfigTable, name: str, nodes: tuple[int, ...], profile: Profile, claims: _Claims
 ) -> int:
-    """unit = node + offset: every unit a valid Modbus id, none taken by another line
-    (checked only when a northbound addresses drives by unit id)."""
+    """unit = node + offset: every unit a valid Modbus id, none taken by another line of
+    its scope (checked only where a northbound addresses drives by unit id)."""
     offset = or_default(table.integer("unit_offset"), profile.unit_offset)
-    if not claims.check_units:
-        return offset
     # Blame the offset when the file sets it, else the nodes.
     key = "unit_offset" if table.has("unit_offset") else "nodes"
     low, high = UNIT_RANGE[0], UNIT_RANGE[-1]
-    for node in nodes:
-        unit, drive = node + offset, f"{profile.node_noun} {node}"
-        if unit not in UNIT_RANGE:
-            raise table.error(key, f"{drive} would be Modbus unit {unit}, outside {low}..{high}")
-        if unit in claims.units:
-            other, other_drive = claims.units[unit]
-            raise table.error(
-                key,
-                f"Modbus unit {unit} ({drive}) is also line {other}'s ({other_drive}): "
-                "set unit_offset on one of them",
-            )
-    claims.units.update((node + offset, (name, f"{profile.node_noun} {node}")) for node in nodes)
+    for index, scope in claims.scopes_of(name):
+        taken = claims.units.setdefault(index, {})
+        # The one listener of a plain [modbus] needs no naming; a group's does.
+        plain = scope.lines is None and len(claims.scopes) == 1
+        on = "" if plain else f" on {scope.where}"
+        for node in nodes:
+            unit, drive = node + offset, f"{profile.node_noun} {node}"
+            if unit not in UNIT_RANGE:
+                raise table.error(
+                    key, f"{drive} would be Modbus unit {unit}{on}, outside {low}..{high}"
+                )
+            if unit in taken:
+                other, other_drive = taken[unit]
+                raise table.error(
+                    key,
+                    f"Modbus unit {unit}{on} ({drive}) is also line {other}'s ({other_drive}): "
+                    "set unit_offset on one of them",
+                )
+        taken.update((node + offset, (name, f"{profile.node_noun} {node}")) for node in nodes)
     return offset
 
 

@@ -56,11 +56,13 @@ __all__ = [
     "Northbound",
     "NorthboundSpec",
     "SectionContext",
+    "UnitScope",
     "get_northbound",
     "northbound_extra",
     "northbound_names",
     "register_northbound",
     "section_aliases",
+    "unit_scopes",
     "unregister_northbound",
 ]
 
@@ -185,8 +187,9 @@ class NorthboundSpec(Protocol):
             GatewayConfigError: through *table*'s getters and ``table.error``.
         """
 
-    # Optional: ``unit_ids = True`` when it addresses drives by unit id (Modbus): only
-    # then does the configuration hold every drive to a unique id in 1..247.
+    # Optional: ``unit_scopes(config)``, the groups of lines within which it addresses
+    # drives by unit id (Modbus: one per listener): only then does the configuration
+    # hold each drive of a group to a unique id in 1..247. Read by :func:`unit_scopes`.
     # Optional: ``extra``, the package extra that brings ``requires`` (default
     # ``"gateway"``; OPC UA's is ``"opcua"``), read through :func:`northbound_extra`.
     # Optional: ``aliases``, a sequence of older section names the spec still takes
@@ -198,6 +201,22 @@ class NorthboundSpec(Protocol):
 
     def create(self, config: object) -> Northbound:
         """The northbound for *config*, not started."""
+
+
+@dataclass(frozen=True, slots=True)
+class UnitScope:
+    """Lines whose drives one server addresses by unit id: each id once, in 1..247."""
+
+    #: Where the configuration names it (``modbus.listeners[0]``), for errors.
+    where: str
+    #: The lines' names; None: every line no other scope of the northbound names.
+    lines: frozenset[str] | None
+
+
+def unit_scopes(spec: NorthboundSpec, config: object) -> Sequence[UnitScope]:
+    """The unit-id scopes of *spec* with *config* (its optional ``unit_scopes``; none)."""
+    scopes = getattr(spec, "unit_scopes", None)
+    return () if scopes is None else tuple(scopes(config))
 
 
 def northbound_extra(spec: NorthboundSpec) -> str:

@@ -63,7 +63,9 @@ def test_every_key_of_the_configuration_file_is_in_its_example() -> None:
             if key == "writes":
                 assert "[[lines.writes]]" in example
                 continue
-            arrays = (("http", "users"), ("http", "tokens"), ("opcua", "users"))
+            arrays = (
+                ("http", "users"), ("http", "tokens"), ("opcua", "users"), ("modbus", "listeners"),
+            )  # fmt: skip
             if (section, key) in arrays:  # arrays of tables
                 table = f"[[{section}.{key}]]"
                 assert re.search(rf"^ *(# )?{re.escape(table)}", example, re.M), table

@@ -1,8 +1,18 @@
 """The Modbus TCP northbound: every drive a unit id, its register map served from the cache.
 
 Configured by ``[modbus] listen = "HOST:PORT"`` or ``--modbus HOST:PORT``,
-and the listener's limits ``max_connections`` (default 64) and
-``idle_timeout_s`` (default 60). Reads are served from each drive's latest
+and the listeners' limits ``max_connections`` (default 64, all listeners
+together) and ``idle_timeout_s`` (default 60). A plant of more drives than
+one Modbus server can address (247 unit ids) gives groups of lines their
+own listeners, each with its own unit ids::
+
+    [[modbus.listeners]]
+    listen = "0.0.0.0:5021"
+    lines = ["hall-a", "hall-b"]
+
+``listen`` then serves the lines no listener names (it may be left out
+when every line has one). Unit ids are unique within a listener, not
+across them (:class:`UnitScope`). Reads are served from each drive's latest
 snapshot (no read reaches a line); writes go through the gateway's write
 path, and a refusal is answered with the Modbus exception its meaning is
 closest to (:data:`REFUSAL_CODES`). The register map is docs/GATEWAY.md's
@@ -25,6 +35,8 @@ from .. import (
     ListenerLimits,
     Northbound,
     SectionContext,
+    UnitScope,
+    valid_name,
 )
 from ._clients import MAX_CLIENTS, OTHER_CLIENT, ClientCounters, client_families
 from ._framing import Exc
@@ -40,6 +52,7 @@ __all__ = [
     "Exc",
     "Field",
     "ModbusConfig",
+    "ModbusListener",
     "RegisterMap",
     "client_families",
     "describe",
@@ -54,27 +67,69 @@ DEFAULT_LIMITS: Final = ListenerLimits(max_connections=64, idle_timeout_s=60.0)
 
 
 @dataclass(frozen=True, slots=True)
-class ModbusConfig:
-    """``[modbus]``: where the Modbus TCP server listens, and its limits."""
+class ModbusListener:
+    """``[[modbus.listeners]]``: a listener of its own for some lines, with their unit ids."""
 
     listen: Endpoint
+    lines: frozenset[str]
+
+
+@dataclass(frozen=True, slots=True)
+class ModbusConfig:
+    """``[modbus]``: where the Modbus TCP servers listen, and their limits."""
+
+    #: The listener of every line no listener below names (None: every line has one).
+    listen: Endpoint | None
     limits: ListenerLimits = DEFAULT_LIMITS
+    listeners: tuple[ModbusListener, ...] = ()
+
+
+def _listeners(table: ConfigTable) -> tuple[ModbusListener, ...]:
+    found: list[ModbusListener] = []
+    named: dict[str, str] = {}
+    for i, item in enumerate(table.tables("listeners", "modbus.listeners")):
+        path = f"{table.path}.listeners[{i}]"
+        entry = ConfigTable(table.ctx, path, item, ("listen", "lines"))
+        listen = entry.required_endpoint("listen")
+        lines = entry.strings("lines")
+        if not lines:
+            raise entry.error("lines", "name the lines this listener serves")
+        for name in lines:
+            if not valid_name(name):
+                raise entry.error("lines", f"not a line name: {name!r}")
+            if name in named:
+                raise entry.error("lines", f"line {name!r} is also {named[name]}'s")
+            named[name] = f"modbus.listeners[{i}]"
+        found.append(ModbusListener(listen, frozenset(lines)))
+    return tuple(found)
 
 
 class _Spec:
     section = "modbus"
-    keys = ("listen", *LIMIT_KEYS)
+    keys = ("listen", *LIMIT_KEYS, "listeners")
     flag = Flag("--modbus", "listen", "HOST:PORT", "serve Modbus TCP there (port 0: any)")
     requires = ()
-    #: Drives are Modbus units: the configuration checks every unit id (1..247, unique).
-    unit_ids = True
 
     def parse(self, table: ConfigTable, context: SectionContext) -> ModbusConfig:
-        return ModbusConfig(table.required_endpoint("listen"), DEFAULT_LIMITS.parse(table))
+        listeners = _listeners(table)
+        listen = table.required_endpoint("listen") if table.has("listen") or not listeners else None
+        return ModbusConfig(listen, DEFAULT_LIMITS.parse(table), listeners)
 
     def endpoints(self, config: object) -> Sequence[tuple[str, Endpoint]]:
         assert isinstance(config, ModbusConfig)
-        return [("listen", config.listen)]
+        out = [] if config.listen is None else [("listen", config.listen)]
+        out += [(f"listeners[{i}].listen", x.listen) for i, x in enumerate(config.listeners)]
+        return out
+
+    def unit_scopes(self, config: object) -> Sequence[UnitScope]:
+        """Drives are Modbus units: unique ids (1..247) within each listener."""
+        assert isinstance(config, ModbusConfig)
+        scopes = [
+            UnitScope(f"modbus.listeners[{i}]", x.lines) for i, x in enumerate(config.listeners)
+        ]
+        if config.listen is not None:
+            scopes.append(UnitScope("modbus.listen", None))
+        return scopes
 
     def create(self, config: object) -> Northbound:
         from ._northbound import ModbusNorthbound

@@ -7,7 +7,7 @@ from collections.abc import Iterator
 from typing import TYPE_CHECKING
 
 from ...profiles import DriveSnapshot
-from .. import GatewayView, LineConfig, listener_families
+from .. import ConnectionLimit, Endpoint, GatewayView, LineConfig, listener_families
 from . import ModbusConfig
 from ._clients import ClientCounters, bad_frames_family, client_families
 from ._registers import RegisterMap
@@ -22,33 +22,70 @@ _log = logging.getLogger("sj300_async.gateway.modbus")
 
 
 class ModbusNorthbound:
-    """Serves the drives on Modbus TCP (a :class:`~sj300_async.gateway.Northbound`)."""
+    """Serves the drives on Modbus TCP (a :class:`~sj300_async.gateway.Northbound`).
+
+    One server per listener: ``[modbus] listen`` for the lines no listener names,
+    each ``[[modbus.listeners]]`` for its own lines, with their own unit ids. They
+    share one connection limit (``max_connections`` is for them all) and the
+    client counters.
+    """
 
     def __init__(self, config: ModbusConfig) -> None:
         self.config = config
         #: Requests and exception replies per client, for the exporter.
         self.clients = ClientCounters()
-        self.server: ModbusServer | None = None
+        #: The running servers, the main listener's first: (its endpoint, its server).
+        self.servers: list[tuple[Endpoint, ModbusServer]] = []
+
+    @property
+    def server(self) -> ModbusServer | None:
+        """The first server (the main listener's when there is one), None when not started."""
+        return self.servers[0][1] if self.servers else None
 
     async def start(self, gateway: GatewayView) -> None:
+        config = self.config
+        named = {name for listener in config.listeners for name in listener.lines}
+        groups: list[tuple[Endpoint, set[str]]] = []
+        if config.listen is not None:
+            rest = {line.config.name for line in gateway.lines} - named
+            groups.append((config.listen, rest))
+        groups += [(listener.listen, set(listener.lines)) for listener in config.listeners]
         maps: dict[int, tuple[LineConfig, RegisterMap]] = {}
-        units = {}
-        for drive in gateway.drives:
-            line = drive.line
-            if id(line) not in maps:
-                maps[id(line)] = (line, RegisterMap(drive.profile, line.parameters))
-            units[drive.unit] = Unit(drive, maps[id(line)][1], {})
-        server = ModbusServer(units, gateway, self.config.limits, self.clients)
-        await server.start(self.config.listen)
-        self.server = server
+        limit: ConnectionLimit | None = None
+        try:
+            for endpoint, lines in groups:
+                units = {}
+                for drive in gateway.drives:
+                    line = drive.line
+                    if line.name not in lines:
+                        continue
+                    if id(line) not in maps:
+                        maps[id(line)] = (line, RegisterMap(drive.profile, line.parameters))
+                    units[drive.unit] = Unit(drive, maps[id(line)][1], {})
+                server = ModbusServer(units, gateway, config.limits, self.clients, limit)
+                limit = server.limit
+                await server.start(endpoint)
+                self.servers.append((endpoint, server))
+        except BaseException:
+            await self.close()
+            raise
 
     @property
     def port(self) -> int:
-        """The port it listens on (the real one when asked for port 0), 0 when not started."""
+        """The first server's port (the real one when asked for port 0), 0 when not started."""
         return 0 if self.server is None else self.server.port
 
     def announce(self) -> str | None:
-        return f"modbus on {self.config.listen.host}:{self.port}"
+        """``modbus on HOST:PORT``, and a line per listener naming its lines."""
+        lines = []
+        first = 0 if self.config.listen is None else 1
+        for i, (endpoint, server) in enumerate(self.servers):
+            line = f"modbus on {endpoint.host}:{server.port}"
+            if i >= first:
+                names = ", ".join(sorted(self.config.listeners[i - first].lines))
+                line += f" (modbus.listeners[{i - first}]: {names})"
+            lines.append(line)
+        return "\n".join(lines)
 
     def publish(self, snapshot: DriveSnapshot) -> None:
         """Nothing to do: reads are served from each drive's latest snapshot."""
@@ -57,9 +94,9 @@ class ModbusNorthbound:
         yield from client_families(self.clients)
         if self.server is not None:
             yield from listener_families("sj300_modbus", self.server.limit)
-            yield bad_frames_family(self.server.bad_frames)
+            yield bad_frames_family(sum(server.bad_frames for _, server in self.servers))
 
     async def close(self) -> None:
-        if self.server is not None:
-            await self.server.close()
-            self.server = None
+        servers, self.servers = self.servers, []
+        for _, server in servers:
+            await server.close()

@@ -104,13 +104,15 @@ class ModbusServer:
         gateway: GatewayView,
         limits: ListenerLimits,
         counters: ClientCounters,
+        limit: ConnectionLimit | None = None,
     ) -> None:
         self.units = units
         self.gateway = gateway
         self.stale_after_s = gateway.config.stale_after_s
         self.idle_timeout_s = limits.idle_timeout_s
         self.counters = counters
-        self.limit = ConnectionLimit("modbus", limits.max_connections, _log)
+        #: Shared by every listener of the northbound: max_connections is for them all.
+        self.limit = limit or ConnectionLimit("modbus", limits.max_connections, _log)
         #: Frames that could not be framed (each closed its connection).
         self.bad_frames = 0
         self._bad_frame_log = RateLimitedLog(_log)
