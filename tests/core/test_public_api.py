@@ -140,9 +140,12 @@ GATEWAY_NAMES = (
     "verify_password",
     # a northbound's own section checks and extra (issue 29)
     "unknown_choice", "northbound_extra",
+    # where unit ids are held: a Modbus listener each (issue 30)
+    "UnitScope",
 )  # fmt: skip
 GATEWAY_MODBUS_NAMES = (
     "ClientCounters", "DEFAULT_LIMITS", "Exc", "Field", "MAX_CLIENTS", "ModbusConfig",
+    "ModbusListener",
     "NORTHBOUND", "OTHER_CLIENT", "REFUSAL_CODES", "RegisterMap", "client_families", "describe",
     "parameter_address",
 )  # fmt: skip
