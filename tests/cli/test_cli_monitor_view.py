@@ -52,7 +52,9 @@ async def test_at_80_columns_nothing_is_cut_in_the_node_and_frequency_columns(
     tcp_sim.bus.drives[1].trip(1, now=now)  # "tripped E01 over-current at constant speed"
     tcp_sim.bus.drives[3].set_parameter("F001", 4500)
     url_args = ("--url", tcp_sim.url, "--nodes", "1-4", "--interval", "0.05")
-    result = await sj300_on_terminal("monitor", *url_args, "--duration", "1.5", columns=80)
+    # --count waits for the reads beside the poll (the set frequency): a fixed duration
+    # missed it on a loaded machine (the last frame showed "-" for 45.00).
+    result = await sj300_on_terminal("monitor", *url_args, "--count", "3", columns=80)
     assert result.code == 0, result.out
     # (A frame's last line and the next frame's first share a line once the cursor
     # movements are stripped: the rows and rules are what is measured.)
