@@ -148,7 +148,7 @@ async def test_a_silent_drive_goes_uncertain_then_bad_no_communication(tmp_path:
     """Stale past stale_after_s while the poller still waits for it; offline once it gives up."""
     async with tcp_line() as (sim, url):
         text = opcua_toml(
-            tmp_path, url=url, gateway_extra="stale_after_s = 0.3", line_extra="timeout_s = 0.6"
+            tmp_path, url=url, gateway_extra="stale_after_s = 0.3", line_extra="timeout_s = 0.4"
         )
         async with opcua_gateway(text) as (gateway, server), connected(server.url) as client:
             ns = await _namespace(client)
@@ -191,14 +191,8 @@ async def test_a_silent_drive_goes_uncertain_then_bad_no_communication(tmp_path:
                 raise_on_bad_status=False
             )
             assert not other.StatusCode.is_bad()
-            # It comes back.
-            sim.faults.silence(3, False)
-            await wait_for(lambda: drive.snapshot.online, "node 3 back", timeout=10)
-            await wait_for(lambda: drive.snapshot.online and drive.snapshot.monitor_at > 0)
-            deadline = asyncio.get_running_loop().time() + 10
-            while not await status_is(ua.StatusCodes.Good):
-                assert asyncio.get_running_loop().time() < deadline, seen[-1]
-                await asyncio.sleep(0.05)
+            # Its return is test_opcua_node.py's (the poller retries an offline drive
+            # on its own schedule: seconds this test need not spend).
 
 
 class _Notifications:
