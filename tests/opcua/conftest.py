@@ -22,6 +22,7 @@ from asyncua.crypto import cert_gen
 from cryptography import x509
 from cryptography.hazmat.primitives import serialization
 from cryptography.x509.oid import ExtendedKeyUsageOID
+from waiting import wait_for
 
 from sj300_async.gateway import Gateway, hash_password, parse_config
 from sj300_async.gateway.opcua._server import OpcuaServer
@@ -165,6 +166,11 @@ async def connected(
 def node(client: Client, namespace: int, path: str) -> object:
     """The client's node of a drive variable by its path (``hall/Drive1/Monitoring/State``)."""
     return client.get_node(ua.NodeId(path, namespace))
+
+
+async def polled(gateway: Gateway) -> None:
+    """Every drive heard from (a drive not heard yet refuses runs like an offline one)."""
+    await wait_for(lambda: all(d.snapshot.available for d in gateway.drives), "first samples")
 
 
 @contextlib.asynccontextmanager

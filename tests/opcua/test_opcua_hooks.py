@@ -24,7 +24,6 @@ from asyncua.client.ua_client import UaClient
 from asyncua.ua.uaerrors import UaError, UaStatusCodeError
 from waiting import wait_for
 
-from sj300_async.gateway import Gateway
 from sj300_async.gateway.opcua import _hooks
 
 from .conftest import (
@@ -36,14 +35,11 @@ from .conftest import (
     connected,
     opcua_gateway,
     opcua_toml,
+    polled,
     tcp_line,
 )
 
 SECURE_ONLY = '["Basic256Sha256_SignAndEncrypt", "Basic256Sha256_Sign"]'
-
-
-async def _polled(gateway: Gateway) -> None:
-    await wait_for(lambda: all(d.snapshot.available for d in gateway.drives), "first samples")
 
 
 @contextlib.asynccontextmanager
@@ -114,7 +110,7 @@ async def test_an_unoffered_or_uncertified_unsecured_channel_only_discovers(
 async def test_an_offered_unsecured_channel_reads(tmp_path: Path) -> None:
     text = opcua_toml(tmp_path, security='["None"]')
     async with opcua_gateway(text) as (gateway, server), _unsecured_channel(server.url) as client:
-        await _polled(gateway)
+        await polled(gateway)
         await _session_on(client, server.url)
         assert (await _read_state(client, 1)).Value.Value == "stopped"
 
@@ -127,7 +123,7 @@ async def test_an_untrusted_certificate_cannot_skip_the_check_by_leaving_it_out(
     shutil.copy(client_pair.certificate, trusted / "client.der")
     text = opcua_toml(tmp_path, opcua_extra=f'trusted_clients = "{trusted}"')
     async with opcua_gateway(text) as (gateway, server):
-        await _polled(gateway)
+        await polled(gateway)
         client = Client(server.url, timeout=5)
         client.application_uri = "urn:sj300-async:other-client"
         await client.set_security_string(
@@ -159,7 +155,7 @@ async def test_session_tokens_are_random_and_another_s_cannot_be_activated(
         opcua_gateway(opcua_toml(tmp_path)) as (gateway, server),
         connected(server.url, pair=client_pair, user=USER, password=PASSWORD) as operator,
     ):
-        await _polled(gateway)
+        await polled(gateway)
         token = operator.uaclient.protocol.authentication_token
         assert token.NodeIdType == ua.NodeIdType.ByteString
         assert len(token.Identifier) == 32
@@ -183,7 +179,7 @@ async def test_a_reactivated_session_still_lapses_its_lease_when_it_closes(
     async with tcp_line() as (sim, url):
         text = opcua_toml(tmp_path, url=url, line_extra='lease_s = 60\nlease_scope = "connection"')
         async with opcua_gateway(text) as (gateway, server):
-            await _polled(gateway)
+            await polled(gateway)
             drive = gateway.drive("hall", 1)
             assert drive is not None
             async with connected(
@@ -263,7 +259,7 @@ async def test_one_request_carries_at_most_64_writes(tmp_path: Path, client_pair
         opcua_gateway(opcua_toml(tmp_path)) as (gateway, server),
         connected(server.url, pair=client_pair, user=USER, password=PASSWORD) as client,
     ):
-        await _polled(gateway)
+        await polled(gateway)
         ns = await client.get_namespace_index(NAMESPACE)
         stop = ua.CallMethodRequest(
             ObjectId=ua.NodeId("hall/Drive1", ns), MethodId=ua.NodeId("hall/Drive1/Stop", ns)
@@ -282,7 +278,7 @@ async def test_an_array_argument_is_a_type_mismatch_and_audited(
         opcua_gateway(opcua_toml(tmp_path)) as (gateway, server),
         connected(server.url, pair=client_pair, user=USER, password=PASSWORD) as client,
     ):
-        await _polled(gateway)
+        await polled(gateway)
         ns = await client.get_namespace_index(NAMESPACE)
         for argument in (
             ua.Variant([5.0], ua.VariantType.Double, is_array=True),
@@ -325,7 +321,7 @@ async def test_a_value_written_with_a_bad_status_is_refused_unsent(
         opcua_gateway(opcua_toml(tmp_path, url=url)) as (gateway, server),
         connected(server.url, pair=client_pair, user=USER, password=PASSWORD) as client,
     ):
-        await _polled(gateway)
+        await polled(gateway)
         ns = await client.get_namespace_index(NAMESPACE)
         before = dict(sim.drives[1].parameters)
         flagged = ua.DataValue(
@@ -345,7 +341,7 @@ async def test_a_value_written_with_a_bad_status_is_refused_unsent(
 
 async def test_a_value_that_cannot_be_served_fails_alone(tmp_path: Path) -> None:
     async with opcua_gateway(opcua_toml(tmp_path)) as (gateway, server):
-        await _polled(gateway)
+        await polled(gateway)
         binding = next(
             b for b in server._drives[("hall", 1)].bindings
             if b.name == "Monitoring/ConverterOutputCurrent"

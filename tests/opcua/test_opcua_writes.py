@@ -24,6 +24,7 @@ from .conftest import (
     connected,
     opcua_gateway,
     opcua_toml,
+    polled,
     tcp_line,
 )
 
@@ -52,11 +53,6 @@ def _hz(value: float) -> ua.Variant:
     return ua.Variant(value, ua.VariantType.Double)
 
 
-async def _polled(gateway: Gateway) -> None:
-    """Every drive heard from (a drive not heard yet refuses runs like an offline one)."""
-    await wait_for(lambda: all(d.snapshot.available for d in gateway.drives), "first samples")
-
-
 def _refusals(gateway: Gateway) -> list[dict[str, object]]:
     return [entry for entry in gateway.audit.recent if entry["result"] == "refused"]
 
@@ -70,7 +66,7 @@ async def test_writes_need_a_named_user_over_an_encrypted_channel(
     tmp_path: Path, client_pair: Pair
 ) -> None:
     async with opcua_gateway(opcua_toml(tmp_path)) as (gateway, server):
-        await _polled(gateway)
+        await polled(gateway)
         async with connected(server.url) as anonymous:
             ns = await anonymous.get_namespace_index(NAMESPACE)
             assert await _status(_call(anonymous, ns, "Stop")) == "BadUserAccessDenied"
@@ -131,7 +127,7 @@ async def test_run_and_frequency_need_the_lease_and_stop_does_not(
             connected(server.url, pair=client_pair, user="second", password="other-pass") as other,
         ):
             ns = await first.get_namespace_index(NAMESPACE)
-            await _polled(gateway)
+            await polled(gateway)
             assert await _status(_call(first, ns, "Run", "forward")) == "BadInvalidState"
             assert await _status(_call(first, ns, "SetFrequency", _hz(6.0))) == "BadInvalidState"
             assert not _running(sim, 1)
@@ -167,8 +163,8 @@ async def test_a_closed_session_lapses_its_connection_scoped_lease(
                 server.url, pair=client_pair, user=USER, password=PASSWORD
             ) as client:
                 ns = await client.get_namespace_index(NAMESPACE)
-                await _polled(gateway)
-                await _polled(gateway)
+                await polled(gateway)
+                await polled(gateway)
                 assert await _call(client, ns, "TakeControl") == 60.0
                 assert await _status(_call(client, ns, "SetFrequency", _hz(5.0))) == "Good"
                 assert await _status(_call(client, ns, "Run", "reverse")) == "Good"
@@ -276,7 +272,7 @@ async def test_a_parameter_write_reaches_the_drive_and_reads_back(
         connected(server.url, pair=client_pair, user=USER, password=PASSWORD) as client,
     ):
         ns = await client.get_namespace_index(NAMESPACE)
-        await _polled(gateway)
+        await polled(gateway)
         f002 = client.get_node(ua.NodeId("hall/Drive1/Parameters/F002", ns))
         # No lease needed for a granted parameter (the controller's rule).
         assert await _status(f002.write_value(_hz(12.5))) == "Good"
