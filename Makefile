@@ -26,8 +26,10 @@ SYSTEM_PACKAGES := socat:socat ser2net:ser2net mbpoll:mbpoll mosquitto:mosquitto
 # from its package-lock.json; tests/test_readme.py checks README.md against package.json).
 # npm ci runs when node_modules is missing or older than the lockfile; the stamp is
 # inside node_modules, so deleting node_modules installs again.
-NODE_DIR := tests/opcua/node
-NODE_STAMP := $(NODE_DIR)/node_modules/.installed
+# The npm packages the tests use as independent implementations, each folder with its
+# lockfile: node-opcua (tests/opcua), Eclipse Tahu's sparkplug-payload (tests/sparkplug).
+NODE_DIRS := tests/opcua/node tests/sparkplug/node
+NODE_STAMPS := $(addsuffix /node_modules/.installed,$(NODE_DIRS))
 
 .PHONY: demo gateway examples test lint typecheck lint-imports docs system-packages \
 	node-packages pytest bench bench-compare soak clean venv
@@ -101,15 +103,15 @@ system-packages:
 
 # Names Node.js >= 20 and npm in one line and fails (exit 2) when either is missing (or
 # node is older): not installed from Debian, whose nodejs may be older than node-opcua needs.
-node-packages: $(NODE_STAMP)
+node-packages: $(NODE_STAMPS)
 
-$(NODE_STAMP): $(NODE_DIR)/package-lock.json $(NODE_DIR)/package.json
+%/node_modules/.installed: %/package-lock.json %/package.json
 	@command -v npm >/dev/null 2>&1 \
 		&& node -e 'process.exit(parseInt(process.versions.node) >= 20 ? 0 : 1)' 2>/dev/null || { \
-		echo "the OPC UA tests need Node.js >= 20 and npm: install them, then make node-packages" >&2; \
+		echo "the OPC UA and Sparkplug tests need Node.js >= 20 and npm: install them, then make node-packages" >&2; \
 		exit 2; \
 	}
-	npm ci --prefix $(NODE_DIR) --no-audit --no-fund --loglevel=error
+	npm ci --prefix $* --no-audit --no-fund --loglevel=error
 	touch $@
 
 # The suite in this many worker processes (pytest-xdist; 0: all in one process, as a

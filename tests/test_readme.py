@@ -26,7 +26,10 @@ def test_the_readme_lists_every_system_package_the_tests_need() -> None:
 
 def test_the_readme_lists_every_npm_package_the_tests_need() -> None:
     readme = " ".join((ROOT / "README.md").read_text(encoding="utf-8").split())
-    found = re.search(r"the npm packages its OPC UA tests use \(([^:)]+)", readme)
+    found = re.search(r"the npm packages its OPC UA and Sparkplug tests use \(([^:)]+)", readme)
     assert found is not None, "README.md no longer lists the npm packages"
-    package = json.loads((ROOT / "tests/opcua/node/package.json").read_text(encoding="utf-8"))
-    assert found[1].split(", ") == list(package["dependencies"])
+    wanted = []
+    for folder in ("opcua", "sparkplug"):
+        package = json.loads((ROOT / f"tests/{folder}/node/package.json").read_text("utf-8"))
+        wanted += list(package["dependencies"])
+    assert found[1].split(", ") == wanted

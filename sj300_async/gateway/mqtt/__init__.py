@@ -19,8 +19,14 @@ from collections.abc import Sequence
 from typing import Final
 
 from .. import ConfigTable, Endpoint, Flag, Northbound, SectionContext
-from ._commands import COMMAND_DIRECTIONS, error_text, parse_command
-from ._config import MQTT_KEYS, MqttConfig, parse_mqtt_section
+from ._commands import (
+    COMMAND_DIRECTIONS,
+    error_text,
+    frequency_request,
+    parameter_request,
+    parse_command,
+)
+from ._config import MQTT_KEYS, MqttConfig, SparkplugConfig, parse_mqtt_section
 from ._discovery import discovery, node_id
 from ._fleet import (
     FLEET_SCHEMES,
@@ -62,6 +68,7 @@ __all__ = [
     "Malformed",
     "MqttConfig",
     "SessionStats",
+    "SparkplugConfig",
     "StateMessage",
     "SubscriptionRefused",
     "Topics",
@@ -69,10 +76,12 @@ __all__ = [
     "discovery",
     "error_text",
     "follow",
+    "frequency_request",
     "is_fleet_url",
     "keep_connected",
     "mqtt_families",
     "node_id",
+    "parameter_request",
     "parse_command",
     "parse_fleet_url",
     "parse_state_topic",
@@ -88,9 +97,9 @@ class _Spec:
         "url",
         "URL",
         "publish to this MQTT broker (mqtt://HOST[:PORT] or mqtts://): state, "
-        "availability, Home Assistant discovery",
+        "availability, Home Assistant discovery (Sparkplug B: [mqtt] sparkplug = true)",
     )
-    requires = ("aiomqtt",)
+    requires = ("aiomqtt", "google.protobuf")
 
     def parse(self, table: ConfigTable, context: SectionContext) -> MqttConfig:
         return parse_mqtt_section(table, context)
@@ -99,10 +108,21 @@ class _Spec:
         return ()  # a client: it listens on nothing
 
     def create(self, config: object) -> Northbound:
-        from ._bridge import MqttBridge
-
         assert isinstance(config, MqttConfig)
-        return MqttBridge(config)
+        parts: list[Northbound] = []
+        if config.state_topics:
+            from ._bridge import MqttBridge
+
+            parts.append(MqttBridge(config))
+        if config.sparkplug is not None:
+            from ..sparkplug import EdgeNode
+
+            parts.append(EdgeNode(config))
+        if len(parts) == 1:
+            return parts[0]
+        from ._pair import Clients
+
+        return Clients(parts)
 
 
 #: The registry's entry (``sj300_async.gateway.mqtt:NORTHBOUND``).

@@ -32,7 +32,15 @@ from .. import (
     excerpt,
 )
 
-__all__ = ["COMMAND_DIRECTIONS", "MAX_PAYLOAD_BYTES", "error_text", "oversized", "parse_command"]
+__all__ = [
+    "COMMAND_DIRECTIONS",
+    "MAX_PAYLOAD_BYTES",
+    "error_text",
+    "frequency_request",
+    "oversized",
+    "parameter_request",
+    "parse_command",
+]
 
 #: The longest command payload read (the longest real one is a number or
 #: ``run_forward``): a longer one is refused unread, ``malformed``.
@@ -91,12 +99,7 @@ def parse_command(profile: Profile, what: str, payload: bytes) -> WriteRequest |
         hz = _number(text)
         if hz is None:
             return WriteResult(Refusal.MALFORMED, f"expected a number of Hz, got {_quoted(text)}")
-        # The set frequency's step, every protocol. Past 1e6 Hz no drive's range holds
-        # it (the gateway refuses it naming the maximum), and 1e308 * 100 is inf,
-        # which round() cannot take: it once killed the drive's command worker.
-        if abs(hz) <= 1e6 and abs(round(hz * 100) - hz * 100) > 1e-6:
-            return WriteResult(Refusal.INVALID_VALUE, f"{excerpt(text)} Hz is finer than 0.01 Hz")
-        return SetFrequency(hz)
+        return frequency_request(hz, text)
     code = profile.parameters.code(what)
     if code is None:
         return WriteResult(
@@ -109,6 +112,27 @@ def parse_command(profile: Profile, what: str, payload: bytes) -> WriteRequest |
         return WriteResult(
             Refusal.MALFORMED, f"expected a number in {code}'s unit, got {_quoted(text)}"
         )
+    return parameter_request(profile, code, value, text)
+
+
+def frequency_request(hz: float, text: str) -> SetFrequency | WriteResult:
+    """A set frequency of *hz* (finite; *text* as the client sent it), unless finer than 0.01 Hz."""
+    # The set frequency's step, every protocol. Past 1e6 Hz no drive's range holds
+    # it (the gateway refuses it naming the maximum), and 1e308 * 100 is inf,
+    # which round() cannot take: it once killed the drive's command worker.
+    if abs(hz) <= 1e6 and abs(round(hz * 100) - hz * 100) > 1e-6:
+        return WriteResult(Refusal.INVALID_VALUE, f"{excerpt(text)} Hz is finer than 0.01 Hz")
+    return SetFrequency(hz)
+
+
+def parameter_request(
+    profile: Profile, code: str, value: float, text: str
+) -> ParameterWrite | WriteResult:
+    """Parameter *code* (normalised) set to *value* in its unit (finite; *text* as sent).
+
+    Refused when outside the parameter's range or finer than its setting
+    increment: a number is never rounded to what the drive can hold.
+    """
     spec = profile.parameters.spec(code)
     try:
         raw = raw_value(spec, value)

@@ -5,6 +5,13 @@ default); credentials have their own keys (a URL ends up in logs). A
 ``tls_ca`` must exist now: a missing file found at connect time would be a
 retry loop, not an error. A relative ``tls_ca`` is relative to the
 configuration file. The client id defaults to ``sj300-<gateway id>``.
+
+Sparkplug B (``sparkplug = true``, docs/GATEWAY.md "Sparkplug B") needs a
+``group_id`` and takes an optional ``primary_host_id``; its edge node id is
+the gateway's id. It connects apart, as ``<client id>-spb`` (an MQTT
+connection has one last will, and Sparkplug's is the edge node's NDEATH).
+``state_topics = false`` leaves the JSON topics and discovery out, for a
+plant that reads only Sparkplug.
 """
 
 from __future__ import annotations
@@ -17,13 +24,24 @@ from typing import Final
 from .. import ConfigTable, SectionContext, valid_name
 from ._topics import DEFAULT_PREFIX, DISCOVERY_PREFIX
 
-__all__ = ["MQTT_KEYS", "MqttConfig", "parse_mqtt_section"]
+__all__ = ["MQTT_KEYS", "MqttConfig", "SparkplugConfig", "parse_mqtt_section"]
 
 MQTT_KEYS: Final = (
     *("url", "client_id", "username", "password", "tls_ca", "prefix", "qos"),
     *("discovery", "discovery_prefix", "keepalive_s"),
+    *("state_topics", "sparkplug", "group_id", "primary_host_id"),
 )
 _PORTS: Final = {"mqtt": 1883, "mqtts": 8883}
+
+
+@dataclass(frozen=True, slots=True)
+class SparkplugConfig:
+    """Sparkplug B on the same broker (docs/GATEWAY.md, "Sparkplug B")."""
+
+    #: The Sparkplug group the gateway's edge node belongs to.
+    group_id: str
+    #: The primary host application the edge node waits for (its STATE), or None.
+    primary_host_id: str | None = None
 
 
 @dataclass(frozen=True, slots=True)
@@ -50,6 +68,10 @@ class MqttConfig:
     #: The MQTT keepalive: the broker publishes the last will ("offline") about
     #: 1.5 keepalives after the gateway last spoke (plus its own check interval).
     keepalive_s: int = 30
+    #: The JSON topics (state, availability, commands) and discovery.
+    state_topics: bool = True
+    #: Sparkplug B, or None.
+    sparkplug: SparkplugConfig | None = None
 
     @property
     def url(self) -> str:
@@ -86,6 +108,12 @@ def parse_mqtt_section(table: ConfigTable, context: SectionContext) -> MqttConfi
         raise table.error("keepalive_s", f"must be 1..65535 seconds, got {keepalive_s}")
     tls = tls or tls_ca is not None  # a CA to verify the broker with means TLS
     discovery = table.boolean("discovery")
+    state_topics = table.boolean("state_topics")
+    sparkplug = _sparkplug(table)
+    if state_topics is False and sparkplug is None:
+        raise table.error(
+            "state_topics", "with state_topics = false, set sparkplug = true: nothing is published"
+        )
     return MqttConfig(
         host=host,
         port=port if port is not None else _PORTS["mqtts" if tls else "mqtt"],
@@ -99,7 +127,39 @@ def parse_mqtt_section(table: ConfigTable, context: SectionContext) -> MqttConfi
         discovery=_DEFAULT.discovery if discovery is None else discovery,
         discovery_prefix=_topic_prefix(table, "discovery_prefix", DISCOVERY_PREFIX),
         keepalive_s=_DEFAULT.keepalive_s if keepalive_s is None else keepalive_s,
+        state_topics=_DEFAULT.state_topics if state_topics is None else state_topics,
+        sparkplug=sparkplug,
     )
+
+
+def _sparkplug(table: ConfigTable) -> SparkplugConfig | None:
+    """``sparkplug = true`` with its ``group_id`` and optional ``primary_host_id``."""
+    enabled = table.boolean("sparkplug")
+    if not enabled:
+        for key in ("group_id", "primary_host_id"):
+            if table.string(key) is not None:
+                raise table.error(key, "needs sparkplug = true")
+        return None
+    group_id = _sparkplug_id(table, "group_id")
+    if group_id is None:
+        raise table.error("group_id", "sparkplug = true needs a group_id (the Sparkplug group)")
+    return SparkplugConfig(
+        group_id=group_id, primary_host_id=_sparkplug_id(table, "primary_host_id")
+    )
+
+
+def _sparkplug_id(table: ConfigTable, key: str) -> str | None:
+    """A Sparkplug id: UTF-8 text without ``+``, ``/``, ``#`` or control characters."""
+    text = table.string(key)
+    if text is None:
+        return None
+    if not text or any(c in "+/#" or not c.isprintable() for c in text) or text != text.strip():
+        raise table.error(
+            key,
+            f"expected a Sparkplug id: text without '+', '/', '#', control characters or "
+            f"surrounding spaces, got {text!r}",
+        )
+    return text
 
 
 def _url(table: ConfigTable) -> tuple[str, int | None, bool]:

@@ -1,0 +1,115 @@
+"""DCMD metrics -> the gateway's neutral writes (sans-IO).
+
+A DCMD names its metrics by alias (the specification's rule) or by name
+(some hosts send both; the alias wins). Each metric is judged alone:
+
+- a metric the device's birth did not have: ``unknown_metric``
+  (:attr:`~sj300_async.gateway.Refusal.UNKNOWN_TARGET`);
+- a read-only one: not allowed;
+- a null, no value, a datatype other than the metric's, or a value of the
+  wrong kind: ``wrong_type`` (malformed). Numbers may come in any numeric
+  member (a host may send a Float for a Double); an integer member is read
+  as unsigned, as the specification encodes it, so a negative number must
+  come as a Float or Double;
+- then the value as the MQTT commands judge it: a frequency at 0.01 Hz, a
+  parameter exact at its setting increment and within its range, a
+  direction among ``stop``, ``forward``, ``reverse``; ``Control/Lease`` and
+  ``Control/Stop`` take ``true`` only.
+"""
+
+from __future__ import annotations
+
+import math
+from typing import Final
+
+from ...wire import Direction
+from .. import Heartbeat, Refusal, RunCommand, WriteRequest, WriteResult, excerpt
+from ..mqtt import frequency_request, parameter_request
+from ._device import DIRECTION_WORDS, Device, DeviceMetric, Writes
+from ._payload import BOOLEAN, DOUBLE, STRING, ReceivedMetric
+
+__all__ = ["Judged", "judge"]
+
+_NUMBERS: Final = frozenset({"int_value", "long_value", "float_value", "double_value"})
+_MEMBERS: Final = {
+    DOUBLE: _NUMBERS,
+    BOOLEAN: frozenset({"boolean_value"}),
+    STRING: frozenset({"string_value"}),
+}
+_DIRECTIONS: Final = dict(
+    zip(DIRECTION_WORDS, (Direction.STOP, Direction.FORWARD, Direction.REVERSE), strict=True)
+)
+
+#: What became of one metric of a DCMD: the device's metric it names (None: none), the
+#: write it asks for or why not, and the bad-input reason to count (None: not bad input).
+Judged = tuple[DeviceMetric | None, WriteRequest | WriteResult, str | None]
+
+
+def _shown(value: object) -> str:
+    return excerpt(repr(value))
+
+
+def judge(device: Device, received: ReceivedMetric) -> Judged:
+    """The write *received* asks of *device* (see the module docstring)."""
+    metric = None
+    if received.alias is not None:
+        metric = device.by_alias.get(received.alias)
+    elif received.name is not None:
+        metric = device.by_name.get(received.name)
+    if metric is None:
+        what = excerpt(received.label)
+        return (
+            None,
+            WriteResult(Refusal.UNKNOWN_TARGET, f"{what} is no metric of {device.id}"),
+            "unknown_metric",
+        )
+    definition = metric.definition
+    if metric.write is None:
+        return (
+            metric,
+            WriteResult(Refusal.NOT_ALLOWED, f"{definition.name} is read-only here"),
+            None,
+        )
+    expected = _MEMBERS[definition.datatype]
+    if (
+        received.is_null
+        or received.member not in expected
+        or (received.datatype is not None and received.datatype != definition.datatype)
+    ):
+        got = "null" if received.is_null or received.member is None else received.member
+        return (
+            metric,
+            WriteResult(
+                Refusal.MALFORMED,
+                f"{definition.name} takes a {_type_name(definition.datatype)}, got {got}",
+            ),
+            "wrong_type",
+        )
+    return metric, _request(device, metric, received.value), None
+
+
+def _type_name(datatype: int) -> str:
+    return {DOUBLE: "number", BOOLEAN: "Boolean", STRING: "String"}[datatype]
+
+
+def _request(device: Device, metric: DeviceMetric, value: object) -> WriteRequest | WriteResult:
+    name = metric.definition.name
+    if metric.write in (Writes.FREQUENCY, Writes.PARAMETER):
+        assert isinstance(value, int | float)
+        number = float(value)
+        if not math.isfinite(number):
+            return WriteResult(Refusal.INVALID_VALUE, f"{name}: {number} is no value")
+        if metric.write == Writes.FREQUENCY:
+            return frequency_request(number, repr(value))
+        assert metric.code is not None
+        return parameter_request(device.drive.profile, metric.code, number, repr(value))
+    if metric.write == Writes.DIRECTION:
+        direction = _DIRECTIONS.get(str(value).strip().lower())
+        if direction is None:
+            return WriteResult(
+                Refusal.MALFORMED, f"Direction takes stop, forward or reverse, got {_shown(value)}"
+            )
+        return RunCommand(direction)
+    if value is not True:
+        return WriteResult(Refusal.MALFORMED, f"{name} takes true only")
+    return Heartbeat() if metric.write == Writes.LEASE else RunCommand(Direction.STOP)

@@ -1,0 +1,226 @@
+"""A drive as a Sparkplug device: its metrics, their aliases, and its values in a sample.
+
+Sans-IO. Each drive of the gateway is one device of the edge node, with
+device id ``<line>-<node>``. Its metrics (docs/GATEWAY.md, "Sparkplug B"):
+
+==========================  ========  =====  =========================================
+metric                      type      unit   written by a DCMD (where the line grants it)
+==========================  ========  =====  =========================================
+Output Frequency            Double    Hz
+Frequency Command           Double    Hz     yes: the set frequency (control)
+Output Current              Double    A
+Output Voltage              Double    V
+Output Power                Double    kW     (where the protocol measures it)
+Output Torque               Double    %      (where the protocol measures it)
+Direction                   String           yes: stop, forward, reverse (control)
+Running, Tripped            Boolean
+State, Trip, Trip Meaning   String
+Lapse Pending               Boolean
+Parameters/<code>           Double    its    yes, where granted
+Control/Lease               Boolean          yes: true takes or renews the lease (control)
+Control/Stop                Boolean          yes: true stops (control; no lease needed)
+Control/Last Refusal        String           (where something is writable: the latest
+Control/Refusals            UInt64            refusal in words, and how many so far)
+Info/Protocol, Info/Line    String
+Info/Node                   UInt32
+==========================  ========  =====  =========================================
+
+A value the gateway does not know now (stale, never read, not given by
+the drive) is null. Aliases are unique across the edge node: device *k*
+(1-based, the gateway's drive order) numbers its metrics from ``k << 16``;
+the node's own metrics are below 65536. The order of metrics and their
+aliases are fixed for a configuration, so they are the same at every birth.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass
+from typing import Final
+
+from ...profiles import ParameterSpec
+from .. import GatewayDrive
+from ..mqtt import StateMessage
+from ._payload import BOOLEAN, DOUBLE, STRING, UINT32, UINT64, MetricDef, Property
+
+__all__ = [
+    "DIRECTION_WORDS",
+    "LAST_REFUSAL",
+    "Device",
+    "DeviceMetric",
+    "Writes",
+    "device_id",
+]
+
+#: Direction's words, as read and as written.
+DIRECTION_WORDS: Final = ("stop", "forward", "reverse")
+LAST_REFUSAL: Final = "Control/Last Refusal"
+
+#: Reads a metric's value from a sample's state (and whether the Sparkplug
+#: client holds the lease), None when unknown.
+Reader = Callable[[StateMessage, bool], object]
+
+
+class Writes:
+    """What a written metric asks for."""
+
+    FREQUENCY: Final = "frequency"
+    DIRECTION: Final = "direction"
+    LEASE: Final = "lease"
+    STOP: Final = "stop"
+    PARAMETER: Final = "parameter"
+
+
+@dataclass(frozen=True, slots=True)
+class DeviceMetric:
+    """One metric of a device: its definition, how it is read, and what writing it does."""
+
+    definition: MetricDef
+    read: Reader
+    #: What a DCMD writing it asks for (a :class:`Writes` word), None: read-only.
+    write: str | None = None
+    #: The parameter code of a ``Parameters/<code>`` metric.
+    code: str | None = None
+
+
+def device_id(line: str, node: int) -> str:
+    """The device id of drive *node* of line *line*: ``line1-3``."""
+    return f"{line}-{node}"
+
+
+def _unit(unit: str) -> tuple[Property, ...]:
+    return (Property("engUnit", STRING, unit),) if unit else ()
+
+
+def _field(name: str) -> Reader:
+    def read(state: StateMessage, lease: bool) -> object:
+        return getattr(state, name)
+
+    return read
+
+
+def _parameter(code: str) -> Reader:
+    def read(state: StateMessage, lease: bool) -> object:
+        return state.parameters.get(code)
+
+    return read
+
+
+def _constant(value: object) -> Reader:
+    def read(state: StateMessage, lease: bool) -> object:
+        return value
+
+    return read
+
+
+def _lease(state: StateMessage, lease: bool) -> object:
+    return lease
+
+
+def _never(state: StateMessage, lease: bool) -> object:
+    return False
+
+
+def _parameter_properties(spec: ParameterSpec) -> tuple[Property, ...]:
+    return (
+        *_unit(spec.unit),
+        Property("engLow", DOUBLE, float(spec.minimum)),
+        Property("engHigh", DOUBLE, float(spec.maximum)),
+        Property("Documentation", STRING, spec.name),
+    )
+
+
+class Device:
+    """One drive as a device (see the module docstring)."""
+
+    def __init__(self, drive: GatewayDrive, ordinal: int) -> None:
+        self.drive = drive
+        self.id = device_id(*drive.key)
+        line, node, profile = drive.line, drive.node, drive.profile
+        control = line.control_allowed(node)
+        granted = line.writable_parameters(node)
+        measures = profile.capabilities.measures
+        rows: list[tuple[str, int, tuple[Property, ...], Reader, str | None, str | None]] = [
+            ("Output Frequency", DOUBLE, _unit("Hz"), _field("output_frequency_hz"), None, None),
+            (
+                "Frequency Command",
+                DOUBLE,
+                _unit("Hz"),
+                _field("set_frequency_hz"),
+                Writes.FREQUENCY if control else None,
+                None,
+            ),
+            ("Output Current", DOUBLE, _unit("A"), _field("output_current_a"), None, None),
+            ("Output Voltage", DOUBLE, _unit("V"), _field("output_voltage_v"), None, None),
+        ]
+        if "power_kw" in measures:
+            rows.append(("Output Power", DOUBLE, _unit("kW"), _field("power_kw"), None, None))
+        if "output_torque_percent" in measures:
+            rows.append(
+                ("Output Torque", DOUBLE, _unit("%"), _field("output_torque_percent"), None, None)
+            )
+        rows += [
+            (
+                "Direction",
+                STRING,
+                (),
+                _field("direction"),
+                Writes.DIRECTION if control else None,
+                None,
+            ),
+            ("Running", BOOLEAN, (), _field("running"), None, None),
+            ("Tripped", BOOLEAN, (), _field("tripped"), None, None),
+            ("State", STRING, (), _field("state"), None, None),
+            ("Trip", STRING, (), _field("trip"), None, None),
+            ("Trip Meaning", STRING, (), _field("trip_meaning"), None, None),
+            ("Lapse Pending", BOOLEAN, (), _field("lapse_pending"), None, None),
+        ]
+        for code in dict.fromkeys((*line.parameters, *sorted(granted))):
+            spec = profile.parameters.spec(code)
+            rows.append(
+                (
+                    f"Parameters/{code}",
+                    DOUBLE,
+                    _parameter_properties(spec),
+                    _parameter(code),
+                    Writes.PARAMETER if code in granted else None,
+                    code,
+                )
+            )
+        if control:
+            rows.append(("Control/Lease", BOOLEAN, (), _lease, Writes.LEASE, None))
+            rows.append(("Control/Stop", BOOLEAN, (), _never, Writes.STOP, None))
+        #: Something can be written: a refusal has a metric to be told on.
+        self.writable = control or bool(granted)
+        if self.writable:
+            rows.append((LAST_REFUSAL, STRING, (), _constant(None), None, None))
+            rows.append(("Control/Refusals", UINT64, (), _constant(0), None, None))
+        rows += [
+            ("Info/Protocol", STRING, (), _constant(drive.profile.name), None, None),
+            ("Info/Line", STRING, (), _constant(line.name), None, None),
+            ("Info/Node", UINT32, (), _constant(node), None, None),
+        ]
+        base = ordinal << 16
+        self.metrics: Sequence[DeviceMetric] = tuple(
+            DeviceMetric(MetricDef(name, base + i, datatype, properties), read, write, code)
+            for i, (name, datatype, properties, read, write, code) in enumerate(rows)
+        )
+        self.definitions: Sequence[MetricDef] = tuple(m.definition for m in self.metrics)
+        self.by_alias = {m.definition.alias: m for m in self.metrics}
+        self.by_name = {m.definition.name: m for m in self.metrics}
+        self._refusal_index = next(
+            (i for i, m in enumerate(self.metrics) if m.definition.name == LAST_REFUSAL), None
+        )
+
+    def values(
+        self, state: StateMessage, lease: bool, refusal: tuple[str, int] | None
+    ) -> list[object]:
+        """Every metric's value in *state*, in the metrics' order.
+
+        *lease*: the Sparkplug client holds the drive's lease; *refusal*: the
+        latest refusal in words and the count so far (None: none yet).
+        """
+        out = [metric.read(state, lease) for metric in self.metrics]
+        if self._refusal_index is not None and refusal is not None:
+            out[self._refusal_index], out[self._refusal_index + 1] = refusal
+        return out

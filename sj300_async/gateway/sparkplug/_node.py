@@ -1,0 +1,703 @@
+"""The gateway as a Sparkplug B 3.0 edge node: births, data by exception, deaths, commands.
+
+:class:`EdgeNode` is a northbound, created by the MQTT northbound when
+``[mqtt] sparkplug = true``. Its edge node id is the gateway's id; each
+drive is a device (:mod:`._device`). Topics are
+``spBv1.0/<group_id>/<TYPE>/<gateway id>[/<device id>]``.
+
+The session (Sparkplug 3.0, sections 5.4 to 5.7):
+
+- Each connection attempt takes the next ``bdSeq`` (0 at the process's
+  start, 0..255, wrapping) and registers the NDEATH that carries it as the
+  last will (QoS 1, not retained), on a connection of its own
+  (``<client id>-spb``, clean session).
+- It subscribes to its NCMD and DCMD topics (QoS 1), and with a
+  ``primary_host_id`` to ``spBv1.0/STATE/<host>`` first. With a primary
+  host, nothing is born until the host's retained STATE says
+  ``online: true``; a STATE with ``online: false`` newer than the last one
+  seen (its ``timestamp``), while born, makes the edge node publish its
+  NDEATH and disconnect, then reconnect (the next ``bdSeq``) and wait
+  again. The lease the Sparkplug client holds on a drive of a
+  ``lease_scope = "connection"`` line lapses when the host goes offline or
+  the connection is lost.
+- NBIRTH (``seq`` 0): ``bdSeq``, ``Node Control/Rebirth`` (false; no
+  alias) and the gateway's metrics (:data:`NODE_METRICS` per line), then a
+  DBIRTH for each drive the poller hears. NDATA carries the gateway's
+  metrics that changed, checked once a second.
+- A drive's sample is a DDATA of the metrics whose value changed since the
+  device's last message (report by exception: a sample that changed
+  nothing sends nothing); DDEATH when the poller takes the drive offline,
+  and a new DBIRTH with every value when it comes back.
+- ``seq`` counts every message after NBIRTH, 0..255 and wrapping; a
+  payload's timestamp is the sample's time (the birth of the edge node's
+  own metrics: now), and so is each metric's.
+- NCMD ``Node Control/Rebirth = true``: NBIRTH and every DBIRTH again, with
+  the same ``bdSeq`` (no death first).
+- A clean stop publishes the NDEATH, then disconnects.
+
+Never blocking the poller: :meth:`EdgeNode.publish` keeps the drive's
+latest sample and marks it; the edge node's task turns samples into
+messages in order. A sample replaced before its turn is counted
+(``samples_replaced``); its changes go out with the newer one, since a
+DDATA is the difference from what the host last got.
+
+Commands (DCMD): see :mod:`._commands` for how a metric is judged. Writes
+go through the gateway like every other door's (client ``sparkplug``: one
+identity, as on MQTT; the lease, the grants, the read-back, the audit
+log). A drive's commands run in order, each drive on its own. What is
+refused is audited, counted, and told on the device's ``Control/Last
+Refusal`` and ``Control/Refusals`` metrics in the next DDATA (Sparkplug
+has no error reply; a host sees the write did not take, and why). Input
+that changes nothing is counted by reason (:data:`~._stats.BAD_INPUTS`)
+and logged at DEBUG with an escaped excerpt.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import json
+import logging
+import time
+from collections.abc import Callable, Iterator
+from typing import TYPE_CHECKING, Final
+
+import aiomqtt
+
+from ...profiles import DriveSnapshot
+from ...wire import Direction
+from .. import GatewayLine, GatewayView, Heartbeat, Refusal, RunCommand, WriteResult, excerpt
+from ..mqtt import (
+    MqttConfig,
+    SparkplugConfig,
+    StateMessage,
+    error_text,
+    keep_connected,
+    state_message,
+)
+from ._commands import judge
+from ._device import Device
+from ._payload import (
+    BOOLEAN,
+    INT64,
+    UINT32,
+    UINT64,
+    MalformedPayload,
+    MetricDef,
+    ReceivedMetric,
+    decode_payload,
+    encode_payload,
+)
+from ._stats import SparkplugStats, sparkplug_families
+
+if TYPE_CHECKING:
+    from prometheus_client.core import Metric
+
+__all__ = ["CLIENT", "NAMESPACE", "NODE_METRICS", "EdgeNode"]
+
+_log = logging.getLogger("sj300_async.gateway.sparkplug")
+
+NAMESPACE: Final = "spBv1.0"
+#: The client every Sparkplug command comes from.
+CLIENT: Final = "sparkplug"
+REBIRTH: Final = "Node Control/Rebirth"
+BACKOFF_MAX_S: Final = 30.0
+#: The longest command read; a longer one is refused unread.
+MAX_COMMAND_BYTES: Final = 65536
+#: Metrics one DCMD may carry; the rest are refused (each would be a write and an audit line).
+MAX_METRICS: Final = 64
+#: Commands waiting for one drive, at most (more are refused: busy).
+MAX_COMMANDS: Final = 16
+#: How often the gateway's own metrics are checked for an NDATA.
+NODE_TICK_S: Final = 1.0
+CLOSE_TIMEOUT_S: Final = 3.0
+
+#: Each line's metrics in the NBIRTH: (name under ``Lines/<line>/``, datatype).
+NODE_METRICS: Final = (
+    ("Connected", BOOLEAN),
+    ("Drives Online", UINT32),
+    ("Timeouts", UINT64),
+    ("Transport Errors", UINT64),
+)
+
+Key = tuple[str, int]
+_Command = tuple[int, Device, ReceivedMetric]
+
+
+def _line_values(line: GatewayLine) -> Iterator[object]:
+    """A line's :data:`NODE_METRICS` values now."""
+    transactions = line.bus.stats.transactions
+    yield line.bus.connected
+    yield sum(1 for drive in line.drives.values() if drive.snapshot.available)
+    yield transactions.timeouts
+    yield transactions.transport_errors
+
+
+class _HostOffline(aiomqtt.MqttError):
+    """The primary host went offline: the session ends (reconnect, wait for it again)."""
+
+
+class EdgeNode:
+    """The gateway's Sparkplug edge node (see the module docstring); a northbound."""
+
+    def __init__(self, config: MqttConfig) -> None:
+        assert config.sparkplug is not None
+        self.config = config
+        self.sparkplug: SparkplugConfig = config.sparkplug
+        self.stats = SparkplugStats()
+        self.edge_node = ""
+        self.stale_after_s = 0.0
+        self._gateway: GatewayView | None = None
+        self._devices: dict[Key, Device] = {}
+        self._by_id: dict[str, Device] = {}
+        self._node_defs: list[MetricDef] = []
+        #: The latest sample of each drive: its state, and whether the poller hears it.
+        self._latest: dict[Key, tuple[StateMessage, bool]] = {}
+        #: Drives with a sample not yet turned into a message, in arrival order.
+        self._dirty: dict[Key, None] = {}
+        #: What the host was last told of each live device (its values, in metric order).
+        self._alive: dict[Key, list[object]] = {}
+        self._node_values: list[object] = []
+        #: Per drive: the latest refusal in words, and how many so far.
+        self._refusals: dict[Key, tuple[str, int]] = {}
+        self._wake = asyncio.Event()
+        self._bdseq = -1  # the current connection's (its will's)
+        self._next_bdseq = 0
+        self._seq = 0
+        self._born = False
+        self._rebirth = False
+        #: The primary host's latest STATE: online, and its timestamp (None: none seen).
+        self.host_online: bool | None = None
+        self._host_stamp: int | None = None
+        self._client: aiomqtt.Client | None = None
+        self._epoch = 0
+        self._session_name: str | None = None
+        self._commands: dict[Key, asyncio.Queue[_Command]] = {}
+        self._workers: dict[Key, asyncio.Task[None]] = {}
+        self._task: asyncio.Task[None] | None = None
+        self._closing = False
+
+    # -- topics ------------------------------------------------------------------------
+
+    def topic(self, kind: str, device: str | None = None) -> str:
+        base = f"{NAMESPACE}/{self.sparkplug.group_id}/{kind}/{self.edge_node}"
+        return base if device is None else f"{base}/{device}"
+
+    @property
+    def _state_topic(self) -> str | None:
+        host = self.sparkplug.primary_host_id
+        return None if host is None else f"{NAMESPACE}/STATE/{host}"
+
+    @property
+    def born(self) -> bool:
+        return self._born
+
+    @property
+    def bdseq(self) -> int:
+        """The bdSeq of the current (or last) connection; -1 before the first."""
+        return self._bdseq
+
+    # -- the northbound ----------------------------------------------------------------
+
+    async def start(self, gateway: GatewayView) -> None:
+        self._gateway = gateway
+        self.edge_node = gateway.config.gateway_id
+        self.stale_after_s = gateway.config.stale_after_s
+        for ordinal, drive in enumerate(gateway.drives, start=1):
+            device = Device(drive, ordinal)
+            self._devices[drive.key] = device
+            self._by_id[device.id] = device
+        self._node_defs = [MetricDef("bdSeq", None, INT64), MetricDef(REBIRTH, None, BOOLEAN)]
+        alias = 0
+        for line in gateway.lines:
+            for name, datatype in NODE_METRICS:
+                alias += 1
+                self._node_defs.append(
+                    MetricDef(f"Lines/{line.config.name}/{name}", alias, datatype)
+                )
+        if self._task is None:
+            self._task = asyncio.get_running_loop().create_task(self._run(), name="sparkplug")
+
+    def announce(self) -> str | None:
+        host = self.sparkplug.primary_host_id
+        waits = f", primary host {host}" if host is not None else ""
+        return f"sparkplug to {self.config.url} as {self.topic('NBIRTH')}{waits}"
+
+    def publish(self, snapshot: DriveSnapshot) -> None:
+        """A drive's new sample: kept, and marked for the edge node's task (never blocks)."""
+        if self._closing:
+            return
+        key = (snapshot.line, snapshot.node)
+        if key not in self._devices:
+            return
+        self.stats.samples += 1
+        drive = None if self._gateway is None else self._gateway.drive(*key)
+        message = state_message(
+            self.edge_node,
+            snapshot,
+            now=asyncio.get_running_loop().time(),
+            stale_after_s=self.stale_after_s,
+            lapse_pending=drive is not None and drive.lapse_pending,
+        )
+        self._mark(key, message, snapshot.available)
+
+    def _mark(self, key: Key, message: StateMessage, available: bool) -> None:
+        if key in self._dirty:
+            self.stats.replaced += 1
+        self._latest[key] = (message, available)
+        self._dirty[key] = None
+        self._wake.set()
+
+    def metrics(self) -> Iterator[Metric]:
+        return sparkplug_families(self.stats, born=self._born, host_online=self.host_online)
+
+    # -- payloads ----------------------------------------------------------------------
+
+    def _next_seq(self) -> int:
+        seq = self._seq
+        self._seq = (seq + 1) % 256
+        return seq
+
+    def _ndeath(self) -> bytes:
+        return encode_payload(
+            int(time.time() * 1000), None, [(self._node_defs[0], self._bdseq)], birth=True
+        )
+
+    def _node_now(self) -> list[object]:
+        assert self._gateway is not None
+        values: list[object] = [self._bdseq, False]
+        for line in self._gateway.lines:
+            values.extend(_line_values(line))
+        return values
+
+    def _device_values(self, device: Device, state: StateMessage) -> list[object]:
+        lease = device.drive.lease.held_by(CLIENT, asyncio.get_running_loop().time())
+        return device.values(state, lease, self._refusals.get(device.drive.key))
+
+    # -- turning samples into messages (the edge node's task) -----------------------------
+
+    def _births(self) -> Iterator[tuple[str, bytes]]:
+        """NBIRTH (seq 0), then a DBIRTH for each drive heard now."""
+        self._seq = 0
+        self._node_values = self._node_now()
+        stamp = int(time.time() * 1000)
+        yield (
+            self.topic("NBIRTH"),
+            encode_payload(
+                stamp,
+                self._next_seq(),
+                zip(self._node_defs, self._node_values, strict=True),
+                birth=True,
+            ),
+        )
+        self.stats.published["NBIRTH"] += 1
+        self._alive.clear()
+        self._born, self._rebirth = True, False
+        for key in self._devices:
+            if self._rebirth:
+                return  # asked again meanwhile: the next turn starts over
+            self._dirty.pop(key, None)
+            latest = self._latest.get(key)
+            if latest is not None and latest[1]:
+                yield self._dbirth(key, latest[0])
+
+    def _dbirth(self, key: Key, state: StateMessage) -> tuple[str, bytes]:
+        device = self._devices[key]
+        values = self._device_values(device, state)
+        self._alive[key] = values
+        self.stats.published["DBIRTH"] += 1
+        return self.topic("DBIRTH", device.id), encode_payload(
+            int(state.time * 1000),
+            self._next_seq(),
+            zip(device.definitions, values, strict=True),
+            birth=True,
+        )
+
+    def _device_message(self, key: Key) -> tuple[str, bytes] | None:
+        """What the latest sample of *key* changes for the host: a message or nothing."""
+        state, available = self._latest[key]
+        device = self._devices[key]
+        last = self._alive.get(key)
+        if last is None:
+            return self._dbirth(key, state) if available else None
+        stamp = int(state.time * 1000)
+        if not available:
+            del self._alive[key]
+            self.stats.published["DDEATH"] += 1
+            return self.topic("DDEATH", device.id), encode_payload(
+                stamp, self._next_seq(), (), birth=False
+            )
+        values = self._device_values(device, state)
+        defs = device.definitions
+        changed = [(defs[i], v) for i, v in enumerate(values) if v != last[i]]
+        if not changed:
+            return None
+        self._alive[key] = values
+        self.stats.published["DDATA"] += 1
+        return self.topic("DDATA", device.id), encode_payload(
+            stamp, self._next_seq(), changed, birth=False
+        )
+
+    def _node_data(self) -> tuple[str, bytes] | None:
+        values = self._node_now()
+        changed = [
+            (self._node_defs[i], v)
+            for i, v in enumerate(values)
+            if i >= 2 and v != self._node_values[i]
+        ]
+        if not changed:
+            return None
+        self._node_values = values
+        self.stats.published["NDATA"] += 1
+        return self.topic("NDATA"), encode_payload(
+            int(time.time() * 1000), self._next_seq(), changed, birth=False
+        )
+
+    def _ready(self) -> bool:
+        """Connected, and the primary host (if any) is online: messages may go out."""
+        if self._client is None:
+            return False
+        return self.sparkplug.primary_host_id is None or self.host_online is True
+
+    def _outgoing(self) -> Iterator[tuple[str, bytes]]:
+        """Everything due now, in order (each with its seq already taken)."""
+        if not self._born or self._rebirth:
+            yield from self._births()
+        while self._dirty and not self._rebirth:
+            key = next(iter(self._dirty))
+            del self._dirty[key]
+            message = self._device_message(key)
+            if message is not None:
+                yield message
+
+    async def _publisher(self, client: aiomqtt.Client) -> None:
+        while True:
+            await self._wake.wait()
+            self._wake.clear()
+            if not self._ready():
+                continue
+            for topic, payload in self._outgoing():
+                await self._send(client, topic, payload)
+
+    async def _ticker(self, client: aiomqtt.Client) -> None:
+        while True:
+            await asyncio.sleep(NODE_TICK_S)
+            if self._born and self._ready() and not self._rebirth:
+                message = self._node_data()
+                if message is not None:
+                    await self._send(client, *message)
+
+    async def _send(self, client: aiomqtt.Client, topic: str, payload: bytes) -> None:
+        try:
+            await client.publish(topic, payload, qos=0, retain=False)
+        except BaseException:
+            self.stats.lost += 1
+            raise
+
+    # -- the connection ------------------------------------------------------------------
+
+    def _make_client(self) -> aiomqtt.Client:
+        """A client for the next connection attempt: the next bdSeq, in its will."""
+        config = self.config
+        self._bdseq = self._next_bdseq
+        self._next_bdseq = (self._bdseq + 1) % 256
+        tls = None
+        if config.tls:
+            tls = aiomqtt.TLSParameters(
+                ca_certs=None if config.tls_ca is None else str(config.tls_ca)
+            )
+        return aiomqtt.Client(
+            config.host,
+            config.port,
+            identifier=f"{config.client_id}-spb",
+            username=config.username,
+            password=config.password,
+            tls_params=tls,
+            will=aiomqtt.Will(self.topic("NDEATH"), self._ndeath(), qos=1, retain=False),
+            clean_session=True,
+            keepalive=config.keepalive_s,
+            max_queued_outgoing_messages=10_000,
+        )
+
+    async def _run(self) -> None:
+        await keep_connected(
+            self._make_client,
+            self._connection,
+            url=self.config.url,
+            log=_log,
+            ceiling_s=BACKOFF_MAX_S,
+            stats=self.stats,
+            who=f" as Sparkplug edge node {self.sparkplug.group_id}/{self.edge_node}",
+        )
+
+    async def _connection(self, client: aiomqtt.Client, connected: Callable[[], None]) -> None:
+        try:
+            state = self._state_topic
+            if state is not None:
+                await client.subscribe(state, qos=1)
+            await client.subscribe(self.topic("NCMD"), qos=1)
+            await client.subscribe(self.topic("DCMD", "+"), qos=1)
+            self._born = False
+            self._epoch += 1
+            self._session_name = f"sparkplug session {self._epoch}"
+            self._client = client
+            connected()
+            self._wake.set()
+            await self._session(client)
+        except asyncio.CancelledError:
+            if self._closing and self._born:
+                await self._say_dead(client)
+            raise
+        finally:
+            self._client = None
+            self._born = False
+            self._end_session()
+
+    def _end_session(self) -> None:
+        """The Sparkplug session is over: commands of it are stale, its leases lapse."""
+        self._epoch += 1
+        session, self._session_name = self._session_name, None
+        if session is not None and self._gateway is not None:
+            self._gateway.disconnected(session)
+
+    async def _say_dead(self, client: aiomqtt.Client) -> None:
+        """NDEATH before a disconnect we choose (a clean disconnect drops the will)."""
+        try:
+            async with asyncio.timeout(CLOSE_TIMEOUT_S):
+                await client.publish(self.topic("NDEATH"), self._ndeath(), qos=1, retain=False)
+            self.stats.published["NDEATH"] += 1
+        except (aiomqtt.MqttError, TimeoutError) as exc:
+            _log.warning("Sparkplug: could not publish NDEATH: %s", exc or "time-out")
+
+    async def _session(self, client: aiomqtt.Client) -> None:
+        tasks = {
+            asyncio.create_task(self._publisher(client), name="sparkplug publisher"),
+            asyncio.create_task(self._receiver(client), name="sparkplug receiver"),
+            asyncio.create_task(self._ticker(client), name="sparkplug ticker"),
+        }
+        try:
+            done, _ = await asyncio.wait(tasks, return_when=asyncio.FIRST_COMPLETED)
+        finally:
+            for task in tasks:
+                task.cancel()
+            await asyncio.gather(*tasks, return_exceptions=True)
+        for task in done:
+            task.result()
+        raise aiomqtt.MqttError("the session ended")
+
+    async def _receiver(self, client: aiomqtt.Client) -> None:
+        async for message in client.messages:
+            topic = message.topic.value
+            payload = message.payload if isinstance(message.payload, bytes) else b""
+            if topic == self._state_topic:
+                if self._host_state(payload):
+                    self.stats.host_offline += 1
+                    _log.warning(
+                        "Sparkplug: primary host %s went offline: NDEATH, reconnecting",
+                        self.sparkplug.primary_host_id,
+                    )
+                    await self._say_dead(client)
+                    raise _HostOffline(f"primary host {self.sparkplug.primary_host_id} offline")
+                continue
+            self.stats.commands += 1
+            if len(payload) > MAX_COMMAND_BYTES:
+                self._bad("oversized", f"{excerpt(topic)}: {len(payload)} bytes, not read")
+                continue
+            if message.retain:
+                self._bad("retained", f"{excerpt(topic)}: a retained command is never carried out")
+                continue
+            if topic == self.topic("NCMD"):
+                self._node_command(payload)
+            else:
+                self._device_command(topic, payload)
+
+    def _bad(self, reason: str, text: str) -> None:
+        self.stats.bad_input[reason] += 1
+        _log.debug("Sparkplug: %s: %s", reason, text)
+
+    # -- the primary host ----------------------------------------------------------------
+
+    def _host_state(self, payload: bytes) -> bool:
+        """Take a STATE message; True when it means: die now (the host went offline)."""
+        try:
+            body = json.loads(payload)
+            online, stamp = body["online"], body["timestamp"]
+            if (
+                not isinstance(online, bool)
+                or not isinstance(stamp, int)
+                or isinstance(stamp, bool)
+            ):
+                raise TypeError
+        except (ValueError, TypeError, KeyError):
+            self._bad("malformed", f"STATE {excerpt(payload)!r}")
+            return False
+        if self._host_stamp is not None and stamp < self._host_stamp:
+            self._bad("stale_state", f"STATE of {stamp} after one of {self._host_stamp}")
+            return False
+        self._host_stamp = stamp
+        was, self.host_online = self.host_online, online
+        if online:
+            if was is not True:
+                _log.info("Sparkplug: primary host %s is online", self.sparkplug.primary_host_id)
+            self._wake.set()
+            return False
+        self._end_session()  # the host's leases lapse with it
+        self._epoch += 1
+        self._session_name = f"sparkplug session {self._epoch}"
+        return self._born
+
+    # -- commands ------------------------------------------------------------------------
+
+    def _node_command(self, payload: bytes) -> None:
+        try:
+            decoded = decode_payload(payload)
+        except MalformedPayload as exc:
+            self._bad("malformed", f"NCMD {excerpt(payload)!r}: {exc}")
+            return
+        for metric in decoded.metrics:
+            if metric.name != REBIRTH:
+                self._bad("unknown_metric", f"NCMD {excerpt(metric.label)}")
+            elif metric.member != "boolean_value" or metric.is_null:
+                self._bad("wrong_type", f"NCMD {REBIRTH} takes a Boolean")
+            elif metric.value is True:
+                self.stats.rebirths += 1
+                _log.info("Sparkplug: rebirth requested")
+                self._rebirth = True
+                self._wake.set()
+
+    def _device_command(self, topic: str, payload: bytes) -> None:
+        device = self._by_id.get(topic.rsplit("/", 1)[-1])
+        if device is None:
+            self._bad("unknown_device", excerpt(topic))
+            return
+        try:
+            decoded = decode_payload(payload)
+        except MalformedPayload as exc:
+            self._bad("malformed", f"DCMD to {device.id} {excerpt(payload)!r}: {exc}")
+            self._refuse(
+                device,
+                "DCMD",
+                excerpt(payload),
+                WriteResult(Refusal.MALFORMED, "not a Sparkplug B payload"),
+            )
+            return
+        for index, metric in enumerate(decoded.metrics):
+            if index >= MAX_METRICS:
+                extra = len(decoded.metrics) - MAX_METRICS
+                self.stats.bad_input["too_many"] += extra
+                self.stats.refused += extra
+                _log.debug(
+                    "Sparkplug: DCMD to %s: %d metrics past %d refused",
+                    device.id,
+                    extra,
+                    MAX_METRICS,
+                )
+                break
+            self._queue(device, metric)
+
+    def _queue(self, device: Device, metric: ReceivedMetric) -> None:
+        key = device.drive.key
+        queue = self._commands.get(key)
+        if queue is None:
+            queue = self._commands[key] = asyncio.Queue(MAX_COMMANDS)
+            self._workers[key] = asyncio.create_task(
+                self._worker(queue), name=f"sparkplug commands {key[0]} {key[1]}"
+            )
+        try:
+            queue.put_nowait((self._epoch, device, metric))
+        except asyncio.QueueFull:
+            self._refuse(
+                device,
+                metric.label,
+                metric.value,
+                WriteResult(Refusal.BUSY, f"{MAX_COMMANDS} commands already wait for this drive"),
+            )
+
+    async def _worker(self, queue: asyncio.Queue[_Command]) -> None:
+        while not self._closing:
+            epoch, device, metric = await queue.get()
+            if epoch != self._epoch:
+                self._refuse(
+                    device,
+                    metric.label,
+                    metric.value,
+                    WriteResult(Refusal.NO_ANSWER, "received in a Sparkplug session that is over"),
+                )
+                continue
+            try:
+                await self._carry_out(device, metric)
+            except Exception:  # a bug: the worker, and the drive's next stop, go on
+                _log.exception("Sparkplug: DCMD %s to %s failed", metric.label, device.id)
+                self._refuse(
+                    device,
+                    metric.label,
+                    metric.value,
+                    WriteResult(Refusal.NO_ANSWER, "the gateway failed to carry it out"),
+                )
+
+    async def _carry_out(self, device: Device, received: ReceivedMetric) -> None:
+        target, request, bad = judge(device, received)
+        name = received.label if target is None else target.definition.name
+        if bad is not None:
+            self._bad(bad, f"DCMD {excerpt(name)} to {device.id}")
+        if isinstance(request, WriteResult):
+            self._refuse(device, name, received.value, request)
+            return
+        # A stop is always tried, and a lease harms nothing; a motion waits for a live drive.
+        harmless = request == RunCommand(Direction.STOP) or isinstance(request, Heartbeat)
+        if device.drive.key not in self._alive and not harmless:
+            self._bad("offline", f"DCMD {name} to {device.id}")
+            self._refuse(
+                device,
+                name,
+                received.value,
+                WriteResult(Refusal.NO_ANSWER, "the drive is offline: nothing was sent"),
+            )
+            return
+        assert self._gateway is not None
+        result = await self._gateway.write(
+            CLIENT, device.drive, request, connection=self._session_name
+        )  # audited there
+        if result.refusal is None:
+            self.stats.writes += 1
+        else:
+            self._refuse(device, name, received.value, result, audited=True)
+
+    def _refuse(
+        self,
+        device: Device,
+        what: str,
+        value: object,
+        result: WriteResult,
+        *,
+        audited: bool = False,
+    ) -> None:
+        self.stats.refused += 1
+        shown = None if value is None else excerpt(repr(value))
+        text = error_text(result)
+        _log.debug("Sparkplug: DCMD %s %s to %s refused: %s", excerpt(what), shown, device.id, text)
+        if not audited and self._gateway is not None:
+            self._gateway.refused(CLIENT, device.drive, f"sparkplug {excerpt(what)}", shown, result)
+        key = device.drive.key
+        count = self._refusals.get(key, ("", 0))[1] + 1
+        self._refusals[key] = (f"{excerpt(what)}: {text}", count)
+        latest = self._latest.get(key)
+        if latest is not None and device.writable:
+            self._mark(key, *latest)  # the next DDATA tells it
+
+    # -- stopping ------------------------------------------------------------------------
+
+    async def close(self) -> None:
+        """Stop: NDEATH, then disconnect (the commands waiting are not carried out)."""
+        if self._task is None:
+            return
+        self._closing = True
+        self._epoch += 1
+        for task in self._workers.values():
+            task.cancel()
+        await asyncio.gather(*self._workers.values(), return_exceptions=True)
+        task, self._task = self._task, None
+        # Once is not always enough on Python 3.11: a task inside asyncio.wait_for
+        # (aiomqtt's publish and subscribe) can lose a cancellation (gh-86296).
+        while not task.done():
+            task.cancel()
+            await asyncio.wait({task}, timeout=0.1)
