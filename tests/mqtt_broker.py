@@ -137,15 +137,24 @@ class Broker:
 async def publish(
     broker: Broker, topic: str, payload: bytes | str | None, *, retain: bool = False
 ) -> None:
-    """``mosquitto_pub``: one message, QoS 1; the broker has it when this returns."""
-    text = payload.decode() if isinstance(payload, bytes) else payload
+    """``mosquitto_pub``: one message, QoS 1; the broker has it when this returns.
+
+    Bytes go through its standard input (``-s``), whatever they hold (a protobuf).
+    """
     args = ["-h", "127.0.0.1", "-p", str(broker.port), "-q", "1", "-t", topic]
-    args += ["-n"] if text is None else ["-m", text]
+    if payload is None:
+        args.append("-n")
+    elif isinstance(payload, bytes):
+        args.append("-s")
+    else:
+        args += ["-m", payload]
     proc = await asyncio.create_subprocess_exec(
-        tool("mosquitto_pub"), *args, *(["-r"] if retain else []), stderr=asyncio.subprocess.PIPE
-    )
+        tool("mosquitto_pub"), *args, *(["-r"] if retain else []),
+        stdin=asyncio.subprocess.PIPE, stderr=asyncio.subprocess.PIPE,
+    )  # fmt: skip
     try:
-        _, err = await asyncio.wait_for(proc.communicate(), TIMEOUT_S)
+        data = payload if isinstance(payload, bytes) else b""
+        _, err = await asyncio.wait_for(proc.communicate(data), TIMEOUT_S)
     finally:
         if proc.returncode is None:
             proc.kill()

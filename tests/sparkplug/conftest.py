@@ -24,11 +24,11 @@ from sj300_async.simulator.sj300 import SimulatedBus
 
 from .host import Codec, codec
 
-#: Drives 1-2 may be run and have A004 written; 3-4 are read-only.
+#: Drives 1-2 may be run and have A004 and F002 written; 3-4 are read-only.
 GRANTS = """
     [[lines.writes]]
     nodes = "1-2"
-    parameters = ["A004"]
+    parameters = ["A004", "F002"]
     control = true
 """
 
@@ -84,6 +84,7 @@ def spb_toml(url: str, broker: Broker, *, mqtt_extra: str = "", interval_s: floa
             interval_s = {interval_s}
             parameters = ["A004", "F002"]
             lease_scope = "connection"
+            lease_s = 60
             """
     ) + textwrap.dedent(GRANTS)
 

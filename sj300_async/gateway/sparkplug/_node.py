@@ -499,16 +499,10 @@ class EdgeNode:
                     raise _HostOffline(f"primary host {self.sparkplug.primary_host_id} offline")
                 continue
             self.stats.commands += 1
-            if len(payload) > MAX_COMMAND_BYTES:
-                self._bad("oversized", f"{excerpt(topic)}: {len(payload)} bytes, not read")
-                continue
-            if message.retain:
-                self._bad("retained", f"{excerpt(topic)}: a retained command is never carried out")
-                continue
             if topic == self.topic("NCMD"):
-                self._node_command(payload)
+                self._node_command(payload, retained=message.retain)
             else:
-                self._device_command(topic, payload)
+                self._device_command(topic, payload, retained=message.retain)
 
     def _bad(self, reason: str, text: str) -> None:
         self.stats.bad_input[reason] += 1
@@ -547,7 +541,25 @@ class EdgeNode:
 
     # -- commands ------------------------------------------------------------------------
 
-    def _node_command(self, payload: bytes) -> None:
+    def _unread(self, what: str, payload: bytes, *, retained: bool) -> WriteResult | None:
+        """Why a command is not read at all (too long, or retained), or None."""
+        if len(payload) > MAX_COMMAND_BYTES:
+            self._bad("oversized", f"{what}: {len(payload)} bytes, not read")
+            return WriteResult(
+                Refusal.MALFORMED, f"a command is at most {MAX_COMMAND_BYTES} bytes: not read"
+            )
+        if retained:
+            # Stored by the broker, not sent now: carrying it out would replay it.
+            self._bad("retained", f"{what}: a retained command is never carried out")
+            return WriteResult(
+                Refusal.NOT_ALLOWED,
+                "a retained command is never carried out (publish commands without retain)",
+            )
+        return None
+
+    def _node_command(self, payload: bytes, *, retained: bool) -> None:
+        if self._unread("NCMD", payload, retained=retained) is not None:
+            return
         try:
             decoded = decode_payload(payload)
         except MalformedPayload as exc:
@@ -564,10 +576,14 @@ class EdgeNode:
                 self._rebirth = True
                 self._wake.set()
 
-    def _device_command(self, topic: str, payload: bytes) -> None:
+    def _device_command(self, topic: str, payload: bytes, *, retained: bool) -> None:
         device = self._by_id.get(topic.rsplit("/", 1)[-1])
         if device is None:
             self._bad("unknown_device", excerpt(topic))
+            return
+        unread = self._unread(f"DCMD to {device.id}", payload, retained=retained)
+        if unread is not None:
+            self._refuse(device, "DCMD", excerpt(payload), unread)
             return
         try:
             decoded = decode_payload(payload)

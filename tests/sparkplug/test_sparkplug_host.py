@@ -1,0 +1,94 @@
+"""The primary host: nothing is born before its STATE says online; its going offline is a death.
+
+The STATE messages are published by mosquitto_pub as a host application
+would (retained, JSON); the edge node's messages are read by the
+independent subscriber (host.py).
+"""
+
+from __future__ import annotations
+
+import asyncio
+import json
+
+from mqtt_broker import Broker
+from waiting import wait_for
+
+from sj300_async.gateway.sparkplug import EdgeNode
+
+from .conftest import SimLine, drive, edge, polled, running_gateway, spb_toml
+from .host import Codec, host
+from .test_sparkplug_commands import metric
+from .test_sparkplug_lifecycle import names, seqs_follow
+
+STATE = "spBv1.0/STATE/scada"
+
+
+async def say(broker: Broker, online: bool, timestamp: int) -> None:
+    """The host's STATE, as Sparkplug 3.0 has a host publish it (retained, QoS 1)."""
+    body = json.dumps({"online": online, "timestamp": timestamp})
+    await broker.publish(STATE, body, retain=True)
+
+
+async def malformed_reach(node: EdgeNode, total: int, what: str) -> None:
+    await wait_for(lambda: node.stats.bad_input["malformed"] == total, what)
+
+
+async def test_the_edge_node_is_born_only_while_its_primary_host_is_online(
+    sim_line: SimLine, broker: Broker, tahu: Codec
+) -> None:
+    loop = asyncio.get_running_loop()
+    text = spb_toml(sim_line.url, broker, mqtt_extra='primary_host_id = "scada"')
+    await say(broker, False, 1000)
+    async with host(broker, tahu) as h, running_gateway(text) as gateway:
+        node = edge(gateway)
+        await wait_for(lambda: node.host_online is False, "the host's STATE read")
+        await polled(gateway)
+        assert h.of("NBIRTH") == []
+        assert node.bdseq == 0
+        await say(broker, True, 2000)
+        await h.until(lambda m: m.kind == "DBIRTH", "the births", count=4)
+        await h.command("DCMD", [metric(h, "hall-1", "Control/Lease", "Boolean", True)],
+                        "hall-1")  # fmt: skip
+        one = drive(gateway, 1)
+        await wait_for(lambda: one.lease.held_by("sparkplug", loop.time()), "the lease")
+        # A STATE older than the last one seen changes nothing.
+        await say(broker, False, 1500)
+        await wait_for(lambda: node.stats.bad_input["stale_state"] == 1, "the stale STATE")
+        assert node.born
+        assert node.host_online
+        # The host goes offline: NDEATH, the connection-scoped lease lapses, and the
+        # edge node reconnects (the next bdSeq) to wait for the host again.
+        await say(broker, False, 3000)
+        await h.until(lambda m: m.kind == "NDEATH", "the death")
+        await wait_for(lambda: not one.lease.held_by("sparkplug", loop.time()), "the lapse")
+        await wait_for(lambda: node.stats.connects == 2 and node.host_online is False,
+                       "connected again, the host still offline")  # fmt: skip
+        assert node.bdseq == 1
+        assert len(h.of("NBIRTH")) == 1
+        await say(broker, True, 4000)
+        await h.until(lambda m: m.kind == "DBIRTH", "the births again", count=8)
+        assert node.stats.host_offline == 1
+    first, second = h.of("NBIRTH")
+    (death, _) = h.of("NDEATH")  # the host's offline, then the clean stop
+    assert names(first)["bdSeq"]["value"] == names(death)["bdSeq"]["value"] == 0
+    assert names(second)["bdSeq"]["value"] == 1
+    assert h.messages.index(death) < h.messages.index(second)
+    seqs_follow(h.messages)
+
+
+async def test_a_state_that_is_no_state_is_counted_and_ignored(
+    sim_line: SimLine, broker: Broker, tahu: Codec
+) -> None:
+    text = spb_toml(sim_line.url, broker, mqtt_extra='primary_host_id = "scada"')
+    async with host(broker, tahu) as h, running_gateway(text) as gateway:
+        node = edge(gateway)
+        await wait_for(lambda: node.stats.connects == 1, "subscribed (then connected)")
+        bad = ("online", '{"online": "yes", "timestamp": 5}', '{"online": true}',
+               '{"online": true, "timestamp": true}', "\xff")  # fmt: skip
+        for number, text in enumerate(bad, start=1):
+            await broker.publish(STATE, text)
+            await malformed_reach(node, number, f"{text!r} counted")
+        assert node.host_online is None
+        assert h.of("NBIRTH") == []
+        await say(broker, True, 1)
+        await h.until(lambda m: m.kind == "DBIRTH", "the births", count=4)
