@@ -156,6 +156,14 @@ GATEWAY_MQTT_NAMES = (
     "UNAVAILABLE", "backoff", "discovery", "error_text", "follow", "is_fleet_url",
     "keep_connected", "mqtt_families", "node_id", "parse_command", "parse_fleet_url",
     "parse_state_topic", "state_message",
+    # Sparkplug B's settings, and the command checks it shares with the JSON topics (issue 30)
+    "SparkplugConfig", "frequency_request", "parameter_request",
+)  # fmt: skip
+GATEWAY_SPARKPLUG_NAMES = (
+    "BAD_INPUTS", "CLIENT", "DATA_TYPES", "DIRECTION_WORDS", "LAST_REFUSAL", "NAMESPACE",
+    "NODE_METRICS", "Decoded", "Device", "DeviceMetric", "EdgeNode", "MalformedPayload",
+    "MetricDef", "Property", "ReceivedMetric", "SparkplugStats", "decode_payload", "device_id",
+    "encode_payload",
 )  # fmt: skip
 GATEWAY_HTTP_NAMES = (
     "DEFAULT_LIMITS", "DEFAULT_TREND_S", "HttpConfig", "NORTHBOUND",
@@ -182,6 +190,7 @@ PINNED = {
     "sj300_async.gateway": GATEWAY_NAMES,
     "sj300_async.gateway.modbus": GATEWAY_MODBUS_NAMES,
     "sj300_async.gateway.mqtt": GATEWAY_MQTT_NAMES,
+    "sj300_async.gateway.sparkplug": GATEWAY_SPARKPLUG_NAMES,
     "sj300_async.gateway.http": GATEWAY_HTTP_NAMES,
     "sj300_async.gateway.opcua": GATEWAY_OPCUA_NAMES,
 }
