@@ -158,6 +158,8 @@ GATEWAY_MQTT_NAMES = (
     "parse_state_topic", "state_message",
     # Sparkplug B's settings, and the command checks it shares with the JSON topics (issue 30)
     "SparkplugConfig", "frequency_request", "parameter_request",
+    # a stop waits behind no command (issue 30's review)
+    "DROPPED_BY_STOP",
 )  # fmt: skip
 GATEWAY_SPARKPLUG_NAMES = (
     "BAD_INPUTS", "CLIENT", "DATA_TYPES", "DIRECTION_WORDS", "LAST_REFUSAL", "NAMESPACE",

@@ -690,13 +690,9 @@ async def test_a_command_waiting_when_the_connection_breaks_is_never_carried_out
 ) -> None:
     topics = Topics("gw1")
     async with running_gateway(mqtt_toml(sim_line.url, broker)) as gateway:
-        mqtt = bridge(gateway)
-        await wait_for(lambda: mqtt.connected, "connected")
-        await publish(broker, topics.command("hall", 1, "lease"), "1")
-        await wait_for(lambda: drive_of(gateway, "hall", 1).lease.holder == "mqtt", "the lease")
+        mqtt, lock = await leased(gateway, broker)
         # Another write to node 1 under way (its lock held): MQTT's first command waits
         # for it, the second waits in the drive's queue.
-        lock = gateway.lines[0].controller._locks.setdefault(1, asyncio.Lock())
         async with lock:
             await publish(broker, topics.command("hall", 1, "frequency_hz"), "10")
             await publish(broker, topics.command("hall", 1, "frequency_hz"), "20")
@@ -708,6 +704,42 @@ async def test_a_command_waiting_when_the_connection_breaks_is_never_carried_out
         assert sim_line.sim.drives[1].parameters["F001"] == 1000  # the one under way: done
     sent = b"".join(data for _, direction, data in sim_line.log.chunks if direction == "rx")
     assert b"\x020101002000" not in sent  # 20 Hz: received, never sent to the drive
+
+
+async def test_a_stop_drops_the_commands_waiting_and_follows_the_one_under_way(
+    sim_line: SimLine, broker: Broker
+) -> None:
+    topics = Topics("gw1")
+    async with running_gateway(mqtt_toml(sim_line.url, broker)) as gateway:
+        mqtt, lock = await leased(gateway, broker)
+        async with lock:  # another write under way: the first command waits for it
+            await publish(broker, topics.command("hall", 1, "frequency_hz"), "10")
+            await wait_for(lambda: ("hall", 1) in mqtt._busy, "the first started")
+            for hz in ("20", "30"):
+                await publish(broker, topics.command("hall", 1, "frequency_hz"), hz)
+            await publish(broker, topics.command("hall", 1, "command"), "stop")
+            await wait_for(lambda: mqtt.stats.refused == 2, "the two waiting dropped")
+        await wait_for(
+            lambda: any(e["new"] == "stop" and e["result"] == "ok" for e in gateway.audit.recent),
+            "the stop carried out",
+        )
+        dropped = [
+            e for e in gateway.audit.recent if e.get("detail") == "dropped: a stop came after it"
+        ]
+        assert len(dropped) == 2
+        assert sim_line.sim.drives[1].parameters["F001"] == 1000  # the one under way: done
+    sent = b"".join(data for _, direction, data in sim_line.log.chunks if direction == "rx")
+    assert b"\x020101002000" not in sent  # 20 Hz: dropped, never sent to the drive
+
+
+async def leased(gateway: Gateway, broker: Broker) -> tuple[MqttBridge, asyncio.Lock]:
+    """The bridge once connected and holding drive 1's lease (taken over MQTT), and the
+    lock that, held, is another write to drive 1 under way."""
+    mqtt = bridge(gateway)
+    await wait_for(lambda: mqtt.connected, "connected")
+    await publish(broker, Topics("gw1").command("hall", 1, "lease"), "1")
+    await wait_for(lambda: drive_of(gateway, "hall", 1).lease.holder == "mqtt", "the lease")
+    return mqtt, gateway.lines[0].controller._locks.setdefault(1, asyncio.Lock())
 
 
 # -- the messages, without a broker ---------------------------------------------------------------

@@ -137,3 +137,33 @@ async def test_bad_input_changes_nothing_and_is_counted(
             # the node's own commands.
             assert len(refused) == 7, refused
     assert node.stats.rebirths == 0
+
+
+async def test_a_stop_waits_behind_no_command_and_a_flood_is_one_audit_line(
+    sim_line: SimLine, broker: Broker, tahu: Codec
+) -> None:
+    async with host(broker, tahu) as h, running_gateway(spb_toml(sim_line.url, broker)) as gateway:
+        await h.until(lambda m: m.kind == "DBIRTH", "a birth per drive", count=4)
+        node = edge(gateway)
+        hz = [metric(h, "hall-1", "Frequency Command", "Double", 10.0 + n) for n in range(30)]
+        stop = metric(h, "hall-1", "Control/Stop", "Boolean", True)
+        lease = metric(h, "hall-1", "Control/Lease", "Boolean", True)
+        await h.command("DCMD", [lease, *hz, stop], "hall-1")
+        await wait_for(
+            lambda: any(e["what"] == "command" and e["new"] == "stop"
+                        for e in sparkplug_audit(gateway)), "the stop carried out",
+        )  # fmt: skip
+        audit = sparkplug_audit(gateway)
+        # Each of the 32 audited once: the stop carried out; what waited before it
+        # dropped, what found the queue full refused busy; nothing else.
+        assert len(audit) == 32
+        stops = [e for e in audit if e["what"] == "command"]
+        assert [(e["new"], e["result"]) for e in stops] == [("stop", "ok")]
+        assert {e.get("reason") for e in audit if e["result"] == "refused"} == {"busy"}
+        assert any(e.get("detail") == "dropped: a stop came after it" for e in audit)
+        # 100 metrics in one DCMD: 64 judged, the rest refused in one audit line.
+        before = len(sparkplug_audit(gateway))
+        await h.command("DCMD", [metric(h, "hall-1", "Output Frequency", "Double", 1.0)] * 100,
+                        "hall-1")  # fmt: skip
+        await wait_for(lambda: node.stats.bad_input["too_many"] == 36, "the excess counted")
+        await wait_for(lambda: len(sparkplug_audit(gateway)) == before + 65, "65 audit lines")

@@ -84,6 +84,7 @@ async def test_nbirth_then_a_dbirth_per_drive_then_ddata_by_exception(
             )
             samples = edge(gateway).stats.samples
         ended = time.time() * 1000
+        await h.until(lambda m: m.kind == "NDEATH", "the clean stop's NDEATH")
     nbirth = h.messages[0]
     assert nbirth.kind == "NBIRTH"
     assert nbirth.topic == "spBv1.0/plant/NBIRTH/gw1"

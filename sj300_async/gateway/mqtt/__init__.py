@@ -21,6 +21,7 @@ from typing import Final
 from .. import ConfigTable, Endpoint, Flag, Northbound, SectionContext
 from ._commands import (
     COMMAND_DIRECTIONS,
+    DROPPED_BY_STOP,
     error_text,
     frequency_request,
     parameter_request,
@@ -58,6 +59,7 @@ __all__ = [
     "COMMAND_DIRECTIONS",
     "DEFAULT_PREFIX",
     "DISCOVERY_PREFIX",
+    "DROPPED_BY_STOP",
     "FLEET_SCHEMES",
     "NORTHBOUND",
     "UNAVAILABLE",

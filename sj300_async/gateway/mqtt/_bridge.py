@@ -52,6 +52,8 @@ Decisions:
 - Commands to one drive are carried out in order (a lease, then a
   frequency); each drive has its own queue, so a drive that does not
   answer delays only its own commands, never another drive's heartbeat.
+  A stop waits behind none: the commands waiting when it comes are dropped
+  (refused ``busy``, audited), and it follows the write under way.
 - The bridge publishes with the configured QoS and waits for each batch's
   acknowledgements (at most ``MAX_IN_FLIGHT`` at once) before the next: a
   slow broker makes the outbox coalesce, never grow.
@@ -77,7 +79,7 @@ import aiomqtt
 
 from ...profiles import DriveSnapshot
 from .. import GatewayDrive, GatewayView, Refusal, WriteResult, excerpt
-from ._commands import error_text, oversized, parse_command
+from ._commands import DROPPED_BY_STOP, error_text, oversized, parse_command
 from ._config import MqttConfig
 from ._discovery import discovery
 from ._messages import state_message
@@ -467,6 +469,12 @@ class MqttBridge:
             self._workers[line, node] = asyncio.create_task(
                 self._worker((line, node), drive, queue), name=f"mqtt commands {line} {node}"
             )
+        if what == "command" and payload.strip() == b"stop":
+            # A stop waits behind no command: what waits is dropped (refused, audited),
+            # and the stop follows the write under way, if any, at once.
+            while not queue.empty():
+                _, old_topic, old_payload, old_what = queue.get_nowait()
+                self._refuse(drive, old_topic, old_what, old_payload, DROPPED_BY_STOP)
         try:
             queue.put_nowait((self._epoch, topic, payload, what))
         except asyncio.QueueFull:

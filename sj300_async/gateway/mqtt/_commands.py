@@ -34,6 +34,7 @@ from .. import (
 
 __all__ = [
     "COMMAND_DIRECTIONS",
+    "DROPPED_BY_STOP",
     "MAX_PAYLOAD_BYTES",
     "error_text",
     "frequency_request",
@@ -52,6 +53,11 @@ COMMAND_DIRECTIONS: Final = {
     "run_forward": Direction.FORWARD,
     "run_reverse": Direction.REVERSE,
 }
+
+
+#: A command still waiting for its drive when a stop for it came: never carried out
+#: (a stop waits behind no command; the JSON topics and Sparkplug alike).
+DROPPED_BY_STOP: Final = WriteResult(Refusal.BUSY, "dropped: a stop came after it")
 
 
 def _number(text: str) -> float | None:
