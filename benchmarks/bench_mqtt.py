@@ -169,7 +169,7 @@ QUICK_CHANGES = 4
 ON_ID, OFF_ID, FLOOR_ID, LATENCY_ID = "mqtt-on", "mqtt-off", "aiomqtt", "latency"
 #: Publishes the bridge has in flight at most (its MAX_IN_FLIGHT), and the floor's second
 #: mode awaits together.
-MAX_IN_FLIGHT = BATCH = 32
+MAX_IN_FLIGHT = BATCH = 256
 #: The trip code of the latency figure's changes (E07, over-voltage).
 TRIP_CODE = 7
 #: The project's aims (docs/BENCHMARKS.md, "mqtt"): the bridge's CPU per message at most

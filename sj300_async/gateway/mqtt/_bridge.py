@@ -103,7 +103,7 @@ MAX_ERRORS: Final = 100
 #: Commands waiting for one drive, at most (more are refused: busy).
 MAX_COMMANDS: Final = 16
 #: Publishes in flight at once (paho queues the rest; aiomqtt warns past its threshold).
-MAX_IN_FLIGHT: Final = 32
+MAX_IN_FLIGHT: Final = 256
 #: Messages paho may hold for a socket that does not take them.
 MAX_QUEUED: Final = 1000
 #: How long a clean stop waits for a write under way, and for its last publishes.
@@ -344,6 +344,7 @@ class MqttBridge:
             # A broker that stops reading: paho's queue (QoS 0 publishes return at
             # once) is bounded too; past it, publish fails and the bridge reconnects.
             max_queued_outgoing_messages=MAX_QUEUED,
+            max_inflight_messages=MAX_IN_FLIGHT,
         )
         client.pending_calls_threshold = 2 * MAX_IN_FLIGHT
         return client
