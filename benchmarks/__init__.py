@@ -31,6 +31,7 @@ BENCHMARKS: dict[str, str] = {
     "mqtt": "benchmarks.bench_mqtt",
     "workbench": "benchmarks.bench_workbench",
     "opcua": "benchmarks.bench_opcua",
+    "plant": "benchmarks.bench_plant",
 }
 
 

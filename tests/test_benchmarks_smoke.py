@@ -254,7 +254,7 @@ def test_best_time_runs_once_untimed_then_each_repeat(harness: ModuleType) -> No
 
 #: Every benchmark, in the order they run and print.
 ALL_BENCHMARKS = ("codec", "tcp", "loopback", "latency", "wire", "scale", "gateway", "mqtt",
-                  "workbench", "opcua")  # fmt: skip
+                  "workbench", "opcua", "plant")  # fmt: skip
 
 
 def test_every_registered_benchmark_has_the_module_contract(harness: ModuleType) -> None:
@@ -633,6 +633,30 @@ def test_opcua_matches_every_notification_and_times_the_start_up(harness: Module
         ("ms", None, "OPC UA start-up", True),
         ("µs", None, f"{bench.QUICK_DRIVES} items", True),
         ("ms", None, f"{bench.QUICK_DRIVES} items", True),
+    ]
+
+
+def test_plant_runs_its_gateways_and_counts_every_sample(harness: ModuleType) -> None:
+    bench = importlib.import_module("benchmarks.bench_plant")
+    # Raises on a child that failed (its stderr's tail in the message).
+    children = bench.measure(_quick(harness))
+    assert set(children) == {"bare", "all"}
+    for child in children.values():
+        assert child.drives == bench.QUICK_LINES * bench.QUICK_DRIVES_PER_LINE
+        assert all(rate > 0 for rate in child.samples_per_s)
+        assert child.rss_bytes > 0
+    whole = children["all"].delivery
+    assert whole["mqtt_samples"] > 0
+    assert whole["spb_samples"] > 0
+    assert set(children["all"].visible_s) == {"mqtt", "sparkplug"}  # every drive, both ways
+    assert children["all"].opcua_startup_s > 0
+    assert children["bare"].visible_s == {}
+    section = bench.report(children)
+    assert [(r.unit, r.target, r.against) for r in section.results] == [
+        ("µs", bench.TARGET_ALL, "bare poll"),
+        ("share", 1.0, "every sample"),
+        ("share", 1.0, "every sample"),
+        ("KiB", None, "bare poll"),
     ]
 
 
