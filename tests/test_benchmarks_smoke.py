@@ -687,8 +687,8 @@ def test_cli_quick_runs_every_benchmark_into_one_table() -> None:
     table = out.split("\n## results\n", 1)[1]
     rows = [line for line in table.splitlines() if line.startswith("| ") and "---" not in line]
     # header + rows of each benchmark: codec, tcp, loopback, latency, wire, scale, gateway,
-    # mqtt, workbench, opcua
-    assert len(rows) == 1 + 3 + 10 + 4 + 3 + 2 + 5 + 3 + 3 + 5 + 9
+    # mqtt, workbench, opcua, plant (its quick run: bare and all only)
+    assert len(rows) == 1 + 3 + 10 + 4 + 3 + 2 + 5 + 3 + 3 + 5 + 9 + 4
     assert "**failed**" not in out
 
 
