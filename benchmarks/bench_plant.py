@@ -14,6 +14,7 @@ each has the machine's two cores to itself and its RSS is its own:
 - ``mqtt``: ``[mqtt]`` with the JSON topics and Home Assistant discovery
   (QoS 1, the default), on a mosquitto of its own on loopback;
 - ``sparkplug``: ``[mqtt] sparkplug = true``, ``state_topics = false``;
+- ``mqtt+sparkplug``: both, each sample's state message built once for both;
 - ``opcua``: ``[opcua]`` without security, no client;
 - ``http``: ``[http]`` (the workbench, /metrics), no client;
 - ``modbus``: nine ``[[modbus.listeners]]`` of seven lines each, no client;
@@ -78,7 +79,11 @@ __all__ = [
 TITLE = "plant"
 USES_EVENT_LOOP = True
 #: Each configuration's northbounds, in the order they run.
-CONFIGURATIONS: Final = ("bare", "mqtt", "sparkplug", "opcua", "http", "modbus", "all")
+CONFIGURATIONS: Final = (
+    *("bare", "mqtt", "sparkplug", "mqtt+sparkplug", "opcua", "http", "modbus", "all"),
+)
+#: The northbounds of ``all``.
+EVERY: Final = frozenset({"mqtt", "sparkplug", "opcua", "http", "modbus"})
 LINES: Final = 64
 DRIVES_PER_LINE: Final = 32
 QUICK_LINES: Final = 2
@@ -100,7 +105,7 @@ CHILD_TIMEOUT_S: Final = 300.0
 
 
 def _toml(which: str, lines: int, per_line: int, broker: int, directory: Path) -> str:
-    parts = set(CONFIGURATIONS[1:-1]) if which == "all" else {which} - {"bare"}
+    parts = EVERY if which == "all" else set(which.split("+")) - {"bare"}
     text = '[gateway]\nid = "plant"\n'
     if parts & {"mqtt", "sparkplug"}:
         text += f'[mqtt]\nurl = "mqtt://127.0.0.1:{broker}"\n'

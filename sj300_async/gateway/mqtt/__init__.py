@@ -39,7 +39,7 @@ from ._fleet import (
     is_fleet_url,
     parse_fleet_url,
 )
-from ._messages import state_message
+from ._messages import drive_state, state_message
 from ._session import BrokerUnreachable, SessionStats, backoff, keep_connected
 from ._stats import BridgeStats, mqtt_families
 from ._topics import (
@@ -76,6 +76,7 @@ __all__ = [
     "Topics",
     "backoff",
     "discovery",
+    "drive_state",
     "error_text",
     "follow",
     "frequency_request",
@@ -110,8 +111,10 @@ class _Spec:
         return ()  # a client: it listens on nothing
 
     def create(self, config: object) -> Northbound:
+        from ._pair import Clients, StatePublisher
+
         assert isinstance(config, MqttConfig)
-        parts: list[Northbound] = []
+        parts: list[StatePublisher] = []
         if config.state_topics:
             from ._bridge import MqttBridge
 
@@ -122,8 +125,6 @@ class _Spec:
             parts.append(EdgeNode(config))
         if len(parts) == 1:
             return parts[0]
-        from ._pair import Clients
-
         return Clients(parts)
 
 

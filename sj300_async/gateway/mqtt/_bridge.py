@@ -82,10 +82,10 @@ from .. import GatewayDrive, GatewayView, Refusal, WriteResult, excerpt
 from ._commands import DROPPED_BY_STOP, error_text, oversized, parse_command
 from ._config import MqttConfig
 from ._discovery import discovery
-from ._messages import state_message
+from ._messages import drive_state
 from ._session import keep_connected
 from ._stats import BridgeStats, mqtt_families
-from ._topics import AVAILABLE, UNAVAILABLE, Topics
+from ._topics import AVAILABLE, UNAVAILABLE, StateMessage, Topics
 
 if TYPE_CHECKING:
     from prometheus_client.core import Metric
@@ -197,19 +197,18 @@ class MqttBridge:
 
         Never blocks: the message waits in the outbox (see the module docstring).
         """
+        self.publish_state(snapshot, self.state_of(snapshot))
+
+    def state_of(self, snapshot: DriveSnapshot) -> StateMessage:
+        """*snapshot* as a state message now (the Sparkplug node builds the same one)."""
+        return drive_state(self._gateway, self.topics.gateway, snapshot, self.stale_after_s)
+
+    def publish_state(self, snapshot: DriveSnapshot, message: StateMessage) -> None:
+        """:meth:`publish` with the state message built already (once for every MQTT client)."""
         if self._closing:
             return
         key = (snapshot.line, snapshot.node)
         self.stats.samples[key] += 1
-        now = asyncio.get_running_loop().time()
-        drive = None if self._gateway is None else self._gateway.drive(*key)
-        message = state_message(
-            self.topics.gateway,
-            snapshot,
-            now=now,
-            stale_after_s=self.stale_after_s,
-            lapse_pending=drive is not None and drive.lapse_pending,
-        )
         out = _Out(self.topics.state(*key), message.to_json(), retain=True, drive=key)
         self._latest[key] = out
         self._put(out)

@@ -1,23 +1,28 @@
 """A drive's state as published on MQTT: a snapshot -> :class:`~._topics.StateMessage`.
 
-Sans-IO. A value is published only when younger than ``stale_after_s`` at
-the moment of publishing (the rule of the Modbus reads), else it is null;
-the message's ``time`` is the sample's, in Unix time. A polled parameter
-that is stale, or that the drive refused to read (unavailable), is null;
-one never read yet is left out (the gateway polls it before it knows). The trip is the
-snapshot's present trip (known only from a trip history read after the
-trip was seen), shown only while the drive's status is fresh.
+Sans-IO but for :func:`drive_state`, which reads the loop's clock. A value
+is published only when younger than ``stale_after_s`` at the moment of
+publishing (the rule of the Modbus reads), else it is null; the message's
+``time`` is the sample's, in Unix time. A polled parameter that is stale, or
+that the drive refused to read (unavailable), is null; one never read yet is
+left out (the gateway polls it before it knows). The trip is the snapshot's
+present trip (known only from a trip history read after the trip was seen),
+shown only while the drive's status is fresh.
 """
 
 from __future__ import annotations
 
-from typing import Final
+import asyncio
+from typing import TYPE_CHECKING, Final
 
 from ...profiles import DriveSnapshot, is_fresh
 from ...wire import Direction
 from ._topics import StateMessage
 
-__all__ = ["state_message"]
+if TYPE_CHECKING:
+    from .. import GatewayView
+
+__all__ = ["drive_state", "state_message"]
 
 _DIRECTIONS: Final = {
     Direction.STOP: "stop",
@@ -78,4 +83,18 @@ def state_message(
         state=snapshot.state if status else None,
         trip_meaning=None if trip is None else trip.meaning,
         lapse_pending=lapse_pending,
+    )
+
+
+def drive_state(
+    gateway: GatewayView | None, gateway_id: str, snapshot: DriveSnapshot, stale_after_s: float
+) -> StateMessage:
+    """*snapshot*'s state message now, with the gateway's word on its lapse (in the loop)."""
+    drive = None if gateway is None else gateway.drive(snapshot.line, snapshot.node)
+    return state_message(
+        gateway_id,
+        snapshot,
+        now=asyncio.get_running_loop().time(),
+        stale_after_s=stale_after_s,
+        lapse_pending=drive is not None and drive.lapse_pending,
     )

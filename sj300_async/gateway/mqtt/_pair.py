@@ -4,34 +4,45 @@ Each keeps its own connection (an MQTT connection has one last will: the
 bridge's says ``offline`` on its availability topic, Sparkplug's is the edge
 node's NDEATH); to the gateway they are one northbound, ``[mqtt]``. They
 start in order and a failed start closes what started; every call goes to
-each, and a ``publish`` that raises in one still reaches the other.
+each, and a ``publish`` that raises in one still reaches the other. A
+sample's state message is built once, by the first client, for them all
+(:class:`StatePublisher`): both read the same fields of the same sample.
 """
 
 from __future__ import annotations
 
 import logging
 from collections.abc import Iterator, Sequence
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Protocol
 
 from ...profiles import DriveSnapshot
 from .. import GatewayView, Northbound
+from ._topics import StateMessage
 
 if TYPE_CHECKING:
     from prometheus_client.core import Metric
 
-__all__ = ["Clients"]
+__all__ = ["Clients", "StatePublisher"]
 
 _log = logging.getLogger("sj300_async.gateway.mqtt")
+
+
+class StatePublisher(Northbound, Protocol):
+    """An MQTT client that publishes a sample from its state message."""
+
+    def state_of(self, snapshot: DriveSnapshot) -> StateMessage: ...
+
+    def publish_state(self, snapshot: DriveSnapshot, message: StateMessage) -> None: ...
 
 
 class Clients:
     """Several MQTT clients as one northbound (see the module docstring)."""
 
-    def __init__(self, parts: Sequence[Northbound]) -> None:
+    def __init__(self, parts: Sequence[StatePublisher]) -> None:
         self.parts = tuple(parts)
 
     async def start(self, gateway: GatewayView) -> None:
-        started: list[Northbound] = []
+        started: list[StatePublisher] = []
         try:
             for part in self.parts:
                 await part.start(gateway)
@@ -47,9 +58,10 @@ class Clients:
 
     def publish(self, snapshot: DriveSnapshot) -> None:
         failure: Exception | None = None
+        message = self.parts[0].state_of(snapshot)
         for part in self.parts:
             try:
-                part.publish(snapshot)
+                part.publish_state(snapshot, message)
             except Exception as exc:  # the gateway counts it; the other part still gets it
                 failure = failure or exc
         if failure is not None:

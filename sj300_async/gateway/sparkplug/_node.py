@@ -80,9 +80,9 @@ from ..mqtt import (
     MqttConfig,
     SparkplugConfig,
     StateMessage,
+    drive_state,
     error_text,
     keep_connected,
-    state_message,
 )
 from ._commands import judge
 from ._device import Device
@@ -237,20 +237,20 @@ class EdgeNode:
 
     def publish(self, snapshot: DriveSnapshot) -> None:
         """A drive's new sample: kept, and marked for the edge node's task (never blocks)."""
+        self.publish_state(snapshot, self.state_of(snapshot))
+
+    def state_of(self, snapshot: DriveSnapshot) -> StateMessage:
+        """*snapshot* as a state message now (the JSON bridge builds the same one)."""
+        return drive_state(self._gateway, self.edge_node, snapshot, self.stale_after_s)
+
+    def publish_state(self, snapshot: DriveSnapshot, message: StateMessage) -> None:
+        """:meth:`publish` with the state message built already (once for every MQTT client)."""
         if self._closing:
             return
         key = (snapshot.line, snapshot.node)
         if key not in self._devices:
             return
         self.stats.samples += 1
-        drive = None if self._gateway is None else self._gateway.drive(*key)
-        message = state_message(
-            self.edge_node,
-            snapshot,
-            now=asyncio.get_running_loop().time(),
-            stale_after_s=self.stale_after_s,
-            lapse_pending=drive is not None and drive.lapse_pending,
-        )
         self._mark(key, message, snapshot.available)
 
     def _mark(
