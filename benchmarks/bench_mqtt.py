@@ -81,7 +81,11 @@ Decisions:
   does; a drive is chosen only once the fleet view has seen it not
   tripped, so the first tripped state after the change can only come from
   a poll after it. ``trips_interval_s = 0``: no trip-history read adds to
-  the line after a trip.
+  the line after a trip. ``setpoint_interval_s = 0``: the set-frequency
+  reads beside the poll (issue 27, every 2 s per drive by default) lengthen
+  the cycles they fall in, which the reference (the mean cycle) does not
+  model; with them the p99 was the longest cycle's (1,052 ms against a
+  mean of 798), whatever the bridge did.
 - **Latency: the reference** is what a poll-based system cannot beat: up to
   one poll period (the interval, or the mean cycle when it is longer)
   until the drive's next status read, plus that drive's poll (the mean
@@ -194,6 +198,7 @@ def _gateway_toml(gateway_id: str, url: str, interval_s: float, broker_port: int
         nodes = "1-{DRIVES}"
         interval_s = {interval_s!r}
         trips_interval_s = 0
+        setpoint_interval_s = 0
         """
     )
 
