@@ -64,6 +64,7 @@ from typing import Any, Final
 
 from ._harness import Config, Result, Section
 from .bench_mqtt import _mosquitto
+from .bench_opcua import _start_drives
 
 __all__ = [
     "CONFIGURATIONS",
@@ -96,8 +97,6 @@ QUICK_WARM_UP_S: Final = 2.0
 QUICK_WINDOW_S: Final = 1.0
 #: Lines per Modbus listener (unit ids 1..224 within each).
 LINES_PER_LISTENER: Final = 7
-RUN_HZ: Final = 50.0
-RAMP_S: Final = 300.0
 #: The issue's goal: every northbound together at most 2x the poll's CPU per sample.
 TARGET_ALL: Final = 1 / 2
 #: How long a child may take, over its windows and warm-up.
@@ -151,7 +150,6 @@ def _toml(which: str, lines: int, per_line: int, broker: int, directory: Path) -
 
 async def _child(args: argparse.Namespace) -> dict[str, Any]:
     from sj300_async.gateway import Gateway, parse_config
-    from sj300_async.sj300 import Drive
 
     directory = Path(args.directory)
     text = _toml(args.which, args.lines, args.per_line, args.broker, directory)
@@ -167,14 +165,7 @@ async def _child(args: argparse.Namespace) -> dict[str, Any]:
 
         for line in gateway.lines:
             line.poller.on_sample(on_sample)
-            simulator = line.bus.simulator
-            assert simulator is not None
-            for node in line.drives:
-                simulator.drives[node].set_parameter("F002", round(RAMP_S * 100))
-                drive = line.bus.drive(node)
-                assert isinstance(drive, Drive)
-                await drive.set_frequency(RUN_HZ)
-                await drive.run_forward()
+        await _start_drives(gateway)  # the OPC UA benchmark's ramp: 50 Hz over 300 s
         drives = len(gateway.drives)
         mqtt: Any = gateway.northbounds.get("mqtt")
         parts = getattr(mqtt, "parts", (mqtt,) if mqtt is not None else ())

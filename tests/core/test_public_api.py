@@ -161,7 +161,7 @@ GATEWAY_MQTT_NAMES = (
     # a stop waits behind no command (issue 30's review)
     "DROPPED_BY_STOP",
     # each sample's state built once for every MQTT client (issue 30)
-    "drive_state",
+    "drive_state", "new_client",
 )  # fmt: skip
 GATEWAY_SPARKPLUG_NAMES = (
     "BAD_INPUTS", "CLIENT", "DATA_TYPES", "DIRECTION_WORDS", "LAST_REFUSAL", "NAMESPACE",

@@ -40,7 +40,7 @@ from ._fleet import (
     parse_fleet_url,
 )
 from ._messages import drive_state, state_message
-from ._session import BrokerUnreachable, SessionStats, backoff, keep_connected
+from ._session import BrokerUnreachable, SessionStats, backoff, keep_connected, new_client
 from ._stats import BridgeStats, mqtt_families
 from ._topics import (
     AVAILABLE,
@@ -83,6 +83,7 @@ __all__ = [
     "is_fleet_url",
     "keep_connected",
     "mqtt_families",
+    "new_client",
     "node_id",
     "parameter_request",
     "parse_command",

@@ -83,7 +83,7 @@ from ._commands import DROPPED_BY_STOP, error_text, oversized, parse_command
 from ._config import MqttConfig
 from ._discovery import discovery
 from ._messages import drive_state
-from ._session import keep_connected
+from ._session import keep_connected, new_client
 from ._stats import BridgeStats, mqtt_families
 from ._topics import AVAILABLE, UNAVAILABLE, StateMessage, Topics
 
@@ -324,29 +324,13 @@ class MqttBridge:
     # -- the connection ------------------------------------------------------------------
 
     def _make_client(self) -> aiomqtt.Client:
-        config = self.config
-        tls = None
-        if config.tls:
-            tls = aiomqtt.TLSParameters(
-                ca_certs=None if config.tls_ca is None else str(config.tls_ca)
-            )
-        client = aiomqtt.Client(
-            config.host,
-            config.port,
-            identifier=config.client_id,
-            username=config.username,
-            password=config.password,
-            tls_params=tls,
-            will=aiomqtt.Will(self.topics.availability, UNAVAILABLE, config.qos, retain=True),
-            clean_session=True,  # nothing the broker kept for us: no stale command
-            keepalive=config.keepalive_s,
-            # A broker that stops reading: paho's queue (QoS 0 publishes return at
-            # once) is bounded too; past it, publish fails and the bridge reconnects.
-            max_queued_outgoing_messages=MAX_QUEUED,
-            max_inflight_messages=MAX_IN_FLIGHT,
+        return new_client(
+            self.config,
+            identifier=self.config.client_id,
+            will=aiomqtt.Will(self.topics.availability, UNAVAILABLE, self.config.qos, retain=True),
+            max_queued=MAX_QUEUED,
+            max_in_flight=MAX_IN_FLIGHT,
         )
-        client.pending_calls_threshold = 2 * MAX_IN_FLIGHT
-        return client
 
     async def _run(self) -> None:
         await keep_connected(

@@ -41,7 +41,16 @@ from typing import TYPE_CHECKING, Final
 if TYPE_CHECKING:
     import aiomqtt
 
-__all__ = ["BACKOFF_FIRST_S", "BrokerUnreachable", "SessionStats", "backoff", "keep_connected"]
+    from ._config import MqttConfig
+
+__all__ = [
+    "BACKOFF_FIRST_S",
+    "BrokerUnreachable",
+    "SessionStats",
+    "backoff",
+    "keep_connected",
+    "new_client",
+]
 
 BACKOFF_FIRST_S: Final = 0.5
 
@@ -62,6 +71,46 @@ class SessionStats:
     connects: int = 0
     #: Connections lost after they were up (each logged once).
     losses: int = 0
+
+
+def new_client(
+    config: MqttConfig,
+    *,
+    identifier: str,
+    will: aiomqtt.Will,
+    max_queued: int,
+    max_in_flight: int | None = None,
+) -> aiomqtt.Client:
+    """A client for one connection attempt to *config*'s broker (not entered yet).
+
+    Its URL, credentials, TLS and keepalive are the section's; the session is
+    clean (nothing the broker kept for us: no stale command). *max_queued*
+    bounds paho's queue for a broker that stops reading (QoS 0 publishes
+    return at once): past it, a publish fails and the connection is made
+    again. *max_in_flight* is paho's cap on QoS 1 publishes awaiting their
+    acknowledgement (None: paho's own).
+    """
+    import aiomqtt
+
+    tls = None
+    if config.tls:
+        tls = aiomqtt.TLSParameters(ca_certs=None if config.tls_ca is None else str(config.tls_ca))
+    client = aiomqtt.Client(
+        config.host,
+        config.port,
+        identifier=identifier,
+        username=config.username,
+        password=config.password,
+        tls_params=tls,
+        will=will,
+        clean_session=True,
+        keepalive=config.keepalive_s,
+        max_queued_outgoing_messages=max_queued,
+        max_inflight_messages=max_in_flight,
+    )
+    if max_in_flight is not None:
+        client.pending_calls_threshold = 2 * max_in_flight
+    return client
 
 
 def backoff(attempt: int, ceiling_s: float) -> float:

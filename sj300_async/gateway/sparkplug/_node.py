@@ -83,6 +83,7 @@ from ..mqtt import (
     drive_state,
     error_text,
     keep_connected,
+    new_client,
 )
 from ._commands import judge
 from ._device import Device
@@ -122,6 +123,9 @@ MAX_COMMANDS: Final = 16
 #: How often the gateway's own metrics are checked for an NDATA.
 NODE_TICK_S: Final = 1.0
 CLOSE_TIMEOUT_S: Final = 3.0
+#: Messages paho may hold for a socket that does not take them (a DDATA per drive and
+#: sample waits in the edge node, coalesced, never here for long).
+MAX_QUEUED: Final = 10_000
 
 #: Each line's metrics in the NBIRTH: (name under ``Lines/<line>/``, datatype).
 NODE_METRICS: Final = (
@@ -411,25 +415,13 @@ class EdgeNode:
 
     def _make_client(self) -> aiomqtt.Client:
         """A client for the next connection attempt: the next bdSeq, in its will."""
-        config = self.config
         self._bdseq = self._next_bdseq
         self._next_bdseq = (self._bdseq + 1) % 256
-        tls = None
-        if config.tls:
-            tls = aiomqtt.TLSParameters(
-                ca_certs=None if config.tls_ca is None else str(config.tls_ca)
-            )
-        return aiomqtt.Client(
-            config.host,
-            config.port,
-            identifier=f"{config.client_id}-spb",
-            username=config.username,
-            password=config.password,
-            tls_params=tls,
+        return new_client(
+            self.config,
+            identifier=f"{self.config.client_id}-spb",
             will=aiomqtt.Will(self.topic("NDEATH"), self._ndeath(), qos=1, retain=False),
-            clean_session=True,
-            keepalive=config.keepalive_s,
-            max_queued_outgoing_messages=10_000,
+            max_queued=MAX_QUEUED,
         )
 
     async def _run(self) -> None:
