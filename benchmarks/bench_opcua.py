@@ -136,6 +136,7 @@ __all__ = [
     "Window",
     "main",
     "measure",
+    "opcua_section",
     "report",
     "run",
 ]
@@ -210,16 +211,21 @@ def _gateway_toml(
     if broker:
         text += f'[mqtt]\nurl = "mqtt://127.0.0.1:{broker}"\n'
     if opcua is not None:
-        text += textwrap.dedent(
-            f"""
-            [opcua]
-            endpoint = "opc.tcp://127.0.0.1:0"
-            security = ["None"]
-            certificate = "{opcua / "cert.der"}"
-            private_key = "{opcua / "key.pem"}"
-            """
-        )
+        text += opcua_section(opcua)
     return text + _lines_toml(drives, interval_s)
+
+
+def opcua_section(directory: Path) -> str:
+    """``[opcua]`` on a free loopback port, no security, its certificate in *directory*."""
+    return textwrap.dedent(
+        f"""
+        [opcua]
+        endpoint = "opc.tcp://127.0.0.1:0"
+        security = ["None"]
+        certificate = "{directory / "cert.der"}"
+        private_key = "{directory / "key.pem"}"
+        """
+    )
 
 
 #: Wall time of the last ``Server.init()`` and ``SpaceBuilder.commit()`` (a child's side).

@@ -64,7 +64,7 @@ from typing import Any, Final
 
 from ._harness import Config, Result, Section
 from .bench_mqtt import _mosquitto
-from .bench_opcua import _start_drives
+from .bench_opcua import _start_drives, opcua_section
 
 __all__ = [
     "CONFIGURATIONS",
@@ -115,18 +115,12 @@ def _toml(which: str, lines: int, per_line: int, broker: int, directory: Path) -
     if "modbus" in parts:
         text += "[modbus]\n"
         for first in range(0, lines, LINES_PER_LISTENER):
-            names = ", ".join(f'"l{i}"' for i in range(first, min(lines, first + 7)))
+            names = ", ".join(
+                f'"l{i}"' for i in range(first, min(lines, first + LINES_PER_LISTENER))
+            )
             text += f'[[modbus.listeners]]\nlisten = "127.0.0.1:0"\nlines = [{names}]\n'
     if "opcua" in parts:
-        text += textwrap.dedent(
-            f"""
-            [opcua]
-            endpoint = "opc.tcp://127.0.0.1:0"
-            security = ["None"]
-            certificate = "{directory / "cert.der"}"
-            private_key = "{directory / "key.pem"}"
-            """
-        )
+        text += opcua_section(directory)
     if "http" in parts:
         text += '[http]\nlisten = "127.0.0.1:0"\n'
     for index in range(lines):
