@@ -8,6 +8,13 @@ issue's 8 s, halved), then answer again. Per phase, the healthy drives'
 sample rate is measured as intervals between consecutive good samples of
 one drive, assigned to the phase they end in (whole intervals, so a short
 phase is not skewed by where its edges cut a cycle).
+
+The scenario runs on a virtual clock (tests/virtual_clock.py): the paced
+wire, the time-outs and the poller's cycle all read the loop's clock, so the
+figures are the schedule's own, the same on a loaded CI machine as on an idle
+one. On the wall clock, a CI run once measured 74 % in the declaring phase
+(a 1.9 s phase of three cycles, one of them stretched by the other worker's
+load) where an idle machine measures 89-90 %.
 """
 
 from __future__ import annotations
@@ -17,6 +24,7 @@ import itertools
 from collections import defaultdict
 
 import sj300_async as sj
+from tests.virtual_clock import run_on_virtual_clock
 
 SILENT = (4, 7)
 HEALTHY = tuple(n for n in range(1, 9) if n not in SILENT)
@@ -35,7 +43,11 @@ def _rate(good: dict[int, list[float]], start: float, end: float) -> float:
     return count / total
 
 
-async def test_healthy_drives_keep_their_pace_while_two_fail() -> None:
+def test_healthy_drives_keep_their_pace_while_two_fail() -> None:
+    run_on_virtual_clock(_two_drives_fail())
+
+
+async def _two_drives_fail() -> None:
     async with sj.open_bus("sim://?nodes=1-8&pace=1&baudrate=19200") as bus:
         sim = bus.simulator
         assert sim is not None
@@ -105,5 +117,12 @@ async def test_healthy_drives_keep_their_pace_while_two_fail() -> None:
         for name, rate in phases.items():
             assert rate >= 0.8 * before, (name, rate, before)
         assert all(polls <= 3 for polls in polls_to_offline.values()), polls_to_offline
+        # Once offline, at most one unanswered probe per cycle (node 1 is polled
+        # once a cycle), whatever the number of drives offline.
+        outage = [s for s in samples if t_offline < s.timestamp < t_back]
+        unanswered = sum(1 for s in outage if s.node in SILENT and not s.online)
+        cycles = sum(1 for s in outage if s.node == 1)
+        print(f"offline phase: {unanswered} unanswered probes in {cycles} cycles")
+        assert 0 < unanswered <= cycles + 1, (unanswered, cycles)
         assert t_online - t_back <= 1.0
         assert t_offline < t_back
