@@ -23,8 +23,9 @@ import asyncio
 import itertools
 from collections import defaultdict
 
+from virtual_clock import run_on_virtual_clock
+
 import sj300_async as sj
-from tests.virtual_clock import run_on_virtual_clock
 
 SILENT = (4, 7)
 HEALTHY = tuple(n for n in range(1, 9) if n not in SILENT)
