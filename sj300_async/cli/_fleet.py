@@ -53,9 +53,8 @@ Decisions:
   to learn that something on the broker is wrong.
 - Broker unreachable at the start: one line, exit 1, as an unreachable
   bus; lost later: the caption says so, and without the table a note on
-  stderr does. Without aiomqtt (the ``gateway`` extra) the view is one line
-  naming the command that installs it (``pip install 'sj300-async[gateway]'``;
-  ``make gateway`` in a checkout), exit 2.
+  stderr does. The view needs no extra: the MQTT client is the gateway's
+  own, on the standard library.
 """
 
 from __future__ import annotations
@@ -63,7 +62,6 @@ from __future__ import annotations
 import argparse
 import asyncio
 import contextlib
-import importlib.util
 import sys
 import time
 from collections.abc import Iterator
@@ -77,9 +75,8 @@ from ..gateway.mqtt import (
     follow,
     parse_fleet_url,
 )
-from ._errors import FAILURE, USAGE, CliError
+from ._errors import FAILURE, CliError
 from ._fit import STATE_WIDTH, FitColumn, clip, fit
-from ._install import gateway_install_command
 from ._output import Justify, is_terminal, print_json
 from ._record import DriveRecord
 
@@ -343,16 +340,6 @@ def record(message: StateMessage, *, gateway_online: bool = True) -> DriveRecord
 # --- the subscription ------------------------------------------------------------------------
 
 
-def _need_aiomqtt() -> None:
-    """Exit 2 naming the extra that brings aiomqtt, when it is missing."""
-    if importlib.util.find_spec("aiomqtt") is None:
-        raise CliError(
-            "the fleet view needs the gateway extra (aiomqtt is missing): "
-            + gateway_install_command(),
-            status=USAGE,
-        )
-
-
 def _refuse_bus_options(args: argparse.Namespace) -> None:
     """A bus option with a broker URL: exit 2 rather than ignore it."""
     for attr, option in _BUS_OPTIONS:
@@ -370,12 +357,11 @@ async def watch_fleet(args: argparse.Namespace, url_text: str) -> None:
     """``sj300 monitor`` on a broker: until ``--count`` cycles, ``--duration`` or a signal.
 
     Raises:
-        CliError: a bad URL or a bus option (exit 2), aiomqtt missing (exit 2),
-            the broker unreachable at the start (exit 1).
+        CliError: a bad URL or a bus option (exit 2), the broker unreachable at
+            the start (exit 1).
     """
     url = parse_fleet_url(url_text)
     _refuse_bus_options(args)
-    _need_aiomqtt()  # before anything is shown
     fleet = Fleet(url)
     live = is_terminal() and not args.json
     count: int | None = args.count

@@ -40,16 +40,17 @@ _DETAIL_CHARS: Final = 256
 _MAX_VALUES: Final = 125
 
 
-def excerpt(text: str | bytes, limit: int = EXCERPT_CHARS) -> str:
+def excerpt(text: str | bytes, limit: int = EXCERPT_CHARS, *, size: int | None = None) -> str:
     """At most *limit* characters of a client's *text*, safe to log, show or store.
 
     Unprintable characters are escaped (``\\x1b``, ``\\n``; bytes that are not
     UTF-8 become U+FFFD), and a text that does not fit is cut where a
     character starts, its size noted: ``run_forw…(1048576 bytes)`` (counted
     in characters for a ``str``). Only the head of *text* is read, whatever
-    its size.
+    its size. *size*: the whole text's, when *text* is only its head (a
+    payload too long to read).
     """
-    size = len(text)
+    size = len(text) if size is None else size
     head = text[: 4 * limit]  # enough for limit characters: UTF-8 takes at most 4 bytes each
     if isinstance(head, bytes):
         head, unit = head.decode("utf-8", errors="replace"), "bytes"

@@ -267,7 +267,7 @@ async def test_no_arguments_is_a_usage_error() -> None:
 @pytest.mark.parametrize(
     ("module", "flag"),
     [
-        ("aiomqtt", ["--mqtt", "mqtt://127.0.0.1:1"]),
+        ("google.protobuf", ["--mqtt", "mqtt://127.0.0.1:1"]),
         ("prometheus_client", ["--metrics", "127.0.0.1:0"]),
     ],
 )

@@ -874,7 +874,7 @@ async def test_a_stop_mid_batch_counts_what_it_could_not_confirm() -> None:
     class Stuck:
         """A client whose publishes never complete (a broker that stopped answering)."""
 
-        async def publish(self, *args: object, **kwargs: object) -> None:
+        async def publish_many(self, *args: object, **kwargs: object) -> None:
             await asyncio.Event().wait()
 
     bridge = MqttBridge(MqttConfig("b", 1883))

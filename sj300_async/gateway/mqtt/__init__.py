@@ -9,8 +9,9 @@
 - The fleet (:mod:`._fleet`): every drive of every gateway on a broker,
   read-only; ``sj300 monitor --url mqtt://…`` renders it.
 
-aiomqtt (the ``gateway`` extra) is imported only when a connection is made:
-this package's face is light, for the command line builds its flags from it.
+The MQTT client (:mod:`.client`) is the gateway's own, on the standard
+library: this package's face stays light, for the command line builds its
+flags from it.
 """
 
 from __future__ import annotations
@@ -103,7 +104,7 @@ class _Spec:
         "publish to this MQTT broker (mqtt://HOST[:PORT] or mqtts://): state, "
         "availability, Home Assistant discovery (Sparkplug B: [mqtt] sparkplug = true)",
     )
-    requires = ("aiomqtt", "google.protobuf")
+    requires = ("google.protobuf",)
 
     def parse(self, table: ConfigTable, context: SectionContext) -> MqttConfig:
         return parse_mqtt_section(table, context)

@@ -75,17 +75,16 @@ from collections.abc import Callable, Iterator
 from dataclasses import dataclass
 from typing import TYPE_CHECKING, Final
 
-import aiomqtt
-
 from ...profiles import DriveSnapshot
 from .. import GatewayDrive, GatewayView, Refusal, WriteResult, excerpt
-from ._commands import DROPPED_BY_STOP, error_text, oversized, parse_command
+from ._commands import DROPPED_BY_STOP, MAX_PAYLOAD_BYTES, error_text, oversized, parse_command
 from ._config import MqttConfig
 from ._discovery import discovery
 from ._messages import drive_state
 from ._session import keep_connected, new_client
 from ._stats import BridgeStats, mqtt_families
 from ._topics import AVAILABLE, UNAVAILABLE, StateMessage, Topics
+from .client import Client, MqttError, Will
 
 if TYPE_CHECKING:
     from prometheus_client.core import Metric
@@ -102,10 +101,9 @@ BACKOFF_MAX_S: Final = 30.0
 MAX_ERRORS: Final = 100
 #: Commands waiting for one drive, at most (more are refused: busy).
 MAX_COMMANDS: Final = 16
-#: Publishes in flight at once (paho queues the rest; aiomqtt warns past its threshold).
+#: Publishes in flight at once: a batch is sent in chunks of this many, each
+#: acknowledged before the next goes.
 MAX_IN_FLIGHT: Final = 256
-#: Messages paho may hold for a socket that does not take them.
-MAX_QUEUED: Final = 1000
 #: How long a clean stop waits for a write under way, and for its last publishes.
 CLOSE_TIMEOUT_S: Final = 3.0
 #: How often a task that lost its cancellation is cancelled again (see _cancel_and_wait).
@@ -129,8 +127,9 @@ async def _cancel_and_wait(tasks: set[asyncio.Task[None]]) -> None:
     """Cancel *tasks* and wait until each has ended, cancelling again any still running.
 
     Once is not always enough on Python 3.11: a task inside ``asyncio.wait_for``
-    (aiomqtt's publish and subscribe) can lose a cancellation that arrives as
-    the awaited result does (gh-86296), and run on.
+    can lose a cancellation that arrives as the awaited result does
+    (gh-86296), and run on. The MQTT client awaits plain futures, but a
+    command's write goes through the gateway and the bus, which use it.
     """
     pending = {task for task in tasks if not task.done()}
     while pending:
@@ -161,7 +160,7 @@ class MqttBridge:
         self._latest: dict[Key, _Out] = {}
         #: The availability last put in the outbox, per drive.
         self._availability: dict[Key, bool] = {}
-        self._client: aiomqtt.Client | None = None
+        self._client: Client | None = None
         #: Changes on every connect and loss: a command of an older epoch is stale.
         self._epoch = 0
         #: The connection's name in the gateway (a connection-scoped lease's holder
@@ -256,8 +255,9 @@ class MqttBridge:
         for out in self._latest.values():
             self._put(out)
 
-    async def _send(self, client: aiomqtt.Client) -> None:
+    async def _send(self, client: Client) -> None:
         """Publish everything waiting; raise the connection's error after counting what it cost."""
+        qos = self.config.qos
         while self._pending or self._errors:
             batch = list(self._pending.values())
             self._pending.clear()
@@ -266,70 +266,38 @@ class MqttBridge:
             for start in range(0, len(batch), MAX_IN_FLIGHT):
                 chunk = batch[start : start + MAX_IN_FLIGHT]
                 try:
-                    results = await self._publish(client, chunk)
-                except asyncio.CancelledError:
-                    # Stopped mid-batch: this chunk's fate is unknown (it may have
-                    # reached the broker), the rest was never sent. Counted as lost,
-                    # since none is confirmed; never silently.
+                    await client.publish_many(
+                        [(out.topic, out.payload, out.retain) for out in chunk], qos=qos
+                    )
+                except (asyncio.CancelledError, MqttError) as exc:
+                    # Stopped or lost mid-batch: this chunk's fate is unknown (it may
+                    # have reached the broker), the rest was never sent. Counted as
+                    # lost, since none is confirmed; never silently.
                     self.stats.lost += len(batch) - start
-                    _log.debug("MQTT: stopped with %d messages unconfirmed", len(batch) - start)
+                    _log.debug("MQTT: %d messages unconfirmed: %s", len(batch) - start,
+                               exc or type(exc).__name__)  # fmt: skip
                     raise
-                failure: BaseException | None = None
-                for out, result in zip(chunk, results, strict=True):
-                    if isinstance(result, BaseException):
-                        failure = failure or result
-                        self.stats.lost += 1
-                        _log.debug("%s: not published: %s", out.topic, result)
-                        continue
-                    self.stats.published += 1
+                self.stats.published += len(chunk)
+                states = self.stats.states
+                for out in chunk:
                     if out.drive is not None:
-                        self.stats.states[out.drive] += 1
-                if failure is not None:
-                    self.stats.lost += len(batch) - start - len(chunk)
-                    raise failure
+                        states[out.drive] += 1
 
-    async def _publish(
-        self, client: aiomqtt.Client, chunk: list[_Out]
-    ) -> list[BaseException | None]:
-        """Publish *chunk* at once; each message's error, or None."""
-        qos = self.config.qos
-        if len(chunk) == 1:  # the usual case on a real line, one poll at a time: no task
-            out = chunk[0]
-            try:
-                await client.publish(out.topic, out.payload, qos=qos, retain=out.retain)
-            except Exception as exc:  # as gather(return_exceptions=True) would have it
-                return [exc]
-            return [None]
-        results = await asyncio.gather(
-            *(client.publish(o.topic, o.payload, qos=qos, retain=o.retain) for o in chunk),
-            return_exceptions=True,
-        )
-        return [r if isinstance(r, BaseException) else None for r in results]
-
-    async def _publisher(self, client: aiomqtt.Client) -> None:
-        task = asyncio.current_task()
-        assert task is not None
+    async def _publisher(self, client: Client) -> None:
         while True:
             await self._wake.wait()
             self._wake.clear()
             await self._send(client)
-            if task.cancelling():
-                # aiomqtt's publish awaits asyncio.wait_for, which on Python 3.11 returns
-                # the result and drops a cancellation that arrives as the broker's
-                # acknowledgement does (gh-86296). This task then waited on _wake for
-                # good, and the gateway's stop with it (seen in the MQTT benchmark's
-                # child). The cancellation is not lost: raise it here.
-                raise asyncio.CancelledError
 
     # -- the connection ------------------------------------------------------------------
 
-    def _make_client(self) -> aiomqtt.Client:
+    def _make_client(self) -> Client:
         return new_client(
             self.config,
             identifier=self.config.client_id,
-            will=aiomqtt.Will(self.topics.availability, UNAVAILABLE, self.config.qos, retain=True),
-            max_queued=MAX_QUEUED,
+            will=Will(self.topics.availability, UNAVAILABLE, self.config.qos, retain=True),
             max_in_flight=MAX_IN_FLIGHT,
+            max_payload=MAX_PAYLOAD_BYTES,
         )
 
     async def _run(self) -> None:
@@ -343,7 +311,7 @@ class MqttBridge:
             who=f" as {self.topics.gateway}",
         )
 
-    async def _connection(self, client: aiomqtt.Client, connected: Callable[[], None]) -> None:
+    async def _connection(self, client: Client, connected: Callable[[], None]) -> None:
         """One connection: set up, then publish and receive until it fails."""
         try:
             await self._setup(client)
@@ -360,7 +328,7 @@ class MqttBridge:
             if session is not None and self._gateway is not None:
                 self._gateway.disconnected(session)  # its connection-scoped leases lapse
 
-    async def _say_offline(self, client: aiomqtt.Client) -> None:
+    async def _say_offline(self, client: Client) -> None:
         """A clean stop: what is waiting, then "offline" (a clean disconnect has no will)."""
         loop = asyncio.get_running_loop()
         try:
@@ -369,12 +337,12 @@ class MqttBridge:
                 await client.publish(
                     self.topics.availability, UNAVAILABLE, qos=self.config.qos, retain=True
                 )
-        except (aiomqtt.MqttError, TimeoutError) as exc:
+        except (MqttError, TimeoutError) as exc:
             # The disconnect that follows is clean, so the broker drops the will:
             # "online" stays until the gateway connects again. Said loudly.
             _log.warning("MQTT: could not say offline before stopping: %s", exc or "time-out")
 
-    async def _setup(self, client: aiomqtt.Client) -> None:
+    async def _setup(self, client: Client) -> None:
         """Subscribe, say online, and queue everything retained again."""
         qos = self.config.qos
         await client.subscribe(self.topics.command_filter, qos=qos)
@@ -386,7 +354,7 @@ class MqttBridge:
         self._client = client
         self._announce()
 
-    async def _session(self, client: aiomqtt.Client) -> None:
+    async def _session(self, client: Client) -> None:
         """Publish and receive until the connection fails (raises its MqttError)."""
         tasks = {
             asyncio.create_task(self._publisher(client), name="mqtt publisher"),
@@ -398,12 +366,11 @@ class MqttBridge:
             await _cancel_and_wait(tasks)
         for task in done:
             task.result()  # the connection's error
-        raise aiomqtt.MqttError("the session ended")  # both loops run until an error
+        raise MqttError("the session ended")  # both loops run until an error
 
-    async def _receiver(self, client: aiomqtt.Client) -> None:
+    async def _receiver(self, client: Client) -> None:
         async for message in client.messages:
-            topic = message.topic.value
-            payload = message.payload if isinstance(message.payload, bytes) else b""
+            topic, payload = message.topic, message.payload
             if topic == self._birth:
                 # Home Assistant (re)started: it needs the configs and states again. A
                 # retained birth is the one it sent before we connected: already covered.
@@ -411,14 +378,16 @@ class MqttBridge:
                     _log.info("MQTT: Home Assistant is online: republishing discovery")
                     self._announce()
                 continue
-            self._receive_command(topic, payload, retained=message.retain)
+            self._receive_command(topic, payload, retained=message.retain, length=message.length)
 
     # -- commands ------------------------------------------------------------------------
 
     def _drive(self, line: str, node: int) -> GatewayDrive | None:
         return None if self._gateway is None else self._gateway.drive(line, node)
 
-    def _receive_command(self, topic: str, payload: bytes, *, retained: bool) -> None:
+    def _receive_command(
+        self, topic: str, payload: bytes, *, retained: bool, length: int | None = None
+    ) -> None:
         self.stats.commands += 1
         parsed = self.topics.parse_command(topic)
         drive = None if parsed is None else self._drive(*parsed[:2])
@@ -429,10 +398,10 @@ class MqttBridge:
         line, node, what = parsed
         # The topic as replies and logs show it: the client's part of it excerpted.
         topic = topic[: len(topic) - len(what)] + excerpt(what)
-        too_long = oversized(payload)
+        too_long = oversized(len(payload) if length is None else length)
         if too_long is not None:
             self.stats.oversized += 1
-            self._refuse(drive, topic, what, payload, too_long)
+            self._refuse(drive, topic, what, payload, too_long, size=length)
             return
         if retained:
             # Stored by the broker, not sent now: carrying it out would replay it.
@@ -520,9 +489,11 @@ class MqttBridge:
         result: WriteResult,
         *,
         audited: bool = False,
+        size: int | None = None,
     ) -> None:
+        """Refuse a command; *size*: its payload's, when *payload* is only the head of it."""
         self.stats.refused += 1
-        text = excerpt(payload)
+        text = excerpt(payload, size=size)
         error = error_text(result)
         _log.debug("MQTT: %s %r refused: %s", topic, text, error)
         if not audited and self._gateway is not None:

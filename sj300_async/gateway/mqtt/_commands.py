@@ -69,13 +69,13 @@ def _number(text: str) -> float | None:
     return value if math.isfinite(value) else None
 
 
-def oversized(payload: bytes) -> WriteResult | None:
-    """The refusal of a payload too long to read, None for one that is not."""
-    if len(payload) <= MAX_PAYLOAD_BYTES:
+def oversized(length: int) -> WriteResult | None:
+    """The refusal of a payload of *length* bytes too long to read, None for one that is not."""
+    if length <= MAX_PAYLOAD_BYTES:
         return None
     return WriteResult(
         Refusal.MALFORMED,
-        f"a command is at most {MAX_PAYLOAD_BYTES} bytes, got {len(payload)}: not read",
+        f"a command is at most {MAX_PAYLOAD_BYTES} bytes, got {length}: not read",
     )
 
 
@@ -85,7 +85,7 @@ def _quoted(text: str) -> str:
 
 def parse_command(profile: Profile, what: str, payload: bytes) -> WriteRequest | WriteResult:
     """The write a command asks for, or why it cannot be one (nothing judged yet)."""
-    too_long = oversized(payload)
+    too_long = oversized(len(payload))
     if too_long is not None:
         return too_long
     if what == "lease":

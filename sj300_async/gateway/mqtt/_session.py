@@ -18,7 +18,7 @@ Decisions:
   under the table).
 - ``on_link`` hears every change: None when connected, else a sentence
   saying what happened and when the next attempt comes.
-- A bug in the session body (any exception but aiomqtt's) is, for a
+- A bug in the session body (any exception but the client's MqttError) is, for a
   service (``survive_errors``: the gateway's bridge), logged with its
   traceback and treated as a lost connection, so it cannot end the
   connection for good; for a viewer it ends the session and is raised (the
@@ -34,13 +34,14 @@ from __future__ import annotations
 
 import asyncio
 import logging
+import ssl
 from collections.abc import Awaitable, Callable
 from dataclasses import dataclass
 from typing import TYPE_CHECKING, Final
 
-if TYPE_CHECKING:
-    import aiomqtt
+from .client import Client, MqttError, Will
 
+if TYPE_CHECKING:
     from ._config import MqttConfig
 
 __all__ = [
@@ -55,9 +56,9 @@ __all__ = [
 BACKOFF_FIRST_S: Final = 0.5
 
 #: The body of a connection: runs with the connected client until the connection
-#: fails (raising aiomqtt's error) or its work is done (returning); it calls the
+#: fails (raising the client's MqttError) or its work is done (returning); it calls the
 #: given function once it is set up (subscribed), which counts as "connected".
-Body = Callable[["aiomqtt.Client", Callable[[], None]], Awaitable[None]]
+Body = Callable[[Client, Callable[[], None]], Awaitable[None]]
 
 
 class BrokerUnreachable(Exception):
@@ -77,40 +78,37 @@ def new_client(
     config: MqttConfig,
     *,
     identifier: str,
-    will: aiomqtt.Will,
-    max_queued: int,
-    max_in_flight: int | None = None,
-) -> aiomqtt.Client:
+    will: Will,
+    max_in_flight: int = 256,
+    max_payload: int = 1 << 20,
+) -> Client:
     """A client for one connection attempt to *config*'s broker (not entered yet).
 
     Its URL, credentials, TLS and keepalive are the section's; the session is
-    clean (nothing the broker kept for us: no stale command). *max_queued*
-    bounds paho's queue for a broker that stops reading (QoS 0 publishes
-    return at once): past it, a publish fails and the connection is made
-    again. *max_in_flight* is paho's cap on QoS 1 publishes awaiting their
-    acknowledgement (None: paho's own).
+    clean (nothing the broker kept for us: no stale command). *max_in_flight*
+    caps the QoS 1 publishes awaiting their acknowledgement. A broker that
+    stops reading makes publishes wait, and its keepalive ends the
+    connection (:mod:`.client`). A received payload past *max_payload*
+    bytes is skipped unread, and delivered empty with its length.
     """
-    import aiomqtt
-
     tls = None
     if config.tls:
-        tls = aiomqtt.TLSParameters(ca_certs=None if config.tls_ca is None else str(config.tls_ca))
-    client = aiomqtt.Client(
+        tls = ssl.create_default_context(
+            cafile=None if config.tls_ca is None else str(config.tls_ca)
+        )
+    return Client(
         config.host,
         config.port,
         identifier=identifier,
         username=config.username,
         password=config.password,
-        tls_params=tls,
+        tls=tls,
         will=will,
         clean_session=True,
-        keepalive=config.keepalive_s,
-        max_queued_outgoing_messages=max_queued,
-        max_inflight_messages=max_in_flight,
+        keepalive_s=config.keepalive_s,
+        max_in_flight=max_in_flight,
+        max_publish_bytes=max_payload,
     )
-    if max_in_flight is not None:
-        client.pending_calls_threshold = 2 * max_in_flight
-    return client
 
 
 def backoff(attempt: int, ceiling_s: float) -> float:
@@ -119,7 +117,7 @@ def backoff(attempt: int, ceiling_s: float) -> float:
 
 
 async def keep_connected(
-    connect: Callable[[], aiomqtt.Client],
+    connect: Callable[[], Client],
     body: Body,
     *,
     url: str,
@@ -145,8 +143,6 @@ async def keep_connected(
     Raises:
         BrokerUnreachable: with *fail_first*, the first connection failed.
     """
-    import aiomqtt
-
     stats = SessionStats() if stats is None else stats
     attempt = 0  # failed attempts since the last good connection
     outage = False  # an outage already logged (its next failed attempts are DEBUG)
@@ -174,7 +170,7 @@ async def keep_connected(
             async with connect() as client:
                 await body(client, connected)
             return
-        except aiomqtt.MqttError as exc:
+        except MqttError as exc:
             reason = " ".join(str(exc).split()) or type(exc).__name__
         except Exception as exc:  # a bug of ours must not end a service's connection for good
             if not survive_errors:

@@ -11,8 +11,8 @@ topics; it connects to the same broker on a connection of its own.
 - :mod:`._node`: the edge node's session (births, data by exception,
   deaths, the primary host, commands); :mod:`._stats`: its counters.
 
-The protobuf runtime and aiomqtt are imported with this package, which the
-MQTT northbound imports only when Sparkplug is configured.
+The protobuf runtime is imported with this package, which the MQTT
+northbound imports only when Sparkplug is configured.
 """
 
 from __future__ import annotations

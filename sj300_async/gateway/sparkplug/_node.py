@@ -61,8 +61,6 @@ import time
 from collections.abc import Callable, Iterator
 from typing import TYPE_CHECKING, Final
 
-import aiomqtt
-
 from ...profiles import DriveSnapshot
 from ...wire import Direction
 from .. import (
@@ -85,6 +83,7 @@ from ..mqtt import (
     keep_connected,
     new_client,
 )
+from ..mqtt.client import Client, MqttError, Will
 from ._commands import judge
 from ._device import Device
 from ._payload import (
@@ -123,9 +122,10 @@ MAX_COMMANDS: Final = 16
 #: How often the gateway's own metrics are checked for an NDATA.
 NODE_TICK_S: Final = 1.0
 CLOSE_TIMEOUT_S: Final = 3.0
-#: Messages paho may hold for a socket that does not take them (a DDATA per drive and
-#: sample waits in the edge node, coalesced, never here for long).
-MAX_QUEUED: Final = 10_000
+#: Messages published between two yields to the event loop: publishing at QoS 0
+#: never waits while the socket takes the bytes, and a burst of births for a
+#: plant's drives must not hold the polls up meanwhile.
+YIELD_EVERY: Final = 64
 
 #: Each line's metrics in the NBIRTH: (name under ``Lines/<line>/``, datatype).
 NODE_METRICS: Final = (
@@ -149,7 +149,7 @@ def _line_values(line: GatewayLine) -> Iterator[object]:
     yield transactions.transport_errors
 
 
-class _HostOffline(aiomqtt.MqttError):
+class _HostOffline(MqttError):
     """The primary host went offline: the session ends (reconnect, wait for it again)."""
 
 
@@ -185,7 +185,7 @@ class EdgeNode:
         #: The primary host's latest STATE: online, and its timestamp (None: none seen).
         self.host_online: bool | None = None
         self._host_stamp: int | None = None
-        self._client: aiomqtt.Client | None = None
+        self._client: Client | None = None
         self._epoch = 0
         self._session_name: str | None = None
         self._commands: dict[Key, asyncio.Queue[_Command]] = {}
@@ -385,18 +385,20 @@ class EdgeNode:
             if message is not None:
                 yield message
 
-    async def _publisher(self, client: aiomqtt.Client) -> None:
+    async def _publisher(self, client: Client) -> None:
         while True:
             await self._wake.wait()
             self._wake.clear()
             if not self._ready():
                 continue
-            for topic, payload in self._outgoing():
+            for sent, (topic, payload) in enumerate(self._outgoing(), 1):
                 if not self._born:
                     break  # dead meanwhile (the host went offline): nothing after the NDEATH
                 await self._send(client, topic, payload)
+                if not sent % YIELD_EVERY:
+                    await asyncio.sleep(0)
 
-    async def _ticker(self, client: aiomqtt.Client) -> None:
+    async def _ticker(self, client: Client) -> None:
         while True:
             await asyncio.sleep(NODE_TICK_S)
             if self._born and self._ready() and not self._rebirth:
@@ -404,7 +406,7 @@ class EdgeNode:
                 if message is not None:
                     await self._send(client, *message)
 
-    async def _send(self, client: aiomqtt.Client, topic: str, payload: bytes) -> None:
+    async def _send(self, client: Client, topic: str, payload: bytes) -> None:
         try:
             await client.publish(topic, payload, qos=0, retain=False)
         except BaseException:
@@ -413,15 +415,15 @@ class EdgeNode:
 
     # -- the connection ------------------------------------------------------------------
 
-    def _make_client(self) -> aiomqtt.Client:
+    def _make_client(self) -> Client:
         """A client for the next connection attempt: the next bdSeq, in its will."""
         self._bdseq = self._next_bdseq
         self._next_bdseq = (self._bdseq + 1) % 256
         return new_client(
             self.config,
             identifier=f"{self.config.client_id}-spb",
-            will=aiomqtt.Will(self.topic("NDEATH"), self._ndeath(), qos=1, retain=False),
-            max_queued=MAX_QUEUED,
+            will=Will(self.topic("NDEATH"), self._ndeath(), qos=1, retain=False),
+            max_payload=MAX_COMMAND_BYTES,
         )
 
     async def _run(self) -> None:
@@ -435,7 +437,7 @@ class EdgeNode:
             who=f" as Sparkplug edge node {self.sparkplug.group_id}/{self.edge_node}",
         )
 
-    async def _connection(self, client: aiomqtt.Client, connected: Callable[[], None]) -> None:
+    async def _connection(self, client: Client, connected: Callable[[], None]) -> None:
         try:
             state = self._state_topic
             if state is not None:
@@ -478,7 +480,7 @@ class EdgeNode:
         if session is not None and self._gateway is not None:
             self._gateway.disconnected(session)
 
-    async def _say_dead(self, client: aiomqtt.Client, *, lost_is_expected: bool = False) -> None:
+    async def _say_dead(self, client: Client, *, lost_is_expected: bool = False) -> None:
         """NDEATH before a disconnect we choose (a clean disconnect drops the will).
 
         *lost_is_expected*: the session ended on an error, most often the lost
@@ -488,11 +490,11 @@ class EdgeNode:
             async with asyncio.timeout(CLOSE_TIMEOUT_S):
                 await client.publish(self.topic("NDEATH"), self._ndeath(), qos=1, retain=False)
             self.stats.published["NDEATH"] += 1
-        except (aiomqtt.MqttError, TimeoutError) as exc:
+        except (MqttError, TimeoutError) as exc:
             level = logging.DEBUG if lost_is_expected else logging.WARNING
             _log.log(level, "Sparkplug: could not publish NDEATH: %s", exc or "time-out")
 
-    async def _session(self, client: aiomqtt.Client) -> None:
+    async def _session(self, client: Client) -> None:
         tasks = {
             asyncio.create_task(self._publisher(client), name="sparkplug publisher"),
             asyncio.create_task(self._receiver(client), name="sparkplug receiver"),
@@ -504,14 +506,13 @@ class EdgeNode:
             await _cancel_all(tasks)
         for task in done:
             task.result()
-        raise aiomqtt.MqttError("the session ended")
+        raise MqttError("the session ended")
 
-    async def _receiver(self, client: aiomqtt.Client) -> None:
+    async def _receiver(self, client: Client) -> None:
         async for message in client.messages:
-            topic = message.topic.value
-            payload = message.payload if isinstance(message.payload, bytes) else b""
+            topic, payload, length = message.topic, message.payload, message.length
             if topic == self._state_topic:
-                if self._host_state(payload):
+                if self._host_state(payload, length):
                     self.stats.host_offline += 1
                     _log.warning(
                         "Sparkplug: primary host %s went offline: NDEATH, reconnecting",
@@ -522,9 +523,9 @@ class EdgeNode:
                 continue
             self.stats.commands += 1
             if topic == self.topic("NCMD"):
-                self._node_command(payload, retained=message.retain)
+                self._node_command(payload, length, retained=message.retain)
             else:
-                self._device_command(topic, payload, retained=message.retain)
+                self._device_command(topic, payload, length, retained=message.retain)
 
     def _bad(self, reason: str, text: str) -> None:
         self.stats.bad_input[reason] += 1
@@ -532,10 +533,10 @@ class EdgeNode:
 
     # -- the primary host ----------------------------------------------------------------
 
-    def _host_state(self, payload: bytes) -> bool:
+    def _host_state(self, payload: bytes, length: int) -> bool:
         """Take a STATE message; True when it means: die now (the host went offline)."""
-        if len(payload) > MAX_STATE_BYTES:
-            self._bad("oversized", f"STATE: {len(payload)} bytes, not read")
+        if length > MAX_STATE_BYTES:
+            self._bad("oversized", f"STATE: {length} bytes, not read")
             return False
         try:
             body = json.loads(payload)
@@ -567,10 +568,10 @@ class EdgeNode:
 
     # -- commands ------------------------------------------------------------------------
 
-    def _unread(self, what: str, payload: bytes, *, retained: bool) -> WriteResult | None:
+    def _unread(self, what: str, length: int, *, retained: bool) -> WriteResult | None:
         """Why a command is not read at all (too long, or retained), or None."""
-        if len(payload) > MAX_COMMAND_BYTES:
-            self._bad("oversized", f"{what}: {len(payload)} bytes, not read")
+        if length > MAX_COMMAND_BYTES:
+            self._bad("oversized", f"{what}: {length} bytes, not read")
             return WriteResult(
                 Refusal.MALFORMED, f"a command is at most {MAX_COMMAND_BYTES} bytes: not read"
             )
@@ -583,8 +584,8 @@ class EdgeNode:
             )
         return None
 
-    def _node_command(self, payload: bytes, *, retained: bool) -> None:
-        if self._unread("NCMD", payload, retained=retained) is not None:
+    def _node_command(self, payload: bytes, length: int, *, retained: bool) -> None:
+        if self._unread("NCMD", length, retained=retained) is not None:
             return
         try:
             decoded = decode_payload(payload)
@@ -602,14 +603,14 @@ class EdgeNode:
                 self._rebirth = True
                 self._wake.set()
 
-    def _device_command(self, topic: str, payload: bytes, *, retained: bool) -> None:
+    def _device_command(self, topic: str, payload: bytes, length: int, *, retained: bool) -> None:
         device = self._by_id.get(topic.rsplit("/", 1)[-1])
         if device is None:
             self._bad("unknown_device", excerpt(topic))
             return
-        unread = self._unread(f"DCMD to {device.id}", payload, retained=retained)
+        unread = self._unread(f"DCMD to {device.id}", length, retained=retained)
         if unread is not None:
-            self._refuse(device, "DCMD", excerpt(payload), unread)
+            self._refuse(device, "DCMD", excerpt(payload, size=length), unread)
             return
         try:
             decoded = decode_payload(payload)
@@ -753,9 +754,9 @@ async def _cancel_all(tasks: set[asyncio.Task[None]]) -> None:
     """Cancel *tasks* and wait until each has ended, cancelling again any still running.
 
     Once is not always enough on Python 3.11: a task inside ``asyncio.wait_for``
-    (aiomqtt's publish, at every QoS, and subscribe) can lose a cancellation that
-    arrives as the awaited result does (gh-86296), and run on: a publisher that
-    did kept a dead session born and deaf (the adversarial review's probe).
+    can lose a cancellation that arrives as the awaited result does (gh-86296),
+    and run on: a publisher on aiomqtt (which the MQTT client replaced) that did
+    kept a dead session born and deaf (the adversarial review's probe).
     """
     pending = {task for task in tasks if not task.done()}
     while pending:

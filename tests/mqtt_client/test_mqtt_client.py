@@ -1,0 +1,359 @@
+"""The gateway's MQTT client against a real mosquitto, and against scripted brokers for what
+mosquitto never does (refuse a CONNACK, stop reading, hold PUBACKs back, break the protocol).
+
+What the client publishes is checked by another implementation (aiomqtt on
+paho); what it receives comes from ``mosquitto_pub``.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import contextlib
+import ssl
+import subprocess
+from collections.abc import AsyncIterator, Awaitable, Callable
+from pathlib import Path
+
+import aiomqtt
+import pytest
+from mqtt_broker import Broker, running_broker, tool
+from waiting import wait_for
+
+from sj300_async.gateway.mqtt.client import Client, Message, MqttError, Will
+from sj300_async.gateway.mqtt.client._packets import PacketParser
+
+
+@pytest.fixture
+async def broker(tmp_path: Path) -> AsyncIterator[Broker]:
+    async with running_broker(tmp_path) as b:
+        yield b
+
+
+@contextlib.asynccontextmanager
+async def watching(broker: Broker, topic: str) -> AsyncIterator[list[aiomqtt.Message]]:
+    """An independent subscriber (aiomqtt) to *topic*, collecting what it receives."""
+    got: list[aiomqtt.Message] = []
+    async with aiomqtt.Client("127.0.0.1", broker.port, identifier="watcher") as sub:
+        await sub.subscribe(topic, qos=1)
+
+        async def collect() -> None:
+            async for message in sub.messages:
+                got.append(message)
+
+        task = asyncio.create_task(collect())
+        try:
+            yield got
+        finally:
+            task.cancel()
+            with contextlib.suppress(asyncio.CancelledError):
+                await task
+
+
+def client(broker: Broker, **kwargs: object) -> Client:
+    return Client("127.0.0.1", broker.port, identifier="under-test", **kwargs)  # type: ignore[arg-type]
+
+
+@pytest.mark.parametrize("qos", [0, 1])
+async def test_a_burst_arrives_whole_and_in_order(broker: Broker, qos: int) -> None:
+    messages = [(f"t/{i % 7}", f"m{i}".encode(), False) for i in range(3000)]
+    async with watching(broker, "t/#") as got, client(broker, max_in_flight=64) as c:
+        # In bursts of 500: mosquitto drops QoS 1 messages past a slow subscriber's
+        # queue of 1000 (max_queued_messages), and the watcher is the slow one.
+        for end in range(500, len(messages) + 1, 500):
+            await c.publish_many(messages[end - 500 : end], qos=qos)
+            await wait_for(lambda n=end: len(got) >= n, "the burst at the subscriber")  # type: ignore[misc]
+    assert [(m.topic.value, m.payload) for m in got] == [(t, p) for t, p, _ in messages]
+
+
+async def test_retain_and_a_large_payload(broker: Broker) -> None:
+    big = bytes(range(256)) * 400  # 102,400 bytes: a three-byte remaining length
+    async with client(broker) as c:
+        await c.publish("keep/a", big, qos=1, retain=True)
+        await c.publish("keep/b", "text", retain=True)
+    async with watching(broker, "keep/#") as got:
+        await wait_for(lambda: len(got) == 2, "both retained messages")
+    assert {m.topic.value: (m.payload, m.retain) for m in got} == {
+        "keep/a": (big, True),
+        "keep/b": (b"text", True),
+    }
+
+
+async def test_subscribed_messages_arrive_and_qos1_is_acknowledged(broker: Broker) -> None:
+    async with client(broker) as c:
+        assert await c.subscribe([("in/#", 1), ("other", 0)]) == (1, 0)
+        for i in range(5):
+            await broker.publish(f"in/{i}", f"v{i}")  # mosquitto_pub, QoS 1
+        received: list[Message] = []
+        async for message in c.messages:
+            received.append(message)
+            if len(received) == 5:
+                break
+        await c.unsubscribe("in/#")
+        await broker.publish("in/late", "x")
+        await c.publish("other", b"mine")  # something after the unsubscribe
+        late = await anext(c.messages)
+    assert [(m.topic, m.payload, m.qos) for m in received] == [
+        (f"in/{i}", f"v{i}".encode(), 1) for i in range(5)
+    ]
+    assert late.topic == "other"  # nothing from in/late came
+
+
+async def test_the_will_is_published_when_the_connection_dies_not_when_it_ends(
+    broker: Broker,
+) -> None:
+    will = Will("gw/availability", "offline", qos=1, retain=False)
+    async with watching(broker, "gw/availability") as got:
+        async with client(broker, will=will):
+            pass  # a clean end: DISCONNECT, no will
+        async with client(broker, will=will) as c:
+            protocol = c._protocol
+            assert protocol is not None
+            assert protocol.transport is not None
+            protocol.transport.abort()  # the socket dies as in a crash
+            with pytest.raises(MqttError):
+                await wait_for_error(c)
+        await wait_for(lambda: len(got) == 1, "the will")
+        # A clean end before would have shown here as a second message.
+        await broker.publish("gw/availability", "marker")
+        await wait_for(lambda: len(got) == 2, "the marker")
+    assert [m.payload for m in got] == [b"offline", b"marker"]
+
+
+async def wait_for_error(c: Client) -> None:
+    while True:
+        await c.publish("probe", b"")
+        await asyncio.sleep(0.01)
+
+
+async def test_a_stopped_broker_fails_every_waiter(broker: Broker) -> None:
+    async with client(broker) as c:
+        await c.subscribe("x", qos=1)
+        reader = asyncio.create_task(anext(c.messages))
+        await asyncio.sleep(0)
+        await broker.stop()
+        with pytest.raises(MqttError, match="connection lost"):
+            await reader
+        with pytest.raises(MqttError):
+            await c.publish("x", b"after", qos=1)
+
+
+async def test_tls_with_the_brokers_ca(broker: Broker, tmp_path: Path) -> None:
+    ca, key, cert = _certificates(tmp_path)
+    await broker.stop()
+    port = broker.port
+    conf = tmp_path / "tls.conf"
+    conf.write_text(
+        f"listener {port} 127.0.0.1\nallow_anonymous true\npersistence false\n"
+        f"cafile {ca}\ncertfile {cert}\nkeyfile {key}\n"
+        # Run as root (as tests here are), mosquitto drops to its own user, which
+        # cannot read the key in the test's private directory: it stays root.
+        "user root\n",
+        encoding="utf-8",
+    )
+    proc = await asyncio.create_subprocess_exec(
+        tool("mosquitto"), "-c", str(conf), stderr=asyncio.subprocess.DEVNULL
+    )
+    try:
+        trusting = ssl.create_default_context(cafile=str(ca))
+        tls_client = Client("localhost", port, identifier="tls", tls=trusting)
+        await wait_for_connect(tls_client)
+        async with tls_client as c:
+            assert await c.subscribe("secure", qos=1) == (1,)
+            await c.publish("secure", b"over TLS", qos=1)
+            message = await anext(c.messages)
+        assert message.payload == b"over TLS"
+        with pytest.raises(MqttError, match="CERTIFICATE_VERIFY_FAILED"):
+            async with Client(
+                "localhost", port, identifier="untrusting", tls=ssl.create_default_context()
+            ):
+                pass
+    finally:
+        proc.terminate()
+        await proc.wait()
+
+
+async def wait_for_connect(c: Client) -> None:
+    """Connect once the broker listens (its start is not logged here)."""
+    for _ in range(200):
+        try:
+            async with Client(c.host, c.port, identifier="ping", tls=c._tls):
+                return
+        except MqttError as exc:
+            if "CERTIFICATE" in str(exc):
+                raise
+            await asyncio.sleep(0.05)
+    raise AssertionError("the TLS broker did not start")
+
+
+def _certificates(directory: Path) -> tuple[Path, Path, Path]:
+    """A CA and a server certificate for localhost, made by openssl."""
+    ca_key, ca, key, csr, cert = (
+        directory / n for n in ("ca.key", "ca.pem", "s.key", "s.csr", "s.pem")
+    )
+
+    def run(*args: str) -> None:
+        subprocess.run(["openssl", *args], check=True, capture_output=True)
+
+    run("req", "-x509", "-newkey", "rsa:2048", "-nodes", "-keyout", str(ca_key), "-out", str(ca),
+        "-days", "2", "-subj", "/CN=test CA")  # fmt: skip
+    run("req", "-newkey", "rsa:2048", "-nodes", "-keyout", str(key), "-out", str(csr),
+        "-subj", "/CN=localhost")  # fmt: skip
+    ext = directory / "ext.cnf"
+    ext.write_text("subjectAltName=DNS:localhost\n", encoding="utf-8")
+    run("x509", "-req", "-in", str(csr), "-CA", str(ca), "-CAkey", str(ca_key),
+        "-CAcreateserial", "-out", str(cert), "-days", "2", "-extfile", str(ext))  # fmt: skip
+    return ca, key, cert
+
+
+# -- scripted brokers -------------------------------------------------------------------
+
+Script = Callable[[asyncio.StreamReader, asyncio.StreamWriter], Awaitable[None]]
+
+
+@contextlib.asynccontextmanager
+async def scripted(script: Script) -> AsyncIterator[int]:
+    """A TCP server on a free loopback port that runs *script* for each connection."""
+    tasks: set[asyncio.Task[None]] = set()
+
+    async def serve(reader: asyncio.StreamReader, writer: asyncio.StreamWriter) -> None:
+        tasks.add(asyncio.current_task())  # type: ignore[arg-type]
+        try:
+            await script(reader, writer)
+        finally:
+            writer.close()
+
+    server = await asyncio.start_server(serve, "127.0.0.1", 0)
+    try:
+        yield server.sockets[0].getsockname()[1]
+    finally:
+        for task in tasks:
+            task.cancel()
+        server.close()
+        await server.wait_closed()
+
+
+async def _read_connect(reader: asyncio.StreamReader) -> None:
+    first = await reader.readexactly(2)
+    assert first[0] == 0x10
+    await reader.readexactly(first[1])
+
+
+@pytest.mark.parametrize(
+    ("code", "says"), [(4, "user name or password"), (5, "did not authorize"), (9, "unknown")]
+)
+async def test_a_refused_connection_says_why(code: int, says: str) -> None:
+    async def refuse(reader: asyncio.StreamReader, writer: asyncio.StreamWriter) -> None:
+        await _read_connect(reader)
+        writer.write(bytes((0x20, 2, 0, code)))
+        await reader.read()
+
+    async with scripted(refuse) as port:
+        with pytest.raises(MqttError, match=f"refused \\({code}\\): .*{says}"):
+            async with Client("127.0.0.1", port, identifier="c"):
+                pass
+
+
+async def test_a_silent_broker_times_the_connect_out() -> None:
+    async def silent(reader: asyncio.StreamReader, writer: asyncio.StreamWriter) -> None:
+        await reader.read()
+
+    async with scripted(silent) as port:
+        with pytest.raises(MqttError, match=r"no answer .* within 0\.2 s"):
+            async with Client("127.0.0.1", port, identifier="c", connect_timeout_s=0.2):
+                pass
+
+
+async def test_nobody_listening_is_an_mqtt_error() -> None:
+    async def nothing(reader: asyncio.StreamReader, writer: asyncio.StreamWriter) -> None:
+        pass
+
+    async with scripted(nothing) as port:
+        pass  # closed: nobody listens on the port now
+    with pytest.raises(MqttError, match="Connect call failed"):
+        async with Client("127.0.0.1", port, identifier="c"):
+            pass
+
+
+async def test_no_more_than_max_in_flight_wait_for_their_puback() -> None:
+    """The scripted broker holds PUBACKs back and counts what arrives meanwhile."""
+    window = 8
+    most = 0
+
+    async def slow_acks(reader: asyncio.StreamReader, writer: asyncio.StreamWriter) -> None:
+        nonlocal most
+        await _read_connect(reader)
+        writer.write(b"\x20\x02\x00\x00")
+        parser = PacketParser()
+        unacked: list[int] = []
+        while True:
+            data = await reader.read(65536)
+            if not data:
+                return
+            for packet in parser.feed(data):  # PUBLISH parses the same both ways
+                assert packet.packet_id is not None  # type: ignore[union-attr]
+                unacked.append(packet.packet_id)  # type: ignore[union-attr]
+            most = max(most, len(unacked))
+            await asyncio.sleep(0.005)  # the acknowledgements come late
+            for packet_id in unacked:
+                writer.write(b"\x40\x02" + packet_id.to_bytes(2, "big"))
+            unacked.clear()
+
+    async with (
+        scripted(slow_acks) as port,
+        Client("127.0.0.1", port, identifier="c", max_in_flight=window) as c,
+    ):
+        await c.publish_many([("t", b"x", False)] * 200, qos=1)
+    assert most == window
+
+
+async def test_a_broker_that_stops_reading_is_found_by_the_keepalive() -> None:
+    async def deaf(reader: asyncio.StreamReader, writer: asyncio.StreamWriter) -> None:
+        await _read_connect(reader)
+        writer.write(b"\x20\x02\x00\x00")
+        await asyncio.sleep(3600)  # never reads again: the socket's buffers fill up
+
+    async def publish_for_ever(c: Client) -> None:
+        chunk = [("t", b"x" * 60_000, False)] * 20
+        while True:  # waits, paused, once the buffers are full
+            await c.publish_many(chunk)
+
+    async with (
+        scripted(deaf) as port,
+        Client("127.0.0.1", port, identifier="c", keepalive_s=1) as c,
+    ):
+        with pytest.raises(MqttError, match="no answer from the broker within 1 s"):
+            await publish_for_ever(c)
+
+
+async def test_a_broker_breaking_the_protocol_ends_the_connection() -> None:
+    async def broken(reader: asyncio.StreamReader, writer: asyncio.StreamWriter) -> None:
+        await _read_connect(reader)
+        writer.write(b"\x20\x02\x00\x00")
+        await reader.readexactly(2)  # something the client sent
+        writer.write(b"\x50\x02\x00\x01")  # PUBREC: QoS 2, which it never spoke
+        await reader.read()
+
+    async with (
+        scripted(broken) as port,
+        Client("127.0.0.1", port, identifier="c", keepalive_s=0) as c,
+    ):
+        with pytest.raises(MqttError, match=r"broke MQTT 3\.1\.1: packet type PUBREC"):
+            await c.subscribe("x")
+
+
+async def test_an_oversized_payload_is_skipped_and_delivered_with_its_length(
+    broker: Broker, caplog: pytest.LogCaptureFixture
+) -> None:
+    caplog.set_level("DEBUG", "sj300_async.gateway.mqtt.client")
+    async with Client("127.0.0.1", broker.port, identifier="c", max_publish_bytes=1000) as c:
+        await c.subscribe("big/#", qos=1)
+        await broker.publish("big/one", b"y" * 5000)
+        await broker.publish("big/two", "small")
+        big, small = await anext(c.messages), await anext(c.messages)
+        assert c.oversized == 1
+        # Acknowledged: the broker kept no QoS 1 message waiting for this session.
+        await c.publish("big/three", b"after", qos=1)
+        assert (await anext(c.messages)).payload == b"after"
+    assert (big.topic, big.payload, big.length, big.skipped) == ("big/one", b"y" * 256, 5000, True)
+    assert (small.payload, small.length, small.skipped) == (b"small", 5, False)
+    assert "a message of 5000 bytes on 'big/one' skipped (limit 1000)" in caplog.text
