@@ -20,7 +20,7 @@ from mqtt_broker import Broker, running_broker, tool
 from waiting import wait_for
 
 from sj300_async.gateway.mqtt.client import Client, Message, MqttError, Will
-from sj300_async.gateway.mqtt.client._packets import PacketParser
+from sj300_async.gateway.mqtt.client._packets import PacketParser, encode_publish
 
 
 @pytest.fixture
@@ -357,3 +357,132 @@ async def test_an_oversized_payload_is_skipped_and_delivered_with_its_length(
     assert (big.topic, big.payload, big.length, big.skipped) == ("big/one", b"y" * 256, 5000, True)
     assert (small.payload, small.length, small.skipped) == (b"small", 5, False)
     assert "a message of 5000 bytes on 'big/one' skipped (limit 1000)" in caplog.text
+
+
+# -- what the adversarial review found ----------------------------------------------------
+
+
+async def _connack(reader: asyncio.StreamReader, writer: asyncio.StreamWriter) -> None:
+    await _read_connect(reader)
+    writer.write(b"\x20\x02\x00\x00")
+
+
+async def test_a_broker_that_stops_reading_but_goes_on_sending_is_found() -> None:
+    """Only a PINGRESP answers a PINGREQ: other packets do not show the broker reading."""
+
+    async def talking(reader: asyncio.StreamReader, writer: asyncio.StreamWriter) -> None:
+        await _connack(reader, writer)
+        while True:  # never reads again, and publishes on
+            writer.write(encode_publish(b"news", b"x"))
+            await asyncio.sleep(0.1)
+
+    async with (
+        scripted(talking) as port,
+        Client("127.0.0.1", port, identifier="c", keepalive_s=1) as c,
+    ):
+        with pytest.raises(MqttError, match="no answer from the broker within 1 s"):
+            async for _ in c.messages:
+                pass
+
+
+async def test_a_slow_reader_does_not_make_a_healthy_broker_look_dead(broker: Broker) -> None:
+    """Reading paused (the reader is behind): the PINGRESP waits, and is judged later."""
+    async with Client(
+        "127.0.0.1", broker.port, identifier="c", keepalive_s=1, max_queued_messages=10
+    ) as c:
+        await c.subscribe("many", qos=1)
+        await c.publish_many([("many", b"x", False)] * 50)
+        await wait_for(lambda: c._reading_paused, "reading paused")
+        loop = asyncio.get_running_loop()
+        until = loop.time() + 2.5  # two and a half keepalives behind
+        while loop.time() < until:
+            await asyncio.sleep(0.1)
+        taken = [await anext(c.messages) for _ in range(50)]
+        await c.publish("many", b"still connected", qos=1)
+        assert (await anext(c.messages)).payload == b"still connected"
+    assert len(taken) == 50
+
+
+async def test_a_cancelled_exit_still_closes_the_socket() -> None:
+    async def deaf(reader: asyncio.StreamReader, writer: asyncio.StreamWriter) -> None:
+        await _connack(reader, writer)
+        await asyncio.sleep(3600)
+
+    async with scripted(deaf) as port:
+        c = Client("127.0.0.1", port, identifier="c")
+        await c.__aenter__()
+        filling = asyncio.create_task(c.publish_many([("t", b"x" * 60_000, False)] * 400))
+        await wait_for(lambda: c._writable is not None, "the socket's buffers full")
+        exiting = asyncio.create_task(c.__aexit__(None, None, None))
+        await asyncio.sleep(0.05)  # waiting for the DISCONNECT to go out
+        exiting.cancel()
+        with pytest.raises(asyncio.CancelledError):
+            await exiting
+        protocol = c._protocol
+        assert protocol is not None
+        assert protocol.transport is not None
+        assert protocol.transport.is_closing()
+        await asyncio.wait_for(protocol.lost, 1)  # aborted: closed at once
+        with pytest.raises(MqttError, match="disconnected"):
+            await filling
+
+
+async def test_a_second_connack_in_the_same_read_fails_the_connect() -> None:
+    async def twice(reader: asyncio.StreamReader, writer: asyncio.StreamWriter) -> None:
+        await _read_connect(reader)
+        writer.write(b"\x20\x02\x00\x00" * 2)
+        await reader.read()
+
+    async with scripted(twice) as port:
+        with pytest.raises(MqttError, match="a second CONNACK"):
+            async with Client("127.0.0.1", port, identifier="c"):
+                pass
+
+
+async def test_packet_identifiers_are_never_exhausted_silently() -> None:
+    with pytest.raises(ValueError, match=r"max_in_flight must be 1\.\.65000"):
+        Client("h", identifier="c", max_in_flight=65_535)
+
+
+async def test_a_cancelled_subscribe_keeps_its_identifier_until_answered() -> None:
+    """Else its late SUBACK would answer the next request given the same identifier."""
+    subacks: list[bytes] = []
+
+    async def late(reader: asyncio.StreamReader, writer: asyncio.StreamWriter) -> None:
+        await _connack(reader, writer)
+        first = await reader.readexactly(2)
+        packet = await reader.readexactly(first[1])
+        subacks.append(packet[:2])
+        await asyncio.sleep(3600)  # never answers
+
+    async with scripted(late) as port, Client("127.0.0.1", port, identifier="c") as c:
+        with pytest.raises(TimeoutError):
+            async with asyncio.timeout(0.2):
+                await c.subscribe("x", qos=1)
+        assert len(subacks) == 1
+        taken = int.from_bytes(subacks[0], "big")
+        c._ids = iter([taken, taken + 1])  # type: ignore[assignment]
+        assert c._next_id() == taken + 1
+
+
+async def test_one_task_reads_the_messages() -> None:
+    async with (
+        scripted(lambda r, w: _connack_and_wait(r, w)) as port,
+        Client("127.0.0.1", port, identifier="c") as c,
+    ):
+        first = asyncio.create_task(anext(c.messages))
+        await asyncio.sleep(0)
+        with pytest.raises(RuntimeError, match="one task at a time"):
+            await anext(c.messages)
+        first.cancel()
+
+
+async def _connack_and_wait(reader: asyncio.StreamReader, writer: asyncio.StreamWriter) -> None:
+    await _connack(reader, writer)
+    await reader.read()
+
+
+async def test_a_host_name_that_cannot_be_one_is_an_mqtt_error() -> None:
+    with pytest.raises(MqttError):
+        async with Client("bad..host", 1883, identifier="c", connect_timeout_s=5):
+            pass

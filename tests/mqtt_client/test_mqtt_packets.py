@@ -155,7 +155,9 @@ def test_the_limit_is_the_payload_s_a_long_topic_is_read() -> None:
         (b"\x30\x03\x00\x05a", "shorter than its topic"),
         (b"\x30\x04\x00\x02\xff\xfe", "not UTF-8"),
         (b"\x20\x02\x02\x00", "CONNACK with flags"),
-        (b"\x40\x03\x00\x01\x00", "PUBACK with flags 0x0 and 3 bytes"),
+        (b"\x40\x03\x00\x01\x00", "PUBACK of 3 bytes"),
+        (b"\x41\x02\x00\x01", "PUBACK with flags 0x1 and 2 bytes"),
+        (b"\x40\xff\xff\xff\x7f", "PUBACK of 268435455 bytes"),  # judged before its body
         (b"\x90\x03\x00\x01\x03", "SUBACK with return codes 03"),
         (b"\xc0\x00", "PINGREQ from a broker"),
         (b"\x50\x02\x00\x01", "PUBREC from a broker"),

@@ -41,7 +41,14 @@ from ._fleet import (
     parse_fleet_url,
 )
 from ._messages import drive_state, state_message
-from ._session import BrokerUnreachable, SessionStats, backoff, keep_connected, new_client
+from ._session import (
+    BrokerUnreachable,
+    SessionStats,
+    backoff,
+    cancel_and_wait,
+    keep_connected,
+    new_client,
+)
 from ._stats import BridgeStats, mqtt_families
 from ._topics import (
     AVAILABLE,
@@ -76,6 +83,7 @@ __all__ = [
     "SubscriptionRefused",
     "Topics",
     "backoff",
+    "cancel_and_wait",
     "discovery",
     "drive_state",
     "error_text",

@@ -81,7 +81,7 @@ from ._commands import DROPPED_BY_STOP, MAX_PAYLOAD_BYTES, error_text, oversized
 from ._config import MqttConfig
 from ._discovery import discovery
 from ._messages import drive_state
-from ._session import keep_connected, new_client
+from ._session import cancel_and_wait, keep_connected, new_client
 from ._stats import BridgeStats, mqtt_families
 from ._topics import AVAILABLE, UNAVAILABLE, StateMessage, Topics
 from .client import Client, MqttError, Will
@@ -106,8 +106,6 @@ MAX_COMMANDS: Final = 16
 MAX_IN_FLIGHT: Final = 256
 #: How long a clean stop waits for a write under way, and for its last publishes.
 CLOSE_TIMEOUT_S: Final = 3.0
-#: How often a task that lost its cancellation is cancelled again (see _cancel_and_wait).
-CANCEL_AGAIN_S: Final = 0.1
 
 Key = tuple[str, int]
 
@@ -121,24 +119,6 @@ class _Out:
     retain: bool
     #: The drive of a state message (counted per drive), else None.
     drive: Key | None = None
-
-
-async def _cancel_and_wait(tasks: set[asyncio.Task[None]]) -> None:
-    """Cancel *tasks* and wait until each has ended, cancelling again any still running.
-
-    Once is not always enough on Python 3.11: a task inside ``asyncio.wait_for``
-    can lose a cancellation that arrives as the awaited result does
-    (gh-86296), and run on. The MQTT client awaits plain futures, but a
-    command's write goes through the gateway and the bus, which use it.
-    """
-    pending = {task for task in tasks if not task.done()}
-    while pending:
-        for task in pending:
-            task.cancel()
-        _, pending = await asyncio.wait(pending, timeout=CANCEL_AGAIN_S)
-    for task in tasks:
-        if not task.cancelled():
-            task.exception()  # retrieved: the caller has the connection's error already
 
 
 class MqttBridge:
@@ -337,10 +317,13 @@ class MqttBridge:
                 await client.publish(
                     self.topics.availability, UNAVAILABLE, qos=self.config.qos, retain=True
                 )
-        except (MqttError, TimeoutError) as exc:
+        except (MqttError, TimeoutError, asyncio.CancelledError) as exc:
             # The disconnect that follows is clean, so the broker drops the will:
             # "online" stays until the gateway connects again. Said loudly.
-            _log.warning("MQTT: could not say offline before stopping: %s", exc or "time-out")
+            _log.warning("MQTT: could not say offline before stopping: %s",
+                         exc or type(exc).__name__)  # fmt: skip
+            if isinstance(exc, asyncio.CancelledError):
+                raise
 
     async def _setup(self, client: Client) -> None:
         """Subscribe, say online, and queue everything retained again."""
@@ -363,7 +346,7 @@ class MqttBridge:
         try:
             done, _ = await asyncio.wait(tasks, return_when=asyncio.FIRST_COMPLETED)
         finally:
-            await _cancel_and_wait(tasks)
+            await cancel_and_wait(tasks)
         for task in done:
             task.result()  # the connection's error
         raise MqttError("the session ended")  # both loops run until an error
@@ -523,7 +506,7 @@ class MqttBridge:
                 task.cancel()
         if busy:
             await asyncio.wait(busy, timeout=CLOSE_TIMEOUT_S)
-        await _cancel_and_wait(set(self._workers.values()))
+        await cancel_and_wait(set(self._workers.values()))
         waiting = sum(queue.qsize() for queue in self._commands.values())
         if waiting:
             self.stats.discarded += waiting
@@ -531,7 +514,9 @@ class MqttBridge:
         # The connection's own task says "offline" as it ends (see _connection), after
         # anything it was publishing: never before an "online" still on its way.
         self._close_by = loop.time() + CLOSE_TIMEOUT_S
-        await _cancel_and_wait({self._task})
+        # Its "offline" and its disconnect take up to CLOSE_TIMEOUT_S and the client's
+        # own close time: cancelled again sooner, it would leave "online" retained.
+        await cancel_and_wait({self._task}, patience_s=2 * CLOSE_TIMEOUT_S)
         self._task = None
         pending = len(self._pending) + len(self._errors)
         if pending:

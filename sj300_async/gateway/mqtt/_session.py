@@ -49,11 +49,14 @@ __all__ = [
     "BrokerUnreachable",
     "SessionStats",
     "backoff",
+    "cancel_and_wait",
     "keep_connected",
     "new_client",
 ]
 
 BACKOFF_FIRST_S: Final = 0.5
+#: How often a task that lost its cancellation is cancelled again (see cancel_and_wait).
+CANCEL_AGAIN_S: Final = 0.1
 
 #: The body of a connection: runs with the connected client until the connection
 #: fails (raising the client's MqttError) or its work is done (returning); it calls the
@@ -89,7 +92,8 @@ def new_client(
     caps the QoS 1 publishes awaiting their acknowledgement. A broker that
     stops reading makes publishes wait, and its keepalive ends the
     connection (:mod:`.client`). A received payload past *max_payload*
-    bytes is skipped unread, and delivered empty with its length.
+    bytes is skipped unread, and delivered as its first 256 bytes with its
+    length.
     """
     tls = None
     if config.tls:
@@ -196,3 +200,29 @@ async def keep_connected(
         await asyncio.sleep(delay)
         if on_attempt is not None:
             on_attempt(attempt)
+
+
+async def cancel_and_wait(
+    tasks: set[asyncio.Task[None]], *, patience_s: float = CANCEL_AGAIN_S
+) -> None:
+    """Cancel *tasks* and wait until each has ended, cancelling again any still running.
+
+    Once is not always enough on Python 3.11: a task inside ``asyncio.wait_for``
+    can lose a cancellation that arrives as the awaited result does
+    (gh-86296), and run on (a publisher on aiomqtt, before the client was
+    ours, kept a dead Sparkplug session born and deaf that way). A command's
+    write still goes through code that uses it. The tasks get *patience_s*
+    after the first cancellation (a connection's task says "offline" and
+    disconnects as it ends: cancelled again meanwhile, it would say
+    nothing), then are cancelled again every :data:`CANCEL_AGAIN_S`.
+    """
+    pending = {task for task in tasks if not task.done()}
+    wait_s = patience_s
+    while pending:
+        for task in pending:
+            task.cancel()
+        _, pending = await asyncio.wait(pending, timeout=wait_s)
+        wait_s = CANCEL_AGAIN_S
+    for task in tasks:
+        if not task.cancelled():
+            task.exception()  # retrieved: the caller has the task's error already

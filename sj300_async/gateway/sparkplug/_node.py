@@ -78,6 +78,7 @@ from ..mqtt import (
     MqttConfig,
     SparkplugConfig,
     StateMessage,
+    cancel_and_wait,
     drive_state,
     error_text,
     keep_connected,
@@ -503,7 +504,7 @@ class EdgeNode:
         try:
             done, _ = await asyncio.wait(tasks, return_when=asyncio.FIRST_COMPLETED)
         finally:
-            await _cancel_all(tasks)
+            await cancel_and_wait(tasks)
         for task in done:
             task.result()
         raise MqttError("the session ended")
@@ -747,22 +748,5 @@ class EdgeNode:
             task.cancel()
         await asyncio.gather(*self._workers.values(), return_exceptions=True)
         task, self._task = self._task, None
-        await _cancel_all({task})
-
-
-async def _cancel_all(tasks: set[asyncio.Task[None]]) -> None:
-    """Cancel *tasks* and wait until each has ended, cancelling again any still running.
-
-    Once is not always enough on Python 3.11: a task inside ``asyncio.wait_for``
-    can lose a cancellation that arrives as the awaited result does (gh-86296),
-    and run on: a publisher on aiomqtt (which the MQTT client replaced) that did
-    kept a dead session born and deaf (the adversarial review's probe).
-    """
-    pending = {task for task in tasks if not task.done()}
-    while pending:
-        for task in pending:
-            task.cancel()
-        _, pending = await asyncio.wait(pending, timeout=0.1)
-    for task in tasks:
-        if not task.cancelled():
-            task.exception()  # retrieved: the caller has the session's error already
+        # Its NDEATH and disconnect take up to CLOSE_TIMEOUT_S and the client's close.
+        await cancel_and_wait({task}, patience_s=2 * CLOSE_TIMEOUT_S)

@@ -20,10 +20,15 @@ small, and is shaped for the one job:
   written (asyncio pauses the protocol above its high-water mark), every
   publish waits. A broker that stops reading is found by the keepalive:
   a PINGREQ goes out every ``keepalive_s / 2`` whatever else is sent, and
-  one unanswered for ``keepalive_s`` ends the connection.
+  one whose PINGRESP has not come within ``keepalive_s`` ends the
+  connection (whatever else the broker sends meanwhile).
 - **Incoming messages are bounded.** Past ``max_queued_messages`` not yet
-  taken by the reader, the connection stops reading the socket (TCP then
-  holds the broker back) until half are taken. A payload longer than
+  taken by the reader (give or take one read of the socket, at most 256
+  KiB), the connection stops reading the socket (TCP then holds the
+  broker back) until half are taken. Meanwhile the broker's answers
+  (PUBACK, SUBACK, PINGRESP) wait behind those messages too: a publish at
+  QoS 1 finishes once the reader has caught up, and the keepalive judges
+  the broker only while reading. A payload longer than
   ``max_publish_bytes`` is skipped unread as it arrives: the message is
   delivered with its first 256 bytes as ``payload`` and its whole
   ``length`` (so the application can refuse it as too long, quoting its
@@ -71,7 +76,7 @@ from ._packets import (
     encode_unsubscribe,
 )
 
-__all__ = ["Client", "Message", "MqttError", "Will"]
+__all__ = ["MAX_IN_FLIGHT", "Client", "Message", "MqttError", "Will"]
 
 _log = logging.getLogger("sj300_async.gateway.mqtt.client")
 
@@ -80,6 +85,9 @@ CLOSE_TIMEOUT_S: Final = 2.0
 #: Bytes gathered for one write at most: past it they go to the socket at once, so a
 #: caller that publishes without ever yielding meets the transport's back-pressure.
 FLUSH_BYTES: Final = 1 << 16
+#: QoS 1 publishes unacknowledged at most: the packet identifiers are 65,535,
+#: and subscriptions need some too.
+MAX_IN_FLIGHT: Final = 65_000
 #: How much of a topic a DEBUG line shows.
 _EXCERPT: Final = 80
 
@@ -175,8 +183,10 @@ class Client:
         max_publish_bytes: int = 1 << 20,
         connect_timeout_s: float = 10.0,
     ) -> None:
-        if max_in_flight < 1 or max_queued_messages < 2:
-            raise ValueError("max_in_flight must be >= 1 and max_queued_messages >= 2")
+        if not 1 <= max_in_flight <= MAX_IN_FLIGHT or max_queued_messages < 2:
+            raise ValueError(
+                f"max_in_flight must be 1..{MAX_IN_FLIGHT} and max_queued_messages >= 2"
+            )
         self.host, self.port = host, port
         self.identifier = identifier
         self._username, self._password = username, password
@@ -248,8 +258,8 @@ class Client:
             raise MqttError(
                 f"no answer from {self.host}:{self.port} within {self.connect_timeout_s:g} s"
             ) from None
-        except (OSError, ssl.SSLError) as exc:
-            self._abort()
+        except (OSError, ValueError) as exc:  # ssl.SSLError is an OSError; a bad host name
+            self._abort()  # a UnicodeError (IDNA), a ValueError
             raise MqttError(str(exc) or type(exc).__name__) from exc
         except BaseException:
             self._abort()
@@ -258,6 +268,9 @@ class Client:
             self._abort()
             reason = CONNACK_REASONS.get(connack.return_code, "unknown reason")
             raise MqttError(f"connection refused ({connack.return_code}): {reason}")
+        if self._error is not None:  # what came with the CONNACK broke the connection
+            self._abort()
+            raise self._error
         if self.keepalive_s:
             self._keepalive = loop.call_later(self.keepalive_s / 2, self._tick)
         return self
@@ -266,16 +279,20 @@ class Client:
         protocol = self._protocol
         if protocol is None or protocol.transport is None:
             return
-        if self._error is None:
-            self._write(DISCONNECT)
-            self._flush()
-            protocol.transport.close()
-            try:
-                async with asyncio.timeout(CLOSE_TIMEOUT_S):
-                    await asyncio.shield(protocol.lost)
-            except TimeoutError:
+        if self._error is not None:
+            return
+        self._write(DISCONNECT)
+        self._flush()
+        self._lost(None, "disconnected")  # what still waits hears that, not "lost"
+        protocol.transport.close()
+        try:
+            async with asyncio.timeout(CLOSE_TIMEOUT_S):
+                await asyncio.shield(protocol.lost)
+        except TimeoutError:
+            pass
+        finally:  # the socket is closed even when this wait is cancelled
+            if not protocol.lost.done():
                 protocol.transport.abort()
-        self._lost(None, "disconnected")
 
     def _abort(self) -> None:
         protocol = self._protocol
@@ -330,10 +347,11 @@ class Client:
             await batch.future
 
     def _next_id(self) -> int:
-        for packet_id in self._ids:
+        for packet_id in itertools.islice(self._ids, 0xFFFF):
             if packet_id not in self._inflight and packet_id not in self._acks:
                 return packet_id
-        raise AssertionError("unreachable")  # pragma: no cover
+        # Only subscriptions never acknowledged, past the in-flight cap, get here.
+        raise MqttError("every packet identifier is waiting for an acknowledgement")
 
     async def _wait_slot(self) -> None:
         if self._error is not None:
@@ -368,12 +386,11 @@ class Client:
         assert self._loop is not None
         packet_id = self._next_id()
         future: asyncio.Future[tuple[int, ...]] = self._loop.create_future()
+        # The id stays taken until its acknowledgement comes (or the connection ends),
+        # even for a caller that stopped waiting: a late one must not answer another.
         self._acks[packet_id] = future
-        try:
-            self._write(packet(packet_id))
-            return await future
-        finally:
-            self._acks.pop(packet_id, None)
+        self._write(packet(packet_id))
+        return await future
 
     # -- receiving ----------------------------------------------------------------------
 
@@ -390,6 +407,8 @@ class Client:
             if self._error is not None:
                 raise self._error
             assert self._loop is not None
+            if self._message_waiter is not None:
+                raise RuntimeError("one task at a time reads a client's messages")
             self._message_waiter = self._loop.create_future()
             try:
                 await self._message_waiter
@@ -398,6 +417,8 @@ class Client:
         message = self._messages.popleft()
         if self._reading_paused and len(self._messages) <= self.max_queued_messages // 2:
             self._reading_paused = False
+            if self._ping_sent is not None and self._loop is not None:
+                self._ping_sent = self._loop.time()  # judged from now on
             protocol = self._protocol
             if protocol is not None and protocol.transport is not None and self._error is None:
                 protocol.transport.resume_reading()
@@ -446,14 +467,13 @@ class Client:
         except MalformedPacket as exc:
             self._fail(MqttError(f"the broker broke MQTT 3.1.1: {exc}"))
             return
-        self._ping_sent = None  # anything the broker sends shows it alive
         for packet in packets:
             if isinstance(packet, PubAck):
                 self._puback(packet.packet_id)
             elif isinstance(packet, Publish):
                 self._publish_received(packet)
             elif isinstance(packet, SubAck | UnsubAck):
-                future = self._acks.get(packet.packet_id)
+                future = self._acks.pop(packet.packet_id, None)
                 if future is not None and not future.done():
                     future.set_result(packet.return_codes if isinstance(packet, SubAck) else ())
             elif isinstance(packet, ConnAck):
@@ -475,7 +495,11 @@ class Client:
                 self._deliver(
                     Message(packet.topic, packet.head, packet.qos, packet.retain, packet.length)
                 )
-            elif not isinstance(packet, PingResp):  # pragma: no cover - the parser's types
+            elif isinstance(packet, PingResp):
+                # Only the answer to the PINGREQ counts: a broker that stopped reading
+                # may go on sending.
+                self._ping_sent = None
+            else:  # pragma: no cover - the parser's types
                 raise AssertionError(packet)
 
     def _puback(self, packet_id: int) -> None:
@@ -511,7 +535,12 @@ class Client:
         """Every keepalive_s / 2: a PINGREQ, or the end of a broker that did not answer one."""
         assert self._loop is not None
         now = self._loop.time()
-        if self._ping_sent is not None and now - self._ping_sent >= self.keepalive_s:
+        if self._reading_paused:
+            # The answer may be waiting behind the messages the reader has not taken:
+            # the broker's silence is judged once reading goes on.
+            if self._ping_sent is not None:
+                self._ping_sent = now
+        elif self._ping_sent is not None and now - self._ping_sent >= self.keepalive_s:
             self._fail(MqttError(f"no answer from the broker within {self.keepalive_s} s"))
             return
         if self._ping_sent is None:
@@ -542,9 +571,10 @@ class Client:
             self._flush_handle.cancel()
             self._flush_handle = None
         batches, self._inflight = list(self._inflight.values()), {}
+        acks, self._acks = list(self._acks.values()), {}
         futures: list[asyncio.Future[None] | None] = [batch.future for batch in batches]
         futures += [self._slot, self._writable, self._message_waiter]
-        for future in (*futures, self._connack, *self._acks.values()):
+        for future in (*futures, self._connack, *acks):
             if future is not None and not future.done():
                 future.set_exception(error)
                 future.exception()  # retrieved: a waiter may have gone (cancelled)

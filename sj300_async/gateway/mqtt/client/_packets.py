@@ -62,6 +62,13 @@ CONNACK_REASONS: Final = {
 
 _U16 = struct.Struct("!H")
 
+#: The packets a broker sends but PUBLISH, and the most bytes each carries after its
+#: fixed header (a SUBACK: one code per filter; we subscribe a few at a time).
+_MOST: Final = {2: 2, 4: 2, 9: 2 + 1024, 11: 2, 13: 0}
+_NAMES: Final = {1: "CONNECT", 2: "CONNACK", 3: "PUBLISH", 4: "PUBACK", 5: "PUBREC",
+                 6: "PUBREL", 7: "PUBCOMP", 8: "SUBSCRIBE", 9: "SUBACK", 10: "UNSUBSCRIBE",
+                 11: "UNSUBACK", 12: "PINGREQ", 13: "PINGRESP", 14: "DISCONNECT"}  # fmt: skip
+
 
 class MalformedPacket(Exception):
     """The broker sent bytes that break MQTT 3.1.1; the connection cannot go on."""
@@ -247,6 +254,13 @@ class PacketParser:
                     raise MalformedPacket("a remaining length of more than four bytes")
             if not complete:
                 break
+            kind = first >> 4
+            if kind != 3 and size > _MOST.get(kind, -1):
+                # Judged before the body comes: a broker must not make us hold a
+                # 256 MB "PUBACK" (a type it never sends fails here at once too).
+                if kind not in _MOST:
+                    raise MalformedPacket(f"packet type {_NAMES.get(kind, kind)} from a broker")
+                raise MalformedPacket(f"{_NAMES[kind]} of {size} bytes")
             if first >> 4 == 3 and size > self.max_publish_bytes:
                 # Perhaps a payload past the limit: read the header (topic, packet id),
                 # and skip the payload as it comes if it is.
@@ -300,12 +314,7 @@ def _parse(first: int, body: bytes) -> Packet:
         if body[0] & 0xFE:
             raise MalformedPacket(f"CONNACK with flags {body[0]:#04x}")
         return ConnAck(bool(body[0] & 1), body[1])
-    names = {1: "CONNECT", 5: "PUBREC", 6: "PUBREL", 7: "PUBCOMP", 8: "SUBSCRIBE",
-             10: "UNSUBSCRIBE", 12: "PINGREQ", 14: "DISCONNECT"}  # fmt: skip
-    known = {2: "CONNACK", 4: "PUBACK", 9: "SUBACK", 11: "UNSUBACK", 13: "PINGRESP"}
-    if kind in known:
-        raise MalformedPacket(f"{known[kind]} with flags {flags:#x} and {len(body)} bytes")
-    raise MalformedPacket(f"packet type {names.get(kind, kind)} from a broker")
+    raise MalformedPacket(f"{_NAMES[kind]} with flags {flags:#x} and {len(body)} bytes")
 
 
 def _publish(first: int, body: bytes, *, header: bool = False) -> Publish:
