@@ -247,6 +247,42 @@ async def test_a_subscription_follows_a_running_drive(tmp_path: Path, client_pai
         await node.call_method(f"{ns}:Stop")
 
 
+async def test_only_watched_values_are_pushed_and_reads_stay_fresh(
+    tmp_path: Path, client_pair: Pair
+) -> None:
+    """Unwatched, a value costs nothing per sample: reads ask its binding, nothing is pushed."""
+    async with (
+        opcua_gateway(opcua_toml(tmp_path)) as (gateway, server),
+        connected(server.url, pair=client_pair, user=USER, password=PASSWORD) as client,
+    ):
+        ns = await _namespace(client)
+        drive = gateway.drive("hall", 1)
+        assert drive is not None
+        await wait_for(lambda: drive.snapshot.last_ok is not None, "a first sample")
+        node = _var(client, ns, "hall/Drive1")
+        await node.call_method(f"{ns}:TakeControl")
+        await node.call_method(f"{ns}:SetFrequency", ua.Variant(3.0, ua.VariantType.Double))
+        await node.call_method(f"{ns}:Run", "forward")
+        frequency = _var(client, ns, "hall/Drive1/Monitoring/ConverterOutputFrequency")
+        # Ramping, and nobody subscribed: every sample changes it, nothing is pushed.
+        polls = drive.snapshot.taken_at
+        await wait_for(lambda: drive.snapshot.taken_at > polls + 0.3, "three more samples")
+        assert server.pushed == 0
+        first = (await frequency.read_data_value()).Value.Value
+        handler = _Notifications()
+        subscription = await client.create_subscription(50, handler)
+        handle = await subscription.subscribe_data_change(frequency)
+        await wait_for(lambda: server.pushed > 0, "a pushed value")
+        await subscription.unsubscribe(handle)
+        pushed = server.pushed
+        polls = drive.snapshot.taken_at
+        await wait_for(lambda: drive.snapshot.taken_at > polls + 0.3, "three more samples")
+        assert server.pushed == pushed  # unwatched again
+        later = (await frequency.read_data_value()).Value.Value
+        assert first < later <= 3.0  # the read is the latest sample, not the last push
+        await node.call_method(f"{ns}:Stop")
+
+
 async def test_the_trip_history_is_not_stale_within_its_own_read_interval(tmp_path: Path) -> None:
     """Read every trips_interval_s by plan: older than stale_after_s, yet not stale."""
     text = opcua_toml(

@@ -33,6 +33,13 @@ it is done here, each on the one server instance, and checked by
 - **Discovery registration** (:func:`refuse_registration`): asyncua
   lets any client, without a session, register servers that FindServers
   then lists; the gateway is no discovery server.
+- **Who watches a value** (:func:`watchers`): asyncua says nowhere in
+  its API whether a variable has monitored items. Reads are served from
+  the gateway's bindings (a value callback), so a value only subscriptions
+  would see is built and written into asyncua for nothing: at 2,048
+  drives that was most of the northbound's CPU with no client at all. The
+  gateway builds and pushes a value only while its variable's Value
+  attribute has data-change callbacks (asyncua's monitored items).
 - **Values not copied** (:func:`share_frozen_values`): asyncua deep-copies
   every value written, once per monitored item on it, in case its writer
   changes it afterwards (43-54 µs each: more than half the northbound's
@@ -46,7 +53,7 @@ from __future__ import annotations
 import asyncio
 import logging
 import secrets
-from collections.abc import Awaitable, Callable
+from collections.abc import Awaitable, Callable, Mapping
 from dataclasses import dataclass
 from typing import Any, Final
 
@@ -65,6 +72,7 @@ __all__ = [
     "refuse_registration",
     "route_writes",
     "share_frozen_values",
+    "watchers",
 ]
 
 _log = logging.getLogger("sj300_async.gateway.opcua")
@@ -238,6 +246,14 @@ def refuse_registration(server: Server) -> None:
 
     server.iserver.register_server = refuse
     server.iserver.register_server2 = refuse
+
+
+def watchers(server: Server, node: ua.NodeId) -> Mapping[int, Any]:
+    """The monitored items' callbacks on *node*'s value: asyncua's live mapping."""
+    callbacks: Mapping[int, Any] = (
+        server.iserver.aspace[node].attributes[ua.AttributeIds.Value].datachange_callbacks
+    )
+    return callbacks
 
 
 @dataclass

@@ -39,7 +39,7 @@ subscriptions.
 from __future__ import annotations
 
 import math
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field
 from typing import Final
 
@@ -117,8 +117,11 @@ class Binding:
     #: The same instant as Unix time.
     wall: float = 0.0
     online: bool = True
-    #: (value, status) last pushed to subscriptions.
+    #: (value, status) last pushed to subscriptions (None: nobody watched it since).
     pushed: tuple[object, int] | None = None
+    #: The monitored items on its value (asyncua's own, live mapping; empty: nobody
+    #: watches it, so nothing is built or pushed for it: a read asks the binding).
+    watchers: Mapping[int, object] = field(default_factory=dict)
 
     def take(self, snapshot: DriveSnapshot) -> None:
         """Take the value and its read time from *snapshot*."""
@@ -174,8 +177,10 @@ class LineNodes:
     line: GatewayLine
     node: ua.NodeId
     counters: dict[str, ua.NodeId] = field(default_factory=dict)
-    #: What each counter last showed.
+    #: What each counter last showed to subscriptions.
     shown: dict[str, object] = field(default_factory=dict)
+    #: Each counter's monitored items (see :attr:`Binding.watchers`).
+    watchers: dict[str, Mapping[int, object]] = field(default_factory=dict)
 
 
 #: A line's counters: name, variant type, description, unit.

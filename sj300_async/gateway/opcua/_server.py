@@ -53,6 +53,7 @@ from ._hooks import (
     refuse_registration,
     route_writes,
     share_frozen_values,
+    watchers,
 )
 from ._model import (
     LINE_COUNTERS,
@@ -262,6 +263,7 @@ class OpcuaServer:
             for name, counter in line_nodes.counters.items():
                 server.set_attribute_value_callback(counter, self._line_reader(line_nodes, name))
                 server.set_attribute_value_setter(counter, _keep)
+                line_nodes.watchers[name] = watchers(server, counter)
         for nodes in self._drives.values():
             self._bind(server, nodes)
             for node, code in nodes.writable.items():
@@ -285,6 +287,7 @@ class OpcuaServer:
             binding.take(drive.snapshot)
             server.set_attribute_value_callback(binding.node, self._reader(binding))
             server.set_attribute_value_setter(binding.node, _keep)
+            binding.watchers = watchers(server, binding.node)
         calls = self._calls
         methods = nodes.methods
         if methods is None or calls is None:
@@ -436,7 +439,16 @@ class OpcuaServer:
         return read
 
     def _stage(self, binding: Binding, now: float) -> bool:
-        """Leave *binding*'s value in the outbox when it or its status changed."""
+        """Leave *binding*'s value in the outbox when it or its status changed.
+
+        Only for a value some monitored item watches: reads ask the binding.
+        Unwatched, what it showed is forgotten; a subscription made later
+        starts from a read, and a first push of the same value notifies
+        nothing (asyncua compares value and status).
+        """
+        if not binding.watchers:
+            binding.pushed = None
+            return False
         status = binding.status(now, self.stale_after_s)
         shown = (binding.value, status)
         if shown == binding.pushed:
@@ -526,6 +538,9 @@ class OpcuaServer:
         self._marks[name] = (now, busy)
         changed = False
         for key, value in self._line_values(nodes).items():
+            if not nodes.watchers[key]:  # nobody subscribed: reads ask the line
+                nodes.shown.pop(key, None)
+                continue
             if value is None or nodes.shown.get(key) == value:
                 continue
             nodes.shown[key] = value
