@@ -54,6 +54,7 @@ from ._audit import AuditLog
 from ._control import Controller
 from ._drive import GatewayDrive, Lease
 from ._errors import GatewayStartError
+from ._heap import collector_paused, freeze_long_lived, thaw
 from ._metrics import LineView, drive_view, gateway_metrics, line_problems
 from ._model import GatewayConfig, LineConfig
 from ._northbound import Northbound, get_northbound
@@ -101,6 +102,8 @@ class Gateway:
         self.read_errors: dict[tuple[str, str], int] = {}
         self._stack = contextlib.AsyncExitStack()
         self._tasks: list[asyncio.Task[None]] = []
+        #: The objects alive at start are out of the collector's way (._heap).
+        self._frozen = False
 
     # -- what the northbounds see (GatewayView) --------------------------------------
 
@@ -222,24 +225,30 @@ class Gateway:
             buses = await self._open_buses()
             for config, bus in zip(self.config.lines, buses, strict=True):
                 self.lines.append(self._open_line(config, bus))
-            for section, settings in self.config.northbounds.items():
-                spec = get_northbound(section)
-                northbound = spec.create(settings)
-                try:
-                    await northbound.start(self)
-                except GatewayStartError:
-                    raise
-                except OSError as exc:  # a port in use, an address not on this host: one line
-                    endpoints = [endpoint for _, endpoint in spec.endpoints(settings)]
-                    raise GatewayStartError.of(section, endpoints, exc) from exc
-                self.northbounds[section] = northbound
+            with collector_paused():  # the northbounds' models: docstring of ._heap
+                for section, settings in self.config.northbounds.items():
+                    await self._start_northbound(section, settings)
             for line in self.lines:
                 await self._stack.enter_async_context(line.poller)
                 self._tasks.append(asyncio.create_task(self._background_reads(line)))
         except BaseException:
             await self._shutdown()
             raise
+        freeze_long_lived()
+        self._frozen = True
         return self
+
+    async def _start_northbound(self, section: str, settings: object) -> None:
+        spec = get_northbound(section)
+        northbound = spec.create(settings)
+        try:
+            await northbound.start(self)
+        except GatewayStartError:
+            raise
+        except OSError as exc:  # a port in use, an address not on this host: one line
+            endpoints = [endpoint for _, endpoint in spec.endpoints(settings)]
+            raise GatewayStartError.of(section, endpoints, exc) from exc
+        self.northbounds[section] = northbound
 
     async def __aexit__(
         self,
@@ -419,6 +428,9 @@ class Gateway:
         self._tasks.clear()
         await self._stack.aclose()
         self.audit.close()
+        if self._frozen:
+            self._frozen = False
+            thaw()
 
     def lines_by_name(self) -> Iterable[tuple[str, GatewayLine]]:
         """``(name, line)`` of every line, in the configuration's order."""
