@@ -154,8 +154,8 @@ GATEWAY_MQTT_NAMES = (
     "DEFAULT_PREFIX", "DISCOVERY_PREFIX", "FLEET_SCHEMES", "Fleet", "FleetUrl", "Malformed",
     "MqttConfig", "NORTHBOUND", "SessionStats", "StateMessage", "SubscriptionRefused", "Topics",
     "UNAVAILABLE", "backoff", "cancel_and_wait", "discovery", "error_text", "follow",
-    "is_fleet_url", "keep_connected", "mqtt_families", "node_id", "parse_command", "parse_fleet_url",
-    "parse_state_topic", "state_message",
+    "is_fleet_url", "keep_connected", "mqtt_families", "node_id", "parse_command",
+    "parse_fleet_url", "parse_state_topic", "state_message",
     # Sparkplug B's settings, and the command checks it shares with the JSON topics (issue 30)
     "SparkplugConfig", "frequency_request", "parameter_request",
     # a stop waits behind no command (issue 30's review)
