@@ -228,14 +228,16 @@ class Gateway:
             with collector_paused():  # the northbounds' models: docstring of ._heap
                 for section, settings in self.config.northbounds.items():
                     await self._start_northbound(section, settings)
+                # Before the collector runs again: its first full collection would
+                # scan all of it once more.
+                freeze_long_lived()
+                self._frozen = True
             for line in self.lines:
                 await self._stack.enter_async_context(line.poller)
                 self._tasks.append(asyncio.create_task(self._background_reads(line)))
         except BaseException:
             await self._shutdown()
             raise
-        freeze_long_lived()
-        self._frozen = True
         return self
 
     async def _start_northbound(self, section: str, settings: object) -> None:

@@ -33,13 +33,14 @@ it is done here, each on the one server instance, and checked by
 - **Discovery registration** (:func:`refuse_registration`): asyncua
   lets any client, without a session, register servers that FindServers
   then lists; the gateway is no discovery server.
-- **Who watches a value** (:func:`watchers`): asyncua says nowhere in
-  its API whether a variable has monitored items. Reads are served from
+- **Who watches a value** (:func:`follow_watchers`): asyncua says nowhere
+  in its API whether a variable has monitored items. Reads are served from
   the gateway's bindings (a value callback), so a value only subscriptions
   would see is built and written into asyncua for nothing: at 2,048
   drives that was most of the northbound's CPU with no client at all. The
-  gateway builds and pushes a value only while its variable's Value
-  attribute has data-change callbacks (asyncua's monitored items).
+  gateway hears each data-change callback asyncua adds to or deletes from
+  a Value attribute (its monitored items), and builds and pushes a value
+  only while some monitored item watches it.
 - **Values not copied** (:func:`share_frozen_values`): asyncua deep-copies
   every value written, once per monitored item on it, in case its writer
   changes it afterwards (43-54 µs each: more than half the northbound's
@@ -53,7 +54,7 @@ from __future__ import annotations
 import asyncio
 import logging
 import secrets
-from collections.abc import Awaitable, Callable, Mapping
+from collections.abc import Awaitable, Callable
 from dataclasses import dataclass
 from typing import Any, Final
 
@@ -66,13 +67,13 @@ from asyncua.server.monitored_item_service import MonitoredItemValues
 __all__ = [
     "ACTIVATE_WITHIN_S",
     "FrozenDataValue",
+    "follow_watchers",
     "guard_channels",
     "guard_sessions",
     "on_session_closed",
     "refuse_registration",
     "route_writes",
     "share_frozen_values",
-    "watchers",
 ]
 
 _log = logging.getLogger("sj300_async.gateway.opcua")
@@ -248,12 +249,34 @@ def refuse_registration(server: Server) -> None:
     server.iserver.register_server2 = refuse
 
 
-def watchers(server: Server, node: ua.NodeId) -> Mapping[int, Any]:
-    """The monitored items' callbacks on *node*'s value: asyncua's live mapping."""
-    callbacks: Mapping[int, Any] = (
-        server.iserver.aspace[node].attributes[ua.AttributeIds.Value].datachange_callbacks
-    )
-    return callbacks
+def follow_watchers(server: Server, changed: Callable[[ua.NodeId, int], None]) -> None:
+    """Tell *changed* (node, +1 or -1) of each monitored item added to or deleted from a value.
+
+    See the module docstring. asyncua's address space adds and deletes the
+    data-change callbacks of monitored items (``add_datachange_callback``,
+    ``delete_datachange_callback``); both are wrapped on this server's
+    address space only.
+    """
+    space = server.iserver.aspace
+    add, delete = space.add_datachange_callback, space.delete_datachange_callback
+    handles: dict[int, ua.NodeId] = {}
+
+    def added(nodeid: ua.NodeId, attr: ua.AttributeIds, callback: Any) -> Any:
+        result = add(nodeid, attr, callback)
+        status, handle = result
+        if attr == ua.AttributeIds.Value and status.is_good():
+            handles[handle] = nodeid
+            changed(nodeid, 1)
+        return result
+
+    def deleted(handle: int) -> None:
+        delete(handle)
+        nodeid = handles.pop(handle, None)
+        if nodeid is not None:
+            changed(nodeid, -1)
+
+    space.add_datachange_callback = added
+    space.delete_datachange_callback = deleted
 
 
 @dataclass

@@ -39,7 +39,7 @@ subscriptions.
 from __future__ import annotations
 
 import math
-from collections.abc import Callable, Mapping, Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 from typing import Final
 
@@ -119,9 +119,9 @@ class Binding:
     online: bool = True
     #: (value, status) last pushed to subscriptions (None: nobody watched it since).
     pushed: tuple[object, int] | None = None
-    #: The monitored items on its value (asyncua's own, live mapping; empty: nobody
-    #: watches it, so nothing is built or pushed for it: a read asks the binding).
-    watchers: Mapping[int, object] = field(default_factory=dict)
+    #: Monitored items on its value (0: nobody watches it, so nothing is taken, built
+    #: or pushed for it at a sample: a read takes the drive's latest snapshot itself).
+    watched: int = 0
 
     def take(self, snapshot: DriveSnapshot) -> None:
         """Take the value and its read time from *snapshot*."""
@@ -168,6 +168,8 @@ class DriveNodes:
     #: Writable parameter variables: node -> parameter code.
     writable: dict[ua.NodeId, str] = field(default_factory=dict)
     methods: MethodNodes | None = None
+    #: Monitored items on its variables, all together (0: a sample costs nothing here).
+    watched: int = 0
 
 
 @dataclass(slots=True, eq=False)
@@ -179,8 +181,6 @@ class LineNodes:
     counters: dict[str, ua.NodeId] = field(default_factory=dict)
     #: What each counter last showed to subscriptions.
     shown: dict[str, object] = field(default_factory=dict)
-    #: Each counter's monitored items (see :attr:`Binding.watchers`).
-    watchers: dict[str, Mapping[int, object]] = field(default_factory=dict)
 
 
 #: A line's counters: name, variant type, description, unit.

@@ -41,19 +41,19 @@ from asyncua.server.address_space import NodeData
 from cryptography import x509
 
 from ...profiles import DriveSnapshot
-from .. import GatewayLine, GatewayStartError, GatewayView, busy_seconds
+from .. import GatewayDrive, GatewayLine, GatewayStartError, GatewayView, busy_seconds
 from ._calls import Calls
 from ._certificate import ServerCertificate, load_or_generate
 from ._config import OpcuaConfig
 from ._hooks import (
     FrozenDataValue,
+    follow_watchers,
     guard_channels,
     guard_sessions,
     on_session_closed,
     refuse_registration,
     route_writes,
     share_frozen_values,
-    watchers,
 )
 from ._model import (
     LINE_COUNTERS,
@@ -156,6 +156,11 @@ class OpcuaServer:
         self._writable: dict[ua.NodeId, tuple[DriveNodes, str]] = {}
         #: Every drive variable: node -> (its drive, its name for the audit log).
         self._owners: dict[ua.NodeId, tuple[DriveNodes, str]] = {}
+        #: Every drive variable's binding, by node; those watched by a monitored item;
+        #: the monitored items on each line counter.
+        self._bound: dict[ua.NodeId, tuple[DriveNodes, Binding]] = {}
+        self._watched: dict[ua.NodeId, tuple[DriveNodes, Binding]] = {}
+        self._counters_watched: dict[ua.NodeId, int] = {}
         self._outbox: dict[ua.NodeId, ua.DataValue] = {}
         self._wake = asyncio.Event()
         self._tasks: list[asyncio.Task[None]] = []
@@ -263,13 +268,14 @@ class OpcuaServer:
             for name, counter in line_nodes.counters.items():
                 server.set_attribute_value_callback(counter, self._line_reader(line_nodes, name))
                 server.set_attribute_value_setter(counter, _keep)
-                line_nodes.watchers[name] = watchers(server, counter)
         for nodes in self._drives.values():
             self._bind(server, nodes)
             for node, code in nodes.writable.items():
                 self._writable[node] = (nodes, code)
             for binding in nodes.bindings:
                 self._owners[binding.node] = (nodes, binding.name)
+                self._bound[binding.node] = (nodes, binding)
+        follow_watchers(server, self._watch)
         route_writes(server, self.namespace, self._write)
         share_frozen_values()
         guard_sessions(
@@ -285,9 +291,8 @@ class OpcuaServer:
         drive = nodes.drive
         for binding in nodes.bindings:
             binding.take(drive.snapshot)
-            server.set_attribute_value_callback(binding.node, self._reader(binding))
+            server.set_attribute_value_callback(binding.node, self._reader(binding, drive))
             server.set_attribute_value_setter(binding.node, _keep)
-            binding.watchers = watchers(server, binding.node)
         calls = self._calls
         methods = nodes.methods
         if methods is None or calls is None:
@@ -331,8 +336,8 @@ class OpcuaServer:
 
     def publish(self, snapshot: DriveSnapshot) -> None:
         nodes = self._drives.get((snapshot.line, snapshot.node))
-        if nodes is None or self._server is None:
-            return
+        if nodes is None or not nodes.watched or self._server is None:
+            return  # unwatched: a read takes the latest snapshot itself
         now = asyncio.get_running_loop().time()
         changed = False
         online = snapshot.online
@@ -342,8 +347,9 @@ class OpcuaServer:
                 continue
             group.seen = seen
             for binding in group.bindings:
-                binding.take(snapshot)
-                changed |= self._stage(binding, now)
+                if binding.watched:
+                    binding.take(snapshot)
+                    changed |= self._stage(binding, now)
         if changed:
             self._wake.set()
 
@@ -424,10 +430,11 @@ class OpcuaServer:
             ServerTimestamp=utc(time.time()),
         )
 
-    def _reader(self, binding: Binding) -> Any:
+    def _reader(self, binding: Binding, drive: GatewayDrive) -> Any:
         def read(node: ua.NodeId, attribute: ua.AttributeIds) -> ua.DataValue:
             assert self._loop is not None
             try:
+                binding.take(drive.snapshot)  # the latest, watched or not
                 return self._datavalue(
                     binding, binding.status(self._loop.time(), self.stale_after_s)
                 )
@@ -441,14 +448,8 @@ class OpcuaServer:
     def _stage(self, binding: Binding, now: float) -> bool:
         """Leave *binding*'s value in the outbox when it or its status changed.
 
-        Only for a value some monitored item watches: reads ask the binding.
-        Unwatched, what it showed is forgotten; a subscription made later
-        starts from a read, and a first push of the same value notifies
-        nothing (asyncua compares value and status).
+        Only for a value some monitored item watches (the callers check).
         """
-        if not binding.watchers:
-            binding.pushed = None
-            return False
         status = binding.status(now, self.stale_after_s)
         shown = (binding.value, status)
         if shown == binding.pushed:
@@ -490,9 +491,8 @@ class OpcuaServer:
         assert self._loop is not None
         now = self._loop.time()
         changed = False
-        for nodes in self._drives.values():
-            for binding in nodes.bindings:
-                changed |= self._stage(binding, now)
+        for _, binding in self._watched.values():
+            changed |= self._stage(binding, now)
         for line in self._lines:
             changed |= self._tick_line(line, now)
         if changed:
@@ -538,7 +538,7 @@ class OpcuaServer:
         self._marks[name] = (now, busy)
         changed = False
         for key, value in self._line_values(nodes).items():
-            if not nodes.watchers[key]:  # nobody subscribed: reads ask the line
+            if not self._counters_watched.get(nodes.counters[key]):  # reads ask the line
                 nodes.shown.pop(key, None)
                 continue
             if value is None or nodes.shown.get(key) == value:
@@ -585,6 +585,24 @@ class OpcuaServer:
         user = session.user
         if isinstance(user, Principal):
             user.key = self._session_keys.get(id(session), 0)
+
+    def _watch(self, node: ua.NodeId, change: int) -> None:
+        """A monitored item added to (+1) or deleted from (-1) *node*'s value."""
+        bound = self._bound.get(node)
+        if bound is None:  # a line counter, or a node not ours
+            self._counters_watched[node] = self._counters_watched.get(node, 0) + change
+            return
+        nodes, binding = bound
+        binding.watched += change
+        nodes.watched += change
+        if binding.watched > 0:
+            self._watched[node] = bound
+            return
+        # Nobody watches it now: what it showed is forgotten. A subscription made
+        # later starts from a read, and a first push of the same value notifies
+        # nothing (asyncua compares value and status).
+        self._watched.pop(node, None)
+        binding.pushed = None
 
     def _session_closed(self, session: Any) -> None:
         key = self._session_keys.pop(id(session), None)
