@@ -378,3 +378,37 @@ async def test_close_stops_the_server_even_after_a_tick_failed(tmp_path: Path) -
         probe.settimeout(1)
         with pytest.raises(ConnectionRefusedError):  # closed: nothing listens any more
             probe.connect(("127.0.0.1", port))
+
+
+async def test_monitored_items_are_followed_as_they_come_and_go(
+    tmp_path: Path, client_pair: Pair
+) -> None:
+    """follow_watchers hears asyncua add and delete each monitored item on a value."""
+    async with (
+        opcua_gateway(opcua_toml(tmp_path)) as (gateway, server),
+        connected(server.url, pair=client_pair, user=USER, password=PASSWORD) as client,
+    ):
+        await polled(gateway)
+        ns = await client.get_namespace_index(NAMESPACE)
+        nodes = server._drives["hall", 1]
+        frequency = client.get_node(
+            ua.NodeId("hall/Drive1/Monitoring/ConverterOutputFrequency", ns)
+        )
+        running = client.get_node(ua.NodeId("hall/Drive1/Monitoring/Running", ns))
+        assert nodes.watched == 0
+
+        class Quiet:
+            def datachange_notification(self, *args: Any) -> None:
+                pass
+
+        subscription = await client.create_subscription(100, Quiet())
+        handles = await subscription.subscribe_data_change([frequency, running, frequency])
+        await wait_for(lambda: nodes.watched == 3, "three monitored items followed")
+        by_name = {b.name: b.watched for b in nodes.bindings}
+        assert by_name["Monitoring/ConverterOutputFrequency"] == 2
+        assert by_name["Monitoring/Running"] == 1
+        await subscription.unsubscribe(handles[0])
+        await wait_for(lambda: nodes.watched == 2, "one deleted")
+        await subscription.delete()
+        await wait_for(lambda: nodes.watched == 0, "the subscription's items deleted with it")
+        assert all(b.watched == 0 for b in nodes.bindings)
