@@ -10,7 +10,12 @@ Decisions:
 
 - **Record raw, judge when asked.** The hook only appends the record to a
   bounded deque (:data:`KEEP_S` seconds, at most :data:`MAX_RECORDS`):
-  a line nobody looks at costs an append per chunk. A request for frames
+  a line nobody looks at costs an append per chunk. What is kept of a
+  record is a tuple of plain values (its time, direction, bytes, and
+  whether the bus found it early), not the record: the parsed events it
+  carries are not kept alive, and the garbage collector stops tracking
+  such a tuple, so a plant's lines (64 of them, up to 50,000 chunks each)
+  add nothing to its scans. A request for frames
   runs the passive sniffer (:class:`~sj300_async.bus.LineSniffer`, the
   one ``sj300 sniff`` uses) over the window: it splits, pairs each reply
   with its request (response time) and flags bad check codes, broken
@@ -34,7 +39,7 @@ import collections
 import io
 import time
 from collections.abc import Iterable
-from typing import Any, Final
+from typing import Any, Final, Literal
 
 from ...bus import Bus, CaptureFile, LineSniffer, SniffedFrame, TraceRecord, Unanswered
 from ...profiles import frame_text
@@ -51,6 +56,8 @@ LEAD_S: Final = 2.0
 MAX_FRAMES: Final = 2_000
 
 Json = dict[str, Any]
+#: A chunk as kept: loop time, "tx" or "rx", its bytes, found early by the bus.
+_Kept = tuple[float, Literal["tx", "rx"], bytes, bool]
 
 
 class LineTrace:
@@ -59,27 +66,28 @@ class LineTrace:
     def __init__(self, name: str, bus: Bus[Any, Any]) -> None:
         self.name = name
         self._bus = bus
-        self._records: collections.deque[TraceRecord] = collections.deque(maxlen=MAX_RECORDS)
+        self._records: collections.deque[_Kept] = collections.deque(maxlen=MAX_RECORDS)
         #: Unix time minus loop time: the records carry the loop's clock.
         self._offset = time.time() - _loop_time()
 
     def __call__(self, record: TraceRecord) -> None:
         records = self._records
-        records.append(record)
-        horizon = record.timestamp - KEEP_S
-        while records[0].timestamp < horizon:
+        at = record.timestamp
+        records.append((at, record.direction, record.data, bool(record.early)))
+        horizon = at - KEEP_S
+        while records[0][0] < horizon:
             records.popleft()
 
     def unix(self, loop_time: float) -> float:
         return loop_time + self._offset
 
-    def _window(self, seconds: float) -> tuple[list[TraceRecord], float]:
+    def _window(self, seconds: float) -> tuple[list[_Kept], float]:
         """The records of the last *seconds* (and :data:`LEAD_S` before), and the start."""
         if not self._records:
             return [], 0.0
         start = _loop_time() - seconds
         lead = start - LEAD_S
-        return [r for r in self._records if r.timestamp >= lead], start
+        return [r for r in self._records if r[0] >= lead], start
 
     def frames(self, seconds: float, *, node: int | None = None) -> list[Json]:
         """The frames of the last *seconds*, judged, oldest first (at most :data:`MAX_FRAMES`).
@@ -91,10 +99,9 @@ class LineTrace:
         records, start = self._window(seconds)
         sniffer = LineSniffer(self._bus.dialect, self._bus.line, self._bus.timing)
         out: list[Json] = []
-        for record in records:
-            reports = sniffer.feed(record.data, record.timestamp)
-            early = bool(record.early) and record.direction == "rx"
-            out += self._rows(reports, record.direction, start, node, early=early)
+        for at, direction, data, early in records:
+            reports = sniffer.feed(data, at)
+            out += self._rows(reports, direction, start, node, early=early and direction == "rx")
         if records:
             out += self._rows(sniffer.tick(_loop_time()), "", start, node, early=False)
         return out[-MAX_FRAMES:]
@@ -157,9 +164,9 @@ class LineTrace:
         buffer = io.BytesIO()
         capture = CaptureFile(buffer)
         hook = capture.line(self._bus.dialect, self.name, self._bus.line)
-        for record in records:
-            if record.timestamp >= start:
-                hook(record)
+        for at, direction, data, _ in records:
+            if at >= start:
+                hook(TraceRecord(at, direction, data))
         capture.close()
         return buffer.getvalue()
 
