@@ -1,10 +1,12 @@
 """The whole gateway at plant scale: 64 lines of 32 drives at 1 Hz, each northbound's cost.
 
-Issue 30's measurement, first part: what each northbound adds to the
-gateway's CPU per drive sample, against the bare poll's own CPU per sample
-in the same run, whether every drive state reaches the broker (none
-replaced unsent), the memory per drive, and the time from start to every
-drive visible on MQTT (each drive's first state; every Sparkplug birth).
+Issue 30's measurement: what each northbound adds to the gateway's CPU
+per drive sample, against the bare poll's own CPU per sample in the same
+run, whether every drive state reaches the broker (none replaced unsent),
+the memory per drive, the time from start to every drive visible on MQTT
+(each drive's first state; every Sparkplug birth), the delay from a
+sample to each northbound's client with every northbound serving clients,
+and two gateways feeding one broker.
 
 Each configuration runs in a process of its own (``python -m
 benchmarks.bench_plant gateway --with ...``), one after the other, so that
@@ -17,8 +19,9 @@ each has the machine's two cores to itself and its RSS is its own:
 - ``mqtt+sparkplug``: both, each sample's state message built once for both;
 - ``opcua``: ``[opcua]`` without security, no client;
 - ``http``: ``[http]`` (the workbench, /metrics), no client;
-- ``modbus``: nine ``[[modbus.listeners]]`` of seven lines each, no client;
-- ``all``: every one of them at once.
+- ``modbus``: ten ``[[modbus.listeners]]``, nine of seven lines and one of
+  the last line, no client;
+- ``all``: every one of them at once, with a client on each (below).
 
 Every line is ``sim://?nodes=1-32`` (the same URL: 64 simulators of their
 own), polled every second (status and monitor), no trip-history or
@@ -30,20 +33,45 @@ start-up), then measures :data:`WINDOWS` windows of :data:`WINDOW_S`
 seconds: its CPU (``time.process_time()``, the simulators' included, alike
 on every side) per sample polled; the best window counts.
 
+**The clients of** ``all``: once its servers listen, its child starts
+:mod:`benchmarks.plant_clients`, a process of its own (its CPU is not in the
+child's ``process_time``; the notes give it): a subscriber to every drive's
+JSON state, a Sparkplug host on the group's DDATA and DBIRTH topics, an OPC
+UA subscription with an item on each drive's output frequency, event
+streams on the workbench, and a Modbus master per listener reading each
+unit's monitor and status blocks every second. The child waits until they
+have subscribed, and :data:`CLIENTS_SETTLE_S` more (the first values they
+are handed are each drive's state as of subscribing, not samples just
+taken), then records their delays over its windows: the client's
+``time.time()`` on handling a message minus the sample's time as the
+message carries it (the JSON state's ``time``, the Sparkplug payload's
+timestamp, the OPC UA SourceTimestamp, the workbench event's ``time``).
+Modbus carries no sample time finer than a whole second (register 1), so
+its masters report reads per second and errors instead of a delay.
+
+**Two gateways** (:func:`measure_two_gateways`, after the configurations,
+on a mosquitto of their own): two ``mqtt+sparkplug`` children of 32 lines
+each (``l0``..``l31`` as :data:`PAIR`'s first gateway, ``l32``..``l63`` as
+its second), one Sparkplug group, started together once a fleet view
+(:func:`~sj300_async.gateway.mqtt.follow`, as ``sj300 monitor --url
+mqtt://...`` follows the broker) and a Sparkplug host subscribed to the
+group's DBIRTHs are on the broker. Their warm-up is
+:data:`PAIR_WARM_UP_S`: the time both views have to see every drive.
+
 Rows: ``all`` against ``bare`` (the issue's goal: at most twice), each
 northbound alone against ``bare`` (information), the JSON topics' and
 Sparkplug's share of samples neither replaced unsent nor lost (goal:
 every one; the states confirmed in a window are shown too, but up to a
-chunk of 256 is in flight at each of its edges), RSS per drive, and the
-time to every drive visible.
-
-Not yet measured (issue 30 goes on): clients on the servers (Modbus
-masters reading, an OPC UA subscription, event streams on the
-workbench), the delay from a sample to each northbound's client, and two
-gateways feeding one broker.
+chunk of 256 is in flight at each of its edges), RSS per drive, the p99
+delay from a sample to each timed client of ``all`` against the poll
+interval (goal: under it, or the client falls behind), and the drives the
+two gateways' fleet view and Sparkplug host saw against every drive
+(goal: all). The notes give the time to every drive visible, each
+client's figures, and the time until the two views saw every drive.
 
 ``--quick`` measures nothing: two lines of four drives, one short window,
-and only ``bare`` and ``all``.
+only ``bare`` and ``all`` (with its clients), then two gateways of one
+line each.
 """
 
 from __future__ import annotations
@@ -67,6 +95,14 @@ from typing import Any, Final
 from ._harness import Config, Result, Section
 from .bench_mqtt import _mosquitto
 from .bench_opcua import _start_drives, opcua_section
+from .plant_clients import (
+    EVENT_STREAMS,
+    MODBUS_BLOCKS,
+    PUBLISHING_MS,
+    READY_TIMEOUT_S,
+    SWEEP_S,
+    arguments,
+)
 
 __all__ = [
     "CONFIGURATIONS",
@@ -85,6 +121,9 @@ USES_EVENT_LOOP = True
 CONFIGURATIONS: Final = (
     *("bare", "mqtt", "sparkplug", "mqtt+sparkplug", "opcua", "http", "modbus", "all"),
 )
+#: The gateway's id (the JSON topics' level, the Sparkplug edge node) and Sparkplug group.
+GATEWAY_ID: Final = "plant"
+GROUP: Final = "plant"
 #: The northbounds of ``all``.
 EVERY: Final = frozenset({"mqtt", "sparkplug", "opcua", "http", "modbus"})
 LINES: Final = 64
@@ -99,40 +138,66 @@ QUICK_WARM_UP_S: Final = 2.0
 QUICK_WINDOW_S: Final = 1.0
 #: Lines per Modbus listener (unit ids 1..224 within each).
 LINES_PER_LISTENER: Final = 7
+#: The clients of ``all`` whose delay is a row (the key in their figures), in order.
+DELAYED: Final = (
+    ("mqtt", "MQTT JSON"),
+    ("sparkplug", "Sparkplug"),
+    ("opcua", "OPC UA"),
+    ("http", "the workbench"),
+)
 #: The issue's goal: every northbound together at most 2x the poll's CPU per sample.
 TARGET_ALL: Final = 1 / 2
+#: The repository: the children's working directory (``python -m benchmarks...``).
+ROOT: Final = Path(__file__).resolve().parent.parent
 #: How long a child may take, over its windows and warm-up.
 CHILD_TIMEOUT_S: Final = 300.0
+#: How long ``all``'s clients may take to say they are ready (they give up on a client
+#: after plant_clients.READY_TIMEOUT_S and report it), or to answer.
+CLIENTS_TIMEOUT_S: Final = READY_TIMEOUT_S + 30.0
+#: From the clients' subscriptions to the windows (full, --quick): the first values they
+#: are handed (each drive's state as of subscribing, the event streams' "everything") pass.
+CLIENTS_SETTLE_S: Final = 3.0
+QUICK_CLIENTS_SETTLE_S: Final = 0.5
 
 
-def _toml(which: str, lines: int, per_line: int, broker: int, directory: Path) -> str:
+def _toml(
+    which: str,
+    lines: int,
+    per_line: int,
+    broker: int,
+    directory: Path,
+    gateway_id: str = GATEWAY_ID,
+    first_line: int = 0,
+) -> str:
+    """The configuration of *which*: lines ``l<first_line>`` on, *lines* of them."""
     parts = EVERY if which == "all" else set(which.split("+")) - {"bare"}
-    text = '[gateway]\nid = "plant"\n'
+    text = f'[gateway]\nid = "{gateway_id}"\n'
     if parts & {"mqtt", "sparkplug"}:
         text += f'[mqtt]\nurl = "mqtt://127.0.0.1:{broker}"\n'
         if "sparkplug" in parts:
-            text += 'sparkplug = true\ngroup_id = "plant"\n'
+            text += f'sparkplug = true\ngroup_id = "{GROUP}"\n'
         if "mqtt" not in parts:
             text += "state_topics = false\n"
+    indices = range(first_line, first_line + lines)
     if "modbus" in parts:
         text += "[modbus]\n"
-        for first in range(0, lines, LINES_PER_LISTENER):
+        for first in range(first_line, first_line + lines, LINES_PER_LISTENER):
             names = ", ".join(
-                f'"l{i}"' for i in range(first, min(lines, first + LINES_PER_LISTENER))
+                f'"l{i}"' for i in range(first, min(indices.stop, first + LINES_PER_LISTENER))
             )
             text += f'[[modbus.listeners]]\nlisten = "127.0.0.1:0"\nlines = [{names}]\n'
     if "opcua" in parts:
         text += opcua_section(directory)
     if "http" in parts:
         text += '[http]\nlisten = "127.0.0.1:0"\n'
-    for index in range(lines):
+    for index in indices:
         text += textwrap.dedent(
             f"""
             [[lines]]
             name = "l{index}"
             url = "sim://?nodes=1-{per_line}"
             nodes = "1-{per_line}"
-            unit_offset = {(index % LINES_PER_LISTENER) * DRIVES_PER_LINE}
+            unit_offset = {((index - first_line) % LINES_PER_LISTENER) * DRIVES_PER_LINE}
             interval_s = {INTERVAL_S!r}
             trips_interval_s = 0
             setpoint_interval_s = 0
@@ -148,7 +213,9 @@ async def _child(args: argparse.Namespace) -> dict[str, Any]:
     from sj300_async.gateway import Gateway, parse_config
 
     directory = Path(args.directory)
-    text = _toml(args.which, args.lines, args.per_line, args.broker, directory)
+    text = _toml(
+        args.which, args.lines, args.per_line, args.broker, directory, args.id, args.first_line
+    )
     loop = asyncio.get_running_loop()
     began = loop.time()
     async with Gateway(parse_config(text, "bench_plant.toml")) as gateway:
@@ -167,23 +234,33 @@ async def _child(args: argparse.Namespace) -> dict[str, Any]:
         parts = getattr(mqtt, "parts", (mqtt,) if mqtt is not None else ())
         bridge = next((p for p in parts if type(p).__name__ == "MqttBridge"), None)
         edge = next((p for p in parts if type(p).__name__ == "EdgeNode"), None)
-        visible: dict[str, float] = {}
-        deadline = loop.time() + args.warm_up
-        while loop.time() < deadline:
-            now = loop.time() - began
-            if bridge is not None and len(bridge.stats.states) == drives:
-                visible.setdefault("mqtt", now)
-            if edge is not None and edge.stats.published["DBIRTH"] >= drives:
-                visible.setdefault("sparkplug", now)
-            await asyncio.sleep(0.05)
-        before = _delivery(bridge, edge)
-        windows = []
-        for _ in range(args.windows):
-            cpu, count, wall = time.process_time(), samples, loop.time()
-            await asyncio.sleep(args.window)
-            cpu, count = time.process_time() - cpu, samples - count
-            windows.append({"cpu_s": cpu, "samples": count, "wall_s": loop.time() - wall})
-        after = _delivery(bridge, edge)
+        # Started now that every server listens; read beside the warm-up.
+        clients = await _Clients.start(gateway, args.broker) if args.which == "all" else None
+        try:
+            visible: dict[str, float] = {}
+            deadline = loop.time() + args.warm_up
+            while loop.time() < deadline:
+                now = loop.time() - began
+                if bridge is not None and len(bridge.stats.states) == drives:
+                    visible.setdefault("mqtt", now)
+                if edge is not None and edge.stats.published["DBIRTH"] >= drives:
+                    visible.setdefault("sparkplug", now)
+                await asyncio.sleep(0.05)
+            if clients is not None:
+                await clients.ready(args.settle)
+                clients.command("start")
+            before = _delivery(bridge, edge)
+            windows = []
+            for _ in range(args.windows):
+                cpu, count, wall = time.process_time(), samples, loop.time()
+                await asyncio.sleep(args.window)
+                cpu, count = time.process_time() - cpu, samples - count
+                windows.append({"cpu_s": cpu, "samples": count, "wall_s": loop.time() - wall})
+            after = _delivery(bridge, edge)
+            figures = None if clients is None else await clients.results()
+        finally:
+            if clients is not None:
+                await clients.close()
         statm = Path("/proc/self/statm").read_text(encoding="ascii").split()
         opcua: Any = gateway.northbounds.get("opcua")
         return {
@@ -195,7 +272,74 @@ async def _child(args: argparse.Namespace) -> dict[str, Any]:
             "windows": windows,
             "rss_bytes": int(statm[1]) * os.sysconf("SC_PAGE_SIZE"),
             "delivery": {k: after[k] - before[k] for k in after},
+            "clients": figures,
         }
+
+
+class _Clients:
+    """A child's clients process (:mod:`benchmarks.plant_clients`), on the child's loop."""
+
+    def __init__(self, process: asyncio.subprocess.Process) -> None:
+        self.process = process
+        self.ready_at: float | None = None
+
+    @classmethod
+    async def start(cls, gateway: Any, broker: int) -> _Clients:
+        """Start the clients of every northbound of *gateway* (servers listening)."""
+        modbus = gateway.northbounds["modbus"]
+        opcua = gateway.northbounds["opcua"]
+        command = arguments(
+            gateway=gateway.config.gateway_id,
+            drives=[drive.key for drive in gateway.drives],
+            broker=broker,
+            group=GROUP,
+            opcua=(opcua.url, opcua.config.namespace),
+            http=gateway.northbounds["http"].port,
+            modbus=[(server.port, sorted(server.units)) for _, server in modbus.servers],
+        )
+        process = await asyncio.create_subprocess_exec(
+            *(sys.executable, "-m", "benchmarks.plant_clients", *command),
+            stdin=subprocess.PIPE,
+            stdout=subprocess.PIPE,
+        )  # its stderr is the child's: a traceback reaches the parent's error message
+        return cls(process)
+
+    async def _line(self) -> str:
+        assert self.process.stdout is not None
+        async with asyncio.timeout(CLIENTS_TIMEOUT_S):
+            line = await self.process.stdout.readline()
+        if not line:
+            raise RuntimeError(f"the clients exited ({await self.process.wait()})")
+        return line.decode()
+
+    async def ready(self, settle_s: float) -> None:
+        """Once every client is subscribed, and *settle_s* after: their first values (each
+        drive's state as of subscribing) are not samples just taken."""
+        loop = asyncio.get_running_loop()
+        if self.ready_at is None:
+            word = await self._line()
+            if not word.startswith("ready"):
+                raise RuntimeError(f"the clients said {word!r}, not ready")
+            self.ready_at = loop.time()
+        await asyncio.sleep(max(0.0, self.ready_at + settle_s - loop.time()))
+
+    def command(self, word: str) -> None:
+        assert self.process.stdin is not None
+        self.process.stdin.write(f"{word}\n".encode())
+
+    async def results(self) -> dict[str, Any]:
+        """Stop the clients; their figures (:func:`benchmarks.plant_clients.results`)."""
+        self.command("stop")
+        body: dict[str, Any] = json.loads(await self._line())
+        async with asyncio.timeout(CLIENTS_TIMEOUT_S):
+            await self.process.wait()
+        return body
+
+    async def close(self) -> None:
+        """End the process if it still runs (a failed child), and reap it."""
+        if self.process.returncode is None:
+            self.process.kill()
+        await self.process.wait()
 
 
 def _delivery(bridge: Any, edge: Any) -> dict[str, int]:
@@ -222,10 +366,13 @@ def main(argv: Sequence[str] | None = None) -> None:
     parser.add_argument("--lines", type=int, default=LINES)
     parser.add_argument("--per-line", type=int, default=DRIVES_PER_LINE)
     parser.add_argument("--broker", type=int, default=0)
+    parser.add_argument("--id", default=GATEWAY_ID, help="the gateway's id")
+    parser.add_argument("--first-line", type=int, default=0, help="the first line's index")
     parser.add_argument("--directory", required=True)
     parser.add_argument("--warm-up", type=float, default=WARM_UP_S)
     parser.add_argument("--window", type=float, default=WINDOW_S)
     parser.add_argument("--windows", type=int, default=WINDOWS)
+    parser.add_argument("--settle", type=float, default=CLIENTS_SETTLE_S)
     args = parser.parse_args(argv)
     print(json.dumps(asyncio.run(_child(args))), flush=True)
 
@@ -247,6 +394,8 @@ class Child:
     opcua_startup_s: float | None
     visible_s: dict[str, float]
     delivery: dict[str, int]
+    #: ``all``'s clients' figures (:func:`benchmarks.plant_clients.results`), else None.
+    clients: dict[str, Any] | None = None
 
     @property
     def best_cpu_s(self) -> float:
@@ -265,31 +414,52 @@ class Child:
             opcua_startup_s=body["opcua_startup_s"],
             visible_s=body["visible_s"],
             delivery=body["delivery"],
+            clients=body.get("clients"),
         )
 
 
-def _run_child(which: str, config: Config, broker: int, directory: Path) -> Child:
+def _command(
+    which: str,
+    config: Config,
+    broker: int,
+    directory: Path,
+    *,
+    gateway_id: str = GATEWAY_ID,
+    first_line: int = 0,
+    lines: int | None = None,
+    warm_up: float | None = None,
+) -> list[str]:
+    """A child's command line: *which* configuration, the run's sizes unless given."""
     quick = config.quick
-    command = [
+    return [
         sys.executable, "-m", "benchmarks.bench_plant", "gateway", "--with", which,
         "--broker", str(broker), "--directory", str(directory),
-        "--lines", str(QUICK_LINES if quick else LINES),
+        "--id", gateway_id, "--first-line", str(first_line),
+        "--lines", str(lines or (QUICK_LINES if quick else LINES)),
         "--per-line", str(QUICK_DRIVES_PER_LINE if quick else DRIVES_PER_LINE),
-        "--warm-up", str(QUICK_WARM_UP_S if quick else WARM_UP_S),
+        "--warm-up", str(warm_up or (QUICK_WARM_UP_S if quick else WARM_UP_S)),
         "--window", str(QUICK_WINDOW_S if quick else WINDOW_S),
         "--windows", str(1 if quick else WINDOWS),
+        "--settle", str(QUICK_CLIENTS_SETTLE_S if quick else CLIENTS_SETTLE_S),
     ]  # fmt: skip
+
+
+def _child_of(name: str, returncode: int, stdout: str, stderr: str) -> Child:
+    if returncode != 0:
+        raise RuntimeError(f"the {name} child failed ({returncode}): {stderr[-2000:]}")
+    return Child.from_json(json.loads(stdout.strip().splitlines()[-1]))
+
+
+def _run_child(which: str, config: Config, broker: int, directory: Path) -> Child:
     done = subprocess.run(
-        command,
+        _command(which, config, broker, directory),
         capture_output=True,
         text=True,
         timeout=CHILD_TIMEOUT_S,
-        cwd=Path(__file__).resolve().parent.parent,
+        cwd=ROOT,
         check=False,
     )
-    if done.returncode != 0:
-        raise RuntimeError(f"the {which} child failed ({done.returncode}): {done.stderr[-2000:]}")
-    return Child.from_json(json.loads(done.stdout.strip().splitlines()[-1]))
+    return _child_of(which, done.returncode, done.stdout, done.stderr)
 
 
 @contextmanager
@@ -307,17 +477,150 @@ def measure(config: Config) -> dict[str, Child]:
     return out
 
 
+# -- two gateways on one broker ------------------------------------------------------------
+
+#: The two gateways' ids: each serves half the lines, both on one broker, in one group.
+PAIR: Final = ("plant-a", "plant-b")
+#: Their children's warm-up: the time the fleet view and the host have to see every drive.
+PAIR_WARM_UP_S: Final = 20.0
+
+
+@dataclass(frozen=True)
+class TwoGateways:
+    """What a fleet view and a Sparkplug host saw of two gateways on one broker."""
+
+    #: Every drive of both gateways.
+    drives: int
+    #: The drives whose JSON state the fleet view got, and the devices born (DBIRTH).
+    fleet_drives: int
+    born: int
+    #: From the children's start to every drive in the fleet view, and to every DBIRTH
+    #: (None: not all of them by the end).
+    fleet_s: float | None
+    born_s: float | None
+    #: Each gateway's own figures, in :data:`PAIR`'s order.
+    children: tuple[Child, ...]
+
+
+class _Watch:
+    """A fleet view (``sj300 monitor --url mqtt://...``'s) and a Sparkplug host on a broker."""
+
+    def __init__(self, broker: int, drives: int) -> None:
+        self.broker = broker
+        self.drives = drives
+        self.seen: set[tuple[str, str, int]] = set()
+        self.born: set[str] = set()
+        #: Seconds from :attr:`began` to every drive seen, by which view.
+        self.times: dict[str, float] = {}
+        self.began = 0.0
+
+    def _all(self, view: str, found: set[Any]) -> None:
+        if len(found) >= self.drives:
+            self.times.setdefault(view, asyncio.get_running_loop().time() - self.began)
+
+    async def fleet(self, connected: asyncio.Event) -> None:
+        from sj300_async.gateway.mqtt import Fleet, StateMessage, follow, parse_fleet_url
+
+        def on_state(state: StateMessage) -> bool:
+            if state.gateway in PAIR:
+                self.seen.add((state.gateway, state.line, state.node))
+                self._all("fleet", self.seen)
+            return True
+
+        def on_link(problem: str | None) -> None:
+            if problem is None:
+                connected.set()
+
+        fleet = Fleet(parse_fleet_url(f"mqtt://127.0.0.1:{self.broker}"))
+        await follow(fleet, on_state, on_link=on_link)
+
+    async def host(self, connected: asyncio.Event) -> None:
+        from sj300_async.gateway.mqtt.client import Client
+        from sj300_async.gateway.sparkplug import decode_payload
+
+        async with Client("127.0.0.1", self.broker, identifier="bench-plant-host") as client:
+            await client.subscribe(f"spBv1.0/{GROUP}/DBIRTH/+/+", qos=0)
+            connected.set()
+            async for message in client.messages:
+                node, device = message.topic.split("/")[3:5]
+                if node in PAIR:
+                    decode_payload(message.payload)  # a birth it cannot read is no birth
+                    self.born.add(f"{node}/{device}")
+                    self._all("sparkplug", self.born)
+
+
+async def _pair_child(command: list[str], name: str) -> Child:
+    process = await asyncio.create_subprocess_exec(
+        *command, stdout=subprocess.PIPE, stderr=subprocess.PIPE, cwd=ROOT
+    )
+    try:
+        async with asyncio.timeout(CHILD_TIMEOUT_S):
+            out, err = await process.communicate()
+    finally:
+        if process.returncode is None:
+            process.kill()
+            await process.wait()
+    assert process.returncode is not None
+    return _child_of(name, process.returncode, out.decode(), err.decode())
+
+
+async def _two_gateways(config: Config, broker: int, directory: Path) -> TwoGateways:
+    quick = config.quick
+    lines = (QUICK_LINES if quick else LINES) // len(PAIR)
+    drives = lines * len(PAIR) * (QUICK_DRIVES_PER_LINE if quick else DRIVES_PER_LINE)
+    watch = _Watch(broker, drives)
+    views = [watch.fleet, watch.host]
+    connected = [asyncio.Event() for _ in views]
+    tasks = [asyncio.create_task(view(event)) for view, event in zip(views, connected, strict=True)]
+    try:
+        async with asyncio.timeout(CLIENTS_TIMEOUT_S):  # subscribed before any gateway starts
+            await asyncio.gather(*(event.wait() for event in connected))
+        watch.began = asyncio.get_running_loop().time()
+        commands = [
+            _command(
+                "mqtt+sparkplug", config, broker, directory, gateway_id=name,
+                first_line=index * lines, lines=lines,
+                warm_up=None if quick else PAIR_WARM_UP_S,
+            )
+            for index, name in enumerate(PAIR)
+        ]  # fmt: skip
+        children = await asyncio.gather(*map(_pair_child, commands, PAIR))
+    finally:
+        for task in tasks:
+            task.cancel()
+        failures = await asyncio.gather(*tasks, return_exceptions=True)
+    for failure in failures:
+        if not isinstance(failure, asyncio.CancelledError):
+            raise RuntimeError(f"a view of the two gateways failed: {failure!r}")
+    return TwoGateways(
+        drives,
+        len(watch.seen),
+        len(watch.born),
+        watch.times.get("fleet"),
+        watch.times.get("sparkplug"),
+        tuple(children),
+    )
+
+
+def measure_two_gateways(config: Config) -> TwoGateways:
+    """Two gateways of half the lines each on a broker of their own, watched (module
+    docstring)."""
+    with _broker() as port, tempfile.TemporaryDirectory(prefix="bench_plant_") as directory:
+        return asyncio.run(_two_gateways(config, port, Path(directory)))
+
+
 def _share(delivered: int, samples: int) -> float:
     return delivered / samples if samples else math.nan
 
 
 def run(config: Config) -> Section:
-    """Measure each configuration; rows against the bare poll of the same run."""
-    return report(measure(config))
+    """Measure each configuration, then two gateways; rows against the bare poll of the
+    same run."""
+    return report(measure(config), measure_two_gateways(config))
 
 
-def report(children: dict[str, Child]) -> Section:
-    """The rows and notes of *children*'s figures."""
+def report(children: dict[str, Child], two: TwoGateways | None = None) -> Section:
+    """The rows and notes of *children*'s figures, and of *two* gateways' when given."""
     bare = children["bare"]
     us = 1e6
     drives = bare.drives
@@ -380,6 +683,7 @@ def report(children: dict[str, Child]) -> Section:
             as_multiple=True,
         ),
     ]
+    results += _delay_rows(children["all"].clients)
     notes = [
         f"{drives} simulated SJ300 drives ({len(children)} children, one after the "
         "other), polled every second, each running on a long ramp; CPU per sample is "
@@ -407,7 +711,120 @@ def report(children: dict[str, Child]) -> Section:
             + (f"; Sparkplug {delivery['spb_replaced']} of {delivery['spb_samples']} samples "
                "replaced" if delivery["spb_samples"] else "")
         )  # fmt: skip
+    if children["all"].clients is not None:
+        notes.append(_clients_note(children["all"].clients, drives))
+    if two is not None:
+        results += _two_rows(two)
+        notes.append(_two_note(two))
     return Section(TITLE, tuple(notes), tuple(results))
+
+
+def _two_rows(two: TwoGateways) -> list[Result]:
+    """Every drive of both gateways in the fleet view and born to the host (the goal: all)."""
+    name = f"plant: two gateways on one broker ({two.drives} drives)"
+    return [
+        Result(
+            f"{name}, drives in the fleet view",
+            two.fleet_drives,
+            two.drives,
+            "drives",
+            target=1.0,
+            against="every drive",
+        ),
+        Result(
+            f"{name}, devices born to a Sparkplug host",
+            two.born,
+            two.drives,
+            "drives",
+            target=1.0,
+            against="every drive",
+        ),
+    ]
+
+
+def _two_note(two: TwoGateways) -> str:
+    def seconds(value: float | None) -> str:
+        return "never" if value is None else f"{value:.1f} s"
+
+    each = "; ".join(
+        f"`{gateway}` {child.drives} drives, CPU per sample "
+        + ", ".join(f"{c * 1e6:.0f}" for c in child.cpu_per_sample_s)
+        + " µs"
+        for gateway, child in zip(PAIR, two.children, strict=True)
+    )
+    return (
+        f"Two gateways (`mqtt+sparkplug`, half the lines each, one mosquitto, Sparkplug group "
+        f"`{GROUP}`), watched from before their start by a fleet view (`follow`, as `sj300 "
+        f"monitor --url mqtt://...`) and a Sparkplug host subscribed to the group's DBIRTHs: "
+        f"every drive in the fleet view after {seconds(two.fleet_s)}, every device born after "
+        f"{seconds(two.born_s)} (from the children's start, their imports and start-up "
+        f"included); {each}."
+    )
+
+
+def _delay_rows(clients: dict[str, Any] | None) -> list[Result]:
+    """A row per timed client of ``all``: its p99 against the poll interval (it keeps up)."""
+    figures = {} if clients is None else clients["clients"]
+    out = []
+    for key, label in DELAYED:
+        p99 = figures.get(key, {}).get("p99_ms")
+        out.append(
+            Result(
+                f"plant: p99 delay sample to {label}, every northbound on",
+                math.inf if p99 is None else p99,  # nothing received: never
+                INTERVAL_S * 1e3,
+                "ms",
+                target=1.0,
+                higher_is_better=False,
+                against="poll interval",
+                as_multiple=True,
+            )
+        )
+    return out
+
+
+def _clients_note(body: dict[str, Any], drives: int) -> str:
+    """What ``all``'s clients received, and what they cost their own process."""
+    figures = body["clients"]
+    lag = body["loop_lag_p99_ms"]
+    parts = []
+    for key, label in DELAYED:
+        one = figures.get(key)
+        if one is None:
+            continue
+        text = f"{label} {one['messages']:,} messages from {one['drives']:,} drives"
+        if one["p50_ms"] is not None:
+            text += (
+                f", delay p50 {one['p50_ms']:.0f} / p99 {one['p99_ms']:.0f} / max "
+                f"{one['max_ms']:.0f} ms"
+            )
+        text += f", {one['errors']} errors" if one["errors"] else ""
+        text += f" (**failed**: {one['failure']})" if one["failure"] else ""
+        if key == "sparkplug":
+            text += f", {one['births']:,} devices born while it listened"
+        parts.append(text)
+    modbus = figures.get("modbus")
+    if modbus is not None:
+        rate = modbus["reads_per_s"] or 0.0
+        errors = ", ".join(f"{n} {k}" for k, n in sorted(modbus["errors"].items())) or "none"
+        parts.append(
+            f"Modbus {modbus['masters']} master{'s' * (modbus['masters'] != 1)}, "
+            f"{rate:,.0f} reads/s of "
+            f"{drives * len(MODBUS_BLOCKS) / SWEEP_S:,.0f} due, errors {errors}, "
+            f"{modbus['late_sweeps']} sweeps late"
+            + (f" (**failed**: {modbus['failure']})" if modbus["failure"] else "")
+        )
+    return (
+        f"`all`'s clients (benchmarks/plant_clients.py, a process of its own; OPC UA "
+        f"publishing every {PUBLISHING_MS:.0f} ms, {EVENT_STREAMS} event streams; ready "
+        f"{body['ready_s']:.1f} s after starting; over the {body['window_s']:.1f} s of the "
+        f"windows: {body['cpu_s']:.2f} s CPU"
+        + ("" if lag is None else f", its loop's lag p99 {lag:.0f} ms")
+        + "): "
+        + "; ".join(parts)
+        + ". Delay: the client's `time.time()` on handling the message minus the sample's "
+        "time as the message carries it."
+    )
 
 
 if __name__ == "__main__":

@@ -651,12 +651,34 @@ def test_plant_runs_its_gateways_and_counts_every_sample(harness: ModuleType) ->
     assert set(children["all"].visible_s) == {"mqtt", "sparkplug"}  # every drive, both ways
     assert children["all"].opcua_startup_s > 0
     assert children["bare"].visible_s == {}
-    section = bench.report(children)
+    # all's clients, a process of their own, heard every drive through every northbound
+    assert children["bare"].clients is None
+    clients = children["all"].clients["clients"]
+    drives = bench.QUICK_LINES * bench.QUICK_DRIVES_PER_LINE
+    for name in ("mqtt", "sparkplug", "opcua", "http"):
+        figures = clients[name]
+        assert figures["failure"] is None, name
+        assert figures["drives"] == drives, name
+        assert figures["messages"] > 0, name  # in the window: a delay each
+        assert 0 < figures["p99_ms"] < 1000 * bench.INTERVAL_S, name
+    modbus = clients["modbus"]
+    assert modbus["failure"] is None
+    assert modbus["reads"] > 0
+    assert modbus["errors"] == {}
+    # two gateways of one line each on one broker: the fleet view and the host see all
+    two = bench.measure_two_gateways(_quick(harness))
+    assert two.fleet_drives == two.born == two.drives == drives
+    assert two.fleet_s is not None
+    assert two.born_s is not None
+    assert [child.drives for child in two.children] == [drives // 2, drives // 2]
+    section = bench.report(children, two)
     assert [(r.unit, r.target, r.against) for r in section.results] == [
         ("µs", bench.TARGET_ALL, "bare poll"),
         ("share", 1.0, "every sample"),
         ("share", 1.0, "every sample"),
         ("KiB", None, "bare poll"),
+        *[("ms", 1.0, "poll interval")] * 4,
+        *[("drives", 1.0, "every drive")] * 2,
     ]
 
 
@@ -687,8 +709,9 @@ def test_cli_quick_runs_every_benchmark_into_one_table() -> None:
     table = out.split("\n## results\n", 1)[1]
     rows = [line for line in table.splitlines() if line.startswith("| ") and "---" not in line]
     # header + rows of each benchmark: codec, tcp, loopback, latency, wire, scale, gateway,
-    # mqtt, workbench, opcua, plant (its quick run: bare and all only)
-    assert len(rows) == 1 + 3 + 10 + 4 + 3 + 2 + 5 + 3 + 3 + 5 + 9 + 4
+    # mqtt, workbench, opcua, plant (its quick run: bare and all only, all's four client
+    # delays, the two gateways' two counts)
+    assert len(rows) == 1 + 3 + 10 + 4 + 3 + 2 + 5 + 3 + 3 + 5 + 9 + 10
     assert "**failed**" not in out
 
 
