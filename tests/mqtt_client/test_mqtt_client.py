@@ -17,6 +17,7 @@ from pathlib import Path
 import aiomqtt
 import pytest
 from mqtt_broker import Broker, running_broker, tool
+from transports.bridges import wait_for_port
 from waiting import wait_for
 
 from sj300_async.gateway.mqtt.client import Client, Message, MqttError, Will
@@ -110,19 +111,14 @@ async def test_the_will_is_published_when_the_connection_dies_not_when_it_ends(
             assert protocol is not None
             assert protocol.transport is not None
             protocol.transport.abort()  # the socket dies as in a crash
+            await wait_for(lambda: c._error is not None, "the connection lost")
             with pytest.raises(MqttError):
-                await wait_for_error(c)
+                await c.publish("probe", b"")
         await wait_for(lambda: len(got) == 1, "the will")
         # A clean end before would have shown here as a second message.
         await broker.publish("gw/availability", "marker")
         await wait_for(lambda: len(got) == 2, "the marker")
     assert [m.payload for m in got] == [b"offline", b"marker"]
-
-
-async def wait_for_error(c: Client) -> None:
-    while True:
-        await c.publish("probe", b"")
-        await asyncio.sleep(0.01)
 
 
 async def test_a_stopped_broker_fails_every_waiter(broker: Broker) -> None:
@@ -155,9 +151,8 @@ async def test_tls_with_the_brokers_ca(broker: Broker, tmp_path: Path) -> None:
     )
     try:
         trusting = ssl.create_default_context(cafile=str(ca))
-        tls_client = Client("localhost", port, identifier="tls", tls=trusting)
-        await wait_for_connect(tls_client)
-        async with tls_client as c:
+        await wait_for_port(port)
+        async with Client("localhost", port, identifier="tls", tls=trusting) as c:
             assert await c.subscribe("secure", qos=1) == (1,)
             await c.publish("secure", b"over TLS", qos=1)
             message = await anext(c.messages)
@@ -170,19 +165,6 @@ async def test_tls_with_the_brokers_ca(broker: Broker, tmp_path: Path) -> None:
     finally:
         proc.terminate()
         await proc.wait()
-
-
-async def wait_for_connect(c: Client) -> None:
-    """Connect once the broker listens (its start is not logged here)."""
-    for _ in range(200):
-        try:
-            async with Client(c.host, c.port, identifier="ping", tls=c._tls):
-                return
-        except MqttError as exc:
-            if "CERTIFICATE" in str(exc):
-                raise
-            await asyncio.sleep(0.05)
-    raise AssertionError("the TLS broker did not start")
 
 
 def _certificates(directory: Path) -> tuple[Path, Path, Path]:
@@ -414,7 +396,8 @@ async def test_a_cancelled_exit_still_closes_the_socket() -> None:
         filling = asyncio.create_task(c.publish_many([("t", b"x" * 60_000, False)] * 400))
         await wait_for(lambda: c._writable is not None, "the socket's buffers full")
         exiting = asyncio.create_task(c.__aexit__(None, None, None))
-        await asyncio.sleep(0.05)  # waiting for the DISCONNECT to go out
+        # Past the DISCONNECT: the connection is over, the socket's close still waits.
+        await wait_for(lambda: c._error is not None, "the exit under way")
         exiting.cancel()
         with pytest.raises(asyncio.CancelledError):
             await exiting
