@@ -325,10 +325,13 @@ async def test_node_opcua_browses_lines_drives_and_their_variables_by_their_name
     assert {c["browseName"] for c in shaft["children"]} == {"0:EnumStrings"}
 
     logbook = walk(drive1, "Logbook")
-    assert set(children(logbook)) == {"ActiveTrip", "TripCount"} | {f"Trip{i}" for i in range(1, 9)}
-    assert set(children(walk(logbook, "Trip8"))) == {
-        "Code", "Meaning", "OutputFrequency", "OutputCurrent", "OutputVoltage",
+    assert set(children(logbook)) == {
+        "ActiveTrip", "TripCount", "TripCodes", "TripMeanings", "TripOutputFrequencies",
+        "TripOutputCurrents", "TripOutputVoltages",
     }  # fmt: skip
+    trip_frequencies = walk(logbook, "TripOutputFrequencies")
+    assert trip_frequencies["typeDefinition"] == "ns=0;i=17497"  # AnalogUnitType, an array
+    assert {c["browseName"] for c in trip_frequencies["children"]} == {"0:EngineeringUnits"}
     assert set(children(walk(drive1, "Parameters"))) == {"A004", "F002"}
     assert set(children(walk(hall, "Drive3", "Parameters"))) == {"A004", "F002"}
 

@@ -9,6 +9,7 @@ from datetime import datetime
 from pathlib import Path
 from typing import Any
 
+import pytest
 from asyncua import Client, ua
 from waiting import wait_for
 
@@ -29,6 +30,13 @@ HZ_UNIT_ID = (ord("H") << 16) | (ord("T") << 8) | ord("Z")
 async def _namespace(client: Client) -> int:
     index: int = await client.get_namespace_index(NAMESPACE)
     return index
+
+
+#: The trip history's arrays under each drive's Logbook.
+TRIP_ARRAYS = (
+    "TripCodes", "TripMeanings", "TripOutputFrequencies", "TripOutputCurrents",
+    "TripOutputVoltages",
+)  # fmt: skip
 
 
 def _var(client: Client, ns: int, path: str) -> Any:
@@ -91,13 +99,20 @@ async def test_the_model_follows_opc_40400_with_units_and_ranges(tmp_path: Path)
         assert access.Value.Value & ua.AccessLevel.CurrentWrite.mask
         access = await a004.read_attribute(ua.AttributeIds.AccessLevel)
         assert not access.Value.Value & ua.AccessLevel.CurrentWrite.mask
-        # The trip history, one object per record.
+        # The trip history, one array per field.
         logbook = _var(client, ns, "hall/Drive1/Logbook")
-        assert {"ActiveTrip", "TripCount", "Trip1", "Trip8"} <= await _names(logbook)
-        assert await _names(_var(client, ns, "hall/Drive1/Logbook/Trip1")) == {
-            "Code", "Meaning", "OutputFrequency", "OutputCurrent", "OutputVoltage",
-        }  # fmt: skip
-        assert server.node_count > 4 * 80
+        assert await _names(logbook) == {"ActiveTrip", "TripCount", *TRIP_ARRAYS}
+        frequencies = _var(client, ns, "hall/Drive1/Logbook/TripOutputFrequencies")
+        rank = await frequencies.read_attribute(ua.AttributeIds.ValueRank)
+        assert rank.Value.Value == ua.ValueRank.OneDimension
+        dims = await frequencies.read_attribute(ua.AttributeIds.ArrayDimensions)
+        assert dims.Value.Value == [0]
+        assert (await frequencies.read_data_type()) == ua.NodeId(ua.ObjectIds.Double)
+        units = await (await frequencies.get_child(["0:EngineeringUnits"])).read_value()
+        assert units.UnitId == HZ_UNIT_ID
+        # 212 with 4 drives (the line, its folder and counters included); 101 per drive
+        # when each trip record was an object.
+        assert 4 * 40 < server.node_count < 4 * 60
 
 
 async def test_values_carry_the_time_they_were_read_and_good_quality(tmp_path: Path) -> None:
@@ -134,14 +149,43 @@ async def test_values_carry_the_time_they_were_read_and_good_quality(tmp_path: P
             a004 = await _var(client, ns, "hall/Drive1/Parameters/A004").read_data_value()
             assert a004.StatusCode.is_good()
             assert a004.Value.Value == snapshot.parameters["A004"].value
-            # An empty trip slot has no value and says so.
-            slot = await _var(client, ns, "hall/Drive1/Logbook/Trip8/Code").read_data_value(
-                raise_on_bad_status=False
+            # The trip history, once read: none recorded is an empty array, Good.
+            await wait_for(lambda: drive.snapshot.trips is not None, "the trip history read")
+            codes = await _var(client, ns, "hall/Drive1/Logbook/TripCodes").read_data_value()
+            assert codes.StatusCode.is_good()
+            assert codes.Value.Value == []
+
+
+async def test_the_trip_history_reads_newest_first_one_array_per_field(tmp_path: Path) -> None:
+    async with tcp_line() as (sim, url):
+        text = opcua_toml(tmp_path, url=url, line_extra="trips_interval_s = 0.2")
+        async with opcua_gateway(text) as (gateway, server), connected(server.url) as client:
+            ns = await _namespace(client)
+            drive = gateway.drive("hall", 2)
+            assert drive is not None
+            await wait_for(lambda: drive.snapshot.trips is not None, "the trip history read")
+            loop = asyncio.get_running_loop()
+            assert sim.drives[2].trip(7, now=loop.time())  # E07 over-voltage
+            await wait_for(
+                lambda: drive.snapshot.trips is not None and drive.snapshot.trips.records,
+                "the trip in the history",
             )
-            assert slot.StatusCode.value in (
-                ua.StatusCodes.BadDataUnavailable, ua.StatusCodes.BadWaitingForInitialData,
-            )  # fmt: skip
-            assert slot.Value.Value is None
+            records = drive.snapshot.trips.records  # type: ignore[union-attr]
+            values = {
+                name: (await _var(client, ns, f"hall/Drive2/Logbook/{name}").read_value())
+                for name in TRIP_ARRAYS
+            }
+        assert values["TripCodes"] == [r.code for r in records]
+        assert values["TripCodes"][0] == "E07"
+        assert values["TripMeanings"][0] == "over-voltage"
+        for name, field in (("TripOutputFrequencies", "output_frequency_hz"),
+                            ("TripOutputCurrents", "output_current_a"),
+                            ("TripOutputVoltages", "output_voltage_v")):  # fmt: skip
+            expected = [getattr(r, field) for r in records]
+            served = values[name]
+            assert len(served) == len(expected)
+            for got, want in zip(served, expected, strict=True):  # NaN: not recorded
+                assert math.isnan(got) if want is None else got == pytest.approx(want)
 
 
 async def test_a_silent_drive_goes_uncertain_then_bad_no_communication(tmp_path: Path) -> None:

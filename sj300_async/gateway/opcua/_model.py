@@ -22,8 +22,10 @@
               Running, Tripped, State
             Logbook/                       (40400: PtLogbookType)
               ActiveTrip, TripCount
-              Trip1..Trip8/                newest first: Code, Meaning, OutputFrequency,
-                                           OutputCurrent, OutputVoltage (at the trip)
+              TripCodes, TripMeanings,     the trip history, one array per field,
+              TripOutputFrequencies,       newest first, as many entries as the
+              TripOutputCurrents,          drive keeps records (SJ300 6, FR-700 8);
+              TripOutputVoltages           the values at each trip
             Parameters/                    the polled and the granted parameters, in their units
               <code>                       writable where the line grants it
             TakeControl(), Run(Direction), Stop(), SetFrequency(Frequency)
@@ -53,7 +55,6 @@ from ._space import Argument, SpaceBuilder
 __all__ = [
     "DIRECTION_STATES",
     "LINE_COUNTERS",
-    "TRIP_SLOTS",
     "Binding",
     "DriveNodes",
     "Group",
@@ -63,8 +64,11 @@ __all__ = [
     "build_line",
 ]
 
-#: Trip records shown per drive (SJ300 keeps 6, FR-700 8).
-TRIP_SLOTS: Final = 8
+#: Why the trip history is arrays, not an object per record: an object per
+#: record, each with five variables and their units, was 72 of a drive's 101
+#: nodes, and asyncua keeps some 24 attribute values per node: at 2,048 drives
+#: most of the northbound's memory and start-up, for values that change only
+#: when a drive trips. One array per field says the same to a client.
 #: ShaftTurningDirection's states, indexed by :class:`~sj300_async.Direction`.
 DIRECTION_STATES: Final = ("stopped", "forward", "reverse")
 
@@ -107,6 +111,8 @@ class Binding:
     name: str = ""
     #: The Online variable: the verdict itself, not judged by it (never offline).
     verdict: bool = False
+    #: Its value is a list (an array of vtype), not a scalar.
+    array: bool = False
     #: Seconds its group may wait between reads by plan, beyond stale_after_s: the trip
     #: history is read every trips_interval_s, the set frequency every
     #: setpoint_interval_s; a value read on time is not stale.
@@ -213,10 +219,13 @@ def _monitor(get: Callable[[DriveSnapshot], object]) -> Source:
     return (lambda s: (get(s), s.monitor_at)), _monitor_at
 
 
-def _trip_slot(index: int, get: Callable[[Trip], object]) -> Source:
+def _trip_field(get: Callable[[Trip], object]) -> Source:
+    """One field of every trip record, newest first (None until the history is read)."""
+
     def read(s: DriveSnapshot) -> tuple[object, float]:
-        records = s.trips.records if s.trips is not None else ()
-        return (get(records[index]) if index < len(records) else None), s.trips_at
+        if s.trips is None:
+            return None, s.trips_at
+        return [get(record) for record in s.trips.records], s.trips_at
 
     return read, _trips_at
 
@@ -244,14 +253,21 @@ def _read_active_trip(s: DriveSnapshot) -> tuple[object, float]:
     return (str(s.trip) if s.tripped and s.trip is not None else ""), s.status_at
 
 
-#: A trip record's variables: name, type, value, unit.
-_TRIP_FIELDS: Final[tuple[tuple[str, ua.VariantType, Callable[[Trip], object], str], ...]] = (
-    ("Code", ua.VariantType.String, lambda t: t.code, ""),
-    ("Meaning", ua.VariantType.String, lambda t: t.meaning, ""),
-    ("OutputFrequency", ua.VariantType.Double, lambda t: t.output_frequency_hz, "Hz"),
-    ("OutputCurrent", ua.VariantType.Double, lambda t: t.output_current_a, "A"),
-    ("OutputVoltage", ua.VariantType.Double, lambda t: t.output_voltage_v, "V"),
-)
+#: The trip history's arrays: name, element type, a record's value, unit, description.
+_TRIP_FIELDS: Final[
+    tuple[tuple[str, ua.VariantType, Callable[[Trip], object], str, str], ...]
+] = (
+    ("TripCodes", ua.VariantType.String, lambda t: t.code, "",
+     "each trip's code, newest first"),
+    ("TripMeanings", ua.VariantType.String, lambda t: t.meaning, "",
+     "what each trip means, newest first (null: a code the manual does not list)"),
+    ("TripOutputFrequencies", ua.VariantType.Double, lambda t: t.output_frequency_hz, "Hz",
+     "the output frequency at each trip, newest first (NaN: not recorded)"),
+    ("TripOutputCurrents", ua.VariantType.Double, lambda t: t.output_current_a, "A",
+     "the output current at each trip, newest first (NaN: not recorded)"),
+    ("TripOutputVoltages", ua.VariantType.Double, lambda t: t.output_voltage_v, "V",
+     "the output voltage at each trip, newest first (NaN: not recorded)"),
+)  # fmt: skip
 _DIRECTION: Final[Source] = (_read_direction, lambda s: s.direction_at)
 _ACTIVE_TRIP: Final[Source] = (_read_active_trip, _status_or_trips_at)
 _STATE: Final[Source] = ((lambda s: (s.state_text(), s.status_at)), _status_or_trips_at)
@@ -290,14 +306,17 @@ class _DriveBuilder:
         value_range: tuple[float, float] | None = None,
         states: Sequence[str] = (),
         writable: bool = False,
+        array: bool = False,
     ) -> ua.NodeId:
         node = self.space.variable(
             parent, f"{path}/{name}", name, vtype, description=description, unit=unit,
-            value_range=value_range, states=states, writable=writable,
+            value_range=value_range, states=states, writable=writable, array=array,
         )  # fmt: skip
         read, stamp = source
         relative = f"{path}/{name}".removeprefix(f"{self.path}/")
-        binding = Binding(node, vtype, read, relative, verdict=verdict, allowance=allowance)
+        binding = Binding(
+            node, vtype, read, relative, verdict=verdict, allowance=allowance, array=array
+        )
         self.nodes.bindings.append(binding)
         group = self._groups.get(id(stamp))
         if group is None:
@@ -368,13 +387,9 @@ def build_drive(
     trips = drive.line.trips_interval_s
     b.var(folder, logbook, "TripCount", ua.VariantType.UInt32, _TRIP_COUNT, allowance=trips,
           description="trips since the counter was cleared")  # fmt: skip
-    for slot in range(TRIP_SLOTS):
-        slot_path = f"{logbook}/Trip{slot + 1}"
-        first = "the newest trip" if slot == 0 else ""
-        trip = space.object(folder, slot_path, f"Trip{slot + 1}", first, component=True)
-        for field_name, vtype, get, unit in _TRIP_FIELDS:
-            b.var(trip, slot_path, field_name, vtype, _trip_slot(slot, get), unit=unit,
-                  allowance=trips)  # fmt: skip
+    for field_name, vtype, get, unit, description in _TRIP_FIELDS:
+        b.var(folder, logbook, field_name, vtype, _trip_field(get), unit=unit,
+              allowance=trips, description=description, array=True)  # fmt: skip
 
     granted = drive.line.writable_parameters(drive.node)
     codes = list(dict.fromkeys((*drive.line.parameters, *sorted(granted))))

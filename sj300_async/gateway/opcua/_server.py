@@ -32,7 +32,7 @@ import socket
 import time
 from collections.abc import Iterable, Iterator
 from pathlib import Path
-from typing import TYPE_CHECKING, Any, Final
+from typing import TYPE_CHECKING, Any, Final, cast
 
 from asyncua import Server, ua
 from asyncua.common.connection import TransportLimits
@@ -422,7 +422,14 @@ class OpcuaServer:
         if status & 0x80000000:  # Bad: no value (Part 4, 7.7.1)
             variant = ua.Variant(None, ua.VariantType.Null)
         else:
-            variant = ua.Variant(_CONVERT[binding.vtype](binding.value), binding.vtype)
+            convert = _CONVERT[binding.vtype]
+            if binding.array:  # a missing element: a null string, a NaN number
+                empty = math.nan if binding.vtype == ua.VariantType.Double else None
+                items = cast("list[object]", binding.value)
+                value: object = [empty if v is None else convert(v) for v in items]
+            else:
+                value = convert(binding.value)
+            variant = ua.Variant(value, binding.vtype)
         return FrozenDataValue(
             Value=variant,
             StatusCode=ua.StatusCode(status),

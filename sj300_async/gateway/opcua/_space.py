@@ -142,8 +142,12 @@ class SpaceBuilder:
         value_range: tuple[float, float] | None = None,
         states: Sequence[str] = (),
         writable: bool = False,
+        array: bool = False,
     ) -> ua.NodeId:
-        """A data variable; with a UNECE unit an AnalogUnitType with its EngineeringUnits."""
+        """A data variable; with a UNECE unit an AnalogUnitType with its EngineeringUnits.
+
+        *array*: its value is a one-dimensional array of *vtype*, of any length.
+        """
         eu = eu_information(unit)
         type_definition = ua.NodeId(ua.ObjectIds.BaseDataVariableType)
         if eu is not None:
@@ -154,7 +158,8 @@ class SpaceBuilder:
         attributes = ua.VariableAttributes(
             Value=ua.Variant(None, ua.VariantType.Null),
             DataType=ua.NodeId(vtype.value),
-            ValueRank=ua.ValueRank.Scalar,
+            ValueRank=ua.ValueRank.OneDimension if array else ua.ValueRank.Scalar,
+            ArrayDimensions=[0] if array else None,
             AccessLevel=access,
             UserAccessLevel=access,
             Historizing=False,
