@@ -96,6 +96,7 @@ from ._harness import Config, Result, Section
 from .bench_mqtt import _mosquitto
 from .bench_opcua import _start_drives, opcua_section
 from .plant_clients import (
+    CLOSE_TIMEOUT_S,
     EVENT_STREAMS,
     MODBUS_BLOCKS,
     PUBLISHING_MS,
@@ -154,6 +155,8 @@ CHILD_TIMEOUT_S: Final = 300.0
 #: How long ``all``'s clients may take to say they are ready (they give up on a client
 #: after plant_clients.READY_TIMEOUT_S and report it), or to answer.
 CLIENTS_TIMEOUT_S: Final = READY_TIMEOUT_S + 30.0
+#: How long the clients process takes to close after its figures, at most.
+CLIENTS_CLOSE_S: Final = CLOSE_TIMEOUT_S
 #: From the clients' subscriptions to the windows (full, --quick): the first values they
 #: are handed (each drive's state as of subscribing, the event streams' "everything") pass.
 CLIENTS_SETTLE_S: Final = 3.0
@@ -331,7 +334,11 @@ class _Clients:
         """Stop the clients; their figures (:func:`benchmarks.plant_clients.results`)."""
         self.command("stop")
         body: dict[str, Any] = json.loads(await self._line())
-        async with asyncio.timeout(CLIENTS_TIMEOUT_S):
+        try:  # its figures are out: a close that hangs (an OPC UA session's) is cut short
+            async with asyncio.timeout(2 * CLIENTS_CLOSE_S):
+                await self.process.wait()
+        except TimeoutError:
+            self.process.kill()
             await self.process.wait()
         return body
 

@@ -89,6 +89,8 @@ MODBUS_BLOCKS: Final = ((100, 14), (200, 5))
 SWEEP_S: Final = 1.0
 #: How long the clients may take to subscribe (OPC UA's items on a busy server).
 READY_TIMEOUT_S: Final = 90.0
+#: How long the clients get to close once their figures are out.
+CLOSE_TIMEOUT_S: Final = 5.0
 #: How often the event loop's lag is sampled.
 LAG_TICK_S: Final = 0.05
 #: The MQTT topics' prefix (the gateway's default) and Sparkplug's namespace.
@@ -551,7 +553,7 @@ async def _subscribed(readies: Sequence[tuple[Tally | ModbusTally, asyncio.Event
             tally.failure = f"not subscribed within {READY_TIMEOUT_S:g} s"
 
 
-async def _serve(args: argparse.Namespace) -> dict[str, Any]:
+async def _serve(args: argparse.Namespace) -> None:
     run = _Run()
     began = time.perf_counter()
     run.tasks.append(asyncio.create_task(_loop_lag(run.window, run.lags)))
@@ -565,11 +567,14 @@ async def _serve(args: argparse.Namespace) -> dict[str, Any]:
             if line.strip() == b"start":
                 run.window.start()
         run.window.stop()
+        # The figures are final once the window closes: out before the clients close,
+        # whose goodbyes (an OPC UA session's close, on a gateway still busy with the
+        # others) may take long, once for ever (a full run's child waited 120 s).
+        print(json.dumps(results(run), allow_nan=False), flush=True)
     finally:
         for task in run.tasks:
             task.cancel()
-        await asyncio.gather(*run.tasks, return_exceptions=True)
-    return results(run)
+        await asyncio.wait(run.tasks, timeout=CLOSE_TIMEOUT_S)
 
 
 def results(run: _Run) -> dict[str, Any]:
@@ -597,8 +602,7 @@ def main(argv: Sequence[str] | None = None) -> None:
     # failures are counted in the results, and nothing may log per message.
     for name in ("asyncua", "pymodbus"):
         logging.getLogger(name).setLevel(logging.CRITICAL)
-    body = asyncio.run(_serve(args))
-    print(json.dumps(body, allow_nan=False), flush=True)
+    asyncio.run(_serve(args))
 
 
 if __name__ == "__main__":
