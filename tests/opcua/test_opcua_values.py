@@ -13,6 +13,8 @@ import pytest
 from asyncua import Client, ua
 from waiting import wait_for
 
+from sj300_async.gateway import GatewayDrive
+
 from .conftest import (
     NAMESPACE,
     PASSWORD,
@@ -249,6 +251,12 @@ class _Notifications:
         self.changes.append((value, time.time(), data.monitored_item.Value))
 
 
+async def _three_more_samples(drive: GatewayDrive) -> None:
+    """Until the drive has been polled three more times (its line polls every 0.1 s)."""
+    polls = drive.snapshot.taken_at
+    await wait_for(lambda: drive.snapshot.taken_at > polls + 0.3, "three more samples")
+
+
 async def test_a_subscription_follows_a_running_drive(tmp_path: Path, client_pair: Pair) -> None:
     async with (
         opcua_gateway(opcua_toml(tmp_path)) as (gateway, server),
@@ -285,8 +293,7 @@ async def test_a_subscription_follows_a_running_drive(tmp_path: Path, client_pai
             assert data.SourceTimestamp.timestamp() <= received
         # A sample that changes nothing notifies nothing: at 3 Hz the value stands.
         settled = len(handler.changes)
-        polls = drive.snapshot.taken_at
-        await wait_for(lambda: drive.snapshot.taken_at > polls + 0.3, "three more samples")
+        await _three_more_samples(drive)
         assert [c[0] for c in handler.changes[settled:] if isinstance(c[0], float)] == []
         await node.call_method(f"{ns}:Stop")
 
@@ -309,8 +316,7 @@ async def test_only_watched_values_are_pushed_and_reads_stay_fresh(
         await node.call_method(f"{ns}:Run", "forward")
         frequency = _var(client, ns, "hall/Drive1/Monitoring/ConverterOutputFrequency")
         # Ramping, and nobody subscribed: every sample changes it, nothing is pushed.
-        polls = drive.snapshot.taken_at
-        await wait_for(lambda: drive.snapshot.taken_at > polls + 0.3, "three more samples")
+        await _three_more_samples(drive)
         assert server.pushed == 0
         first = (await frequency.read_data_value()).Value.Value
         handler = _Notifications()
@@ -319,8 +325,7 @@ async def test_only_watched_values_are_pushed_and_reads_stay_fresh(
         await wait_for(lambda: server.pushed > 0, "a pushed value")
         await subscription.unsubscribe(handle)
         pushed = server.pushed
-        polls = drive.snapshot.taken_at
-        await wait_for(lambda: drive.snapshot.taken_at > polls + 0.3, "three more samples")
+        await _three_more_samples(drive)
         assert server.pushed == pushed  # unwatched again
         later = (await frequency.read_data_value()).Value.Value
         assert first < later <= 3.0  # the read is the latest sample, not the last push
