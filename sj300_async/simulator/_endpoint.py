@@ -76,7 +76,10 @@ class SimulatorEndpoint:
         self._loop = loop
         self._queue: list[_Job] = []
         self._sequence = itertools.count()
-        self._timers: set[asyncio.TimerHandle] = set()
+        # Each job's timer by its sequence number. No closure holds its own timer: that
+        # cycle (handle -> callback -> cell -> handle) made 8 objects of garbage per job
+        # that only the cyclic collector frees, two jobs per drive sample.
+        self._timers: dict[int, asyncio.TimerHandle] = {}
         self._closed = False
 
     @property
@@ -116,7 +119,7 @@ class SimulatorEndpoint:
         is heard. What the drives answer goes nowhere.
         """
         self._closed = True
-        for timer in self._timers:
+        for timer in self._timers.values():
             timer.cancel()
         self._timers.clear()
         if self._queue:
@@ -157,19 +160,15 @@ class SimulatorEndpoint:
             self._send(data)
 
     def _at(self, when: float, job: Callable[[], object]) -> None:
-        heapq.heappush(self._queue, (when, next(self._sequence), job))
-        loop = self._get_loop()
-        timer: asyncio.TimerHandle | None = None
+        sequence = next(self._sequence)
+        heapq.heappush(self._queue, (when, sequence, job))
+        self._timers[sequence] = self._get_loop().call_at(when, self._fire, when, sequence)
 
-        def fire() -> None:
-            assert timer is not None
-            self._timers.discard(timer)
-            # A loop that wakes late finds later deliveries due as well: they
-            # go now, with this one.
-            self._run_due(max(when, loop.time()))
-
-        timer = loop.call_at(when, fire)
-        self._timers.add(timer)
+    def _fire(self, when: float, sequence: int) -> None:
+        del self._timers[sequence]
+        # A loop that wakes late finds later deliveries due as well: they go now, with
+        # this one.
+        self._run_due(max(when, self._get_loop().time()))
 
     def _run_due(self, until: float) -> None:
         # Everything due by *until* (never later than now), in (time, sequence)
