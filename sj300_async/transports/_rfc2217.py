@@ -36,7 +36,7 @@ import asyncio
 import logging
 import socket
 from collections.abc import Callable
-from typing import Any, Final
+from typing import Any, Final, cast
 
 from ..wire import LineSettings, TransportError
 from ._buffered import BufferedReads
@@ -168,7 +168,9 @@ class _TcpSide(BufferedReads):
         self._owner = owner
 
     def connection_made(self, transport: asyncio.BaseTransport) -> None:
-        assert isinstance(transport, asyncio.Transport)
+        # Not isinstance(): uvloop's transports implement the interface without
+        # deriving from asyncio's classes.
+        transport = cast(asyncio.Transport, transport)
         self._owner._tcp = transport
 
     def data_received(self, data: bytes) -> None:

@@ -40,7 +40,7 @@ import logging
 import socket
 import ssl
 from collections.abc import Awaitable, Callable, Iterable
-from typing import TYPE_CHECKING, Final
+from typing import TYPE_CHECKING, Final, cast
 
 from aiohttp import web
 from aiohttp.abc import AbstractAccessLogger
@@ -251,7 +251,9 @@ class _Connection(asyncio.Protocol):
         self.received = bytearray()
 
     def connection_made(self, transport: asyncio.BaseTransport) -> None:
-        assert isinstance(transport, asyncio.Transport)
+        # Not isinstance(): uvloop's transports implement the interface without
+        # deriving from asyncio's classes.
+        transport = cast(asyncio.Transport, transport)
         self._transport = transport
         self._server._connections[self._handler] = self
         self._handler.connection_made(transport)

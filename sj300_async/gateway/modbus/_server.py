@@ -45,7 +45,7 @@ import asyncio
 import logging
 from collections.abc import Coroutine
 from dataclasses import dataclass
-from typing import Any, Final
+from typing import Any, Final, cast
 
 from .. import (
     ConnectionLimit,
@@ -181,7 +181,9 @@ class _Connection(asyncio.Protocol):
     # -- asyncio's callbacks ---------------------------------------------------------
 
     def connection_made(self, transport: asyncio.BaseTransport) -> None:
-        assert isinstance(transport, asyncio.Transport)  # admitted by the Listener
+        # Not isinstance(): uvloop's transports implement the interface without
+        # deriving from asyncio's classes.
+        transport = cast(asyncio.Transport, transport)
         self.transport = transport
         peer = transport.get_extra_info("peername") or ("?", 0)
         host, port = str(peer[0]), peer[1]
