@@ -55,6 +55,7 @@ from ._model import (
     parse_endpoint,
 )
 from ._northbound import (
+    GATHER_S,
     Flag,
     GatewayView,
     Northbound,
@@ -90,6 +91,7 @@ __all__ = [
     "COMMAND_LINE",
     "DEFAULT_LEASE_S",
     "DEFAULT_STALE_AFTER_S",
+    "GATHER_S",
     "LAPSE_ACTIONS",
     "LIMIT_KEYS",
     "POLL_READS",

@@ -76,7 +76,7 @@ from dataclasses import dataclass
 from typing import TYPE_CHECKING, Final
 
 from ...profiles import DriveSnapshot
-from .. import GatewayDrive, GatewayView, Refusal, WriteResult, excerpt
+from .. import GATHER_S, GatewayDrive, GatewayView, Refusal, WriteResult, excerpt
 from ._commands import DROPPED_BY_STOP, MAX_PAYLOAD_BYTES, error_text, oversized, parse_command
 from ._config import MqttConfig
 from ._discovery import discovery
@@ -266,6 +266,7 @@ class MqttBridge:
     async def _publisher(self, client: Client) -> None:
         while True:
             await self._wake.wait()
+            await asyncio.sleep(GATHER_S)  # the samples that follow go in the same batch
             self._wake.clear()
             await self._send(client)
 

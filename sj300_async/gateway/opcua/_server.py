@@ -41,7 +41,14 @@ from asyncua.server.address_space import NodeData
 from cryptography import x509
 
 from ...profiles import DriveSnapshot
-from .. import GatewayDrive, GatewayLine, GatewayStartError, GatewayView, busy_seconds
+from .. import (
+    GATHER_S,
+    GatewayDrive,
+    GatewayLine,
+    GatewayStartError,
+    GatewayView,
+    busy_seconds,
+)
 from ._calls import Calls
 from ._certificate import ServerCertificate, load_or_generate
 from ._config import OpcuaConfig
@@ -475,6 +482,7 @@ class OpcuaServer:
         assert server is not None
         while True:
             await self._wake.wait()
+            await asyncio.sleep(GATHER_S)  # the samples that follow are pushed together
             self._wake.clear()
             outbox, self._outbox = self._outbox, {}
             for node, value in outbox.items():

@@ -64,6 +64,7 @@ from typing import TYPE_CHECKING, Final
 from ...profiles import DriveSnapshot
 from ...wire import Direction
 from .. import (
+    GATHER_S,
     GatewayLine,
     GatewayView,
     Heartbeat,
@@ -389,6 +390,7 @@ class EdgeNode:
     async def _publisher(self, client: Client) -> None:
         while True:
             await self._wake.wait()
+            await asyncio.sleep(GATHER_S)  # the samples that follow go out together
             self._wake.clear()
             if not self._ready():
                 continue
