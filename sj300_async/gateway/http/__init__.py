@@ -145,7 +145,7 @@ class _Spec:
         "serve the workbench, its API, /metrics and /healthz there",
         aliases=("--metrics",),
     )
-    requires = ("aiohttp", "prometheus_client")
+    requires = ("aiohttp", "orjson", "prometheus_client")
 
     def parse(self, table: ConfigTable, context: SectionContext) -> HttpConfig:
         trend_s = table.number("trend_s", minimum=0, inclusive=False)

@@ -32,8 +32,9 @@ Decisions:
 from __future__ import annotations
 
 import asyncio
-import json
 from typing import Any, Final
+
+from .._fastjson import dumps
 
 __all__ = ["GATHER_S", "KEEPALIVE", "EventHub", "EventStream", "sse_frame"]
 
@@ -45,8 +46,7 @@ KEEPALIVE: Final = b": keepalive\n\n"
 
 def sse_frame(event: str, data: Any) -> bytes:
     """One server-sent event: ``event: NAME``, its JSON on one ``data:`` line."""
-    text = json.dumps(data, separators=(",", ":"), allow_nan=False)
-    return f"event: {event}\ndata: {text}\n\n".encode()
+    return b"event: %s\ndata: %s\n\n" % (event.encode(), dumps(data))
 
 
 class EventStream:

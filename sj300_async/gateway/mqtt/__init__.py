@@ -112,7 +112,7 @@ class _Spec:
         "publish to this MQTT broker (mqtt://HOST[:PORT] or mqtts://): state, "
         "availability, Home Assistant discovery (Sparkplug B: [mqtt] sparkplug = true)",
     )
-    requires = ("google.protobuf",)
+    requires = ("google.protobuf", "orjson")
 
     def parse(self, table: ConfigTable, context: SectionContext) -> MqttConfig:
         return parse_mqtt_section(table, context)

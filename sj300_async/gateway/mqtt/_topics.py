@@ -142,11 +142,13 @@ class StateMessage:
     lapse_pending: bool = False
 
     def to_json(self) -> bytes:
-        """The payload."""
+        """The payload: compact, keys sorted (needs the gateway extra: orjson)."""
+        from .._fastjson import dumps  # not at import: the fleet view only reads states
+
         body = {name: getattr(self, name) for name in self.__slots__}
         body["parameters"] = dict(self.parameters)
         body["status"] = None if self.status is None else dict(self.status)
-        return json.dumps(body, separators=(",", ":"), sort_keys=True).encode()
+        return dumps(body, sort_keys=True)
 
     @classmethod
     def from_json(cls, payload: bytes | str) -> StateMessage:
