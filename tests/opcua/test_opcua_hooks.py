@@ -407,8 +407,14 @@ async def test_monitored_items_are_followed_as_they_come_and_go(
         by_name = {b.name: b.watched for b in nodes.bindings}
         assert by_name["Monitoring/ConverterOutputFrequency"] == 2
         assert by_name["Monitoring/Running"] == 1
+        # What a sample visits: the monitor group (frequency) and the status group
+        # (running), each with only its watched binding, of a dozen groups.
+        visited = {b.name for g in nodes.watched_groups for b in g.watched}
+        assert visited == {"Monitoring/ConverterOutputFrequency", "Monitoring/Running"}
+        assert len(nodes.watched_groups) == 2 < len(nodes.groups)
         await subscription.unsubscribe(handles[0])
         await wait_for(lambda: nodes.watched == 2, "one deleted")
         await subscription.delete()
         await wait_for(lambda: nodes.watched == 0, "the subscription's items deleted with it")
         assert all(b.watched == 0 for b in nodes.bindings)
+        assert nodes.watched_groups == []

@@ -161,6 +161,8 @@ class Group:
     bindings: list[Binding] = field(default_factory=list)
     #: (stamp, online) when last taken.
     seen: object = None
+    #: Its bindings some monitored item watches (see DriveNodes.follow).
+    watched: list[Binding] = field(default_factory=list)
 
 
 @dataclass(slots=True, eq=False)
@@ -176,6 +178,18 @@ class DriveNodes:
     methods: MethodNodes | None = None
     #: Monitored items on its variables, all together (0: a sample costs nothing here).
     watched: int = 0
+    #: Its groups with a watched binding: all a sample looks at (see follow).
+    watched_groups: list[Group] = field(default_factory=list)
+
+    def follow(self) -> None:
+        """Note which bindings and groups are watched now (after a watch count changed).
+
+        A sample then visits only those: a drive has a dozen groups and some forty
+        variables, a SCADA typically watches a few of them.
+        """
+        for group in self.groups:
+            group.watched = [binding for binding in group.bindings if binding.watched > 0]
+        self.watched_groups = [group for group in self.groups if group.watched]
 
 
 @dataclass(slots=True, eq=False)

@@ -348,15 +348,14 @@ class OpcuaServer:
         now = asyncio.get_running_loop().time()
         changed = False
         online = snapshot.online
-        for group in nodes.groups:  # only the groups read again (the tick ages the rest)
+        for group in nodes.watched_groups:  # only those read again (the tick ages the rest)
             seen = (group.stamp(snapshot), online)
             if seen == group.seen:
                 continue
             group.seen = seen
-            for binding in group.bindings:
-                if binding.watched:
-                    binding.take(snapshot)
-                    changed |= self._stage(binding, now)
+            for binding in group.watched:
+                binding.take(snapshot)
+                changed |= self._stage(binding, now)
         if changed:
             self._wake.set()
 
@@ -610,6 +609,7 @@ class OpcuaServer:
         nodes, binding = bound
         binding.watched += change
         nodes.watched += change
+        nodes.follow()
         if binding.watched > 0:
             self._watched[node] = bound
             return
