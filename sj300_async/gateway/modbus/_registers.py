@@ -244,6 +244,11 @@ def _parameter_field(code: str, address: int) -> Field:
 
 #: Encoded fields by address, with the read time each was encoded for (see RegisterMap.read).
 EncodingCache = dict[int, tuple[float, "list[int] | None"]]
+#: A read's fields, each with the words of it the read takes (first, stop).
+_Plan = tuple[tuple[Field, int, int], ...]
+#: Reads whose plan a map keeps (a SCADA reads the same few blocks over and over; what a
+#: client could ask is 65,536 x 125 reads, so past this many a plan is made every time).
+MAX_PLANS: Final = 1024
 
 
 class RegisterMap:
@@ -267,6 +272,8 @@ class RegisterMap:
                 if f.address + word in self._at:
                     raise AssertionError(f"register {f.address + word} defined twice")
                 self._at[f.address + word] = (f, word)
+        #: (address, count) -> the read's plan, or the exception refusing it (see read)
+        self._plans: dict[tuple[int, int], _Plan | Exc] = {}
 
     def __iter__(self) -> Iterator[Field]:
         return iter(self.fields)
@@ -286,14 +293,17 @@ class RegisterMap:
         with the read time it was encoded for: a SCADA reads far more often
         than the line polls, and a value is encoded once per read of it.
         """
+        key = (address, count)
+        plan = self._plans.get(key)
+        if plan is None:
+            plan = self._plan(address, count)
+            if len(self._plans) < MAX_PLANS:
+                self._plans[key] = plan
+        if isinstance(plan, Exc):
+            return plan
         out: list[int] = []
-        at, end = address, address + count
         snapshot = drive.snapshot
-        while at < end:  # field by field (a two-register field is read once)
-            found = self._at.get(at)
-            if found is None:
-                return Exc.ILLEGAL_ADDRESS
-            f, word = found
+        for f, first, stop in plan:
             stamp = f.stamp
             if stamp is None:  # live: computed every time
                 words = f.words(drive, now)
@@ -310,10 +320,23 @@ class RegisterMap:
                         cache[f.address] = (read_at, words)
             if words is None:
                 return Exc.TARGET_FAILED
-            taken = words[word : word + end - at]
-            out += taken
-            at += len(taken)
+            out += words if stop - first == f.width else words[first:stop]
         return out
+
+    def _plan(self, address: int, count: int) -> _Plan | Exc:
+        """The fields a read of *count* registers at *address* covers, each with the part
+        of its words it takes; ILLEGAL_ADDRESS when a register of it is in no field."""
+        plan: list[tuple[Field, int, int]] = []
+        at, end = address, address + count
+        while at < end:
+            found = self._at.get(at)
+            if found is None:
+                return Exc.ILLEGAL_ADDRESS
+            f, word = found
+            stop = min(f.width, word + end - at)
+            plan.append((f, word, stop))
+            at += stop - word
+        return tuple(plan)
 
     def decode_write(self, address: int, values: list[int]) -> WriteRequest | WriteResult:
         """What a write of *values* at *address* asks for (not yet judged), or why it is none.
