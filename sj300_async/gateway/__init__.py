@@ -21,6 +21,7 @@ from ._config import config_from_flags, load_config, parse_config, valid_name
 from ._control import Controller
 from ._drive import GatewayDrive, Lease
 from ._errors import GatewayStartError
+from ._fastjson import compact_json
 from ._gateway import Gateway, GatewayLine
 from ._listeners import (
     LIMIT_KEYS,
@@ -133,6 +134,7 @@ __all__ = [
     "WriteRequest",
     "WriteResult",
     "busy_seconds",
+    "compact_json",
     "config_from_flags",
     "cumulative_buckets",
     "default_gateway_id",

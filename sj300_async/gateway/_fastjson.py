@@ -3,9 +3,9 @@
 Each sample is a JSON document for the MQTT state and another for the
 workbench's event streams. The standard library's encoder cost 7.3 us for a
 state message, orjson 0.6 us, the same bytes (see CHANGELOG). orjson comes
-with the gateway extra; this module is imported only where the gateway
-encodes (the MQTT bridge, the workbench), never by what reads states (the
-fleet view, ``sj300 monitor --url mqtt://``), which needs no extra.
+with the gateway extra and is imported on the first call, not with the
+gateway's core: what only reads states (the fleet view, ``sj300 monitor
+--url mqtt://``) needs no extra.
 
 What differs from ``json.dumps``, and why it does not matter here: a float
 that is not finite is ``null`` (json writes ``NaN``, which is not JSON), a
@@ -16,19 +16,27 @@ gateway's values are drive readings and counters.
 
 from __future__ import annotations
 
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
-import orjson
+if TYPE_CHECKING:
+    from types import ModuleType
 
-__all__ = ["dumps"]
+__all__ = ["compact_json"]
 
-_SORTED = orjson.OPT_SORT_KEYS
+_orjson: ModuleType | None = None
 
 
-def dumps(value: Any, *, sort_keys: bool = False) -> bytes:
+def compact_json(value: Any, *, sort_keys: bool = False) -> bytes:
     """*value* as compact JSON (no spaces), keys sorted when asked.
 
     Raises:
         TypeError: a value JSON has no form for (a set, an object, a huge int).
+        ModuleNotFoundError: orjson is not installed (the gateway extra brings it).
     """
-    return orjson.dumps(value, option=_SORTED if sort_keys else None)
+    global _orjson
+    if _orjson is None:
+        import orjson
+
+        _orjson = orjson
+    written: bytes = _orjson.dumps(value, option=_orjson.OPT_SORT_KEYS if sort_keys else None)
+    return written

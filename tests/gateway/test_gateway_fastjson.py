@@ -1,4 +1,4 @@
-"""The JSON the gateway writes per sample (gateway/_fastjson.py, orjson) reads back as written.
+"""The JSON the gateway writes per sample (gateway.compact_json, orjson) reads back as written.
 
 The MQTT state and the workbench's events are encoded with orjson since
 issue 30; these check what a consumer of either relies on: the same values
@@ -16,7 +16,7 @@ from typing import Any
 from hypothesis import given
 from hypothesis import strategies as st
 
-from sj300_async.gateway._fastjson import dumps
+from sj300_async.gateway import compact_json as dumps
 from sj300_async.gateway.mqtt import StateMessage
 
 _SCALARS = (

@@ -34,7 +34,7 @@ from __future__ import annotations
 import asyncio
 from typing import Any, Final
 
-from .._fastjson import dumps
+from .. import compact_json
 
 __all__ = ["GATHER_S", "KEEPALIVE", "EventHub", "EventStream", "sse_frame"]
 
@@ -46,7 +46,7 @@ KEEPALIVE: Final = b": keepalive\n\n"
 
 def sse_frame(event: str, data: Any) -> bytes:
     """One server-sent event: ``event: NAME``, its JSON on one ``data:`` line."""
-    return b"event: %s\ndata: %s\n\n" % (event.encode(), dumps(data))
+    return b"event: %s\ndata: %s\n\n" % (event.encode(), compact_json(data))
 
 
 class EventStream:

@@ -37,6 +37,8 @@ from collections.abc import Mapping
 from dataclasses import dataclass, field
 from typing import Any, Final
 
+from .. import compact_json
+
 __all__ = [
     "AVAILABLE",
     "COMMANDS",
@@ -143,12 +145,10 @@ class StateMessage:
 
     def to_json(self) -> bytes:
         """The payload: compact, keys sorted (needs the gateway extra: orjson)."""
-        from .._fastjson import dumps  # not at import: the fleet view only reads states
-
         body = {name: getattr(self, name) for name in self.__slots__}
         body["parameters"] = dict(self.parameters)
         body["status"] = None if self.status is None else dict(self.status)
-        return dumps(body, sort_keys=True)
+        return compact_json(body, sort_keys=True)
 
     @classmethod
     def from_json(cls, payload: bytes | str) -> StateMessage:
