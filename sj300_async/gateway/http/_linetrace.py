@@ -8,14 +8,14 @@ received, :class:`~sj300_async.bus.TraceRecord`).
 
 Decisions:
 
-- **Record raw, judge when asked.** The hook only appends the record to a
-  bounded deque (:data:`KEEP_S` seconds, at most :data:`MAX_RECORDS`):
-  a line nobody looks at costs an append per chunk. What is kept of a
-  record is a tuple of plain values (its time, direction, bytes, and
-  whether the bus found it early), not the record: the parsed events it
-  carries are not kept alive, and the garbage collector stops tracking
-  such a tuple, so a plant's lines (64 of them, up to 50,000 chunks each)
-  add nothing to its scans. A request for frames
+- **Record raw, judge when asked.** The hook only appends the chunk to a
+  bounded log (:data:`KEEP_S` seconds, at most :data:`MAX_RECORDS`, see
+  :mod:`._chunklog`): a line nobody looks at costs an append per chunk.
+  What is kept of a record is its time, direction, bytes and whether the
+  bus found it early, in a few large arrays, not the record: the parsed
+  events it carries are not kept alive, the garbage collector has nothing
+  to scan, and a plant's lines (64 of them, 38,400 chunks each in 300 s)
+  take their bytes plus 13 per chunk. A request for frames
   runs the passive sniffer (:class:`~sj300_async.bus.LineSniffer`, the
   one ``sj300 sniff`` uses) over the window: it splits, pairs each reply
   with its request (response time) and flags bad check codes, broken
@@ -35,14 +35,14 @@ Decisions:
 
 from __future__ import annotations
 
-import collections
 import io
 import time
 from collections.abc import Iterable
-from typing import Any, Final, Literal
+from typing import Any, Final
 
 from ...bus import Bus, CaptureFile, LineSniffer, SniffedFrame, TraceRecord, Unanswered
 from ...profiles import frame_text
+from ._chunklog import ChunkLog, Kept
 
 __all__ = ["KEEP_S", "LEAD_S", "MAX_RECORDS", "LineTrace"]
 
@@ -56,8 +56,6 @@ LEAD_S: Final = 2.0
 MAX_FRAMES: Final = 2_000
 
 Json = dict[str, Any]
-#: A chunk as kept: loop time, "tx" or "rx", its bytes, found early by the bus.
-_Kept = tuple[float, Literal["tx", "rx"], bytes, bool]
 
 
 class LineTrace:
@@ -66,28 +64,22 @@ class LineTrace:
     def __init__(self, name: str, bus: Bus[Any, Any]) -> None:
         self.name = name
         self._bus = bus
-        self._records: collections.deque[_Kept] = collections.deque(maxlen=MAX_RECORDS)
+        self._records = ChunkLog(KEEP_S, MAX_RECORDS)
         #: Unix time minus loop time: the records carry the loop's clock.
         self._offset = time.time() - _loop_time()
 
     def __call__(self, record: TraceRecord) -> None:
-        records = self._records
-        at = record.timestamp
-        records.append((at, record.direction, record.data, bool(record.early)))
-        horizon = at - KEEP_S
-        while records[0][0] < horizon:
-            records.popleft()
+        self._records.append(record.timestamp, record.direction, record.data, bool(record.early))
 
     def unix(self, loop_time: float) -> float:
         return loop_time + self._offset
 
-    def _window(self, seconds: float) -> tuple[list[_Kept], float]:
+    def _window(self, seconds: float) -> tuple[list[Kept], float]:
         """The records of the last *seconds* (and :data:`LEAD_S` before), and the start."""
         if not self._records:
             return [], 0.0
         start = _loop_time() - seconds
-        lead = start - LEAD_S
-        return [r for r in self._records if r[0] >= lead], start
+        return list(self._records.since(start - LEAD_S)), start
 
     def frames(self, seconds: float, *, node: int | None = None) -> list[Json]:
         """The frames of the last *seconds*, judged, oldest first (at most :data:`MAX_FRAMES`).

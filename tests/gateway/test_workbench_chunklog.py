@@ -1,0 +1,81 @@
+"""The workbench's compact log of a line's chunks (gateway/http/_chunklog.py).
+
+A model check: whatever is appended, ``since(t)`` gives exactly the chunks
+a plain list would, for every ``t`` inside what the log promises to keep
+(the last ``keep_s`` seconds, the newest ``max_chunks``), and what it holds
+beyond that is bounded: segments are judged when a new one starts.
+"""
+
+from __future__ import annotations
+
+from typing import Literal
+
+from hypothesis import given
+from hypothesis import strategies as st
+
+from sj300_async.gateway.http._chunklog import ChunkLog, Kept
+
+_CHUNKS = st.lists(
+    st.tuples(
+        st.floats(min_value=0.0, max_value=2.0),
+        st.sampled_from(["tx", "rx"]),
+        st.binary(max_size=12),
+        st.booleans(),
+    ),
+    max_size=200,
+)
+
+
+def _fill(log: ChunkLog, chunks: list[tuple[float, str, bytes, bool]]) -> list[Kept]:
+    """Append *chunks* (each with its gap from the one before); the plain list of them."""
+    at, kept = 100.0, []
+    for gap, direction, data, early in chunks:
+        at += gap
+        side: Literal["tx", "rx"] = "rx" if direction == "rx" else "tx"
+        log.append(at, side, data, early)
+        kept.append((at, side, data, early))
+    return kept
+
+
+@given(_CHUNKS, st.floats(min_value=0.0, max_value=1.0))
+def test_what_is_kept_reads_back_exactly(
+    chunks: list[tuple[float, str, bytes, bool]], share: float
+) -> None:
+    log = ChunkLog(keep_s=1e9, max_chunks=10_000, segment=7)
+    kept = _fill(log, chunks)
+    assert len(log) == len(kept)
+    assert list(log.since(-1.0)) == kept
+    if kept:  # from any time inside it: what a list filtered from there gives
+        start = kept[0][0] + share * (kept[-1][0] - kept[0][0])
+        assert list(log.since(start)) == [c for c in kept if c[0] >= start]
+
+
+@given(_CHUNKS)
+def test_old_chunks_expire_by_whole_segments(chunks: list[tuple[float, str, bytes, bool]]) -> None:
+    log = ChunkLog(keep_s=5.0, max_chunks=10_000, segment=7)
+    kept = _fill(log, chunks)
+    if not kept:
+        return
+    horizon = kept[-1][0] - 5.0
+    recent = [c for c in kept if c[0] >= horizon]
+    assert list(log.since(horizon)) == recent
+    # Judged when the last segment started: everything since that moment's horizon,
+    # and at most the rest of the oldest segment before it.
+    judged = kept[(len(kept) - 1) // 7 * 7][0] - 5.0
+    since_judged = [c for c in kept if c[0] >= judged]
+    assert len(since_judged) <= len(log) < len(since_judged) + 7
+
+
+@given(st.integers(min_value=0, max_value=120))
+def test_at_most_about_max_chunks_are_kept(count: int) -> None:
+    log = ChunkLog(keep_s=1e9, max_chunks=30, segment=8)
+    kept = _fill(log, [(0.01, "tx", bytes([i % 256]), False) for i in range(count)])
+    newest = kept[-30:]
+    assert list(log.since(-1.0))[-len(newest) :] == newest
+    assert min(count, 30) <= len(log) < 30 + 2 * 8
+
+
+def test_an_empty_log_gives_nothing() -> None:
+    log = ChunkLog(keep_s=300.0, max_chunks=100)
+    assert len(log) == 0
+    assert list(log.since(0.0)) == []
