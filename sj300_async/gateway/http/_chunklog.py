@@ -75,7 +75,7 @@ class ChunkLog:
         """One chunk, at loop time *at* (not before the last one's).
 
         Every chunk of every line comes through here: the old segments are
-        judged only when a new one starts (hence "at most one segment more").
+        judged only when a new one starts (hence "plus two segments").
         """
         last = self._last
         if len(last.times) >= self.segment:
@@ -83,7 +83,7 @@ class ChunkLog:
         last.data += data
         last.times.append(at)
         last.ends.append(len(last.data))
-        last.flags.append((direction == "rx") | (early << 1))
+        last.flags.append(_RX * (direction == "rx") | _EARLY * early)
 
     def _start(self, at: float) -> _Segment:
         """A new last segment, once the old ones past the horizon or the bound are gone."""
