@@ -20,6 +20,7 @@ from sj300_async.gateway import (
     WriteResult,
 )
 from sj300_async.gateway.modbus import REFUSAL_CODES, Exc, Field, RegisterMap, parameter_address
+from sj300_async.gateway.modbus._registers import MAX_CACHED_READS, ReadCache
 from sj300_async.profiles import get_profile
 from sj300_async.wire import Direction
 
@@ -127,3 +128,52 @@ def test_the_lease_registers_show_the_lease() -> None:
     assert regs.read(state, 1000, 2, 10.0, 5.0) == [1, 25]
     assert regs.read(state, 1000, 2, 13.0, 5.0) == [0, 0]
     assert math.isinf(_state().lease.expires_at)
+
+
+def test_a_read_of_the_same_snapshot_is_answered_from_the_cache_while_fresh() -> None:
+    regs = RegisterMap(SJ300, ["A004"])
+    state = _state()
+    cache: ReadCache = {}
+    state.readings.set_parameter("A004", 500, 99.0)
+    state.rebuild(99.0)
+    assert regs.read(state, 12008, 2, 100.0, 5.0, cache) == [0, 500]
+    assert cache[12008, 2][0] is state.snapshot  # kept with the snapshot it came from
+    assert regs.read(state, 12008, 2, 101.0, 5.0, cache) == [0, 500]
+    # Aged past stale_after_s: refused, not the kept answer.
+    assert regs.read(state, 12008, 2, 104.1, 5.0, cache) == Exc.TARGET_FAILED
+    # A new snapshot: its values, not the kept ones.
+    state.readings.set_parameter("A004", 600, 104.0)
+    state.rebuild(104.0)
+    assert regs.read(state, 12008, 2, 104.1, 5.0, cache) == [0, 600]
+
+
+def test_a_read_with_a_live_register_is_never_kept() -> None:
+    regs = RegisterMap(SJ300)
+    state = _state()
+    cache: ReadCache = {}
+    state.lease.holder, state.lease.expires_at = "10.0.0.9", 12.5
+    assert regs.read(state, 1000, 2, 10.0, 5.0, cache) == [1, 25]
+    assert regs.read(state, 1000, 2, 11.0, 5.0, cache) == [1, 15]  # same snapshot, lease aged
+    assert regs.read(state, 0, 4, 10.0, 5.0, cache) == [0, 65535, 1, 1]  # the sample's age
+    assert cache == {}
+
+
+def test_a_units_cache_keeps_a_bounded_number_of_reads() -> None:
+    codes = [f"A{n:03d}" for n in range(1, MAX_CACHED_READS + 5)]
+    regs = RegisterMap(SJ300, codes)
+    state = _state()
+    cache: ReadCache = {}
+    for code in codes:
+        state.readings.set_parameter(code, 500, 99.0)
+    state.rebuild(99.0)
+    for code in codes:  # a client reading every parameter on its own
+        address = parameter_address(SJ300, code)
+        assert address is not None
+        assert regs.read(state, address, 2, 100.0, 5.0, cache) == [0, 500]
+    assert len(cache) == MAX_CACHED_READS
+    # The kept ones are answered again, the others still read.
+    assert regs.read(state, 12002, 2, 100.0, 5.0, cache) == [0, 500]  # A001: kept
+    last = parameter_address(SJ300, codes[-1])
+    assert last is not None
+    assert regs.read(state, last, 2, 100.0, 5.0, cache) == [0, 500]  # not kept: read
+    assert len(cache) == MAX_CACHED_READS

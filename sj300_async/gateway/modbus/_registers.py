@@ -242,13 +242,23 @@ def _parameter_field(code: str, address: int) -> Field:
     )
 
 
-#: Encoded fields by address, with the read time each was encoded for (see RegisterMap.read).
-EncodingCache = dict[int, tuple[float, "list[int] | None"]]
-#: A read's fields, each with the words of it the read takes (first, stop).
-_Plan = tuple[tuple[Field, int, int], ...]
+#: A unit's answered reads: (address, count) -> the snapshot it was read from, the
+#: oldest read time of its values, and the registers (see RegisterMap.read).
+ReadCache = dict[tuple[int, int], tuple[DriveSnapshot, float, "list[int]"]]
 #: Reads whose plan a map keeps (a SCADA reads the same few blocks over and over; what a
 #: client could ask is 65,536 x 125 reads, so past this many a plan is made every time).
 MAX_PLANS: Final = 1024
+#: Reads a unit's cache keeps answers of (a SCADA reads a unit in a few blocks).
+MAX_CACHED_READS: Final = 16
+
+
+@dataclass(frozen=True, slots=True)
+class _Plan:
+    """A read's fields, each with the words of it the read takes (first, stop)."""
+
+    segments: tuple[tuple[Field, int, int], ...]
+    #: A field of it is computed at every read (the lease, the sample's age): not cached.
+    live: bool
 
 
 class RegisterMap:
@@ -285,13 +295,17 @@ class RegisterMap:
         count: int,
         now: float,
         stale_after_s: float,
-        cache: EncodingCache | None = None,
+        cache: ReadCache | None = None,
     ) -> list[int] | Exc:
         """*count* registers from *address*, or the exception that refuses the whole read.
 
-        *cache*, kept per drive by the caller, holds each field's encoding
-        with the read time it was encoded for: a SCADA reads far more often
-        than the line polls, and a value is encoded once per read of it.
+        *cache*, kept per drive by the caller, holds each read's answer with
+        the snapshot it came from: a SCADA may read far more often than the
+        line polls, and the same read of the same snapshot is answered again
+        while its oldest value is fresh. One entry per read, not per field:
+        an entry per field, replaced at every sample, was two objects per
+        register for the cyclic collector to scan (70,000 at plant scale).
+        The list returned may be the cache's: the caller must not change it.
         """
         key = (address, count)
         plan = self._plans.get(key)
@@ -301,32 +315,32 @@ class RegisterMap:
                 self._plans[key] = plan
         if isinstance(plan, Exc):
             return plan
-        out: list[int] = []
         snapshot = drive.snapshot
-        for f, first, stop in plan:
+        cached = None if cache is None or plan.live else cache.get(key)
+        if cached is not None and cached[0] is snapshot and now - cached[1] <= stale_after_s:
+            return cached[2]
+        out: list[int] = []
+        oldest = math.inf
+        for f, first, stop in plan.segments:
             stamp = f.stamp
-            if stamp is None:  # live: computed every time
-                words = f.words(drive, now)
-            else:
+            if stamp is not None:  # else live: the lease, the sample's age
                 read_at = stamp(snapshot)
                 if now - read_at > stale_after_s:
                     return Exc.TARGET_FAILED
-                cached = None if cache is None else cache.get(f.address)
-                if cached is not None and cached[0] == read_at:
-                    words = cached[1]
-                else:
-                    words = f.words(drive, now)
-                    if cache is not None:
-                        cache[f.address] = (read_at, words)
+                if read_at < oldest:
+                    oldest = read_at
+            words = f.words(drive, now)
             if words is None:
                 return Exc.TARGET_FAILED
             out += words if stop - first == f.width else words[first:stop]
+        if cache is not None and not plan.live and (key in cache or len(cache) < MAX_CACHED_READS):
+            cache[key] = (snapshot, oldest, out)
         return out
 
     def _plan(self, address: int, count: int) -> _Plan | Exc:
         """The fields a read of *count* registers at *address* covers, each with the part
         of its words it takes; ILLEGAL_ADDRESS when a register of it is in no field."""
-        plan: list[tuple[Field, int, int]] = []
+        segments: list[tuple[Field, int, int]] = []
         at, end = address, address + count
         while at < end:
             found = self._at.get(at)
@@ -334,9 +348,9 @@ class RegisterMap:
                 return Exc.ILLEGAL_ADDRESS
             f, word = found
             stop = min(f.width, word + end - at)
-            plan.append((f, word, stop))
+            segments.append((f, word, stop))
             at += stop - word
-        return tuple(plan)
+        return _Plan(tuple(segments), live=any(f.stamp is None for f, _, _ in segments))
 
     def decode_write(self, address: int, values: list[int]) -> WriteRequest | WriteResult:
         """What a write of *values* at *address* asks for (not yet judged), or why it is none.

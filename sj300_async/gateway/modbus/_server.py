@@ -74,7 +74,7 @@ from ._framing import (
     encode_written,
     excerpt,
 )
-from ._registers import REFUSAL_CODES, EncodingCache, RegisterMap
+from ._registers import REFUSAL_CODES, ReadCache, RegisterMap
 
 __all__ = ["PAUSE_BYTES", "ModbusServer", "Unit"]
 
@@ -88,11 +88,11 @@ _Answer = bytes | Coroutine[Any, Any, bytes]
 
 @dataclass(frozen=True, slots=True)
 class Unit:
-    """What a unit id stands for: a drive, its line's map, and its encodings."""
+    """What a unit id stands for: a drive, its line's map, and its answered reads."""
 
     drive: GatewayDrive
     registers: RegisterMap
-    cache: EncodingCache
+    cache: ReadCache
 
 
 class ModbusServer:
