@@ -25,8 +25,9 @@ Decisions:
   which would charge the gateway for work a UART does; the drives keep the
   simulator's default 1 ms of processing. 8 drives, status and monitor
   every 0.5 s (the configuration's default interval), no parameters, and no
-  trip-history reads (``trips_interval_s = 0``), so that the poll plan's
-  requests are exactly two per poll (see below). The simulated drives are
+  trip-history or set-frequency reads beside the poll (``trips_interval_s =
+  0``, ``setpoint_interval_s = 0``), so that the poll plan's requests are
+  exactly two per poll (see below). The simulated drives are
   stopped: the registers read are zeros, the same work for the register
   map as any other value.
 - **The peer**: pymodbus's ``ModbusTcpServer`` with one ``SimDevice`` per
@@ -159,6 +160,7 @@ def _gateway_toml(drives: int, interval_s: float) -> str:
         nodes = "1-{drives}"
         interval_s = {interval_s!r}
         trips_interval_s = 0
+        setpoint_interval_s = 0
         """
     )
 
