@@ -12,6 +12,8 @@ from __future__ import annotations
 
 import asyncio
 import contextlib
+import dataclasses
+import math
 import shutil
 import socket
 from collections.abc import AsyncIterator
@@ -418,3 +420,35 @@ async def test_monitored_items_are_followed_as_they_come_and_go(
         await wait_for(lambda: nodes.watched == 0, "the subscription's items deleted with it")
         assert all(b.watched == 0 for b in nodes.bindings)
         assert nodes.watched_groups == []
+
+
+async def test_a_group_watched_again_takes_the_next_sample(tmp_path: Path) -> None:
+    """A group nobody watched saw no samples: watched again, it takes the next whatever its
+    stamp. Found by review: the trip count, unwatched, the drive gone offline, watched again
+    (asyncua's first read: offline), the drive back with its trips not read again: the
+    count stayed BadNoCommunication until the next trip read (never, with trips off)."""
+    async with opcua_gateway(opcua_toml(tmp_path)) as (gateway, server):
+        await polled(gateway)
+        drive = next(d for d in gateway.drives if d.node == 1)
+        await wait_for(lambda: drive.snapshot.trips_at > -math.inf, "the trip history read")
+        nodes = server._drives["hall", 1]
+        by_name = {b.name: b for b in nodes.bindings}
+        frequency, trips = (
+            by_name["Monitoring/ConverterOutputFrequency"],
+            by_name["Logbook/TripCount"],
+        )
+        # No await from here on: no real sample comes between these.
+        server._watch(frequency.node, +1)  # a SCADA keeps watching the drive's frequency
+        server._watch(trips.node, +1)
+        online = drive.snapshot
+        server.publish(online)
+        assert trips.online
+        server._watch(trips.node, -1)
+        offline = dataclasses.replace(online, online=False, taken_at=online.taken_at + 1)
+        server.publish(offline)  # its trips not read again: the same stamp
+        server._watch(trips.node, +1)
+        trips.take(offline)  # asyncua's first read of a new monitored item
+        assert not trips.online
+        server.publish(dataclasses.replace(online, taken_at=online.taken_at + 2))
+        assert trips.online
+        assert trips.status(server._loop.time(), server.stale_after_s) == 0  # Good

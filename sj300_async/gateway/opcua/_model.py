@@ -188,7 +188,13 @@ class DriveNodes:
         variables, a SCADA typically watches a few of them.
         """
         for group in self.groups:
-            group.watched = [binding for binding in group.bindings if binding.watched > 0]
+            watched = [binding for binding in group.bindings if binding.watched > 0]
+            if watched and not group.watched:
+                # Samples passed it by while nobody watched it: what it saw last is not
+                # what its variables show now (the drive may have gone offline and come
+                # back meanwhile), so the next sample is taken whatever its stamp.
+                group.seen = None
+            group.watched = watched
         self.watched_groups = [group for group in self.groups if group.watched]
 
 
