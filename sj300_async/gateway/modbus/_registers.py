@@ -248,7 +248,9 @@ ReadCache = dict[tuple[int, int], tuple[DriveSnapshot, float, "list[int]"]]
 #: Reads whose plan a map keeps (a SCADA reads the same few blocks over and over; what a
 #: client could ask is 65,536 x 125 reads, so past this many a plan is made every time).
 MAX_PLANS: Final = 1024
-#: Reads a unit's cache keeps answers of (a SCADA reads a unit in a few blocks).
+#: Reads a unit's cache keeps answers of (a SCADA reads a unit in a few blocks); past
+#: it, the one kept longest makes room, so a client that once scanned the map leaves
+#: no entry the SCADA's own blocks cannot take over.
 MAX_CACHED_READS: Final = 16
 
 
@@ -333,7 +335,9 @@ class RegisterMap:
             if words is None:
                 return Exc.TARGET_FAILED
             out += words if stop - first == f.width else words[first:stop]
-        if cache is not None and not plan.live and (key in cache or len(cache) < MAX_CACHED_READS):
+        if cache is not None and not plan.live:
+            if key not in cache and len(cache) >= MAX_CACHED_READS:
+                del cache[next(iter(cache))]  # the one kept longest (see MAX_CACHED_READS)
             cache[key] = (snapshot, oldest, out)
         return out
 
