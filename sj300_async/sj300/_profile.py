@@ -24,6 +24,7 @@ from __future__ import annotations
 
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
+from math import isfinite
 from typing import Any, Final
 
 from ..profiles import (
@@ -164,22 +165,29 @@ def _extras(snapshot: DriveSnapshot) -> Sj300Extras | None:
     return extras if isinstance(extras, Sj300Extras) else None
 
 
+# The monitor's and the status's readers run at every Modbus read of a unit (a SCADA
+# reads thousands a second at plant scale): _extras and in_counts are inlined.
+
+
 def _monitor(
     get: Callable[[MonitorData], float], per_unit: float = 1
 ) -> Callable[[DriveSnapshot], int | None]:
     def read(snapshot: DriveSnapshot) -> int | None:
-        extras = _extras(snapshot)
-        m = None if extras is None else extras.monitor
-        return None if m is None else in_counts(get(m), per_unit)
+        extras = snapshot.extras
+        if not isinstance(extras, Sj300Extras) or extras.monitor is None:
+            return None
+        value = get(extras.monitor)
+        return round(value * per_unit) if isfinite(value) else None
 
     return read
 
 
 def _status(get: Callable[[InverterStatus], int]) -> Callable[[DriveSnapshot], int | None]:
     def read(snapshot: DriveSnapshot) -> int | None:
-        extras = _extras(snapshot)
-        s = None if extras is None else extras.status
-        return None if s is None else get(s)
+        extras = snapshot.extras
+        if not isinstance(extras, Sj300Extras) or extras.status is None:
+            return None
+        return get(extras.status)
 
     return read
 

@@ -37,11 +37,13 @@ Decisions:
 from __future__ import annotations
 
 import math
+import operator
 from collections.abc import Callable, Iterable, Iterator
 from dataclasses import dataclass
+from math import isfinite
 from typing import Final
 
-from ...profiles import NEVER, DriveSnapshot, Profile, RegisterField, in_counts, read_time
+from ...profiles import NEVER, DriveSnapshot, Profile, RegisterField, read_time
 from ...wire import Direction
 from .. import (
     GatewayDrive,
@@ -133,9 +135,16 @@ class Field:
         return [(value >> (16 * (self.width - 1 - i))) & 0xFFFF for i in range(self.width)]
 
 
-def _snapshot(get: Callable[[DriveSnapshot], float | None], per_unit: float = 1) -> Getter:
+def _snapshot(name: str, per_unit: float = 1) -> Getter:
+    """The snapshot's field *name* in counts of ``1 / per_unit`` (:func:`in_counts`, inlined:
+    a SCADA's reads run these at every request)."""
+    get: Callable[[DriveSnapshot], float | None] = operator.attrgetter(name)
+
     def read(drive: GatewayDrive, now: float) -> int | None:
-        return in_counts(get(drive.snapshot), per_unit)
+        value = get(drive.snapshot)
+        if value is None or not isfinite(value):
+            return None
+        return round(value * per_unit)
 
     return read
 
@@ -172,10 +181,10 @@ def _common(protocol_id: int) -> list[Field]:
         Field(3, "node (FR-700: station)", "address", lambda d, now: d.node),
         Field(200, "running", "0/1", _flag(lambda s: s.running), _status_at),
         Field(201, "tripped", "0/1", _flag(lambda s: s.tripped), _status_at),
-        Field(100, "output frequency", "0.01 Hz", _snapshot(lambda s: s.output_frequency_hz, 100),
+        Field(100, "output frequency", "0.01 Hz", _snapshot("output_frequency_hz", 100),
               m),
-        Field(101, "output current", "0.1 A", _snapshot(lambda s: s.output_current_a, 10), m),
-        Field(102, "output voltage", "0.1 V", _snapshot(lambda s: s.output_voltage_v, 10), m),
+        Field(101, "output current", "0.1 A", _snapshot("output_current_a", 10), m),
+        Field(102, "output voltage", "0.1 V", _snapshot("output_voltage_v", 10), m),
         Field(103, "direction (0 stop, 1 forward, 2 reverse)", "code", _direction, _direction_at),
         Field(
             HEARTBEAT,
@@ -202,7 +211,7 @@ def _common(protocol_id: int) -> list[Field]:
             SET_FREQUENCY,
             "set frequency (as last read back)",
             "0.01 Hz",
-            _snapshot(lambda s: s.set_frequency_hz, 100),
+            _snapshot("set_frequency_hz", 100),
             read_time("set_frequency"),
             writable=True,
         ),
@@ -261,6 +270,9 @@ class _Plan:
     segments: tuple[tuple[Field, int, int], ...]
     #: A field of it is computed at every read (the lease, the sample's age): not cached.
     live: bool
+    #: The distinct read times of its fields (a block's fields mostly share one: it is
+    #: asked once per read, not once per field).
+    stamps: tuple[Stamp, ...]
 
 
 class RegisterMap:
@@ -321,16 +333,21 @@ class RegisterMap:
         cached = None if cache is None or plan.live else cache.get(key)
         if cached is not None and cached[0] is snapshot and now - cached[1] <= stale_after_s:
             return cached[2]
-        out: list[int] = []
         oldest = math.inf
+        for stamp in plan.stamps:
+            read_at = stamp(snapshot)
+            if now - read_at > stale_after_s:
+                return Exc.TARGET_FAILED
+            if read_at < oldest:
+                oldest = read_at
+        out: list[int] = []
         for f, first, stop in plan.segments:
-            stamp = f.stamp
-            if stamp is not None:  # else live: the lease, the sample's age
-                read_at = stamp(snapshot)
-                if now - read_at > stale_after_s:
+            if f.width == 1 and not f.signed:  # most fields: one unsigned register, inline
+                value = f.value(drive, now)
+                if value is None:
                     return Exc.TARGET_FAILED
-                if read_at < oldest:
-                    oldest = read_at
+                out.append(0 if value < 0 else 0xFFFF if value > 0xFFFF else value)
+                continue
             words = f.words(drive, now)
             if words is None:
                 return Exc.TARGET_FAILED
@@ -354,7 +371,12 @@ class RegisterMap:
             stop = min(f.width, word + end - at)
             segments.append((f, word, stop))
             at += stop - word
-        return _Plan(tuple(segments), live=any(f.stamp is None for f, _, _ in segments))
+        stamps = dict.fromkeys(f.stamp for f, _, _ in segments if f.stamp is not None)
+        return _Plan(
+            tuple(segments),
+            live=any(f.stamp is None for f, _, _ in segments),
+            stamps=tuple(stamps),
+        )
 
     def decode_write(self, address: int, values: list[int]) -> WriteRequest | WriteResult:
         """What a write of *values* at *address* asks for (not yet judged), or why it is none.
