@@ -37,7 +37,9 @@ The clients, each optional (a client whose option is absent is not run):
 - **Modbus** (``--modbus``, one per listener): a pymodbus master per
   listener reads each of its units' monitor (100..113) and status
   (200..204) blocks once a second, the listeners' sweeps spread over the
-  second. Modbus carries no time of the sample but register 1, the
+  second; with ``--summary``, it reads its units' records in the
+  listener's summary (unit 255) instead, 125 registers a read (15 drives).
+  Modbus carries no time of the sample but register 1, the
   sample's age in whole seconds: too coarse for a delay within one poll
   interval, so the figures are reads per second, errors, and the sweeps
   that overran their second.
@@ -63,6 +65,8 @@ from collections.abc import Awaitable, Callable, Sequence
 from dataclasses import dataclass, field
 from typing import Any, Final
 
+from sj300_async.gateway.modbus import SUMMARY_RECORD, SUMMARY_UNIT
+
 from .bench_opcua import percentile
 
 __all__ = [
@@ -85,6 +89,8 @@ PUBLISHING_MS: Final = 100.0
 EVENT_STREAMS: Final = 2
 #: What a Modbus master reads of each unit every second: (address, count).
 MODBUS_BLOCKS: Final = ((100, 14), (200, 5))
+#: The most registers a read of the summary asks for (function 3's limit).
+MAX_READ: Final = 125
 #: A Modbus master's sweep of its units, once a second.
 SWEEP_S: Final = 1.0
 #: How long the clients may take to subscribe (OPC UA's items on a busy server).
@@ -168,6 +174,10 @@ class ModbusTally:
     window: Window
     #: Masters (one per listener).
     masters: int = 0
+    #: They read the summary (unit 255), not each unit.
+    summary: bool = False
+    #: Reads due per sweep, every master's.
+    due: int = 0
     reads: int = 0
     #: Exception replies by code, and requests that got no reply (``"transport"``).
     errors: dict[str, int] = field(default_factory=dict)
@@ -185,6 +195,8 @@ class ModbusTally:
         sweeps = sorted(self.sweeps)
         return {
             "masters": self.masters,
+            "summary": self.summary,
+            "due_per_s": self.due / SWEEP_S,
             "reads": self.reads,
             "reads_per_s": self.reads / seconds if seconds else None,
             "errors": self.errors,
@@ -347,11 +359,23 @@ def _drive_event(frame: bytes, tally: Tally) -> None:
         tally.errors += 1
 
 
+def summary_reads(units: Sequence[int]) -> list[tuple[int, int]]:
+    """The reads of the summary (unit 255) that cover *units*' records: (address, count),
+    at most :data:`MAX_READ` registers each."""
+    first, end = SUMMARY_RECORD * min(units), SUMMARY_RECORD * (max(units) + 1)
+    return [(a, min(MAX_READ, end - a)) for a in range(first, end, MAX_READ)]
+
+
 async def modbus_master(
-    port: int, units: Sequence[int], start_s: float, tally: ModbusTally, ready: asyncio.Event
+    port: int,
+    units: Sequence[int],
+    start_s: float,
+    summary: bool,
+    tally: ModbusTally,
+    ready: asyncio.Event,
 ) -> None:
-    """Read every unit's :data:`MODBUS_BLOCKS` each second, the first sweep at *start_s*
-    (loop time)."""
+    """Read every unit's :data:`MODBUS_BLOCKS` each second, or with *summary* the records of
+    every unit in the listener's summary; the first sweep at *start_s* (loop time)."""
     from pymodbus.client import AsyncModbusTcpClient
 
     client = AsyncModbusTcpClient("127.0.0.1", port=port)
@@ -360,11 +384,15 @@ async def modbus_master(
             raise RuntimeError(f"no Modbus connection to port {port}")
         ready.set()
         loop = asyncio.get_running_loop()
+        reads = summary_reads(units)
         due = start_s
         while True:
             await asyncio.sleep(max(0.0, due - loop.time()))
             began = loop.time()
-            await _sweep(client, units, tally)
+            if summary:
+                await _sweep_summary(client, reads, tally)
+            else:
+                await _sweep(client, units, tally)
             if tally.window.open:
                 tally.sweeps.append(loop.time() - began)
             due += SWEEP_S
@@ -376,19 +404,28 @@ async def modbus_master(
 
 
 async def _sweep(client: Any, units: Sequence[int], tally: ModbusTally) -> None:
-    from pymodbus.exceptions import ModbusException
-
     for unit in units:
         for address, count in MODBUS_BLOCKS:
-            try:
-                response = await client.read_holding_registers(address, count=count, device_id=unit)
-            except ModbusException:
-                tally.error("transport")
-                continue
-            if response.isError():
-                tally.error(f"0x{response.exception_code:02X}")
-            elif tally.window.open:
-                tally.reads += 1
+            await _read(client, unit, address, count, tally)
+
+
+async def _sweep_summary(client: Any, reads: Sequence[tuple[int, int]], tally: ModbusTally) -> None:
+    for address, count in reads:
+        await _read(client, SUMMARY_UNIT, address, count, tally)
+
+
+async def _read(client: Any, unit: int, address: int, count: int, tally: ModbusTally) -> None:
+    from pymodbus.exceptions import ModbusException
+
+    try:
+        response = await client.read_holding_registers(address, count=count, device_id=unit)
+    except ModbusException:
+        tally.error("transport")
+        return
+    if response.isError():
+        tally.error(f"0x{response.exception_code:02X}")
+    elif tally.window.open:
+        tally.reads += 1
 
 
 async def _loop_lag(window: Window, lags: list[float]) -> None:
@@ -436,12 +473,14 @@ def arguments(
     opcua: tuple[str, str] | None = None,
     http: int | None = None,
     modbus: Sequence[tuple[int, Sequence[int]]] = (),
+    summary: bool = False,
 ) -> list[str]:
     """This module's command line (after ``python -m benchmarks.plant_clients``).
 
     *drives* are (line, node); *broker* the MQTT broker's port (JSON states);
     *group* the Sparkplug group on it; *opcua* (endpoint URL, namespace URI);
-    *http* the workbench's port; *modbus* each listener's (port, unit ids).
+    *http* the workbench's port; *modbus* each listener's (port, unit ids), read through
+    the summary (unit 255) with *summary*, else unit by unit.
     """
     lines: dict[str, list[int]] = {}
     for line, node in drives:
@@ -459,6 +498,8 @@ def arguments(
         out += ["--http", str(http)]
     for port, units in modbus:
         out += ["--modbus", f"{port}={ranges(units)}"]
+    if modbus and summary:
+        out.append("--summary")
     return out
 
 
@@ -473,6 +514,9 @@ def _parser() -> argparse.ArgumentParser:
     parser.add_argument("--http", type=int, help="the workbench's port: event streams")
     parser.add_argument("--streams", type=int, default=EVENT_STREAMS)
     parser.add_argument("--modbus", action="append", default=[], help="PORT=UNITS, a listener")
+    parser.add_argument(
+        "--summary", action="store_true", help="the masters read the summary (unit 255)"
+    )
     return parser
 
 
@@ -526,10 +570,15 @@ def _start_clients(args: argparse.Namespace, run: _Run) -> None:
         first = asyncio.get_running_loop().time() + SWEEP_S / 2
         listeners = [text.partition("=") for text in args.modbus]
         masters.masters = len(listeners)
-        for i, (port, _, units) in enumerate(listeners):
+        masters.summary = args.summary
+        for i, (port, _, text) in enumerate(listeners):
             # The listeners' sweeps spread over the second, as independent masters' would be.
             start_s = first + i * SWEEP_S / len(listeners)
-            master = functools.partial(modbus_master, int(port), parse_ranges(units), start_s)
+            units = parse_ranges(text)
+            masters.due += (
+                len(summary_reads(units)) if args.summary else len(units) * len(MODBUS_BLOCKS)
+            )
+            master = functools.partial(modbus_master, int(port), units, start_s, args.summary)
             run.start(masters, functools.partial(master, masters))
 
 

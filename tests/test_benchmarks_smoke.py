@@ -663,6 +663,7 @@ def test_plant_runs_its_gateways_and_counts_every_sample(harness: ModuleType) ->
         assert 0 < figures["p99_ms"] < 1000 * bench.INTERVAL_S, name
     modbus = clients["modbus"]
     assert modbus["failure"] is None
+    assert modbus["summary"] is True  # the masters read the summary (unit 255)
     assert modbus["reads"] > 0
     assert modbus["errors"] == {}
     # two gateways of one line each on one broker: the fleet view and the host see all

@@ -151,6 +151,8 @@ GATEWAY_MODBUS_NAMES = (
     "ModbusListener",
     "NORTHBOUND", "OTHER_CLIENT", "REFUSAL_CODES", "RegisterMap", "client_families", "describe",
     "parameter_address",
+    # unit 255: a listener's drives side by side, for a SCADA reading a plant (issue 30)
+    "SUMMARY_RECORD", "SUMMARY_SLOTS", "SUMMARY_UNIT", "Summary", "SummaryBits", "SummaryField",
 )  # fmt: skip
 GATEWAY_MQTT_NAMES = (
     "AVAILABLE", "BridgeStats", "BrokerUnreachable", "COMMANDS", "COMMAND_DIRECTIONS",

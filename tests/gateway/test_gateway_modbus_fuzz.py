@@ -32,7 +32,7 @@ from .test_gateway_modbus_wire import answer, server_of
 
 FRAMES = 10_000
 SOAK_FRAMES = 100_000
-#: Units with a drive (1..4) and some without.
+#: Units with a drive (1..4), the summary (255) and some without.
 UNITS = (0, 1, 2, 3, 4, 5, 99, 255)
 
 

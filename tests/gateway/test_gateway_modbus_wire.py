@@ -107,7 +107,9 @@ READ_ONLY = [
     ("000d 0000 0006 63 03 0000 0001", "000d 0000 0003 63 83 0a"),  # unit 99
     ("000e 0000 0004 63 18 0000", "000e 0000 0003 63 98 0a"),  # FC 24 to unit 99
     ("000f 0000 0006 00 03 0000 0001", "000f 0000 0003 00 83 0a"),  # unit 0
-    ("0010 0000 0006 ff 03 0000 0001", "0010 0000 0003 ff 83 0a"),
+    # Unit 255: the summary, read-only (register 0: the listener's four drives).
+    ("0010 0000 0006 ff 03 0000 0001", "0010 0000 0005 ff 03 02 0004"),
+    ("0110 0000 0006 ff 06 0008 0001", "0110 0000 0003 ff 86 01"),
     # Writes on a read-only line: 0x01; a read-only register 0x01; no register 0x02.
     ("0011 0000 0006 01 06 03e8 0001", "0011 0000 0003 01 86 01"),
     ("0012 0000 0006 01 06 0064 0001", "0012 0000 0003 01 86 01"),
@@ -140,8 +142,8 @@ async def test_conformance_byte_for_byte(sim_line: SimLine) -> None:
             )
         clients = server_of(gateway).counters
         assert clients.requests["127.0.0.1"] == len(READ_ONLY) + len(UNIMPLEMENTED) + 1
-        assert clients.exceptions[("127.0.0.1", 0x0A)] == 4
-        assert clients.exceptions[("127.0.0.1", 0x01)] == 3 + len(UNIMPLEMENTED)
+        assert clients.exceptions[("127.0.0.1", 0x0A)] == 3
+        assert clients.exceptions[("127.0.0.1", 0x01)] == 4 + len(UNIMPLEMENTED)
 
 
 async def test_writes_byte_for_byte(sim_line: SimLine) -> None:

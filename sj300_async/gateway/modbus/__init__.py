@@ -12,7 +12,9 @@ own listeners, each with its own unit ids::
 
 ``listen`` then serves the lines no listener names (it may be left out
 when every line has one). Unit ids are unique within a listener, not
-across them (:class:`UnitScope`). Reads are served from each drive's latest
+across them (:class:`UnitScope`). Unit 255 of every listener is its
+summary (:mod:`._summary`): a record of each of its drives side by side,
+for a SCADA that reads a whole plant. Reads are served from each drive's latest
 snapshot (no read reaches a line); writes go through the gateway's write
 path, and a refusal is answered with the Modbus exception its meaning is
 closest to (:data:`REFUSAL_CODES`). The register map is docs/GATEWAY.md's
@@ -41,6 +43,14 @@ from .. import (
 from ._clients import MAX_CLIENTS, OTHER_CLIENT, ClientCounters, client_families
 from ._framing import Exc
 from ._registers import REFUSAL_CODES, Field, RegisterMap, describe, parameter_address
+from ._summary import (
+    SUMMARY_RECORD,
+    SUMMARY_SLOTS,
+    SUMMARY_UNIT,
+    Summary,
+    SummaryBits,
+    SummaryField,
+)
 
 __all__ = [
     "DEFAULT_LIMITS",
@@ -48,12 +58,18 @@ __all__ = [
     "NORTHBOUND",
     "OTHER_CLIENT",
     "REFUSAL_CODES",
+    "SUMMARY_RECORD",
+    "SUMMARY_SLOTS",
+    "SUMMARY_UNIT",
     "ClientCounters",
     "Exc",
     "Field",
     "ModbusConfig",
     "ModbusListener",
     "RegisterMap",
+    "Summary",
+    "SummaryBits",
+    "SummaryField",
     "client_families",
     "describe",
     "parameter_address",

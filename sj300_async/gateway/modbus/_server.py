@@ -24,7 +24,8 @@ Decisions:
 - **A unit id with no drive behind it gets 0x0A**, whatever its request
   (the unit is judged first, as a gateway routes before the target
   decodes): no data, and no other exception, for a unit that does not
-  exist. Unit 0 is no broadcast here: no drive has it.
+  exist. Unit 0 is no broadcast here: no drive has it. Unit 255 is the
+  listener's summary (:mod:`._summary`), read-only.
 - **Limits**: ``max_connections`` (newcomers past it are accepted and
   closed at once, by the :class:`~sj300_async.gateway.Listener`, the HTTP
   northbound's too) and ``idle_timeout_s`` (a connection with no request
@@ -75,6 +76,7 @@ from ._framing import (
     excerpt,
 )
 from ._registers import REFUSAL_CODES, ReadCache, RegisterMap
+from ._summary import SUMMARY_UNIT, Summary
 
 __all__ = ["PAUSE_BYTES", "ModbusServer", "Unit"]
 
@@ -107,6 +109,8 @@ class ModbusServer:
         limit: ConnectionLimit | None = None,
     ) -> None:
         self.units = units
+        #: Unit 255: every drive's record side by side (see :mod:`._summary`).
+        self.summary = Summary({unit_id: unit.drive for unit_id, unit in units.items()})
         self.gateway = gateway
         self.stale_after_s = gateway.config.stale_after_s
         self.idle_timeout_s = limits.idle_timeout_s
@@ -267,17 +271,16 @@ class _Connection(asyncio.Protocol):
         server = self.server
         server.counters.request(self.client)
         unit = server.units.get(event.unit_id)
-        if unit is None:
+        if unit is None and event.unit_id != SUMMARY_UNIT:
             return self._exception(event, Exc.PATH_UNAVAILABLE)
         if type(event) is ReadRegisters:
-            result = unit.registers.read(
-                unit.drive,
-                event.address,
-                event.count,
-                self._loop.time(),
-                server.stale_after_s,
-                unit.cache,
-            )
+            now = self._loop.time()
+            if unit is None:  # the summary (unit 255)
+                result = server.summary.read(event.address, event.count, now, server.stale_after_s)
+            else:
+                result = unit.registers.read(
+                    unit.drive, event.address, event.count, now, server.stale_after_s, unit.cache
+                )
             if type(result) is list:
                 return encode_registers(event.transaction_id, event.unit_id, event.function, result)
             assert isinstance(result, Exc)
@@ -285,6 +288,8 @@ class _Connection(asyncio.Protocol):
         if isinstance(event, Refused):
             _log.debug("modbus %s: refused with 0x%02x: %s", self.name, event.code, event.reason)
             return self._exception(event, event.code)
+        if unit is None:  # the summary is read-only: commands go to a drive's unit
+            return self._exception(event, Exc.ILLEGAL_FUNCTION)
         assert isinstance(event, WriteRegisters)
         words = list(event.values)
         request = unit.registers.decode_write(event.address, words)
