@@ -38,7 +38,7 @@ The clients, each optional (a client whose option is absent is not run):
   listener reads each of its units' monitor (100..113) and status
   (200..204) blocks once a second, the listeners' sweeps spread over the
   second; with ``--summary``, it reads its units' records in the
-  listener's summary (unit 255) instead, 125 registers a read (15 drives).
+  listener's summary (unit 255) instead, 120 registers a read (15 drives).
   Modbus carries no time of the sample but register 1, the
   sample's age in whole seconds: too coarse for a delay within one poll
   interval, so the figures are reads per second, errors, and the sweeps
@@ -89,8 +89,9 @@ PUBLISHING_MS: Final = 100.0
 EVENT_STREAMS: Final = 2
 #: What a Modbus master reads of each unit every second: (address, count).
 MODBUS_BLOCKS: Final = ((100, 14), (200, 5))
-#: The most registers a read of the summary asks for (function 3's limit).
-MAX_READ: Final = 125
+#: Registers a read of the summary asks for: 15 whole records (function 3 reads 125 at
+#: most), so that each drive's record comes from one answer.
+MAX_READ: Final = 15 * SUMMARY_RECORD
 #: A Modbus master's sweep of its units, once a second.
 SWEEP_S: Final = 1.0
 #: How long the clients may take to subscribe (OPC UA's items on a busy server).

@@ -9,6 +9,7 @@ must refuse writes and reads past its last record.
 from __future__ import annotations
 
 import asyncio
+import math
 from dataclasses import replace
 
 import pytest
@@ -22,11 +23,13 @@ from sj300_async.gateway.modbus import (
     SUMMARY_SLOTS,
     SUMMARY_UNIT,
     Exc,
+    RegisterMap,
     Summary,
     SummaryBits,
     SummaryField,
 )
-from sj300_async.profiles import get_profile
+from sj300_async.profiles import Trip, get_profile
+from sj300_async.wire import Direction
 
 from .conftest import SimLine, gateway_toml, modbus_client, modbus_port, polled, running_gateway
 from .test_gateway_mbpoll import mbpoll
@@ -159,3 +162,92 @@ def test_values_saturate_and_unknown_reads_zero(value: float, word: int) -> None
     assert isinstance(record, list)
     assert SummaryBits.MONITOR in SummaryBits(record[SummaryField.BITS])
     assert record[SummaryField.OUTPUT_FREQUENCY] == word
+
+
+# -- each field against the drive's own unit (an oracle test written in review) -----------
+
+SJ300 = get_profile("sj300")
+UNIT_MAP = RegisterMap(SJ300)
+AGES = st.sampled_from([0.0, 0.4, 1.7, 4.99, 5.0, 5.01, 80.0, math.inf])
+VALUES = st.floats(0, 700, allow_nan=False)
+
+
+@settings(max_examples=400)
+@given(
+    AGES, AGES, AGES, AGES, VALUES, VALUES, VALUES, VALUES,
+    st.booleans(), st.booleans(), st.sampled_from(list(Direction)), st.booleans(),
+)  # fmt: skip
+def test_a_record_says_what_the_drive_s_own_unit_says(
+    status_age: float,
+    monitor_age: float,
+    direction_age: float,
+    set_age: float,
+    frequency: float,
+    current: float,
+    voltage: float,
+    set_frequency: float,
+    running: bool,
+    tripped: bool,
+    direction: Direction,
+    leased: bool,
+) -> None:
+    """Fresh or stale on either side of stale_after_s, every value and bit of drive 2's
+    record is what its unit's registers say (0x0B there: the bit clear and 0 here)."""
+    now, stale_after_s = 100.0, 5.0
+    line = LineConfig("l", "sim://", "sj300", (1, 2), unit_offset=0)
+    drive, other = (GatewayDrive(line, node, SJ300, Lease(5.0)) for node in (2, 1))
+    if leased:
+        drive.lease.holder, drive.lease.expires_at = "client", now + 1
+    drive.snapshot = replace(
+        drive.snapshot,
+        online=True,
+        last_ok=now - min(status_age, 80.0),
+        status_at=now - status_age,
+        running=running,
+        tripped=tripped,
+        monitor_at=now - monitor_age,
+        output_frequency_hz=frequency,
+        output_current_a=current,
+        output_voltage_v=voltage,
+        direction=direction,
+        direction_at=now - direction_age,
+        set_frequency_hz=set_frequency,
+        set_frequency_at=now - set_age,
+        trip=Trip("E07", 7, None, "over-voltage") if tripped else None,
+    )
+    record = Summary({1: other, 2: drive}).read(2 * SUMMARY_RECORD, SUMMARY_RECORD, now, 5.0)
+    assert isinstance(record, list)
+    bits = SummaryBits(record[SummaryField.BITS])
+
+    def unit(address: int, count: int) -> list[int] | None:
+        words = UNIT_MAP.read(drive, address, count, now, stale_after_s)
+        return words if isinstance(words, list) else None
+
+    status = unit(200, 2)
+    assert (SummaryBits.STATUS in bits) == (status is not None)
+    if status is not None:
+        assert status == [int(SummaryBits.RUNNING in bits), int(SummaryBits.TRIPPED in bits)]
+        assert record[SummaryField.TRIP] == (7 if tripped else 0)
+    else:
+        assert not bits & (SummaryBits.RUNNING | SummaryBits.TRIPPED)
+        assert record[SummaryField.TRIP] == 0
+    monitor = unit(100, 3)
+    assert (SummaryBits.MONITOR in bits) == (monitor is not None)
+    first, last = SummaryField.OUTPUT_FREQUENCY, SummaryField.OUTPUT_VOLTAGE
+    assert record[first : last + 1] == (monitor or [0, 0, 0])
+    turning = unit(103, 1)
+    assert (SummaryBits.DIRECTION in bits) == (turning is not None)
+    assert record[SummaryField.DIRECTION] == (turning or [0])[0]
+    setpoint = unit(1003, 1)
+    assert (SummaryBits.SET_FREQUENCY in bits) == (setpoint is not None)
+    assert record[SummaryField.SET_FREQUENCY] == (setpoint or [0])[0]
+    assert [record[SummaryField.AGE_S]] == unit(1, 1)
+    assert [int(SummaryBits.LEASED in bits)] == unit(1000, 1)
+
+
+def test_a_unit_id_the_summary_could_not_hold_is_refused() -> None:
+    """255 would hide the summary; 248..254 have no record (parse_config refuses them too)."""
+    drive = _drives()[1]
+    for unit in (0, 248, 255):
+        with pytest.raises(ValueError, match=f"outside 1..247: \\[{unit}\\]"):
+            Summary({unit: drive})

@@ -3,7 +3,7 @@
 Sans-IO. A SCADA that reads each drive's unit makes two requests a drive
 per scan: 4,096 a second for a plant of 2,048 drives, each a round trip
 and a wake-up of the gateway. The summary gives it the values a plant
-overview needs for up to 15 drives in one read of 125 registers (a
+overview needs for 15 drives in one read of 120 registers (a
 listener of 224 drives in 15 reads).
 
 Decisions:
@@ -15,12 +15,16 @@ Decisions:
 - **Drive u's record is registers 8u..8u+7** (:data:`SUMMARY_RECORD`), so a SCADA
   finds a drive by the unit id it already knows. Registers 0..7 are the
   listener's own (drives served, drives online); 8 x 248 = 1,984
-  registers in all, past them 0x02.
+  registers in all, past them 0x02. "Online" is the poller's verdict and an
+  answer heard at least once (register 0 of a drive's unit may read 1
+  before its first answer).
 - **A read never fails for one drive's sake** (the drives' own units
   answer 0x0B for stale data; here one stale drive would hide fifteen).
   Each record's first register says which of its values are current, a
-  bit per group (:class:`SummaryBits`); a value not current, or one the drive
-  does not give, reads 0. A unit id with no drive has an all-zero record.
+  bit per group (:class:`SummaryBits`); a value not current reads 0 with its
+  bit clear. A value the drive's protocol does not give reads 0 with its
+  group's bit set (the drive's own unit answers 0x0B for it; the SJ300 and
+  FR-700 give every one). A unit id with no drive has an all-zero record.
 - **Not cached.** Every read computes its records from the drives' latest
   snapshots (about 0.3 us a register here): a read covers fifteen drives,
   each with a sample of its own, so an answer would rarely be served twice.
@@ -148,6 +152,14 @@ class Summary:
     """The summary of one listener's drives (see the module docstring)."""
 
     def __init__(self, drives: Mapping[int, GatewayDrive]) -> None:
+        """*drives* by unit id, each 1..247 (the configuration's rule: 255 is this one's).
+
+        Raises:
+            ValueError: a unit id outside 1..247.
+        """
+        wrong = sorted(unit for unit in drives if not 1 <= unit < SUMMARY_SLOTS)
+        if wrong:
+            raise ValueError(f"unit ids outside 1..{SUMMARY_SLOTS - 1}: {wrong}")
         self.drives = dict(drives)
 
     def read(self, address: int, count: int, now: float, stale_after_s: float) -> list[int] | Exc:
