@@ -54,7 +54,7 @@ from ._audit import AuditLog
 from ._control import Controller
 from ._drive import GatewayDrive, Lease
 from ._errors import GatewayStartError
-from ._heap import collector_paused, freeze_long_lived, thaw
+from ._heap import collector_paused, freeze_long_lived, thaw, young_collections_raised
 from ._metrics import LineView, drive_view, gateway_metrics, line_problems
 from ._model import GatewayConfig, LineConfig
 from ._northbound import Northbound, get_northbound
@@ -232,6 +232,7 @@ class Gateway:
                 # scan all of it once more.
                 freeze_long_lived()
                 self._frozen = True
+            self._stack.enter_context(young_collections_raised())
             for line in self.lines:
                 await self._stack.enter_async_context(line.poller)
                 self._tasks.append(asyncio.create_task(self._background_reads(line)))

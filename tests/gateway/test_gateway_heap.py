@@ -14,6 +14,7 @@ import gc
 import pytest
 
 from sj300_async.gateway import GatewayStartError
+from sj300_async.gateway._heap import YOUNG_OBJECTS
 
 from .conftest import running_gateway
 
@@ -29,13 +30,26 @@ nodes = "1-2"
 
 async def test_what_the_gateway_built_is_frozen_while_it_runs() -> None:
     gc.unfreeze()
+    before = gc.get_threshold()
     async with running_gateway(CONFIG) as gateway:
         assert gc.isenabled()  # paused only while the northbounds started
+        assert gc.get_threshold() == (YOUNG_OBJECTS, *before[1:])
         assert gc.get_freeze_count() > 0
         drive = gateway.drives[0]
         assert not any(o is drive for o in gc.get_objects())  # out of every scan
     assert gc.get_freeze_count() == 0
     assert any(o is drive for o in gc.get_objects())  # collectable again
+    assert gc.get_threshold() == before
+
+
+async def test_young_collections_stay_raised_until_the_last_gateway_stops() -> None:
+    before = gc.get_threshold()
+    raised = (YOUNG_OBJECTS, *before[1:])
+    async with running_gateway(CONFIG):
+        async with running_gateway(CONFIG.replace('id = "heap"', 'id = "heap2"')):
+            assert gc.get_threshold() == raised
+        assert gc.get_threshold() == raised  # the first one still runs
+    assert gc.get_threshold() == before
 
 
 async def test_a_failed_start_leaves_the_collector_as_it_was() -> None:
@@ -46,3 +60,4 @@ async def test_a_failed_start_leaves_the_collector_as_it_was() -> None:
             pass
     assert gc.isenabled()
     assert gc.get_freeze_count() == 0
+    assert gc.get_threshold()[0] != YOUNG_OBJECTS
