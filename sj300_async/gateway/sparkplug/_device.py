@@ -34,6 +34,7 @@ aliases are fixed for a configuration, so they are the same at every birth.
 
 from __future__ import annotations
 
+import operator
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from typing import Final
@@ -92,11 +93,28 @@ def _unit(unit: str) -> tuple[Property, ...]:
     return (Property("engUnit", STRING, unit),) if unit else ()
 
 
-def _field(name: str) -> Reader:
-    def read(state: StateMessage, lease: bool) -> object:
-        return getattr(state, name)
+@dataclass(frozen=True, slots=True)
+class _Field:
+    """Reads a field of the state (Device.values reads them all in one call)."""
 
-    return read
+    name: str
+
+    def __call__(self, state: StateMessage, lease: bool) -> object:
+        return getattr(state, self.name)
+
+
+@dataclass(frozen=True, slots=True)
+class _Constant:
+    """The same value at every sample (Device.values starts from them)."""
+
+    value: object
+
+    def __call__(self, state: StateMessage, lease: bool) -> object:
+        return self.value
+
+
+def _field(name: str) -> Reader:
+    return _Field(name)
 
 
 def _parameter(code: str) -> Reader:
@@ -107,10 +125,7 @@ def _parameter(code: str) -> Reader:
 
 
 def _constant(value: object) -> Reader:
-    def read(state: StateMessage, lease: bool) -> object:
-        return value
-
-    return read
+    return _Constant(value)
 
 
 def _lease(state: StateMessage, lease: bool) -> object:
@@ -206,6 +221,20 @@ class Device:
             for i, (name, datatype, properties, read, write, code) in enumerate(rows)
         )
         self.definitions: Sequence[MetricDef] = tuple(m.definition for m in self.metrics)
+        # values() runs at every sample: the state's fields are read in one call (the
+        # attrgetter of their names, each value kept with its metric's index), the
+        # constants are a template, and only the rest is called one by one.
+        fields = [(i, m.read) for i, m in enumerate(self.metrics) if isinstance(m.read, _Field)]
+        self._field_index = tuple(i for i, _ in fields)
+        self._pick = operator.attrgetter(*(f.name for _, f in fields), "node")  # 2 at least
+        self._template: list[object] = [
+            m.read.value if isinstance(m.read, _Constant) else None for m in self.metrics
+        ]
+        self._called = tuple(
+            (i, m.read)
+            for i, m in enumerate(self.metrics)
+            if not isinstance(m.read, (_Field, _Constant))
+        )
         self.by_alias = {m.definition.alias: m for m in self.metrics}
         self.by_name = {m.definition.name: m for m in self.metrics}
         self._refusal_index = next(
@@ -220,7 +249,11 @@ class Device:
         *lease*: the Sparkplug client holds the drive's lease; *refusal*: the
         latest refusal in words and the count so far (None: none yet).
         """
-        out = [metric.read(state, lease) for metric in self.metrics]
+        out = self._template.copy()
+        for i, value in zip(self._field_index, self._pick(state), strict=False):  # not node
+            out[i] = value
+        for i, read in self._called:
+            out[i] = read(state, lease)
         if self._refusal_index is not None and refusal is not None:
             out[self._refusal_index], out[self._refusal_index + 1] = refusal
         return out
