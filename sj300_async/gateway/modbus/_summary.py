@@ -94,6 +94,16 @@ class SummaryField(enum.IntEnum):
 
 
 _EMPTY: Final = (0,) * SUMMARY_RECORD
+# The bits as plain ints: an IntFlag's | makes a flag object each time (2 us a record).
+_PRESENT: Final = int(SummaryBits.PRESENT)
+_ONLINE: Final = int(SummaryBits.ONLINE)
+_STATUS: Final = int(SummaryBits.STATUS)
+_RUNNING: Final = int(SummaryBits.RUNNING)
+_TRIPPED: Final = int(SummaryBits.TRIPPED)
+_MONITOR: Final = int(SummaryBits.MONITOR)
+_DIRECTION: Final = int(SummaryBits.DIRECTION)
+_SET_FREQUENCY: Final = int(SummaryBits.SET_FREQUENCY)
+_LEASED: Final = int(SummaryBits.LEASED)
 
 
 def _word(value: float | None, per_unit: float) -> int:
@@ -107,37 +117,37 @@ def _word(value: float | None, per_unit: float) -> int:
 def record(drive: GatewayDrive, now: float, stale_after_s: float) -> list[int]:
     """Drive *drive*'s record at loop time *now* (see the module docstring)."""
     s: DriveSnapshot = drive.snapshot
-    bits = SummaryBits.PRESENT
+    bits = _PRESENT
     if s.available:
-        bits |= SummaryBits.ONLINE
+        bits |= _ONLINE
     tripped = False
     if now - s.status_at <= stale_after_s:
-        bits |= SummaryBits.STATUS
+        bits |= _STATUS
         tripped = bool(s.tripped)
         if s.running:
-            bits |= SummaryBits.RUNNING
+            bits |= _RUNNING
         if tripped:
-            bits |= SummaryBits.TRIPPED
+            bits |= _TRIPPED
     frequency = current = voltage = 0
     if now - s.monitor_at <= stale_after_s:
-        bits |= SummaryBits.MONITOR
+        bits |= _MONITOR
         frequency = _word(s.output_frequency_hz, 100)
         current = _word(s.output_current_a, 10)
         voltage = _word(s.output_voltage_v, 10)
     direction = 0
     if s.direction is not None and now - s.direction_at <= stale_after_s:
-        bits |= SummaryBits.DIRECTION
+        bits |= _DIRECTION
         direction = int(s.direction)
     set_frequency = 0
     if now - s.set_frequency_at <= stale_after_s:
-        bits |= SummaryBits.SET_FREQUENCY
+        bits |= _SET_FREQUENCY
         set_frequency = _word(s.set_frequency_hz, 100)
     if drive.lease.held(now):
-        bits |= SummaryBits.LEASED
+        bits |= _LEASED
     age = s.sample_age_s(now)
     trip = s.trip.number if tripped and s.trip is not None else 0
     return [
-        int(bits),
+        bits,
         65535 if age is None else min(65535, math.floor(age)),
         frequency,
         current,
