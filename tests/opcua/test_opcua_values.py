@@ -190,6 +190,39 @@ async def test_the_trip_history_reads_newest_first_one_array_per_field(tmp_path:
                 assert math.isnan(got) if want is None else got == pytest.approx(want)
 
 
+async def test_a_subscription_sees_a_silent_drive_s_value_age(tmp_path: Path) -> None:
+    """Between samples only time changes a value's status: the tick pushes Good ->
+    Uncertain past stale_after_s, no sample coming to do it (the value's going Bad once
+    the poller gives up is the next test's, by reads)."""
+    async with tcp_line() as (sim, url):
+        text = opcua_toml(
+            tmp_path, url=url, gateway_extra="stale_after_s = 0.3", line_extra="timeout_s = 0.4"
+        )
+        async with opcua_gateway(text) as (gateway, server), connected(server.url) as client:
+            ns = await _namespace(client)
+            drive = gateway.drive("hall", 3)
+            assert drive is not None
+            await wait_for(lambda: drive.snapshot.last_ok is not None, "a first sample")
+            statuses: list[int] = []
+
+            class Statuses:
+                def datachange_notification(self, node: Any, value: Any, data: Any) -> None:
+                    statuses.append(data.monitored_item.Value.StatusCode.value)
+
+            subscription = await client.create_subscription(50, Statuses())
+            voltage = _var(client, ns, "hall/Drive3/Monitoring/ConverterOutputVoltage")
+            await subscription.subscribe_data_change(voltage)
+            await wait_for(lambda: statuses == [ua.StatusCodes.Good], "Good first")
+            sim.faults.silence(3)
+            await wait_for(
+                lambda: ua.StatusCodes.UncertainLastUsableValue in statuses, "Uncertain pushed"
+            )
+            assert drive.snapshot.online  # aged by the tick: the poller still waits for it
+            assert statuses[: statuses.index(ua.StatusCodes.UncertainLastUsableValue)] == [
+                ua.StatusCodes.Good
+            ]
+
+
 async def test_a_silent_drive_goes_uncertain_then_bad_no_communication(tmp_path: Path) -> None:
     """Stale past stale_after_s while the poller still waits for it; offline once it gives up."""
     async with tcp_line() as (sim, url):
