@@ -21,7 +21,7 @@ from __future__ import annotations
 
 from typing import Any, Final
 
-from ...profiles import NEVER, DriveSnapshot, Trip, TripLog, is_fresh
+from ...profiles import NEVER, DriveSnapshot, Trip, TripLog
 from ...wire import Direction
 
 __all__ = ["drive_json", "monitor_time", "trip_json", "trip_log_json", "unix_time"]
@@ -74,17 +74,15 @@ def trip_log_json(log: TripLog | None, time: float | None) -> Json:
 
 def drive_json(snapshot: DriveSnapshot, *, now: float, stale_after_s: float) -> Json:
     """*snapshot* at loop time *now* (see the module docstring)."""
-
-    def fresh(at: float) -> bool:
-        return is_fresh(at, now, stale_after_s)
-
-    status = fresh(snapshot.status_at)
-    monitor = fresh(snapshot.monitor_at)
+    # Every sample of every drive comes here while an event stream is open: each
+    # freshness test is is_fresh's, inline (no closure made per call).
+    status = now - snapshot.status_at <= stale_after_s
+    monitor = now - snapshot.monitor_at <= stale_after_s
     direction = snapshot.direction
     trip = snapshot.trip if status and snapshot.tripped else None
     parameters: dict[str, Json | None] = {
         code: {"value": reading.value, "raw": reading.raw, "unit": reading.unit}
-        if fresh(reading.at)
+        if now - reading.at <= stale_after_s
         else None
         for code, reading in snapshot.parameters.items()
     }
@@ -105,7 +103,7 @@ def drive_json(snapshot: DriveSnapshot, *, now: float, stale_after_s: float) -> 
         if status and snapshot.status_fields is not None
         else None,
         "direction": _DIRECTIONS.get(direction)
-        if direction is not None and fresh(snapshot.direction_at)
+        if direction is not None and now - snapshot.direction_at <= stale_after_s
         else None,
         "monitor_time": monitor_time(snapshot),
         "output_frequency_hz": snapshot.output_frequency_hz if monitor else None,
@@ -113,7 +111,9 @@ def drive_json(snapshot: DriveSnapshot, *, now: float, stale_after_s: float) -> 
         "output_voltage_v": snapshot.output_voltage_v if monitor else None,
         "output_torque_percent": snapshot.output_torque_percent if monitor else None,
         "power_kw": snapshot.power_kw if monitor else None,
-        "set_frequency_hz": snapshot.set_frequency_hz if fresh(snapshot.set_frequency_at) else None,
+        "set_frequency_hz": snapshot.set_frequency_hz
+        if now - snapshot.set_frequency_at <= stale_after_s
+        else None,
         "trip": None if trip is None else trip_json(trip),
         "trips_time": unix_time(snapshot, snapshot.trips_at),
         "parameters": parameters,
