@@ -33,7 +33,9 @@ worst case for publishing by exception. A child lets the gateway run
 :data:`WARM_UP_S` seconds (the births, the discovery configs, OPC UA's
 start-up), then measures :data:`WINDOWS` windows of :data:`WINDOW_S`
 seconds: its CPU (``time.process_time()``, the simulators' included, alike
-on every side) per sample polled; the best window counts.
+on every side) per sample polled; the best window counts. ``bare`` and
+``all`` run a second time after the others (:data:`REPEATED`): the best
+window of their two children counts.
 
 **The clients of** ``all``: once its servers listen, its child starts
 :mod:`benchmarks.plant_clients`, a process of its own (its CPU is not in the
@@ -96,7 +98,7 @@ import textwrap
 import time
 from collections.abc import Sequence
 from contextlib import contextmanager
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Any, Final
 
@@ -158,6 +160,11 @@ DELAYED: Final = (
     ("opcua", "OPC UA"),
     ("http", "the workbench"),
 )
+#: The goal's two configurations, run a second time after the others (full runs): the
+#: machine is shared, and a host slowed for one child of the two moved the goal's ratio by
+#: 0.3x either way (a bare poll of 204 us an hour after one of 146). The best window of
+#: each, over both of its children, counts.
+REPEATED: Final = ("bare", "all")
 #: The issue's goal: every northbound together at most 2x the poll's CPU per sample.
 TARGET_ALL: Final = 1 / 2
 #: The repository: the children's working directory (``python -m benchmarks...``).
@@ -426,6 +433,15 @@ class Child:
     def best_cpu_s(self) -> float:
         return min(self.cpu_per_sample_s)
 
+    def merged(self, again: Child) -> Child:
+        """This child's figures with *again*'s windows (a second child of the same
+        configuration) after its own; the rest is this one's."""
+        return replace(
+            self,
+            cpu_per_sample_s=self.cpu_per_sample_s + again.cpu_per_sample_s,
+            samples_per_s=self.samples_per_s + again.samples_per_s,
+        )
+
     @classmethod
     def from_json(cls, body: dict[str, Any]) -> Child:
         windows = body["windows"]
@@ -494,11 +510,15 @@ def _broker() -> Any:
 
 
 def measure(config: Config) -> dict[str, Child]:
-    """Every configuration's child, one after the other."""
+    """Every configuration's child, one after the other; then (full runs) the goal's two
+    again, each one's windows merged with its first child's (:data:`REPEATED`)."""
     out: dict[str, Child] = {}
     with _broker() as port, tempfile.TemporaryDirectory(prefix="bench_plant_") as directory:
         for which in ("bare", "all") if config.quick else CONFIGURATIONS:
             out[which] = _run_child(which, config, port, Path(directory))
+        if not config.quick:
+            for which in REPEATED:
+                out[which] = out[which].merged(_run_child(which, config, port, Path(directory)))
     return out
 
 

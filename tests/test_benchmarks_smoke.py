@@ -863,3 +863,15 @@ def test_a_run_told_to_keep_dynamic_thresholds_says_so() -> None:
     done = _cli("--only", "codec", env=env)
     assert done.returncode == 0, done.stdout + done.stderr
     assert "- allocator: glibc's dynamic malloc thresholds (not pinned)" in done.stdout
+
+
+def test_plant_a_repeated_configuration_counts_the_best_window_of_both_children() -> None:
+    bench = importlib.import_module("benchmarks.bench_plant")
+    assert set(bench.REPEATED) == {"bare", "all"}  # the goal's two, run twice
+    first = bench.Child("bare", 8, (2e-4, 1.5e-4), (8.0, 8.0), 100, 0.1, None, {}, {})
+    again = bench.Child("bare", 8, (1.2e-4, 3e-4), (7.0, 8.0), 200, 0.2, None, {}, {})
+    merged = first.merged(again)
+    assert merged.best_cpu_s == 1.2e-4
+    assert merged.cpu_per_sample_s == (2e-4, 1.5e-4, 1.2e-4, 3e-4)
+    assert merged.samples_per_s == (8.0, 8.0, 7.0, 8.0)
+    assert (merged.rss_bytes, merged.started_s) == (100, 0.1)  # the first child's
