@@ -3,8 +3,11 @@
 from __future__ import annotations
 
 import asyncio
+import contextlib
 import math
 import time
+from collections.abc import AsyncIterator
+from dataclasses import dataclass
 from datetime import datetime
 from pathlib import Path
 from typing import Any
@@ -14,6 +17,7 @@ from asyncua import Client, ua
 from waiting import wait_for
 
 from sj300_async.gateway import GatewayDrive
+from sj300_async.simulator.sj300 import SimulatedBus
 
 from .conftest import (
     NAMESPACE,
@@ -190,88 +194,98 @@ async def test_the_trip_history_reads_newest_first_one_array_per_field(tmp_path:
                 assert math.isnan(got) if want is None else got == pytest.approx(want)
 
 
+@dataclass
+class _Silenceable:
+    """A gateway whose line's drives a test can silence: drive 3, seen by a client."""
+
+    sim: SimulatedBus
+    client: Client
+    namespace: int
+    drive: GatewayDrive
+
+    def voltage(self) -> Any:
+        return _var(self.client, self.namespace, "hall/Drive3/Monitoring/ConverterOutputVoltage")
+
+
+@contextlib.asynccontextmanager
+async def _silenceable(tmp_path: Path) -> AsyncIterator[_Silenceable]:
+    """Values stale after 0.3 s, a drive's silence a time-out after 0.4 s; drive 3 sampled."""
+    async with tcp_line() as (sim, url):
+        text = opcua_toml(
+            tmp_path, url=url, gateway_extra="stale_after_s = 0.3", line_extra="timeout_s = 0.4"
+        )
+        async with opcua_gateway(text) as (gateway, server), connected(server.url) as client:
+            drive = gateway.drive("hall", 3)
+            assert drive is not None
+            await wait_for(lambda: drive.snapshot.last_ok is not None, "a first sample")
+            yield _Silenceable(sim, client, await _namespace(client), drive)
+
+
 async def test_a_subscription_sees_a_silent_drive_s_value_age(tmp_path: Path) -> None:
     """Between samples only time changes a value's status: the tick pushes Good ->
     Uncertain past stale_after_s, no sample coming to do it (the value's going Bad once
     the poller gives up is the next test's, by reads)."""
-    async with tcp_line() as (sim, url):
-        text = opcua_toml(
-            tmp_path, url=url, gateway_extra="stale_after_s = 0.3", line_extra="timeout_s = 0.4"
+    async with _silenceable(tmp_path) as line:
+        statuses: list[int] = []
+
+        class Statuses:
+            def datachange_notification(self, node: Any, value: Any, data: Any) -> None:
+                statuses.append(data.monitored_item.Value.StatusCode.value)
+
+        subscription = await line.client.create_subscription(50, Statuses())
+        await subscription.subscribe_data_change(line.voltage())
+        await wait_for(lambda: statuses == [ua.StatusCodes.Good], "Good first")
+        line.sim.faults.silence(3)
+        await wait_for(
+            lambda: ua.StatusCodes.UncertainLastUsableValue in statuses, "Uncertain pushed"
         )
-        async with opcua_gateway(text) as (gateway, server), connected(server.url) as client:
-            ns = await _namespace(client)
-            drive = gateway.drive("hall", 3)
-            assert drive is not None
-            await wait_for(lambda: drive.snapshot.last_ok is not None, "a first sample")
-            statuses: list[int] = []
-
-            class Statuses:
-                def datachange_notification(self, node: Any, value: Any, data: Any) -> None:
-                    statuses.append(data.monitored_item.Value.StatusCode.value)
-
-            subscription = await client.create_subscription(50, Statuses())
-            voltage = _var(client, ns, "hall/Drive3/Monitoring/ConverterOutputVoltage")
-            await subscription.subscribe_data_change(voltage)
-            await wait_for(lambda: statuses == [ua.StatusCodes.Good], "Good first")
-            sim.faults.silence(3)
-            await wait_for(
-                lambda: ua.StatusCodes.UncertainLastUsableValue in statuses, "Uncertain pushed"
-            )
-            assert drive.snapshot.online  # aged by the tick: the poller still waits for it
-            assert statuses[: statuses.index(ua.StatusCodes.UncertainLastUsableValue)] == [
-                ua.StatusCodes.Good
-            ]
+        assert line.drive.snapshot.online  # aged by the tick: the poller still waits for it
+        assert statuses[: statuses.index(ua.StatusCodes.UncertainLastUsableValue)] == [
+            ua.StatusCodes.Good
+        ]
 
 
 async def test_a_silent_drive_goes_uncertain_then_bad_no_communication(tmp_path: Path) -> None:
     """Stale past stale_after_s while the poller still waits for it; offline once it gives up."""
-    async with tcp_line() as (sim, url):
-        text = opcua_toml(
-            tmp_path, url=url, gateway_extra="stale_after_s = 0.3", line_extra="timeout_s = 0.4"
+    async with _silenceable(tmp_path) as line:
+        client, ns, drive, voltage = line.client, line.namespace, line.drive, line.voltage()
+        assert (await voltage.read_data_value()).StatusCode.is_good()
+        last = drive.snapshot.output_voltage_v
+        line.sim.faults.silence(3)
+        seen: list[ua.DataValue] = []
+
+        async def status_is(code: int) -> bool:
+            value = await voltage.read_data_value(raise_on_bad_status=False)
+            seen.append(value)
+            return bool(value.StatusCode.value == code)
+
+        deadline = asyncio.get_running_loop().time() + 10
+        while not await status_is(ua.StatusCodes.UncertainLastUsableValue):
+            assert asyncio.get_running_loop().time() < deadline, seen[-1]
+            await asyncio.sleep(0.02)
+        assert seen[-1].Value.Value == last  # the last usable value, flagged
+        uncertain = len(seen) - 1
+        assert drive.snapshot.online  # the poller has not given up yet
+        deadline = asyncio.get_running_loop().time() + 20
+        while not await status_is(ua.StatusCodes.BadNoCommunication):
+            assert asyncio.get_running_loop().time() < deadline, seen[-1]
+            await asyncio.sleep(0.05)
+        assert seen[-1].Value.Value is None
+        assert not drive.snapshot.online
+        online = await _var(client, ns, "hall/Drive3/Online").read_data_value()
+        assert (online.Value.Value, online.StatusCode.is_good()) == (False, True)
+        # Never served as Good again meanwhile.
+        assert all(v.StatusCode.value != ua.StatusCodes.Good for v in seen[uncertain:]), [
+            (hex(v.StatusCode.value), v.Value.Value) for v in seen[uncertain:]
+        ]
+        # The others stay online (their values may age while node 3's time-outs
+        # hold the line, past this test's short stale_after_s: Uncertain, not Bad).
+        other = await _var(client, ns, "hall/Drive2/Monitoring/State").read_data_value(
+            raise_on_bad_status=False
         )
-        async with opcua_gateway(text) as (gateway, server), connected(server.url) as client:
-            ns = await _namespace(client)
-            drive = gateway.drive("hall", 3)
-            assert drive is not None
-            await wait_for(lambda: drive.snapshot.last_ok is not None, "a first sample")
-            voltage = _var(client, ns, "hall/Drive3/Monitoring/ConverterOutputVoltage")
-            assert (await voltage.read_data_value()).StatusCode.is_good()
-            last = drive.snapshot.output_voltage_v
-            sim.faults.silence(3)
-            seen: list[ua.DataValue] = []
-
-            async def status_is(code: int) -> bool:
-                value = await voltage.read_data_value(raise_on_bad_status=False)
-                seen.append(value)
-                return bool(value.StatusCode.value == code)
-
-            deadline = asyncio.get_running_loop().time() + 10
-            while not await status_is(ua.StatusCodes.UncertainLastUsableValue):
-                assert asyncio.get_running_loop().time() < deadline, seen[-1]
-                await asyncio.sleep(0.02)
-            assert seen[-1].Value.Value == last  # the last usable value, flagged
-            uncertain = len(seen) - 1
-            assert drive.snapshot.online  # the poller has not given up yet
-            deadline = asyncio.get_running_loop().time() + 20
-            while not await status_is(ua.StatusCodes.BadNoCommunication):
-                assert asyncio.get_running_loop().time() < deadline, seen[-1]
-                await asyncio.sleep(0.05)
-            assert seen[-1].Value.Value is None
-            assert not drive.snapshot.online
-            online = await _var(client, ns, "hall/Drive3/Online").read_data_value()
-            assert (online.Value.Value, online.StatusCode.is_good()) == (False, True)
-            # Never served as Good again meanwhile.
-            assert all(v.StatusCode.value != ua.StatusCodes.Good for v in seen[uncertain:]), [
-                (hex(v.StatusCode.value), v.Value.Value) for v in seen[uncertain:]
-            ]
-            # The others stay online (their values may age while node 3's time-outs
-            # hold the line, past this test's short stale_after_s: Uncertain, not Bad).
-            other = await _var(client, ns, "hall/Drive2/Monitoring/State").read_data_value(
-                raise_on_bad_status=False
-            )
-            assert not other.StatusCode.is_bad()
-            # Its return is test_opcua_node.py's (the poller retries an offline drive
-            # on its own schedule: seconds this test need not spend).
+        assert not other.StatusCode.is_bad()
+        # Its return is test_opcua_node.py's (the poller retries an offline drive
+        # on its own schedule: seconds this test need not spend).
 
 
 class _Notifications:
