@@ -12,6 +12,7 @@ from __future__ import annotations
 from ._bus import Bus
 from ._capture import CaptureFile, combine
 from ._channel import Channel, cap_retries, retries_at_most
+from ._chunklog import ChunkLog, Kept
 from ._dialect import Dialect, LineFramer, LineParser, LineRequest, SimulatorFactory
 from ._link import ReconnectPolicy
 from ._listen import Sniffing, sniff
@@ -50,7 +51,9 @@ __all__ = [
     "BusTiming",
     "CaptureFile",
     "Channel",
+    "ChunkLog",
     "Dialect",
+    "Kept",
     "LineFramer",
     "LineParser",
     "LineRequest",

@@ -28,6 +28,7 @@ from ..wire import BusClosedError, LineSettings, LocalProtocolError, TransportEr
 from ._arbiter import Arbiter
 from ._capture import combine
 from ._channel import Channel
+from ._chunklog import ChunkLog
 from ._dialect import Dialect
 from ._link import Connector, Link, ReconnectPolicy
 from ._protocol import LineProtocol
@@ -97,6 +98,7 @@ class Bus(Generic[DriveT, BroadcastT]):
         self._trace = trace
         # The capture sees every frame whatever the trace hook is set to later.
         self._capture = capture
+        self._recorder: ChunkLog | None = None
         self._strip_echo = strip_echo
         self._parser = dialect.new_parser()
         self.link = Link(
@@ -119,6 +121,7 @@ class Bus(Generic[DriveT, BroadcastT]):
             self.stats,
             strip_echo=self._strip_echo,
             trace=combine(self._trace, self._capture),
+            recorder=self._recorder,
         )
 
     @property
@@ -132,6 +135,24 @@ class Bus(Generic[DriveT, BroadcastT]):
         protocol = self.link.protocol
         if protocol is not None:
             protocol.trace = combine(hook, self._capture)
+
+    @property
+    def recorder(self) -> ChunkLog | None:
+        """Where every chunk written and received is kept (None: nowhere).
+
+        A trace hook sees a record of each chunk with the frames it completed;
+        a recorder keeps only the chunk, its time and whether an answer in it
+        came too early, for a fraction of the cost (every chunk of every line
+        passes here): the workbench keeps each line's recent traffic so.
+        """
+        return self._recorder
+
+    @recorder.setter
+    def recorder(self, log: ChunkLog | None) -> None:
+        self._recorder = log
+        protocol = self.link.protocol
+        if protocol is not None:
+            protocol.recorder = log
 
     @property
     def connected(self) -> bool:

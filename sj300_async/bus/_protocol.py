@@ -91,6 +91,7 @@ from typing import Final, Generic, Protocol, TypeVar, cast
 
 from ..transports import BufferedReads
 from ..wire import BadFrame, Discarded
+from ._chunklog import ChunkLog
 from ._dialect import LineParser, ReplyT
 from ._stats import BusStats
 from ._trace import TraceHook, TraceRecord
@@ -141,6 +142,7 @@ class LineProtocol(BufferedReads, Generic[ReplyT]):
         *,
         strip_echo: bool | None = False,
         trace: TraceHook | None = None,
+        recorder: ChunkLog | None = None,
     ) -> None:
         super().__init__()
         self._parser = parser
@@ -158,6 +160,8 @@ class LineProtocol(BufferedReads, Generic[ReplyT]):
         self._held = b""
         self._echo_queue: list[bytes] = []
         self.trace = trace
+        #: The line's recent traffic, kept without a trace record (Bus.recorder).
+        self.recorder = recorder
         self._transport: asyncio.Transport | None = None
         self._loop = asyncio.get_running_loop()
         self._writable = asyncio.Event()
@@ -189,8 +193,8 @@ class LineProtocol(BufferedReads, Generic[ReplyT]):
         if self._echo:
             data = self._remove_echo(data)
         events = self._parser.feed(data) if data else []
-        if self.trace is not None:
-            self._traced(arrived, events, now, self.trace)
+        if self.trace is not None or self.recorder is not None:
+            self._traced(arrived, events, now)
             return
         listener = self._listener
         for event in events:
@@ -202,15 +206,11 @@ class LineProtocol(BufferedReads, Generic[ReplyT]):
             listener.event_received(event, now)
 
     def _traced(
-        self,
-        arrived: bytes,
-        events: list[ReplyT | BadFrame | Discarded],
-        now: float,
-        trace: TraceHook,
+        self, arrived: bytes, events: list[ReplyT | BadFrame | Discarded], now: float
     ) -> None:
-        """data_received's delivery with a trace: the record after the listener has
-        judged the events, so it can say which it refused as early (the arbiter's
-        early-frame count moved). Nothing the listener does writes at once (a
+        """data_received's delivery with a trace or a recorder: the record after the
+        listener has judged the events, so it can say which it refused as early (the
+        arbiter's early-frame count moved). Nothing the listener does writes at once (a
         re-output request is scheduled), so this record still precedes the next tx."""
         stats = self._stats
         early = []
@@ -223,7 +223,10 @@ class LineProtocol(BufferedReads, Generic[ReplyT]):
             self._listener.event_received(event, now)
             if stats.early_frames != refused:
                 early.append(event)
-        trace(TraceRecord(now, "rx", arrived, tuple(events), tuple(early)))
+        if self.recorder is not None:
+            self.recorder.append(now, "rx", arrived, bool(early))
+        if self.trace is not None:
+            self.trace(TraceRecord(now, "rx", arrived, tuple(events), tuple(early)))
 
     def connection_lost(self, exc: Exception | None) -> None:
         self._transport = None
@@ -256,8 +259,12 @@ class LineProtocol(BufferedReads, Generic[ReplyT]):
                 self._expect_another(frame)
             else:
                 self._echo = frame
-        if self.trace is not None:
-            self.trace(TraceRecord(self._loop.time(), "tx", frame))
+        if self.recorder is not None or self.trace is not None:
+            now = self._loop.time()  # one instant for both
+            if self.recorder is not None:
+                self.recorder.append(now, "tx", frame, False)
+            if self.trace is not None:
+                self.trace(TraceRecord(now, "tx", frame))
         if _log.isEnabledFor(logging.DEBUG):
             _log.debug("tx %s", frame.hex(" "))
         self._stats.bytes_written += len(frame)

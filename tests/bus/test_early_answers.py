@@ -16,7 +16,7 @@ from collections.abc import AsyncIterator
 import pytest
 
 import sj300_async as sj
-from sj300_async.bus import TraceRecord
+from sj300_async.bus import ChunkLog, TraceRecord
 from sj300_async.simulator import serve_tcp
 from sj300_async.simulator.sj300 import SimulatedBus
 from sj300_async.wire import INSTANT_LINE
@@ -98,3 +98,26 @@ async def test_a_timely_answer_is_not_marked_early(instant_peer: str) -> None:
     received = [r for r in records if r.direction == "rx" and r.events]
     assert len(received) == 1, records
     assert received[0].early == ()
+
+
+async def test_a_recorder_marks_the_chunk_with_an_answer_refused_as_early(
+    instant_peer: str,
+) -> None:
+    log = ChunkLog(keep_s=300.0, max_chunks=100)
+    async with sj.open_bus(f"{instant_peer}?baudrate={SLOW}", timing=TIMING, retries=0) as bus:
+        bus.recorder = log
+        with pytest.raises(sj.ReplyTimeoutError):
+            await bus.drive(1).read_status()
+    received = [chunk for chunk in log.since(0.0) if chunk[1] == "rx"]
+    assert received and all(early for *_, early in received), received
+
+
+async def test_a_recorder_leaves_a_timely_answer_unmarked(instant_peer: str) -> None:
+    log = ChunkLog(keep_s=300.0, max_chunks=100)
+    async with sj.open_bus(f"{instant_peer}?baudrate=0", timing=TIMING, retries=0) as bus:
+        bus.recorder = log
+        await bus.drive(1).read_status()
+    kept = list(log.since(0.0))
+    assert [chunk[1] for chunk in kept][0] == "tx"
+    assert any(chunk[1] == "rx" for chunk in kept)
+    assert not any(early for *_, early in kept)

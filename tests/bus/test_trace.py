@@ -2,7 +2,12 @@
 
 from __future__ import annotations
 
+import math
+
+from waiting import wait_for
+
 import sj300_async as sj
+import sj300_async.bus as sjbus
 from sj300_async import sj300 as sj3
 
 from .scripted import MakeRig, reply
@@ -42,3 +47,37 @@ def test_replies_are_described_for_traces() -> None:
     assert dialect.describe(sj3.AckReply(3)) == "node 03 ACK"
     assert dialect.describe(sj3.NakReply(3, sj.NakCode(16))).startswith("node 03 NAK 16 (")
     assert dialect.describe(sj3.AckDataReply(3, b"00001000")) == "node 03 ACK + data 00001000"
+
+
+def _as_kept(records: list[sjbus.TraceRecord]) -> list[sjbus.Kept]:
+    return [(r.timestamp, r.direction, r.data, bool(r.early)) for r in records]
+
+
+async def test_a_recorder_keeps_what_the_trace_sees_chunk_for_chunk(scripted: MakeRig) -> None:
+    log = sjbus.ChunkLog(keep_s=300.0, max_chunks=1000)
+    async with scripted(_monitor_in_pieces) as rig:
+        rig.bus.recorder = log
+        await rig.bus.drive(4).read_monitor()
+        await rig.bus.drive(5).read_monitor()
+        kept = list(log.since(-math.inf))
+        assert len(kept) == 8  # two requests, two replies in three chunks each
+        assert kept == _as_kept(rig.trace)
+        rig.bus.recorder = None  # recording stops; the trace goes on
+        await rig.bus.drive(6).read_monitor()
+    assert list(log.since(-math.inf)) == kept
+    assert len(rig.trace) == 12
+
+
+async def test_a_reconnection_keeps_recording(scripted: MakeRig) -> None:
+    log = sjbus.ChunkLog(keep_s=300.0, max_chunks=1000)
+    async with scripted(_monitor_in_pieces) as rig:
+        rig.bus.recorder = log
+        await rig.bus.drive(4).read_monitor()
+        first = rig.bus.link.protocol
+        rig.bus.link.drop()
+        await wait_for(
+            lambda: rig.bus.connected and rig.bus.link.protocol is not first, "a new connection"
+        )
+        await rig.bus.drive(5).read_monitor()  # recorded by the new one, made with the recorder
+        assert list(log.since(-math.inf)) == _as_kept(rig.trace)
+        assert len(log) == 8

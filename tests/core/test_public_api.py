@@ -91,8 +91,10 @@ BUS_NAMES = (
     # captures and the passive sniffer
     "CaptureFile", "LineFramer", "Anomaly", "LineSniffer", "SniffedFrame", "Sniffing",
     "Unanswered", "sniff",
-    # several trace hooks on one bus (the capture and the workbench's line trace)
+    # several trace hooks on one bus (a capture and the caller's own)
     "combine",
+    # a bus's recorder: its recent chunks, without a trace record each (the workbench's)
+    "ChunkLog", "Kept",
 )  # fmt: skip
 SIMULATOR_NAMES = (
     "BusModel", "Faults", "LineCounters", "LinePacing", "PacedLine", "PlausibleLine",

@@ -3,19 +3,21 @@
 The workbench's line page shows the last frames of a line with their
 meaning, who answered whom and how fast, and what went wrong; a button
 downloads the last N seconds for Wireshark. :class:`LineTrace` is one
-line's record, fed by the bus's trace hook (every chunk written and
-received, :class:`~sj300_async.bus.TraceRecord`).
+line's record, kept by the bus's recorder (every chunk written and
+received, :attr:`~sj300_async.bus.Bus.recorder`).
 
 Decisions:
 
-- **Record raw, judge when asked.** The hook only appends the chunk to a
-  bounded log (:data:`KEEP_S` seconds, at most :data:`MAX_RECORDS`, see
-  :mod:`._chunklog`): a line nobody looks at costs an append per chunk.
-  What is kept of a record is its time, direction, bytes and whether the
-  bus found it early, in a few large arrays, not the record: the parsed
-  events it carries are not kept alive, the garbage collector has nothing
-  to scan, and a plant's lines (64 of them, 38,400 chunks each in 300 s)
-  take their bytes plus 13 per chunk. A request for frames
+- **Record raw, judge when asked.** The bus appends each chunk to a
+  bounded log (:data:`KEEP_S` seconds, at most :data:`MAX_RECORDS`, a
+  :class:`~sj300_async.bus.ChunkLog`), with no trace record made for it: a
+  line nobody looks at costs an append per chunk. What is kept of a chunk
+  is its time, direction, bytes and whether the bus found an answer in it
+  early, in a few large arrays: the parsed events are not kept alive, the
+  garbage collector has nothing to scan, and a plant's lines (64 of them,
+  38,400 chunks each in 300 s) take their bytes plus 12 per chunk. A
+  bus that has a recorder already (another reader of the same line) is
+  shared, not replaced. A request for frames
   runs the passive sniffer (:class:`~sj300_async.bus.LineSniffer`, the
   one ``sj300 sniff`` uses) over the window: it splits, pairs each reply
   with its request (response time) and flags bad check codes, broken
@@ -40,9 +42,17 @@ import time
 from collections.abc import Iterable
 from typing import Any, Final
 
-from ...bus import Bus, CaptureFile, LineSniffer, SniffedFrame, TraceRecord, Unanswered
+from ...bus import (
+    Bus,
+    CaptureFile,
+    ChunkLog,
+    Kept,
+    LineSniffer,
+    SniffedFrame,
+    TraceRecord,
+    Unanswered,
+)
 from ...profiles import frame_text
-from ._chunklog import ChunkLog, Kept
 
 __all__ = ["KEEP_S", "LEAD_S", "MAX_RECORDS", "LineTrace"]
 
@@ -64,12 +74,19 @@ class LineTrace:
     def __init__(self, name: str, bus: Bus[Any, Any]) -> None:
         self.name = name
         self._bus = bus
-        self._records = ChunkLog(KEEP_S, MAX_RECORDS)
+        # The bus's recorder, shared (the same traffic), or one of ours until close().
+        existing = bus.recorder
+        self._own = existing is None
+        self._records = ChunkLog(KEEP_S, MAX_RECORDS) if existing is None else existing
+        if existing is None:
+            bus.recorder = self._records
         #: Unix time minus loop time: the records carry the loop's clock.
         self._offset = time.time() - _loop_time()
 
-    def __call__(self, record: TraceRecord) -> None:
-        self._records.append(record.timestamp, record.direction, record.data, bool(record.early))
+    def close(self) -> None:
+        """Stop recording the line (when the recorder was this trace's own)."""
+        if self._own and self._bus.recorder is self._records:
+            self._bus.recorder = None
 
     def unix(self, loop_time: float) -> float:
         return loop_time + self._offset

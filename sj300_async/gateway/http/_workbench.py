@@ -22,7 +22,6 @@ import time
 from collections.abc import Callable
 from typing import Any, Final
 
-from ...bus import TraceHook, combine
 from ...profiles import NEVER, DriveSnapshot
 from ...version import __version__
 from .. import GatewayLine, GatewayView, busy_seconds
@@ -58,14 +57,10 @@ class Workbench:
             drive.key: Trend(trend_capacity(trend_s, drive.line.interval_s))
             for drive in gateway.drives
         }
-        #: Each line's recent traffic (the line page; its hook is on the line's bus).
-        self.traces: dict[str, LineTrace] = {}
-        self._hooks: dict[str, TraceHook | None] = {}
-        for line in gateway.lines:
-            trace = LineTrace(line.config.name, line.bus)
-            self.traces[line.config.name] = trace
-            self._hooks[line.config.name] = line.bus.trace
-            line.bus.trace = combine(line.bus.trace, trace)
+        #: Each line's recent traffic (the line page; kept by the line's bus's recorder).
+        self.traces: dict[str, LineTrace] = {
+            line.config.name: LineTrace(line.config.name, line.bus) for line in gateway.lines
+        }
         #: Each drive's latest monitor read: its loop time, and its Unix time in the trend.
         self._monitor_at: dict[tuple[str, int], float] = {}
         self._monitor_time: dict[tuple[str, int], float] = {}
@@ -173,11 +168,9 @@ class Workbench:
                 self.hub.publish(f"line/{name}", sse_frame("line", self.line_json(line)))
 
     def close(self) -> None:
-        """Give each line's trace hook back, end the event streams."""
-        for line in self.gateway.lines:
-            name = line.config.name
-            if name in self._hooks:
-                line.bus.trace = self._hooks.pop(name)
+        """Stop recording the lines, end the event streams."""
+        for trace in self.traces.values():
+            trace.close()
         self.hub.close()
 
     async def run(self) -> None:

@@ -1,4 +1,4 @@
-"""The workbench's compact log of a line's chunks (gateway/http/_chunklog.py).
+"""A bus recorder's compact log of a line's chunks (bus/_chunklog.py).
 
 A model check: whatever is appended, ``since(t)`` gives exactly the chunks
 a plain list would, for every ``t`` inside what the log promises to keep
@@ -13,7 +13,7 @@ from typing import Literal
 from hypothesis import given
 from hypothesis import strategies as st
 
-from sj300_async.gateway.http._chunklog import ChunkLog, Kept
+from sj300_async.bus import ChunkLog, Kept
 
 _CHUNKS = st.lists(
     st.tuples(
