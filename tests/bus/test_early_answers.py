@@ -109,7 +109,8 @@ async def test_a_recorder_marks_the_chunk_with_an_answer_refused_as_early(
         with pytest.raises(sj.ReplyTimeoutError):
             await bus.drive(1).read_status()
     received = [chunk for chunk in log.since(0.0) if chunk[1] == "rx"]
-    assert received and all(early for *_, early in received), received
+    assert received
+    assert all(early for *_, early in received), received
 
 
 async def test_a_recorder_leaves_a_timely_answer_unmarked(instant_peer: str) -> None:
@@ -118,6 +119,6 @@ async def test_a_recorder_leaves_a_timely_answer_unmarked(instant_peer: str) -> 
         bus.recorder = log
         await bus.drive(1).read_status()
     kept = list(log.since(0.0))
-    assert [chunk[1] for chunk in kept][0] == "tx"
+    assert kept[0][1] == "tx"
     assert any(chunk[1] == "rx" for chunk in kept)
     assert not any(early for *_, early in kept)

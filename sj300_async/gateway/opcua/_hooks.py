@@ -49,11 +49,16 @@ it is done here, each on the one server instance, and checked by
   they are, and its monitored items' notifications carry them as they are
   (asyncua made each one empty first). Values of every other kind are
   copied and notified as before.
+- **Values encoded faster** (:func:`encode_frozen_values`): asyncua's
+  encoder of a DataValue is generic, field by field; a
+  :class:`FrozenDataValue` of a shape the gateway serves is packed by
+  :mod:`._wire` in one ``struct`` call, the same bytes.
 """
 
 from __future__ import annotations
 
 import asyncio
+import functools
 import logging
 import secrets
 from collections.abc import Awaitable, Callable
@@ -65,14 +70,19 @@ from asyncua.common.utils import ServiceError
 from asyncua.crypto.permission_rules import PermissionRuleset
 from asyncua.crypto.security_policies import SecurityPolicyNone
 from asyncua.server.monitored_item_service import MonitoredItemService, MonitoredItemValues
+from asyncua.ua import ua_binary
+
+from ._wire import datavalue_binary
 
 __all__ = [
     "ACTIVATE_WITHIN_S",
     "FrozenDataValue",
+    "encode_frozen_values",
     "follow_watchers",
     "guard_channels",
     "guard_sessions",
     "on_session_closed",
+    "push_frozen",
     "refuse_registration",
     "route_writes",
     "share_frozen_values",
@@ -290,6 +300,8 @@ _copying: Callable[[Any, Any], None] | None = None
 #: asyncua's own data-change callback, as it was before share_frozen_values (the tests
 #: compare the two).
 _notifying: Callable[..., Awaitable[None]] | None = None
+#: share_frozen_values' data-change callback (push_frozen knows its monitored items by it).
+_sharing: Callable[..., Awaitable[None]] | None = None
 
 
 def share_frozen_values() -> None:
@@ -302,7 +314,7 @@ def share_frozen_values() -> None:
     made with it; the rest (the item's mode, its filter and deadband, the
     queue) is asyncua's own, called as asyncua calls it.
     """
-    global _copying, _notifying
+    global _copying, _notifying, _sharing
     if _copying is not None:
         return
     copying = _copying = MonitoredItemValues.set_current_datavalue
@@ -321,20 +333,133 @@ def share_frozen_values() -> None:
         if error or type(value) is not FrozenDataValue:
             await notifying(self, handle, value, error)
             return
-        mid = self._monitored_datachange[handle]
-        item = self._monitored_items[mid]
-        if item.mode == ua.MonitoringMode.Disabled:
-            return
-        item.mvalue.set_current_datavalue(value)
-        if item.filter:
-            changed = self._is_data_changed(
-                item.mvalue, item.filter.Trigger
-            ) and self._is_deadband_exceeded(item.mvalue, item.filter)
-        else:
-            changed = self._is_data_changed(item.mvalue, ua.DataChangeTrigger.StatusValue)
-        if changed:
-            made = ua.MonitoredItemNotification(ClientHandle=item.client_handle, Value=value)
-            await self.isub.enqueue_datachange_event(mid, made, item.queue_size)
+        notified = _notification(self, handle, value)
+        if notified is not None:
+            await self.isub.enqueue_datachange_event(*notified)
 
     MonitoredItemValues.set_current_datavalue = set_current_datavalue
     MonitoredItemService.datachange_callback = datachange_callback
+    _sharing = datachange_callback
+
+
+def _notification(
+    service: Any, handle: int, value: FrozenDataValue
+) -> tuple[int, ua.MonitoredItemNotification, int] | None:
+    """What asyncua's data-change callback queues for *value* on the item of *handle*:
+    (item id, notification, queue size), or None when the item reports nothing."""
+    mid = service._monitored_datachange[handle]
+    item = service._monitored_items[mid]
+    if item.mode == ua.MonitoringMode.Disabled:
+        return None
+    item.mvalue.set_current_datavalue(value)
+    if item.filter:
+        changed = service._is_data_changed(
+            item.mvalue, item.filter.Trigger
+        ) and service._is_deadband_exceeded(item.mvalue, item.filter)
+    else:
+        changed = service._is_data_changed(item.mvalue, ua.DataChangeTrigger.StatusValue)
+    if not changed:
+        return None
+    return (
+        mid,
+        ua.MonitoredItemNotification(ClientHandle=item.client_handle, Value=value),
+        (item.queue_size),
+    )
+
+
+def push_frozen(server: Server, node: ua.NodeId, value: FrozenDataValue) -> bool:
+    """Write *value* to *node*'s Value and queue it for its monitored items, as asyncua's
+    ``write_attribute_value`` does, without its coroutines; False (nothing done) where
+    that would not be the same, and the caller awaits asyncua's own.
+
+    asyncua's write is a coroutine calling each monitored item's callback, a
+    coroutine calling its subscription's queue, a coroutine: at plant scale six
+    coroutines a value, most of the push's time. Only one thing in it can
+    wait: a subscription with no publishing interval publishes as soon as an
+    item's first notification is queued. So: the node and its Value exist,
+    every callback on it is :func:`share_frozen_values`' (a
+    monitored item of a subscription that publishes on its own time), and the
+    value is one asyncua would store as it is (a Bad status carries a Null
+    value; the gateway's values have the node's type, by construction).
+    """
+    record = server.iserver.aspace._nodes.get(node)
+    attribute = None if record is None else record.attributes.get(ua.AttributeIds.Value)
+    if attribute is None:
+        return False
+    if value.StatusCode.is_bad() and value.Value.VariantType != ua.VariantType.Null:
+        return False
+    callbacks = attribute.datachange_callbacks
+    for callback in callbacks.values():
+        if getattr(callback, "__func__", None) is not _sharing:
+            return False
+        subscription = callback.__self__.isub
+        if not subscription._task and subscription.data.RevisedPublishingInterval <= 0.0:
+            return False
+    if attribute.value_setter is not None:  # the gateway's: its binding holds the value
+        attribute.value_setter(record, ua.AttributeIds.Value, value)
+    else:
+        attribute.value = value
+        attribute.value_callback = None
+    for handle, callback in callbacks.items():
+        notified = _notification(callback.__self__, handle, value)
+        if notified is None:
+            continue
+        mid, notification, size = notified
+        queue = callback.__self__.isub._triggered_datachanges
+        queued = queue.get(mid)
+        if queued is None:
+            queue[mid] = [notification]
+            continue
+        if size != 0 and len(queued) >= size:
+            queued.pop(0)
+        queued.append(notification)
+    return True
+
+
+#: asyncua's own dataclass-serializer factory, as it was before encode_frozen_values.
+_serializers: Callable[[type], Callable[[Any], bytes]] | None = None
+
+
+def encode_frozen_values() -> None:
+    """asyncua encodes a :class:`FrozenDataValue` with :func:`._wire.datavalue_binary`
+    (once per process; a shape that leaves to asyncua is encoded by asyncua).
+
+    asyncua builds an encoder per structure type once, from its factory, and
+    keeps it (``functools.cache``); a structure's encoder holds its fields'
+    encoders. The factory is wrapped so that DataValue's is ours, and the
+    caches are emptied, so that every encoder built before (a publish
+    response's, holding a monitored item's, holding a DataValue's) is built
+    again around it.
+    """
+    global _serializers
+    if _serializers is not None:
+        return
+    original = _serializers = ua_binary.create_dataclass_serializer
+    generic = original(ua.DataValue)
+
+    def datavalue(value: Any) -> bytes:
+        if type(value) is FrozenDataValue:
+            wire = datavalue_binary(value)
+            if wire is not None:
+                return wire
+        encoded: bytes = generic(value)
+        return encoded
+
+    @functools.cache
+    def create_dataclass_serializer(dataclazz: type) -> Callable[[Any], bytes]:
+        # A DataValue field's encoder is its type's; a value in a variant (a read's, a
+        # notification's) is encoded by its own class's.
+        if dataclazz is ua.DataValue or dataclazz is FrozenDataValue:
+            return datavalue
+        serializer: Callable[[Any], bytes] = original(dataclazz)
+        return serializer
+
+    ua_binary.create_dataclass_serializer = create_dataclass_serializer
+    for cached in (
+        original,
+        ua_binary.create_type_serializer,
+        ua_binary.create_list_serializer,
+        ua_binary.create_uatype_serializer,
+        ua_binary.create_uatype_array_serializer,
+    ):
+        cached.cache_clear()

@@ -54,10 +54,12 @@ from ._certificate import ServerCertificate, load_or_generate
 from ._config import OpcuaConfig
 from ._hooks import (
     FrozenDataValue,
+    encode_frozen_values,
     follow_watchers,
     guard_channels,
     guard_sessions,
     on_session_closed,
+    push_frozen,
     refuse_registration,
     route_writes,
     share_frozen_values,
@@ -285,6 +287,7 @@ class OpcuaServer:
         follow_watchers(server, self._watch)
         route_writes(server, self.namespace, self._write)
         share_frozen_values()
+        encode_frozen_values()
         guard_sessions(
             server,
             limit=self.config.max_connections,
@@ -486,7 +489,9 @@ class OpcuaServer:
             outbox, self._outbox = self._outbox, {}
             for node, value in outbox.items():
                 try:
-                    await server.write_attribute_value(node, value)
+                    # asyncua's write without its coroutines, where that is the same.
+                    if not push_frozen(server, node, value):
+                        await server.write_attribute_value(node, value)
                 except Exception:  # one bad value must not stop every subscription
                     self.push_errors += 1
                     _log.exception("opcua: cannot push %s to its subscriptions", node)

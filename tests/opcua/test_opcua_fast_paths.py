@@ -1,0 +1,145 @@
+"""push_frozen and encode_frozen_values (gateway/opcua/_hooks.py) against asyncua's own.
+
+push_frozen writes a value and queues its notifications without asyncua's
+coroutines: two variables watched by one subscription, one pushed by it and
+one written by asyncua with the same values, must notify the same. Where it
+would not be the same (a subscription that publishes as soon as something
+is queued, a callback that is not a monitored item's, a Bad value that is
+not Null), it does nothing and says so. encode_frozen_values must put the
+fast encoder in asyncua's encoders, with the same bytes.
+"""
+
+from __future__ import annotations
+
+import asyncio
+from collections.abc import AsyncIterator
+from datetime import UTC, datetime
+from typing import Any
+
+import pytest
+from asyncua import Node, Server, ua
+from asyncua.ua import ua_binary
+from waiting import wait_for
+
+from sj300_async.gateway.opcua import _hooks, _wire
+
+
+class _Handler:
+    def __init__(self) -> None:
+        self.seen: dict[str, list[tuple[object, int]]] = {}
+
+    def datachange_notification(self, node: Node, value: object, data: Any) -> None:
+        dv = data.monitored_item.Value
+        self.seen.setdefault(node.nodeid.Identifier, []).append((value, dv.StatusCode.value))
+
+
+@pytest.fixture
+async def space() -> AsyncIterator[tuple[Server, Node, Node]]:
+    """A server (not listening: its own subscriptions only), with two Double variables."""
+    _hooks.share_frozen_values()
+    server = Server()
+    await server.init()
+    ns = await server.register_namespace("urn:test:fast-paths")
+    objects = server.nodes.objects
+    ours = await objects.add_variable(ua.NodeId("ours", ns), "ours", 0.0)
+    theirs = await objects.add_variable(ua.NodeId("theirs", ns), "theirs", 0.0)
+    yield server, ours, theirs
+    for subscription in list(server.iserver.subscription_service.subscriptions.values()):
+        await subscription.stop()
+
+
+def _frozen(value: float | None, status: int = 0) -> _hooks.FrozenDataValue:
+    now = datetime.now(UTC)
+    variant = (
+        ua.Variant(None, ua.VariantType.Null)
+        if value is None
+        else ua.Variant(value, ua.VariantType.Double)
+    )
+    return _hooks.FrozenDataValue(
+        Value=variant, StatusCode=ua.StatusCode(status), SourceTimestamp=now, ServerTimestamp=now
+    )
+
+
+async def test_a_pushed_value_notifies_as_asyncua_s_write_does(
+    space: tuple[Server, Node, Node],
+) -> None:
+    server, ours, theirs = space
+    handler = _Handler()
+    subscription = await server.create_subscription(20, handler)
+    await subscription.subscribe_data_change([ours, theirs])
+    await wait_for(lambda: len(handler.seen) == 2, "the initial values")
+    values = [
+        _frozen(1.0), _frozen(1.0), _frozen(2.5),
+        _frozen(2.5, ua.StatusCodes.UncertainLastUsableValue),
+        _frozen(None, ua.StatusCodes.BadWaitingForInitialData), _frozen(3.0),
+    ]  # fmt: skip
+    for value in values:  # both in the same loop turn: one publish carries both
+        assert _hooks.push_frozen(server, ours.nodeid, value)
+        await server.write_attribute_value(theirs.nodeid, value)
+        await wait_for(
+            lambda: (
+                handler.seen["ours"][-1:] == handler.seen["theirs"][-1:]
+                and len(handler.seen["ours"]) == len(handler.seen["theirs"])
+            ),
+            "the same notifications",
+        )
+        await asyncio.sleep(0.03)  # a publish interval between values: none coalesced
+    assert handler.seen["ours"] == handler.seen["theirs"]
+    assert handler.seen["ours"][1:] == [
+        (1.0, 0), (2.5, 0), (2.5, ua.StatusCodes.UncertainLastUsableValue),
+        (None, ua.StatusCodes.BadWaitingForInitialData), (3.0, 0),
+    ]  # fmt: skip
+
+
+async def test_what_push_frozen_leaves_to_asyncua_is_left_untouched(
+    space: tuple[Server, Node, Node],
+) -> None:
+    server, ours, theirs = space
+    before = await ours.read_data_value()
+    # A subscription with no publishing interval publishes as an item's first value comes.
+    at_once = await server.create_subscription(0, _Handler())
+    await at_once.subscribe_data_change(ours)
+    assert not _hooks.push_frozen(server, ours.nodeid, _frozen(7.0))
+    assert (await ours.read_data_value()).Value == before.Value
+    # A data-change callback that is not a monitored item's.
+    space_ = server.iserver.aspace
+    space_.add_datachange_callback(theirs.nodeid, ua.AttributeIds.Value, lambda *a: None)
+    assert not _hooks.push_frozen(server, theirs.nodeid, _frozen(7.0))
+    # A Bad value that carries a value (asyncua would store Null), a node that is not there.
+    fresh = await server.nodes.objects.add_variable(ua.NodeId("fresh", 9), "fresh", 0.0)
+    assert not _hooks.push_frozen(
+        server, fresh.nodeid, _frozen(7.0, ua.StatusCodes.BadWaitingForInitialData)
+    )
+    assert not _hooks.push_frozen(server, ua.NodeId("absent", 9), _frozen(7.0))
+    assert _hooks.push_frozen(server, fresh.nodeid, _frozen(7.0))  # and a plain one is done
+    assert (await fresh.read_value()) == 7.0
+
+
+def test_asyncua_encodes_a_frozen_value_with_the_fast_encoder(
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    _hooks.encode_frozen_values()
+    assert _hooks._serializers is not None
+    generic = _hooks._serializers(ua.DataValue)
+    calls: list[object] = []
+    fast = _wire.datavalue_binary
+
+    def counted(value: Any) -> bytes | None:
+        calls.append(value)
+        return fast(value)
+
+    monkeypatch.setattr(_hooks, "datavalue_binary", counted)
+    value = _frozen(12.5)
+    item = ua.MonitoredItemNotification(ClientHandle=3, Value=value)
+    notification = ua.DataChangeNotification(MonitoredItems=[item])
+    encoded = ua_binary.struct_to_binary(notification)
+    assert calls == [value]
+    assert generic(value) in encoded
+    assert encoded == ua_binary.struct_to_binary(
+        ua.DataChangeNotification(
+            MonitoredItems=[ua.MonitoredItemNotification(ClientHandle=3, Value=ua.DataValue(
+                Value=value.Value, StatusCode=value.StatusCode,
+                SourceTimestamp=value.SourceTimestamp, ServerTimestamp=value.ServerTimestamp,
+            ))]
+        )
+    )  # fmt: skip
