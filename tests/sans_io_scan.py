@@ -84,7 +84,13 @@ SJ300_CODEC: Final = tuple(
 )
 
 #: The bus's interfaces and arithmetic.
-BUS_SANS_IO: Final = ("bus._dialect", "bus._sniffer", "bus._timing", "bus._trace")
+BUS_SANS_IO: Final = (
+    "bus._chunklog",
+    "bus._dialect",
+    "bus._sniffer",
+    "bus._timing",
+    "bus._trace",
+)
 
 #: The protocol core (tests/core/test_sans_io.py): the wire, the SJ300 codec, the bus's arithmetic.
 CORE_MODULES: Final = (*WIRE, *SJ300_CODEC, *BUS_SANS_IO)
