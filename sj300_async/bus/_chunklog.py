@@ -45,6 +45,8 @@ Kept = tuple[float, Literal["tx", "rx"], bytes, bool]
 _RX: Final = 1
 _EARLY: Final = 2
 _SHIFT: Final = 2
+# A mark is 32 bits: a segment holds at most this many bytes (a new one starts first).
+_MAX_END: Final = (1 << (32 - _SHIFT)) - 1
 
 
 class _Segment:
@@ -53,7 +55,7 @@ class _Segment:
     def __init__(self) -> None:
         self.times = array("d")
         #: Each chunk's end in data << _SHIFT | its flags.
-        self.marks = array("Q")
+        self.marks = array("I")
         self.data = bytearray()
 
 
@@ -77,7 +79,7 @@ class ChunkLog:
         """One chunk, at loop time *at* (not before the last one's); *early*: the bus
         refused an answer in it as sooner than the line allows."""
         last = self._last
-        if len(last.times) >= self.segment:
+        if len(last.times) >= self.segment or len(last.data) + len(data) > _MAX_END:
             last = self._start(at)
         buffer = last.data
         buffer += data

@@ -91,6 +91,56 @@ async def test_a_pushed_value_notifies_as_asyncua_s_write_does(
     ]  # fmt: skip
 
 
+async def test_values_queued_within_one_publish_interval_are_kept_as_asyncua_keeps_them(
+    space: tuple[Server, Node, Node],
+) -> None:
+    """Several values in one loop turn: each item's queue (size 1, 2, unbounded) keeps the
+    same ones, dropped oldest first."""
+    server, ours, theirs = space
+    for size in (1, 2, 0):
+        handler = _Handler()
+        subscription = await server.create_subscription(20, handler)
+        await subscription.subscribe_data_change([ours, theirs], queuesize=size)
+        await wait_for(lambda: len(handler.seen) == 2, "the initial values")  # noqa: B023
+        for step in range(1, 5):
+            value = _frozen(100.0 * size + step)
+            assert _hooks.push_frozen(server, ours.nodeid, value)
+            await server.write_attribute_value(theirs.nodeid, value)
+        last = (100.0 * size + 4, 0)
+        await wait_for(
+            lambda: handler.seen["ours"][-1:] == handler.seen["theirs"][-1:] == [last],  # noqa: B023
+            "the last value",
+        )
+        assert handler.seen["ours"] == handler.seen["theirs"]
+        assert len(handler.seen["ours"]) - 1 == (size or 4)
+        await subscription.delete()
+
+
+async def test_a_failing_item_leaves_the_others_notified_as_asyncua_does(
+    space: tuple[Server, Node, Node],
+) -> None:
+    """asyncua's deadband fails on a value that goes to or from Null; the items on the
+    same value in another subscription are notified all the same."""
+    server, ours, theirs = space
+    deadband, plain = _Handler(), _Handler()
+    filtered = await server.create_subscription(20, deadband)
+    await filtered.deadband_monitor([ours, theirs], 0.5)
+    unfiltered = await server.create_subscription(20, plain)
+    await unfiltered.subscribe_data_change([ours, theirs])
+    await wait_for(lambda: len(plain.seen) == len(deadband.seen) == 2, "the initial values")
+    for value in (
+        _frozen(1.0),
+        _frozen(None, ua.StatusCodes.BadWaitingForInitialData),
+        _frozen(2.0),
+    ):
+        assert _hooks.push_frozen(server, ours.nodeid, value)
+        await server.write_attribute_value(theirs.nodeid, value)
+        await asyncio.sleep(0.05)  # a publish interval or two between values
+    await wait_for(lambda: len(plain.seen["ours"]) == 4, "every value, unfiltered")
+    assert plain.seen["ours"] == plain.seen["theirs"]
+    assert deadband.seen["ours"] == deadband.seen["theirs"]
+
+
 async def test_what_push_frozen_leaves_to_asyncua_is_left_untouched(
     space: tuple[Server, Node, Node],
 ) -> None:
@@ -105,11 +155,15 @@ async def test_what_push_frozen_leaves_to_asyncua_is_left_untouched(
     space_ = server.iserver.aspace
     space_.add_datachange_callback(theirs.nodeid, ua.AttributeIds.Value, lambda *a: None)
     assert not _hooks.push_frozen(server, theirs.nodeid, _frozen(7.0))
-    # A Bad value that carries a value (asyncua would store Null), a node that is not there.
+    # A Bad value that carries a value (asyncua would store Null), a value of another type
+    # (asyncua refuses it), a node that is not there.
     fresh = await server.nodes.objects.add_variable(ua.NodeId("fresh", 9), "fresh", 0.0)
     assert not _hooks.push_frozen(
         server, fresh.nodeid, _frozen(7.0, ua.StatusCodes.BadWaitingForInitialData)
     )
+    wrong = _frozen(7.0)
+    wrong.Value = ua.Variant(7, ua.VariantType.Int32)
+    assert not _hooks.push_frozen(server, fresh.nodeid, wrong)
     assert not _hooks.push_frozen(server, ua.NodeId("absent", 9), _frozen(7.0))
     assert _hooks.push_frozen(server, fresh.nodeid, _frozen(7.0))  # and a plain one is done
     assert (await fresh.read_value()) == 7.0

@@ -380,14 +380,20 @@ def push_frozen(server: Server, node: ua.NodeId, value: FrozenDataValue) -> bool
     every callback on it is :func:`share_frozen_values`' (a
     monitored item of a subscription that publishes on its own time), and the
     value is one asyncua would store as it is (a Bad status carries a Null
-    value; the gateway's values have the node's type, by construction).
+    value, any other has the node's type). A monitored item whose
+    notification fails is logged and the others are notified, as asyncua
+    does (its deadband filter fails on a value that goes to or from Null).
     """
-    record = server.iserver.aspace._nodes.get(node)
+    space = server.iserver.aspace
+    record = space._nodes.get(node)
     attribute = None if record is None else record.attributes.get(ua.AttributeIds.Value)
     if attribute is None:
         return False
-    if value.StatusCode.is_bad() and value.Value.VariantType != ua.VariantType.Null:
-        return False
+    if value.StatusCode.is_bad():
+        if value.Value.VariantType != ua.VariantType.Null:
+            return False
+    elif not space._is_expected_variant_type(value, attribute, record):
+        return False  # asyncua answers BadTypeMismatch and stores nothing
     callbacks = attribute.datachange_callbacks
     for callback in callbacks.values():
         if getattr(callback, "__func__", None) is not _sharing:
@@ -401,19 +407,27 @@ def push_frozen(server: Server, node: ua.NodeId, value: FrozenDataValue) -> bool
         attribute.value = value
         attribute.value_callback = None
     for handle, callback in callbacks.items():
-        notified = _notification(callback.__self__, handle, value)
-        if notified is None:
-            continue
-        mid, notification, size = notified
-        queue = callback.__self__.isub._triggered_datachanges
-        queued = queue.get(mid)
-        if queued is None:
-            queue[mid] = [notification]
-            continue
-        if size != 0 and len(queued) >= size:
-            queued.pop(0)
-        queued.append(notification)
+        try:
+            _enqueue(callback.__self__, handle, value)
+        except Exception:
+            _log.exception("opcua: notifying monitored item %s of %s failed", handle, node)
     return True
+
+
+def _enqueue(service: Any, handle: int, value: FrozenDataValue) -> None:
+    """Queue *value* for the item of *handle* as its subscription's queue does."""
+    notified = _notification(service, handle, value)
+    if notified is None:
+        return
+    mid, notification, size = notified
+    queue = service.isub._triggered_datachanges
+    queued = queue.get(mid)
+    if queued is None:
+        queue[mid] = [notification]
+        return
+    if size != 0 and len(queued) >= size:
+        queued.pop(0)
+    queued.append(notification)
 
 
 #: asyncua's own dataclass-serializer factory, as it was before encode_frozen_values.
