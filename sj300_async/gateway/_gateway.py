@@ -51,6 +51,7 @@ from ..bus import Bus, CaptureFile, open_bus
 from ..profiles import NEVER, DriveSnapshot, Profile, get_profile
 from ..wire import SJ300Error
 from ._audit import AuditLog
+from ._batch import SnapshotBatch
 from ._control import Controller
 from ._drive import GatewayDrive, Lease
 from ._errors import GatewayStartError
@@ -98,6 +99,8 @@ class Gateway:
         self._by_key: dict[tuple[str, int], GatewayDrive] = {}
         #: Exceptions a northbound's ``publish`` raised, by its section.
         self.publish_errors: dict[str, int] = {}
+        #: Snapshots on their way to the northbounds (see ._batch).
+        self._batch = SnapshotBatch(self._deliver)
         #: Reads beside the poll that failed, by (line, ``"trips"`` or ``"setpoint"``).
         self.read_errors: dict[tuple[str, str], int] = {}
         self._stack = contextlib.AsyncExitStack()
@@ -330,19 +333,27 @@ class Gateway:
         except Exception:  # a profile's bug: the last snapshot stays, the caller goes on
             _log.exception("line %s node %d: no snapshot after a change", *drive.key)
             return
-        self._publish(snapshot)
+        # Out now, after what was gathered before it (see ._batch): someone is waiting.
+        self._batch.add(snapshot)
+        self._batch.flush()
 
     def _publish(self, snapshot: DriveSnapshot) -> None:
+        self._batch.add(snapshot)
+
+    def _deliver(self, snapshots: list[DriveSnapshot]) -> None:
+        """Each northbound takes *snapshots* in turn (see ._batch)."""
         for section, northbound in self.northbounds.items():
-            try:
-                northbound.publish(snapshot)
-            except Exception:  # its own failure: the others, and the caller, go on
-                count = self.publish_errors[section] = self.publish_errors.get(section, 0) + 1
-                if count == 1:
-                    _log.exception("the %s northbound failed to take a snapshot", section)
-                else:
-                    _log.debug("the %s northbound failed to take a snapshot (%d so far)",
-                               section, count, exc_info=True)  # fmt: skip
+            publish = northbound.publish
+            for snapshot in snapshots:
+                try:
+                    publish(snapshot)
+                except Exception:  # its own failure: the others, and the caller, go on
+                    count = self.publish_errors[section] = self.publish_errors.get(section, 0) + 1
+                    if count == 1:
+                        _log.exception("the %s northbound failed to take a snapshot", section)
+                    else:
+                        _log.debug("the %s northbound failed to take a snapshot (%d so far)",
+                                   section, count, exc_info=True)  # fmt: skip
 
     async def _background_reads(self, line: GatewayLine) -> None:
         """What is read beside the poll: each drive's trip history and set frequency, each
@@ -415,6 +426,7 @@ class Gateway:
             return None
 
     async def _shutdown(self) -> None:
+        self._batch.flush()  # every snapshot made so far, before the northbounds close
         for section in reversed(list(self.northbounds)):
             northbound = self.northbounds.pop(section)
             try:
@@ -430,6 +442,7 @@ class Gateway:
         await asyncio.gather(*self._tasks, return_exceptions=True)
         self._tasks.clear()
         await self._stack.aclose()
+        self._batch.flush()  # made while stopping: to no northbound, and no timer left behind
         self.audit.close()
         if self._frozen:
             self._frozen = False

@@ -164,3 +164,31 @@ async def test_the_state_after_a_command_pairs_its_status_with_a_fresh_direction
         assert (await gateway.write("10.0.0.9", drive, RunCommand(Direction.STOP))).ok
         shown = recording.made[0].got[-1]
         assert shown.monitor_at >= shown.status_at
+
+
+async def test_every_snapshot_made_before_the_gateway_stops_reaches_the_northbounds(
+    northbounds: tuple[_Spec, _Spec],
+) -> None:
+    """Snapshots are gathered before the northbounds take them (gateway/_batch.py): those
+    gathered when the gateway stops are delivered before the northbounds close."""
+    _, recording = northbounds
+    made: list[DriveSnapshot] = []
+    async with running_gateway(_toml(0.05)) as gateway:
+        await polled(gateway)
+        recorder = recording.made[0]
+        publish = gateway._publish
+
+        def counted(snapshot: DriveSnapshot) -> None:
+            made.append(snapshot)
+            publish(snapshot)
+
+        gateway._publish = counted  # type: ignore[method-assign]
+        await wait_for(lambda: len(made) >= 4, "snapshots made")
+        await wait_for(lambda: len(gateway._batch) > 0, "snapshots gathered, not delivered")
+        stopping_with = list(made)
+        delivered = len(recorder.got)
+    at = {id(snapshot): i for i, snapshot in enumerate(recorder.got)}
+    assert all(id(snapshot) in at for snapshot in stopping_with)
+    positions = [at[id(snapshot)] for snapshot in stopping_with]
+    assert positions == sorted(positions)  # in the order they were made
+    assert max(positions) >= delivered  # the gathered ones came as the gateway stopped
