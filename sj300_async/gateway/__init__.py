@@ -17,6 +17,7 @@ northbound.
 from __future__ import annotations
 
 from ._audit import AuditLog, excerpt
+from ._budget import KeyedBudget
 from ._config import config_from_flags, load_config, parse_config, valid_name
 from ._control import Controller
 from ._drive import GatewayDrive, Lease
@@ -70,6 +71,7 @@ from ._northbound import (
     unregister_northbound,
 )
 from ._passwords import (
+    PasswordChecks,
     User,
     hash_password,
     named_entries,
@@ -113,6 +115,7 @@ __all__ = [
     "GatewayStartError",
     "GatewayView",
     "Heartbeat",
+    "KeyedBudget",
     "LapseAction",
     "Lease",
     "LineConfig",
@@ -122,6 +125,7 @@ __all__ = [
     "Northbound",
     "NorthboundSpec",
     "ParameterWrite",
+    "PasswordChecks",
     "PollRead",
     "RateLimitedLog",
     "Refusal",

@@ -11,11 +11,26 @@ Decisions: passwords are stored as scrypt hashes (the standard library's
 memory-hard, so a stolen configuration file is slow to attack; compared in
 constant time. A hash weaker than n=1024 is refused when the configuration
 is read.
+
+A check costs about 65 ms of one core. The gateway's event loop also polls
+the lines and runs the lapse stops, so a door never checks a password on
+it: :class:`PasswordChecks` runs the checks in a thread (hashlib's scrypt
+releases the GIL), :data:`CHECK_THREADS` at a time, with at most
+:data:`CHECKS_QUEUED` more waiting; past that a check is refused unchecked
+(``None``: the door answers "busy" and counts it). One thread, not one per
+core: a burst then takes one core and leaves the other to the loop, and
+the queue bounds how long a legitimate login waits behind it (about
+:data:`CHECKS_QUEUED` x 65 ms). The doors spend their per-address and
+per-name budgets (:mod:`._budget`) before they ask, so the queue is the
+last guard, not the first.
 """
 
 from __future__ import annotations
 
+import asyncio
 import base64
+import concurrent.futures
+import contextlib
 import hashlib
 import hmac
 import re
@@ -27,7 +42,10 @@ from typing import Final
 from ._toml import ConfigTable
 
 __all__ = [
+    "CHECKS_QUEUED",
+    "CHECK_THREADS",
     "USER_NAME",
+    "PasswordChecks",
     "User",
     "hash_password",
     "named_entries",
@@ -102,6 +120,62 @@ def verify_password(password: str, stored: str) -> bool:
         maxmem=256 * 1024 * 1024,
     )  # fmt: skip
     return hmac.compare_digest(candidate, digest)
+
+
+#: Password checks running at once (threads), and waiting beyond them, per :class:`PasswordChecks`.
+CHECK_THREADS: Final = 1
+CHECKS_QUEUED: Final = 8
+
+
+class PasswordChecks:
+    """Password checks off the event loop, bounded (see the module docstring).
+
+    Args:
+        threads: checks running at once.
+        queued: checks waiting beyond those; past them, :meth:`verify` refuses.
+    """
+
+    def __init__(self, threads: int = CHECK_THREADS, queued: int = CHECKS_QUEUED) -> None:
+        self._executor = concurrent.futures.ThreadPoolExecutor(
+            max_workers=threads, thread_name_prefix="sj300-password"
+        )
+        self._capacity = threads + queued
+        #: Checks submitted and not finished (a cancelled waiter's check still runs).
+        self.pending = 0
+        #: Checks run, and checks refused because the queue was full, since the start.
+        self.checked = 0
+        self.busy = 0
+
+    async def verify(self, password: str, stored: str) -> bool | None:
+        """True or False as :func:`verify_password` says; None when too many are pending.
+
+        The caller's task may be cancelled while it waits (a client that went
+        away): the check then finishes in its thread and still counts as pending
+        until it does, so a flood of abandoned logins cannot grow the queue.
+        """
+        if self.pending >= self._capacity:
+            self.busy += 1
+            return None
+        loop = asyncio.get_running_loop()
+        self.pending += 1
+        self.checked += 1
+        future = self._executor.submit(verify_password, password, stored)
+
+        def finished(_: concurrent.futures.Future[bool]) -> None:
+            # In the worker thread: the count is the loop's, so it is changed there.
+            # A loop already closed (the process stopping) has nobody left to tell.
+            with contextlib.suppress(RuntimeError):
+                loop.call_soon_threadsafe(self._finished)
+
+        future.add_done_callback(finished)
+        return await asyncio.wrap_future(future, loop=loop)
+
+    def _finished(self) -> None:
+        self.pending -= 1
+
+    def close(self) -> None:
+        """Stop the thread once the running check ends; waiting checks are cancelled."""
+        self._executor.shutdown(wait=False, cancel_futures=True)
 
 
 def _password_problem(stored: str) -> str | None:
