@@ -54,6 +54,7 @@ from ..bus import (
 from ..profiles import Profile, get_profile
 from ..wire import LocalProtocolError
 from ._model import (
+    DEFAULT_LOOP_LAG_LIMIT_S,
     DEFAULT_STALE_AFTER_S,
     LAPSE_ACTIONS,
     LEASE_SCOPES,
@@ -107,7 +108,7 @@ _FLAGS: Final = {
     "gateway.stale_after_s": "--stale-after",
     "gateway.id": "--id",
 }
-_GATEWAY_KEYS: Final = ("id", "stale_after_s", "audit_log")
+_GATEWAY_KEYS: Final = ("id", "stale_after_s", "audit_log", "loop_lag_limit_s")
 _LINE_KEYS: Final = (
     *("name", "url", "protocol", "nodes", "interval_s", "reads", "parameters"),
     *(
@@ -215,6 +216,7 @@ def _build(ctx: ConfigContext, data: object, *, base_dir: Path) -> GatewayConfig
     root = ConfigTable(ctx, "", data, ("gateway", *names, "lines"))
     gateway = ConfigTable(ctx, "gateway", root.data.get("gateway", {}), _GATEWAY_KEYS)
     stale_after_s = gateway.number("stale_after_s", minimum=0, inclusive=False)
+    lag_limit_s = gateway.number("loop_lag_limit_s", minimum=0, inclusive=False)
     audit_log = _audit_log(gateway, base_dir)
     gateway_id = _gateway_id(gateway)
     context = SectionContext(gateway_id, base_dir)
@@ -247,6 +249,7 @@ def _build(ctx: ConfigContext, data: object, *, base_dir: Path) -> GatewayConfig
         northbounds=northbounds,
         stale_after_s=or_default(stale_after_s, DEFAULT_STALE_AFTER_S),
         audit_log=audit_log,
+        loop_lag_limit_s=or_default(lag_limit_s, DEFAULT_LOOP_LAG_LIMIT_S),
         source=ctx.source,
         gateway_id=gateway_id,
     )

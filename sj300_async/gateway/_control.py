@@ -31,7 +31,11 @@ lock; every write to a drive holds that lock from its command to its
 read-back. So the last command a drive gets from a lapsed controller is the
 lapse action, whatever the timing. A lease whose time is up is lapsed
 as soon as any write to the drive sees it, even before its timer has run
-(a loaded loop runs timers late). While a lapse is pending, nobody can
+(a loaded loop runs timers late). But the gateway's own stall is not lease
+time: the seconds its event loop could not run anything (measured by
+:class:`~._looplag.LoopMonitor`) move the lease's end (up to
+:data:`MAX_STALL_CREDIT_S` per heartbeat), so a holder whose heartbeat sat
+unread in a socket while the loop was stuck keeps its lease. While a lapse is pending, nobody can
 take the drive's lease (busy): the stop comes first.
 
 Decisions: a command's read-back is a status read; after a run command the
@@ -56,7 +60,7 @@ from typing import Any, Final
 from ..bus import Bus
 from ..wire import Direction, LocalProtocolError, NakError, ReadOnlyError, SJ300Error
 from ._audit import AuditLog
-from ._drive import GatewayDrive
+from ._drive import GatewayDrive, Lease
 from ._lapse import LapseRunner, LineGate, PollHold
 from ._model import LineConfig
 from ._writes import (
@@ -73,6 +77,8 @@ from ._writes import (
 __all__ = ["Controller"]
 
 _log = logging.getLogger("sj300_async.gateway")
+#: Seconds of the loop's stall a lease is extended by at most, per heartbeat (_credit_stall).
+MAX_STALL_CREDIT_S: Final = 10.0
 #: How long stopping the gateway waits for pending lapses to be confirmed.
 CLOSE_LAPSE_S: Final = 5.0
 _COMMAND_NAMES: Final = {
@@ -127,8 +133,11 @@ class Controller:
         changed: Callable[[GatewayDrive], None] = lambda drive: None,
         *,
         polls: PollHold | None = None,
+        stalled: Callable[[], float] = lambda: 0.0,
     ) -> None:
         self.config = config
+        #: Seconds the event loop has been stalled so far (._looplag.LoopMonitor.stalled).
+        self._stalled = stalled
         self.bus = bus
         self.audit = audit
         self._changed = changed
@@ -165,6 +174,7 @@ class Controller:
         """Judge and carry out one write; its result (audited)."""
         now = asyncio.get_running_loop().time()
         lease = drive.lease
+        self._credit_stall(lease)
         if lease.holder is not None and now >= lease.expires_at:
             self._expire(drive)  # its time is up: lapse it before judging (module docstring)
         refused = self._judge(client, drive, request, now)
@@ -391,11 +401,51 @@ class Controller:
         lease.holder = client
         lease.connection = connection
         lease.expires_at = loop.time() + lease.duration_s
+        lease.stalled_at = self._stalled()
+        lease.credited_s = 0.0
+        self._arm(drive)
+
+    def _arm(self, drive: GatewayDrive) -> None:
         old = self._timers.pop(drive.node, None)
         if old is not None:
             old.cancel()
-        self._timers[drive.node] = loop.call_at(lease.expires_at, self._expire, drive)
+        loop = asyncio.get_running_loop()
+        self._timers[drive.node] = loop.call_at(drive.lease.expires_at, self._due, drive)
         self._timer_drives[drive.node] = drive
+
+    def _credit_stall(self, lease: Lease) -> None:
+        """Move *lease*'s end by the loop's stall since its last heartbeat.
+
+        A holder that heartbeats within ``lease_s`` must not lose the lease
+        because the gateway could not read its heartbeat: the seconds the loop
+        was stalled (._looplag) are not lease time: the lease's clock stops
+        while the loop is stuck, and a silent holder's lease lapses at most
+        the rest of its ``lease_s`` after the loop runs again. A loop that
+        lags on and on would stretch a silent holder's lease for as long, so
+        at most :data:`MAX_STALL_CREDIT_S` (or ``lease_s``, if longer) is
+        added per heartbeat.
+        """
+        if lease.holder is None:
+            return
+        stalled = self._stalled()
+        cap = max(lease.duration_s, MAX_STALL_CREDIT_S)
+        credit = min(stalled - lease.stalled_at, cap - lease.credited_s)
+        lease.stalled_at = stalled
+        if credit > 0:
+            lease.expires_at += credit
+            lease.credited_s += credit
+            _log.info("lease of %s: %.3f s added for the event loop's stall", lease.holder,
+                      credit)  # fmt: skip
+
+    def _due(self, drive: GatewayDrive) -> None:
+        """The lease timer: lapse, unless a stall moved the lease's end (then wait for it)."""
+        self._timers.pop(drive.node, None)
+        lease = drive.lease
+        self._credit_stall(lease)
+        if lease.holder is not None and asyncio.get_running_loop().time() < lease.expires_at:
+            self._arm(drive)
+            return
+        self._expire(drive)
 
     def _expire(self, drive: GatewayDrive) -> None:
         timer = self._timers.pop(drive.node, None)

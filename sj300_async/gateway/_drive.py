@@ -40,6 +40,10 @@ class Lease:
     #: The connection the holder's last heartbeat came by (its northbound's
     #: name for it), or None: a connection-scoped lease lapses when it closes.
     connection: str | None = None
+    #: The loop's stalled seconds (._looplag) at the last heartbeat, and the seconds of
+    #: stall added to ``expires_at`` since: the gateway's own stall is not lease time.
+    stalled_at: float = 0.0
+    credited_s: float = 0.0
 
     def held_by(self, client: str, now: float) -> bool:
         """True when *client* holds the lease at *now*."""

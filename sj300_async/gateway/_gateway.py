@@ -50,12 +50,15 @@ from .. import Poller, Sample
 from ..bus import Bus, CaptureFile, open_bus
 from ..profiles import NEVER, DriveSnapshot, Profile, get_profile
 from ..wire import SJ300Error
+from . import _logflood as logflood
 from ._audit import AuditLog
 from ._batch import SnapshotBatch
 from ._control import Controller
 from ._drive import GatewayDrive, Lease
 from ._errors import GatewayStartError
 from ._heap import collector_paused, freeze_long_lived, thaw, young_collections_raised
+from ._logflood import FloodLimit
+from ._looplag import LoopMonitor
 from ._metrics import LineView, drive_view, gateway_metrics, line_problems
 from ._model import GatewayConfig, LineConfig
 from ._northbound import Northbound, get_northbound
@@ -107,6 +110,10 @@ class Gateway:
         self._tasks: list[asyncio.Task[None]] = []
         #: The objects alive at start are out of the collector's way (._heap).
         self._frozen = False
+        #: The event loop's lag, measured while the gateway runs (._looplag).
+        self.loop_monitor = LoopMonitor(config.loop_lag_limit_s, every_second=_flush_logs)
+        #: The log flood limit, while this gateway runs (._logflood).
+        self._flood: FloodLimit | None = None
 
     # -- what the northbounds see (GatewayView) --------------------------------------
 
@@ -171,6 +178,9 @@ class Gateway:
         yield errors
         yield read_errors
         yield from self._lapse_metrics()
+        yield from self.loop_monitor.metrics()
+        if self._flood is not None:
+            yield from self._flood.metrics()
         for northbound in self.northbounds.values():
             yield from northbound.metrics()
 
@@ -203,6 +213,7 @@ class Gateway:
     def problems(self) -> list[str]:
         """Why the gateway is not healthy (empty: every line is up, no lapse is pending)."""
         problems = line_problems(self._line_views())
+        problems += self.loop_monitor.problems()
         for drive in self._drives:
             if drive.lapse_pending:
                 why = f": {drive.lapse_error}" if drive.lapse_error else ""
@@ -210,6 +221,9 @@ class Gateway:
                     f"line {drive.line.name} {drive.profile.node_noun} {drive.node}: the lapsed "
                     f"lease's stop is not confirmed yet (try {drive.lapse_tries}{why})"
                 )
+        for northbound in self.northbounds.values():
+            # Optional (Northbound's comment): MQTT's refused subscriptions, for one.
+            problems += getattr(northbound, "problems", list)()
         return problems
 
     def _line_views(self) -> list[LineView]:
@@ -221,6 +235,8 @@ class Gateway:
     # -- running -----------------------------------------------------------------
 
     async def __aenter__(self) -> Gateway:
+        self.loop_monitor.start()
+        self._flood = logflood.install()
         try:
             if self.capture_path is not None:
                 self._capture = CaptureFile(self.capture_path)
@@ -309,7 +325,10 @@ class Gateway:
         for drive in drives.values():
             self._drives.append(drive)
             self._by_key[drive.key] = drive
-        controller = Controller(config, bus, self.audit, self._changed, polls=poller)
+        controller = Controller(
+            config, bus, self.audit, self._changed, polls=poller,
+            stalled=self.loop_monitor.stalled,
+        )  # fmt: skip
         line = GatewayLine(config, profile, bus, poller, controller, drives)
         poller.on_sample(lambda sample: self._on_sample(line, sample))
         _log.info("line %s: %s, %s %s", config.name, config.url, profile.node_noun,
@@ -444,6 +463,10 @@ class Gateway:
         await self._stack.aclose()
         self._batch.flush()  # made while stopping: to no northbound, and no timer left behind
         self.audit.close()
+        self.loop_monitor.stop()
+        if self._flood is not None:
+            self._flood = None
+            logflood.uninstall()
         if self._frozen:
             self._frozen = False
             thaw()
@@ -451,3 +474,9 @@ class Gateway:
     def lines_by_name(self) -> Iterable[tuple[str, GatewayLine]]:
         """``(name, line)`` of every line, in the configuration's order."""
         return ((line.config.name, line) for line in self.lines)
+
+
+def _flush_logs() -> None:
+    limit = logflood.installed()
+    if limit is not None:
+        limit.flush()

@@ -14,9 +14,11 @@ line when their interval ends: how many, and the first one's message.
 
 Decisions:
 
-- **A record's kind is its logger and call site** (logger name, level,
-  file, line): the same ``logger.exception`` in a loop is one kind
-  whatever its arguments, and two different problems never hide each other.
+- **A library's record's kind is its logger and call site** (logger
+  name, level, file, line): the same ``logger.exception`` in a loop is one
+  kind whatever its arguments. **Ours are limited when identical** (the
+  same call site and message): a lapse on each of 32 drives is 32 kinds,
+  a refusal repeated for one client is one.
 - **Our own DEBUG lines are not limited.** They are opt-in (``-vv``), each
   is a bounded excerpt, and the doors count what they refuse; a test or an
   engineer reading them wants every one. Everything else is.
@@ -75,6 +77,13 @@ class _Window:
     message: str = ""
 
 
+def _message(record: logging.LogRecord) -> str:
+    try:
+        return record.getMessage()
+    except Exception:  # a record whose arguments do not fit its message
+        return str(record.msg)
+
+
 class FloodLimit(logging.Filter):
     """The filter (see the module docstring)."""
 
@@ -88,14 +97,16 @@ class FloodLimit(logging.Filter):
         self.per_interval = per_interval
         self.interval_s = interval_s
         self._clock = clock
-        self._windows: dict[tuple[str, int, str, int], _Window] = {}
+        self._windows: dict[tuple[str, int, str, int, str], _Window] = {}
         #: Records suppressed since the start, by logger name.
         self.suppressed: dict[str, int] = {}
 
     def filter(self, record: logging.LogRecord) -> bool:
         if record.levelno <= logging.DEBUG and record.name.startswith(_OWN):
             return True
-        key = (record.name, record.levelno, record.pathname, record.lineno)
+        own = record.name.startswith(_OWN)
+        key = (record.name, record.levelno, record.pathname, record.lineno,
+               _message(record) if own else "")  # fmt: skip
         now = self._clock()
         window = self._windows.get(key)
         if window is None or now >= window.start + self.interval_s:
@@ -109,10 +120,7 @@ class FloodLimit(logging.Filter):
             return True
         if not window.suppressed:
             window.logger = record.name
-            try:
-                window.message = record.getMessage()[:200]
-            except Exception:  # a record whose arguments do not fit its message
-                window.message = str(record.msg)[:200]
+            window.message = (key[4] or _message(record))[:200]
         window.suppressed += 1
         self.suppressed[record.name] = self.suppressed.get(record.name, 0) + 1
         return False
@@ -189,8 +197,8 @@ def uninstall() -> None:
     if _users or _installed is None:
         return
     limit, _installed = _installed, None
-    for window in limit._windows.values():
+    windows, limit._windows = limit._windows, {}
+    for window in windows.values():  # announcing logs, which may add a window
         limit._announce(window)
-    limit._windows.clear()
     for logger in _limited_loggers():
         logger.removeFilter(limit)

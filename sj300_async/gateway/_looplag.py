@@ -38,11 +38,12 @@ from collections.abc import Callable, Iterator
 from dataclasses import dataclass
 from typing import TYPE_CHECKING, Final
 
+from ._model import DEFAULT_LOOP_LAG_LIMIT_S
+
 if TYPE_CHECKING:
     from prometheus_client.core import Metric
 
 __all__ = [
-    "DEFAULT_LIMIT_S",
     "LAG_BUCKETS_S",
     "PROBE_S",
     "RECENT_S",
@@ -59,8 +60,6 @@ TOLERANCE_S: Final = 0.02
 LAG_BUCKETS_S: Final = (0.001, 0.002, 0.005, 0.01, 0.02, 0.05, 0.1, 0.2, 0.5, 1.0, 2.0, 5.0)
 #: ``/healthz`` looks at the largest lag of this many seconds back.
 RECENT_S: Final = 10.0
-#: The lag over which ``/healthz`` says the gateway is degraded (``[gateway] loop_lag_limit_s``).
-DEFAULT_LIMIT_S: Final = 0.2
 #: Samples kept for :meth:`LoopMonitor.since`.
 KEPT_SAMPLES: Final = 12_000
 
@@ -84,7 +83,9 @@ class LoopMonitor:
     """
 
     def __init__(
-        self, limit_s: float = DEFAULT_LIMIT_S, every_second: Callable[[], None] | None = None
+        self,
+        limit_s: float = DEFAULT_LOOP_LAG_LIMIT_S,
+        every_second: Callable[[], None] | None = None,
     ) -> None:
         self.limit_s = limit_s
         self._every_second = every_second

@@ -37,6 +37,7 @@ from ..wire import LocalProtocolError
 
 __all__ = [
     "DEFAULT_LEASE_S",
+    "DEFAULT_LOOP_LAG_LIMIT_S",
     "DEFAULT_STALE_AFTER_S",
     "LAPSE_ACTIONS",
     "LEASE_SCOPES",
@@ -62,6 +63,8 @@ LeaseScope = Literal["client", "connection"]
 LEASE_SCOPES: Final = get_args(LeaseScope)
 #: Reads of data older than this fail with Modbus exception 0x0B.
 DEFAULT_STALE_AFTER_S: Final = 5.0
+#: The event loop's lag over which ``/healthz`` says the gateway is degraded.
+DEFAULT_LOOP_LAG_LIMIT_S: Final = 0.2
 DEFAULT_LEASE_S: Final = 5.0
 #: The Modbus unit ids a drive may have (0 is broadcast; 248..255 reserved).
 UNIT_RANGE: Final = range(1, 248)
@@ -166,6 +169,8 @@ class GatewayConfig:
     stale_after_s: float = DEFAULT_STALE_AFTER_S
     #: A file the audit log is appended to, besides the ``sj300_async.gateway.audit`` logger.
     audit_log: Path | None = None
+    #: ``/healthz`` says the gateway is degraded while the event loop lags more (._looplag).
+    loop_lag_limit_s: float = DEFAULT_LOOP_LAG_LIMIT_S
     #: Where the configuration came from (a file name, or ``"<command line>"``).
     source: str = field(default="<command line>", compare=False)
     #: The gateway's name to the outside (an MQTT topic level; see the module docstring).
