@@ -13,9 +13,11 @@ shows it (:attr:`~._drive.GatewayDrive.lapse_pending`, hence a metric,
 pause (:data:`RETRY_FIRST_S` doubling up to :data:`RETRY_MAX_S`), whatever
 went wrong: a NAK, a time-out, the link down, even a bug of ours (logged
 with its traceback). A drive that acknowledged the stop and still reports
-running is decelerating: it is read again until it stops, and sent the stop
-again only every :data:`RESEND_S`, and first thing on a new connection
-(one stop on the wire per lapse when all goes well).
+running is decelerating: it is read again every :data:`DECELERATING_READ_S`
+until it stops (no back-off: it answers, and a stopping gateway waits only
+so long for the confirmation), and sent the stop again only every
+:data:`RESEND_S`, and first thing on a new connection (one stop on the
+wire per lapse when all goes well).
 
 The stop is the first request on a link that comes back. From the moment
 the link is up again (:meth:`~sj300_async.Bus.on_connected`, which runs
@@ -32,7 +34,14 @@ DEBUG (a line down for an hour must not write a line per try); the audit
 log gets one record when the lapse ends (confirmed after N tries, or given
 up when the gateway stops or the line is closed). The runner never gives
 up on its own: a drive left running with nobody in control is the failure
-this exists to prevent.
+this exists to prevent. A lapse given up says what the drive confirmed, at
+the level that deserves (issue 41: every clean stop with a motor running
+logged "given up ... no answer" at ERROR, though the drive had taken the
+stop and was ramping down, which takes the drive's deceleration time, often
+longer than the stopping gateway's wait): ERROR when the drive never
+acknowledged the stop (the motor may still run, with nobody in control),
+WARNING when it took it and only its standstill is not confirmed (it ramps
+down by itself), each with the drive's last answer or the try under way.
 """
 
 from __future__ import annotations
@@ -41,6 +50,7 @@ import asyncio
 import contextlib
 import logging
 from collections.abc import Callable, Collection
+from dataclasses import dataclass
 from typing import Any, Final, Protocol
 
 from ..bus import Bus
@@ -61,6 +71,10 @@ RETRY_MAX_S: Final = 2.0
 #: A drive that took the stop and still reports running (decelerating) is only
 #: read until it stops; the stop is sent again when it has not within this.
 RESEND_S: Final = 10.0
+#: The pause between the status reads of a drive that took the stop and is
+#: decelerating: it answers, so no back-off; a stopping gateway confirms a
+#: standstill that comes within its wait, not one read up to 2 s later.
+DECELERATING_READ_S: Final = 0.25
 _STILL_RUNNING: Final = "the drive still reports running"
 
 
@@ -144,6 +158,20 @@ class _FirstOnReconnect:
         self.release()
 
 
+@dataclass(slots=True)
+class _Known:
+    """What one lapse has learnt of its drive so far: what a give-up says it knows."""
+
+    #: Loop time the drive last acknowledged the stop (None: it never has).
+    taken_at: float | None = None
+    #: The drive's state in words at the latest status read after it took the stop.
+    state: str = ""
+    #: Why the latest try that ended failed ("" when the drive answered it).
+    failure: str = ""
+    #: What the try under way was doing, said if the gateway's stop cuts it short.
+    doing: str = ""
+
+
 class LapseRunner:
     """Runs one line's lapse actions (see the module docstring)."""
 
@@ -184,31 +212,59 @@ class LapseRunner:
         drive.lapse_pending, drive.lapse_error, drive.lapse_tries = True, "", 0
         self._changed(drive)
         gate = _FirstOnReconnect(self.bus, self._gate)
+        known = _Known(doing="the stop not sent yet: the lapsed holder's command was ending")
         try:
             if commands:
                 await asyncio.wait(commands)
-            given_up = await self._until_confirmed(holder, drive, action, gate)
+            known.doing = ""
+            given_up = await self._until_confirmed(holder, drive, action, gate, known)
             if given_up is not None:
-                self._give_up(holder, drive, what, given_up)
+                self._give_up(holder, drive, what, given_up, known)
         except asyncio.CancelledError:
-            self._give_up(holder, drive, what, "the gateway stopped")
+            self._give_up(holder, drive, what, "the gateway stopped", known)
             raise
         finally:
             gate.close()
             drive.lapse_pending = False
             self._changed(drive)
 
-    def _give_up(self, holder: str, drive: GatewayDrive, what: str, why: str) -> None:
-        result = WriteResult(
-            Refusal.NOT_CONFIRMED,
-            f"given up after {_tries(drive.lapse_tries)} when {why}: "
-            f"{drive.lapse_error or 'no answer'}",
+    def _give_up(
+        self, holder: str, drive: GatewayDrive, what: str, why: str, known: _Known
+    ) -> None:
+        """Log and audit a lapse given up with what is known (module docstring)."""
+        tries = _tries(drive.lapse_tries)
+        # The latest news: the try cut short, else the failure of the latest that ended.
+        latest = known.doing or known.failure
+        if known.doing and known.failure:
+            latest += f" (the try before: {known.failure})"
+        if known.taken_at is None:
+            level = logging.ERROR
+            detail = (
+                f"given up after {tries} when {why}: the drive never acknowledged the stop: "
+                f"{latest or 'the stop was not sent'}"
+            )
+        else:
+            level = logging.WARNING
+            if known.state:
+                seen = f" and still read {known.state}" if not latest else f", read {known.state}"
+            else:
+                seen = ""
+            detail = (
+                f"not confirmed stopped after {tries} when {why}: the drive took the stop"
+                f"{seen}{f', then: {latest}' if latest else ''}"
+            )
+        _log.log(level, "line %s node %d: %s %s", *drive.key, what, detail)
+        self.audit.write(
+            holder, drive, what, holder, None, WriteResult(Refusal.NOT_CONFIRMED, detail)
         )
-        _log.error("line %s node %d: %s %s", *drive.key, what, result.detail)
-        self.audit.write(holder, drive, what, holder, None, result)
 
     async def _until_confirmed(
-        self, holder: str, drive: GatewayDrive, action: str, gate: _FirstOnReconnect
+        self,
+        holder: str,
+        drive: GatewayDrive,
+        action: str,
+        gate: _FirstOnReconnect,
+        known: _Known,
     ) -> str | None:
         """Try until confirmed (None), or until the line is closed (why it was given up)."""
         pause = RETRY_FIRST_S
@@ -224,19 +280,23 @@ class LapseRunner:
             gate.back.clear()
             if not self.bus.connected:
                 failures += 1
-                self._failed(drive, action, failures, f"{self.bus.description} is not "
-                             "connected; the stop goes first when it is back")  # fmt: skip
+                known.failure = (f"{self.bus.description} is not connected; the stop goes "
+                                 "first when it is back")  # fmt: skip
+                self._failed(drive, action, failures, known.failure)
                 gate.release()  # nothing held while the link is down (module docstring)
                 await self._link_up()
                 continue  # the link is back and the line held: the next try at once
             send = stop_taken_at is None or loop.time() - stop_taken_at >= RESEND_S
             try:
-                error, taken = await self._try(drive, action if send else None)
+                error, taken = await self._try(drive, action if send else None, known)
             except Exception as exc:  # a bug of ours must not end the lapse: logged, retried
                 _log.exception("line %s node %d: lapse %s try failed", *drive.key, action)
                 error, taken = f"{type(exc).__name__}: {exc}", False
             finally:
                 gate.try_ended()
+            # Ended (not cut short by the gateway's stop, whose give-up says what it waited for).
+            known.doing = ""
+            known.failure = "" if error in (None, _STILL_RUNNING) else error
             if taken:
                 stop_taken_at = loop.time()
             if error is None:
@@ -248,7 +308,8 @@ class LapseRunner:
                                  f"confirmed stopped{detail}", DONE)  # fmt: skip
                 return None
             # A drive that took the stop and still runs is decelerating: not a failure.
-            if error == _STILL_RUNNING and stop_taken_at is not None:
+            decelerating = error == _STILL_RUNNING and stop_taken_at is not None
+            if decelerating:
                 _log.debug("line %s node %d: lapse %s: decelerating", *drive.key, action)
             else:
                 failures += 1
@@ -259,9 +320,10 @@ class LapseRunner:
             # asyncio.timeout, not wait_for: on 3.11 wait_for can lose a cancellation
             # that lands as the event fires, and the gateway's stop cancels this task.
             with contextlib.suppress(TimeoutError):
-                async with asyncio.timeout(pause):
+                async with asyncio.timeout(DECELERATING_READ_S if decelerating else pause):
                     await gate.back.wait()
-            pause = min(pause * 2, RETRY_MAX_S)
+            if not decelerating:
+                pause = min(pause * 2, RETRY_MAX_S)
 
     async def _link_up(self) -> None:
         """Wait for the link (or its close, which the next round of the loop sees)."""
@@ -281,26 +343,37 @@ class LapseRunner:
         _log.log(level, "line %s node %d: lapse %s not confirmed (try %d): %s",
                  *drive.key, action, drive.lapse_tries, error)  # fmt: skip
 
-    async def _try(self, drive: GatewayDrive, action: str | None) -> tuple[str | None, bool]:
+    async def _try(
+        self, drive: GatewayDrive, action: str | None, known: _Known
+    ) -> tuple[str | None, bool]:
         """One try: the stop (unless *action* is None) and a status read.
 
         Returns (None when confirmed, else why not; whether the drive took the stop).
+        *known* follows it: what it waits for, and what the drive answered.
         """
         target = self.bus.drive(drive.node)
+        loop = asyncio.get_running_loop()
         taken = False
         try:
+            known.doing = "the stop not sent yet: a write to the drive was under way"
             async with self._lock(drive):
                 if action == "broadcast_stop":
+                    known.doing = "the broadcast stop under way"
                     await self.bus.broadcast.stop()  # unacknowledged: the drive's own follows
                 if action is not None:
+                    known.doing = "the stop under way, no answer yet"
                     await target.stop()
                     taken = True
+                    known.taken_at = loop.time()
+                known.doing = "its status read under way, no answer yet"
                 status = await target.read_status()
         except SJ300Error as exc:
             return str(exc), taken
-        drive.readings.set_status(status, asyncio.get_running_loop().time(), drive.profile)
-        running = drive.profile.status_view(status).running
-        return (_STILL_RUNNING if running else None), taken
+        drive.readings.set_status(status, loop.time(), drive.profile)
+        view = drive.profile.status_view(status)
+        if known.taken_at is not None:
+            known.state = view.state
+        return (_STILL_RUNNING if view.running else None), taken
 
 
 def _tries(count: int) -> str:
