@@ -1,5 +1,6 @@
 """The gateway's MQTT client against a real mosquitto, and against scripted brokers for what
-mosquitto never does (refuse a CONNACK, stop reading, hold PUBACKs back, break the protocol).
+mosquitto never does (refuse a CONNACK, stop reading, hold PUBACKs back or never send them,
+break the protocol).
 
 What the client publishes is checked by another implementation (aiomqtt on
 paho); what it receives comes from ``mosquitto_pub``.
@@ -9,18 +10,28 @@ from __future__ import annotations
 
 import asyncio
 import contextlib
+import math
 import ssl
 import subprocess
 from collections.abc import AsyncIterator, Awaitable, Callable
+from dataclasses import dataclass
 from pathlib import Path
 
 import aiomqtt
 import pytest
 from mqtt_broker import Broker, running_broker, tool
+from mqtt_misbehaving import misbehaving_broker
 from transports.bridges import wait_for_port
 from waiting import wait_for
 
-from sj300_async.gateway.mqtt.client import Client, Message, MqttError, Will
+from sj300_async.gateway.mqtt.client import (
+    Client,
+    Message,
+    MqttError,
+    PublishUnacknowledged,
+    Will,
+)
+from sj300_async.gateway.mqtt.client._acks import PubackWatch
 from sj300_async.gateway.mqtt.client._packets import PacketParser, encode_publish
 
 
@@ -469,3 +480,59 @@ async def test_a_host_name_that_cannot_be_one_is_an_mqtt_error() -> None:
     with pytest.raises(MqttError):
         async with Client("bad..host", 1883, identifier="c", connect_timeout_s=5):
             pass
+
+
+async def test_a_broker_that_answers_pings_but_never_acknowledges_ends_the_connection() -> None:
+    """The keepalive judges PUBACKs too: pings answered do not keep a stalled publish alive."""
+    async with misbehaving_broker(acknowledge=False) as broker:
+        c = Client("127.0.0.1", broker.port, identifier="c", keepalive_s=1)
+        async with c, asyncio.timeout(10):  # a hang fails, not at the suite's time-out
+            with pytest.raises(PublishUnacknowledged) as raised:
+                await c.publish_many([("t/a", b"1", False), ("t/b", b"2", False)], qos=1)
+        await broker.until(lambda: broker.connections[0].closed_at is not None, "the end")
+    (seen,) = broker.connections
+    assert seen.first_swallowed_at is not None
+    assert seen.closed_at is not None
+    stalled_s = seen.closed_at - seen.first_swallowed_at
+    assert 0.9 <= stalled_s <= 2.25, stalled_s  # keepalive_s to 1.5 keepalive_s, and slack
+    assert any(t > seen.first_swallowed_at for t in seen.pings)  # answered meanwhile
+    assert not seen.disconnected  # aborted: a real broker publishes the will
+    text = str(raised.value)
+    assert "no PUBACK for 1." in text
+    assert "keepalive_s 1" in text
+    assert "of client c, the oldest of 2 waiting" in text
+
+
+async def test_publishes_acknowledged_slowly_but_within_the_keepalive_keep_the_connection() -> None:
+    """Publishes always in flight for 1.5 keepalives, each acknowledged in time: no stall."""
+    async with (
+        misbehaving_broker(puback_delay_s=0.25) as broker,
+        Client("127.0.0.1", broker.port, identifier="c", keepalive_s=1, max_in_flight=2) as c,
+    ):
+        # Two at a time, each PUBACK 0.25 s late: 1.5 s with some always unacknowledged.
+        await c.publish_many([(f"t/{n}", b"x", False) for n in range(12)], qos=1)
+        await c.publish("t/last", b"x", qos=1)
+    (seen,) = broker.connections
+    assert len(seen.publishes) == 13
+    assert seen.pings  # the keepalive ran meanwhile
+    assert seen.disconnected
+
+
+def test_the_puback_watch_knows_a_publish_by_its_id_and_its_batch() -> None:
+    """Sans-IO: ids are reused, a batch's end bounds the wait, and a held reader defers it."""
+
+    @dataclass
+    class Batch:
+        written: float = math.inf  # still waiting for slots
+
+    watch = PubackWatch(1.0)
+    first, second = Batch(), Batch(written=1.25)  # times exact in binary
+    assert watch.overdue(0.5, {}) is None
+    assert watch.overdue(0.5, {7: first}) is None  # first seen: its wait starts now
+    assert watch.overdue(1.25, {7: first}) is None
+    assert watch.overdue(1.5, {7: first}) == (7, 1.0)
+    assert watch.overdue(1.5, {7: second}) is None  # id 7 again: another publish, from 1.25
+    assert watch.overdue(2.25, {7: second}) == (7, 1.0)
+    watch.hold(2.5)  # the reader is behind: the PUBACK may wait behind its messages
+    assert watch.overdue(3.25, {7: second}) is None
+    assert watch.overdue(3.5, {7: second}) == (7, 1.0)

@@ -6,7 +6,15 @@ publishes.
 
 from __future__ import annotations
 
-from ._client import Client, Message, MqttError, Will
+from ._client import Client, Message, MqttError, PublishUnacknowledged, Will
 from ._packets import MalformedPacket, PacketParser
 
-__all__ = ["Client", "MalformedPacket", "Message", "MqttError", "PacketParser", "Will"]
+__all__ = [
+    "Client",
+    "MalformedPacket",
+    "Message",
+    "MqttError",
+    "PacketParser",
+    "PublishUnacknowledged",
+    "Will",
+]

@@ -22,6 +22,11 @@ small, and is shaped for the one job:
   a PINGREQ goes out every ``keepalive_s / 2`` whatever else is sent, and
   one whose PINGRESP has not come within ``keepalive_s`` ends the
   connection (whatever else the broker sends meanwhile).
+- **A PUBACK is due within the keepalive too.** A broker may answer every
+  PINGREQ and never acknowledge a publish; the same tick ends the
+  connection (:class:`PublishUnacknowledged`, without DISCONNECT: the will
+  speaks) once the oldest QoS 1 publish in flight has waited
+  ``keepalive_s`` (:mod:`._acks`).
 - **Incoming messages are bounded.** Past ``max_queued_messages`` not yet
   taken by the reader (give or take one read of the socket, at most 256
   KiB), the connection stops reading the socket (TCP then holds the
@@ -41,8 +46,9 @@ small, and is shaped for the one job:
   what a will would say themselves before they leave.
 
 Failures (refused or lost connections, time-outs, a broker breaking the
-protocol) raise :class:`MqttError`; every waiting publish, subscribe and
-reader gets it.
+protocol) raise :class:`MqttError` (an unacknowledged publish its subclass
+:class:`PublishUnacknowledged`, which a session counts); every waiting
+publish, subscribe and reader gets it.
 """
 
 from __future__ import annotations
@@ -51,11 +57,13 @@ import asyncio
 import collections
 import itertools
 import logging
+import math
 import ssl
 from collections.abc import Callable, Iterable, Sequence
 from dataclasses import dataclass
 from typing import Final, cast
 
+from ._acks import PubackWatch
 from ._packets import (
     CONNACK_REASONS,
     DISCONNECT,
@@ -76,7 +84,7 @@ from ._packets import (
     encode_unsubscribe,
 )
 
-__all__ = ["MAX_IN_FLIGHT", "Client", "Message", "MqttError", "Will"]
+__all__ = ["MAX_IN_FLIGHT", "Client", "Message", "MqttError", "PublishUnacknowledged", "Will"]
 
 _log = logging.getLogger("sj300_async.gateway.mqtt.client")
 
@@ -94,6 +102,10 @@ _EXCERPT: Final = 80
 
 class MqttError(Exception):
     """The connection could not be made, was refused, or was lost."""
+
+
+class PublishUnacknowledged(MqttError):
+    """A QoS 1 publish waited ``keepalive_s`` for its PUBACK: the connection was ended."""
 
 
 @dataclass(frozen=True, slots=True)
@@ -127,11 +139,13 @@ class Message:
 class _Batch:
     """QoS 1 messages published together, done when the last PUBACK comes."""
 
-    __slots__ = ("future", "remaining")
+    __slots__ = ("future", "remaining", "written")
 
     def __init__(self, future: asyncio.Future[None]) -> None:
         self.future = future
         self.remaining = 0
+        #: Loop time its last message was written (inf while it waits for a slot).
+        self.written = math.inf
 
 
 class _Protocol(asyncio.Protocol):
@@ -215,6 +229,7 @@ class Client:
         self._reading_paused = False
         self._keepalive: asyncio.TimerHandle | None = None
         self._ping_sent: float | None = None
+        self._pubacks = PubackWatch(keepalive_s)
         #: PUBLISH packets longer than ``max_publish_bytes``, skipped.
         self.oversized = 0
 
@@ -343,6 +358,7 @@ class Client:
             self._write(
                 encode_publish(topic.encode(), payload, qos=1, retain=retain, packet_id=packet_id)
             )
+        batch.written = self._loop.time()
         if self._writable is not None:
             await self._wait_writable()
         if batch.remaining:
@@ -419,8 +435,11 @@ class Client:
         message = self._messages.popleft()
         if self._reading_paused and len(self._messages) <= self.max_queued_messages // 2:
             self._reading_paused = False
-            if self._ping_sent is not None and self._loop is not None:
-                self._ping_sent = self._loop.time()  # judged from now on
+            if self._loop is not None:  # the broker's answers are judged from now on
+                now = self._loop.time()
+                if self._ping_sent is not None:
+                    self._ping_sent = now
+                self._pubacks.hold(now)
             protocol = self._protocol
             if protocol is not None and protocol.transport is not None and self._error is None:
                 protocol.transport.resume_reading()
@@ -542,8 +561,16 @@ class Client:
             # the broker's silence is judged once reading goes on.
             if self._ping_sent is not None:
                 self._ping_sent = now
+            self._pubacks.hold(now)
         elif self._ping_sent is not None and now - self._ping_sent >= self.keepalive_s:
             self._fail(MqttError(f"no answer from the broker within {self.keepalive_s} s"))
+            return
+        elif (overdue := self._pubacks.overdue(now, self._inflight)) is not None:
+            packet_id, waited = overdue
+            self._fail(PublishUnacknowledged(
+                f"no PUBACK for {waited:.1f} s (keepalive_s {self.keepalive_s}): QoS 1 publish, "
+                f"packet {packet_id} of client {self.identifier}, the oldest of "
+                f"{len(self._inflight)} waiting"))  # fmt: skip
             return
         if self._ping_sent is None:
             self._ping_sent = now
