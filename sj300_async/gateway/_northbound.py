@@ -148,6 +148,10 @@ class Northbound(Protocol):
     async def close(self) -> None:
         """Stop serving: no client request starts any more once this returns."""
 
+    # Optional: ``problems() -> list[str]``, why it does not serve fully now, one line
+    # each (MQTT: a subscription the broker refused); the gateway adds them to its own
+    # for /healthz. Read through getattr, so a northbound written before it needs no change.
+
 
 @dataclass(frozen=True, slots=True)
 class Flag:

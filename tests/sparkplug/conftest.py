@@ -15,6 +15,7 @@ from pathlib import Path
 
 import pytest
 from mqtt_broker import Broker, running_broker
+from mqtt_misbehaving import MisbehavingBroker
 from waiting import wait_for
 
 from sj300_async.gateway import Gateway, GatewayDrive, parse_config
@@ -64,7 +65,13 @@ async def sim_line() -> AsyncIterator[SimLine]:
         yield SimLine(sim, server)
 
 
-def spb_toml(url: str, broker: Broker, *, mqtt_extra: str = "", interval_s: float = 0.1) -> str:
+def spb_toml(
+    url: str,
+    broker: Broker | MisbehavingBroker,
+    *,
+    mqtt_extra: str = "",
+    interval_s: float = 0.1,
+) -> str:
     """A gateway ``gw1`` on *url* (drives 1-4, GRANTS) with Sparkplug in group ``plant``."""
     return textwrap.dedent(
         f"""

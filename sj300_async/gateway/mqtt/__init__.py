@@ -3,7 +3,8 @@
 - The northbound (``[mqtt] url = "mqtt://HOST[:PORT]"`` or ``--mqtt URL``):
   each drive's state and availability, Home Assistant discovery, and
   commands (:mod:`._bridge`, :mod:`._messages`, :mod:`._discovery`,
-  :mod:`._commands`), on one connection kept up by :mod:`._session`.
+  :mod:`._commands`), on one connection kept up by :mod:`._session`, its
+  subscriptions checked by :mod:`._subscriptions` (shared with Sparkplug).
 - The contract both sides share: topics and the state message
   (:mod:`._topics`).
 - The fleet (:mod:`._fleet`): every drive of every gateway on a broker,
@@ -49,7 +50,8 @@ from ._session import (
     keep_connected,
     new_client,
 )
-from ._stats import BridgeStats, mqtt_families
+from ._stats import BridgeStats, mqtt_families, refused_subscriptions
+from ._subscriptions import Subscriptions
 from ._topics import (
     AVAILABLE,
     COMMANDS,
@@ -81,6 +83,7 @@ __all__ = [
     "SparkplugConfig",
     "StateMessage",
     "SubscriptionRefused",
+    "Subscriptions",
     "Topics",
     "backoff",
     "cancel_and_wait",
@@ -98,6 +101,7 @@ __all__ = [
     "parse_command",
     "parse_fleet_url",
     "parse_state_topic",
+    "refused_subscriptions",
     "state_message",
 ]
 

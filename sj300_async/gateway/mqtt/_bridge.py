@@ -56,7 +56,13 @@ Decisions:
   (refused ``busy``, audited), and it follows the write under way.
 - The bridge publishes with the configured QoS and waits for each batch's
   acknowledgements (at most ``MAX_IN_FLIGHT`` at once) before the next: a
-  slow broker makes the outbox coalesce, never grow.
+  slow broker makes the outbox coalesce, never grow. A broker that never
+  acknowledges loses the connection after ``keepalive_s`` (:mod:`.client`,
+  counted by :mod:`._session`): its will then says ``offline``.
+- A subscription the broker refuses (an ACL: the commands, Home
+  Assistant's status) is said, counted and one of :meth:`MqttBridge.problems`
+  (/healthz) until granted (:mod:`._subscriptions`); the bridge goes on
+  publishing.
 
 Nothing is dropped silently: every replaced, lost or discarded message and
 every refused command is counted in :attr:`MqttBridge.stats` and logged at
@@ -83,6 +89,7 @@ from ._discovery import discovery
 from ._messages import drive_state
 from ._session import cancel_and_wait, keep_connected, new_client
 from ._stats import BridgeStats, mqtt_families
+from ._subscriptions import Subscriptions
 from ._topics import AVAILABLE, UNAVAILABLE, StateMessage, Topics
 from .client import Client, MqttError, Will
 
@@ -127,6 +134,7 @@ class MqttBridge:
     def __init__(self, config: MqttConfig) -> None:
         self.config = config
         self.stats = BridgeStats()
+        self._subscriptions = Subscriptions(self.stats, _log, "MQTT")
         self.topics = Topics("", config.prefix)  # the gateway's id is known at start
         self.stale_after_s = math.inf
         self._gateway: GatewayView | None = None
@@ -198,6 +206,10 @@ class MqttBridge:
 
     def metrics(self) -> Iterator[Metric]:
         return mqtt_families(self.stats)
+
+    def problems(self) -> list[str]:
+        """Subscriptions the broker refused (the northbound's optional hook, for /healthz)."""
+        return self._subscriptions.problems()
 
     def _availability_out(self, key: Key) -> _Out:
         payload = AVAILABLE if self._availability.get(key) else UNAVAILABLE
@@ -329,9 +341,10 @@ class MqttBridge:
     async def _setup(self, client: Client) -> None:
         """Subscribe, say online, and queue everything retained again."""
         qos = self.config.qos
-        await client.subscribe(self.topics.command_filter, qos=qos)
+        subscribe = self._subscriptions.subscribe
+        await subscribe(client, self.topics.command_filter, qos=qos, unheard="commands")
         if self.config.discovery:
-            await client.subscribe(self._birth, qos=qos)
+            await subscribe(client, self._birth, qos=qos, unheard="Home Assistant's status")
         await client.publish(self.topics.availability, AVAILABLE, qos=qos, retain=True)
         self._epoch += 1
         self._session_name = f"mqtt session {self._epoch}"

@@ -34,6 +34,8 @@ class StatePublisher(Northbound, Protocol):
 
     def publish_state(self, snapshot: DriveSnapshot, message: StateMessage) -> None: ...
 
+    def problems(self) -> list[str]: ...
+
 
 class Clients:
     """Several MQTT clients as one northbound (see the module docstring)."""
@@ -70,6 +72,9 @@ class Clients:
     def metrics(self) -> Iterator[Metric]:
         for part in self.parts:
             yield from part.metrics()
+
+    def problems(self) -> list[str]:
+        return [problem for part in self.parts for problem in part.problems()]
 
     async def close(self) -> None:
         for part in reversed(self.parts):

@@ -16,6 +16,14 @@ Decisions:
   after it at DEBUG; the recovery at INFO. The fleet view logs outages at
   INFO (its table's caption shows them: a WARNING would reach the terminal
   under the table).
+- A connection ended because a QoS 1 publish waited past ``keepalive_s``
+  for its PUBACK (the client's :class:`~.client.PublishUnacknowledged`:
+  a broker that answers pings and swallows publishes) is counted in
+  ``SessionStats.puback_timeouts``, whether it was up or still setting
+  up, and logged as any other end is (the outage's one WARNING carries the
+  client's reason: the packet, how long, how many waited). The client
+  ended it without DISCONNECT, so the broker publishes the will:
+  "offline" is the truth while nothing gets through.
 - ``on_link`` hears every change: None when connected, else a sentence
   saying what happened and when the next attempt comes.
 - A bug in the session body (any exception but the client's MqttError) is, for a
@@ -33,13 +41,14 @@ Decisions:
 from __future__ import annotations
 
 import asyncio
+import collections
 import logging
 import ssl
 from collections.abc import Awaitable, Callable
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from typing import TYPE_CHECKING, Final
 
-from .client import Client, MqttError, Will
+from .client import Client, MqttError, PublishUnacknowledged, Will
 
 if TYPE_CHECKING:
     from ._config import MqttConfig
@@ -75,6 +84,12 @@ class SessionStats:
     connects: int = 0
     #: Connections lost after they were up (each logged once).
     losses: int = 0
+    #: Connections ended because a QoS 1 publish waited past keepalive_s for its
+    #: PUBACK (up or still setting up; those up are also in ``losses``).
+    puback_timeouts: int = 0
+    #: SUBACKs that refused a subscription, per topic filter (every filter
+    #: subscribed is here, at 0 until refused): see :mod:`._subscriptions`.
+    subscriptions_refused: collections.Counter[str] = field(default_factory=collections.Counter)
 
 
 def new_client(
@@ -176,6 +191,8 @@ async def keep_connected(
             return
         except MqttError as exc:
             reason = " ".join(str(exc).split()) or type(exc).__name__
+            if isinstance(exc, PublishUnacknowledged):
+                stats.puback_timeouts += 1
         except Exception as exc:  # a bug of ours must not end a service's connection for good
             if not survive_errors:
                 raise

@@ -12,7 +12,7 @@ from ._session import SessionStats
 if TYPE_CHECKING:
     from prometheus_client.core import Metric
 
-__all__ = ["BridgeStats", "mqtt_families"]
+__all__ = ["BridgeStats", "mqtt_families", "refused_subscriptions"]
 
 Key = tuple[str, int]
 
@@ -57,6 +57,11 @@ _COUNTERS: Final = (
     ("sj300_mqtt_published", "Messages the broker took.", "published"),
     ("sj300_mqtt_lost", "Messages being sent when the connection broke.", "lost"),
     ("sj300_mqtt_errors_dropped", "Error replies dropped (too many waiting).", "errors_dropped"),
+    (
+        "sj300_mqtt_puback_timeouts",
+        "Connections ended because a QoS 1 publish waited keepalive_s for its PUBACK.",
+        "puback_timeouts",
+    ),
 )
 #: Command messages by what became of them: (label, BridgeStats attribute).
 _COMMAND_RESULTS: Final = (
@@ -93,3 +98,18 @@ def mqtt_families(stats: BridgeStats) -> Iterator[Metric]:
     )
     replaced.add_metric([], sum(stats.replaced.values()))
     yield replaced
+    yield refused_subscriptions("sj300_mqtt_subscriptions_refused", stats)
+
+
+def refused_subscriptions(name: str, stats: SessionStats) -> Metric:
+    """*stats*' refused subscriptions as the counter family *name*, by topic filter."""
+    from prometheus_client.core import CounterMetricFamily
+
+    family = CounterMetricFamily(
+        name,
+        "Subscriptions the broker refused (SUBACK 0x80: an ACL), by topic filter.",
+        labels=["filter"],
+    )
+    for topic_filter, count in stats.subscriptions_refused.items():
+        family.add_metric([topic_filter], count)
+    return family

@@ -12,7 +12,10 @@ The session (Sparkplug 3.0, sections 5.4 to 5.7):
   last will (QoS 1, not retained), on a connection of its own
   (``<client id>-spb``, clean session).
 - It subscribes to its NCMD and DCMD topics (QoS 1), and with a
-  ``primary_host_id`` to ``spBv1.0/STATE/<host>`` first. With a primary
+  ``primary_host_id`` to ``spBv1.0/STATE/<host>`` first. One the broker
+  refuses (an ACL) is said, counted and shown on /healthz, and the session
+  goes on (the MQTT package's ``Subscriptions``: a refused STATE leaves the
+  node unborn, waiting, which /healthz then explains). With a primary
   host, nothing is born until the host's retained STATE says
   ``online: true``; a STATE with ``online: false`` newer than the last one
   seen (its ``timestamp``), while born, makes the edge node publish its
@@ -79,6 +82,7 @@ from ..mqtt import (
     MqttConfig,
     SparkplugConfig,
     StateMessage,
+    Subscriptions,
     cancel_and_wait,
     drive_state,
     error_text,
@@ -163,6 +167,7 @@ class EdgeNode:
         self.config = config
         self.sparkplug: SparkplugConfig = config.sparkplug
         self.stats = SparkplugStats()
+        self._subscriptions = Subscriptions(self.stats, _log, "Sparkplug")
         self.edge_node = ""
         self.stale_after_s = 0.0
         self._gateway: GatewayView | None = None
@@ -270,6 +275,10 @@ class EdgeNode:
 
     def metrics(self) -> Iterator[Metric]:
         return sparkplug_families(self.stats, born=self._born, host_online=self.host_online)
+
+    def problems(self) -> list[str]:
+        """Subscriptions the broker refused (the northbound's optional hook, for /healthz)."""
+        return self._subscriptions.problems()
 
     # -- payloads ----------------------------------------------------------------------
 
@@ -443,10 +452,13 @@ class EdgeNode:
     async def _connection(self, client: Client, connected: Callable[[], None]) -> None:
         try:
             state = self._state_topic
+            subscribe = self._subscriptions.subscribe  # a refusal: said, counted, a problem
             if state is not None:
-                await client.subscribe(state, qos=1)
-            await client.subscribe(self.topic("NCMD"), qos=1)
-            await client.subscribe(self.topic("DCMD", "+"), qos=1)
+                await subscribe(client, state, qos=1, unheard="the primary host's STATE")
+            await subscribe(client, self.topic("NCMD"), qos=1, unheard="node commands (NCMD)")
+            await subscribe(
+                client, self.topic("DCMD", "+"), qos=1, unheard="device commands (DCMD)"
+            )
             self._born = False
             if state is not None:
                 # The host's word counts on the connection it came on: a broker that

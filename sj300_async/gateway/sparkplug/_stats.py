@@ -7,7 +7,7 @@ from collections.abc import Iterator
 from dataclasses import dataclass, field
 from typing import TYPE_CHECKING, Final
 
-from ..mqtt import SessionStats
+from ..mqtt import SessionStats, refused_subscriptions
 
 if TYPE_CHECKING:
     from prometheus_client.core import Metric
@@ -66,6 +66,11 @@ _COUNTERS: Final = (
     ("sj300_sparkplug_rebirths", "Rebirths done on a host's request.", "rebirths"),
     ("sj300_sparkplug_host_offline", "Times the primary host went offline.", "host_offline"),
     ("sj300_sparkplug_lost", "Messages being sent when the connection broke.", "lost"),
+    (
+        "sj300_sparkplug_puback_timeouts",
+        "Connections ended because a QoS 1 publish waited keepalive_s for its PUBACK.",
+        "puback_timeouts",
+    ),
 )
 
 
@@ -99,6 +104,7 @@ def sparkplug_families(
     for reason in BAD_INPUTS:
         bad.add_metric([reason], stats.bad_input[reason])
     yield bad
+    yield refused_subscriptions("sj300_sparkplug_subscriptions_refused", stats)
     state = GaugeMetricFamily(
         "sj300_sparkplug_born", "1 while the edge node's birth stands on a connection."
     )

@@ -1,0 +1,62 @@
+"""The edge node's subscriptions refused by the broker (an ACL): said, counted, on /healthz.
+
+Against the tests' misbehaving broker (tests/mqtt_misbehaving.py), which
+answers SUBACK 0x80 for the filters it is told to, as EMQX and HiveMQ do on
+an ACL deny. Refused, the edge node would wait for a STATE that never comes
+and never hear a command; before, nothing said so.
+"""
+
+from __future__ import annotations
+
+import logging
+
+import pytest
+from mqtt_misbehaving import misbehaving_broker
+from waiting import wait_for
+
+from .conftest import SimLine, edge, running_gateway, spb_toml
+
+STATE = "spBv1.0/STATE/scada"
+NCMD = "spBv1.0/plant/NCMD/gw1"
+DCMD = "spBv1.0/plant/DCMD/gw1/+"
+
+
+async def test_refused_state_ncmd_and_dcmd_are_each_said_counted_and_a_problem(
+    sim_line: SimLine, caplog: pytest.LogCaptureFixture
+) -> None:
+    caplog.set_level(logging.DEBUG, logger="sj300_async.gateway.sparkplug")
+    async with misbehaving_broker(refuse={STATE, NCMD, DCMD}) as broker:
+        text = spb_toml(sim_line.url, broker, mqtt_extra='primary_host_id = "scada"')
+        async with running_gateway(text) as gateway:
+            node = edge(gateway)
+            await wait_for(lambda: node.stats.connects == 1, "connected")
+            problems = gateway.problems()
+            families = {f.name: f for f in node.metrics()}
+            born = node.born
+    (seen,) = broker.connections
+    assert [(f, code) for f, _, code in seen.subscriptions] == [
+        (STATE, 0x80),
+        (NCMD, 0x80),
+        (DCMD, 0x80),
+    ]
+    unheard = {
+        STATE: "the primary host's STATE",
+        NCMD: "node commands (NCMD)",
+        DCMD: "device commands (DCMD)",
+    }
+    for topic_filter, what in unheard.items():
+        line = f"the broker refused the subscription to {{}} (SUBACK 0x80): {what} not received"
+        assert f"Sparkplug: {line.format(topic_filter)}" in problems
+        said = [
+            r
+            for r in caplog.records
+            if r.getMessage() == f"Sparkplug: {line.format(repr(topic_filter))}"
+        ]
+        assert [r.levelno for r in said] == [logging.WARNING], topic_filter
+    refused = families["sj300_sparkplug_subscriptions_refused"]
+    assert {s.labels["filter"]: s.value for s in refused.samples} == {
+        STATE: 1,
+        NCMD: 1,
+        DCMD: 1,
+    }
+    assert not born  # the host's STATE cannot come: /healthz says why
