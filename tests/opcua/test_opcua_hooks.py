@@ -28,6 +28,8 @@ from asyncua.ua.uaerrors import UaError, UaStatusCodeError
 from waiting import wait_for
 
 from sj300_async.gateway.opcua import _hooks
+from sj300_async.gateway.opcua._config import DEFAULT_LOGIN_BURST
+from sj300_async.gateway.opcua._server import OpcuaServer
 
 from .conftest import (
     CLIENT_URI,
@@ -81,6 +83,12 @@ async def _session_on(client: UaClient, url: str) -> None:
     await client.activate_session(activate)
 
 
+def _counted(server: OpcuaServer, family: str, label: str) -> float:
+    """One label's count in one of the server's metric families."""
+    (found,) = [f for f in server.metrics() if f.name == family]
+    return sum(s.value for s in found.samples if label in s.labels.values())
+
+
 async def _read_state(client: UaClient, ns: int) -> ua.DataValue:
     read = ua.ReadValueId(
         NodeId=ua.NodeId("hall/Drive1/Monitoring/State", ns), AttributeId=ua.AttributeIds.Value
@@ -93,7 +101,7 @@ async def _read_state(client: UaClient, ns: int) -> ua.DataValue:
 async def test_an_unoffered_or_uncertified_unsecured_channel_only_discovers(
     tmp_path: Path, client_pair: Pair, trusted: bool
 ) -> None:
-    """No session's request on it: discovery (GetEndpoints, FindServers) only."""
+    """No session on it: discovery (GetEndpoints, FindServers) only."""
     extra = ""
     if trusted:  # None offered, but it carries no certificate to trust
         (tmp_path / "trusted").mkdir()
@@ -104,10 +112,11 @@ async def test_an_unoffered_or_uncertified_unsecured_channel_only_discovers(
     async with opcua_gateway(text) as (_, server), _unsecured_channel(server.url) as client:
         endpoints = await client.get_endpoints(ua.GetEndpointsParameters(EndpointUrl=server.url))
         assert ua.MessageSecurityMode.SignAndEncrypt in {e.SecurityMode for e in endpoints}
-        await _session_on(client, server.url)
         with pytest.raises(UaStatusCodeError) as refused:
-            await _read_state(client, 1)
-        assert ua.StatusCode(refused.value.code).name == "BadUserAccessDenied"
+            await _session_on(client, server.url)
+        assert ua.StatusCode(refused.value.code).name == "BadSecurityPolicyRejected"
+        assert server.session_count == 0
+        assert _counted(server, "sj300_opcua_refused_sessions", "discovery") == 1
 
 
 async def test_an_offered_unsecured_channel_reads(tmp_path: Path) -> None:
@@ -204,11 +213,8 @@ async def test_a_reactivated_session_still_lapses_its_lease_when_it_closes(
             )
 
 
-async def test_an_unactivated_session_is_closed(
-    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
-) -> None:
-    monkeypatch.setattr(_hooks, "ACTIVATE_WITHIN_S", 0.3)
-    text = opcua_toml(tmp_path, security='["None"]')
+async def test_an_unactivated_session_is_closed(tmp_path: Path) -> None:
+    text = opcua_toml(tmp_path, security='["None"]', opcua_extra="activate_within_s = 0.5")
     async with opcua_gateway(text) as (_, server), _unsecured_channel(server.url) as client:
         params = ua.CreateSessionParameters(
             ClientNonce=b"\0" * 32,
@@ -220,6 +226,7 @@ async def test_an_unactivated_session_is_closed(
         await client.create_session(params)
         assert server.session_count == 1
         await wait_for(lambda: server.session_count == 0, "the session closed", timeout=5)
+        assert _counted(server, "sj300_opcua_refused_sessions", "expired") == 1
 
 
 async def test_failed_logins_are_throttled_and_never_stall_the_loop(tmp_path: Path) -> None:
@@ -248,13 +255,13 @@ async def test_failed_logins_are_throttled_and_never_stall_the_loop(tmp_path: Pa
             watcher.cancel()
             with contextlib.suppress(Exception):
                 await client.disconnect()
-        # 30 scrypt checks in a row would hold the loop ~2 s; the budget allows 3 at once.
-        assert server._users.refused + server._users.throttled == 30
-        assert server._users.throttled >= 25
+        # 30 scrypt checks in a row would hold the loop ~2 s; one address's budget allows
+        # 5 at once (a sixth, maybe, as it refills), checked off the loop.
+        refusals = server._users.refusals
+        assert refusals["password"] + refusals["rate"] == 30
+        assert refusals["rate"] >= 30 - DEFAULT_LOGIN_BURST - 1
         assert max(stalls) < 0.5, f"the loop stood still {max(stalls):.2f} s"
-        families = {f.name: f for f in server.metrics()}
-        rate = [s for s in families["sj300_opcua_refused_logins"].samples if s.labels]
-        assert {s.labels["reason"]: s.value for s in rate}["rate"] == server._users.throttled
+        assert _counted(server, "sj300_opcua_refused_logins", "rate") == refusals["rate"]
 
 
 async def test_one_request_carries_at_most_64_writes(tmp_path: Path, client_pair: Pair) -> None:

@@ -702,7 +702,7 @@ async def test_node_opcuas_own_certificate_opens_the_encrypted_channel(
             [read("hall/Drive1/Online")], mode="SignAndEncrypt", user="nobody", password=PASSWORD
         )
         # Under trusted_clients an unsecured channel (no certificate to judge it by)
-        # serves discovery only, whatever certificate the session then names.
+        # serves discovery only: no session on it, whatever certificate it would name.
         plain = await client.run([read("hall/Drive1/Online")])
         untrusted = server.untrusted
     assert [v["statusCode"] for v in secure["values"]] == ["Good", "Good"]
@@ -711,7 +711,7 @@ async def test_node_opcuas_own_certificate_opens_the_encrypted_channel(
     assert not unknown["ok"]
     assert unknown["error"]["statusCode"] == "BadUserAccessDenied"
     assert not plain["ok"]
-    assert plain["error"]["statusCode"] == "BadUserAccessDenied"
+    assert plain["error"]["statusCode"] == "BadSecurityPolicyRejected"
     assert untrusted == 0
     # node-opcua accepted the server's own certificate (and only it) into its PKI.
     accepted = list((node_pki / "trusted" / "certs").iterdir())
@@ -738,9 +738,10 @@ async def test_a_server_trusting_other_clients_refuses_node_opcuas_certificate(
     assert not refused["ok"], refused
     assert refused["steps"] == []
     assert refused_then == 1
-    # Unsecured: node-opcua still names its certificate in CreateSession, judged there too.
+    # Unsecured: a discovery-only channel, where CreateSession is refused before the
+    # certificate it names is judged.
     assert not plain["ok"], plain
-    assert plain["error"]["statusCode"] == "BadCertificateUntrusted"
+    assert plain["error"]["statusCode"] == "BadSecurityPolicyRejected"
     assert plain["steps"] == []
 
 

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import importlib.metadata
+import inspect
 import stat
 import textwrap
 from pathlib import Path
@@ -9,12 +11,13 @@ from pathlib import Path
 import asyncua
 import pytest
 from asyncua import Server, ua
+from asyncua.server.uaprocessor import UaProcessor
 from asyncua.ua.uaerrors import UaError, UaStatusCodeError
 from cryptography import x509
 from waiting import wait_for
 
 from sj300_async.gateway import GatewayConfigError, config_from_flags, parse_config
-from sj300_async.gateway.opcua import DEFAULT_SECURITY, OpcuaConfig
+from sj300_async.gateway.opcua import DEFAULT_SECURITY, OpcuaConfig, _hooks
 
 from .conftest import (
     NAMESPACE,
@@ -183,9 +186,10 @@ async def test_an_unsecured_only_server_reads_but_never_writes(
 async def test_the_default_server_offers_no_unsecured_endpoint(tmp_path: Path) -> None:
     text = opcua_toml(tmp_path, security='["Basic256Sha256_SignAndEncrypt"]')
     async with opcua_gateway(text) as (_, server):
-        with pytest.raises(ua.uaerrors.UaError, match="No matching endpoints"):
-            async with connected(server.url):  # SecurityPolicy None: not offered
+        with pytest.raises(UaStatusCodeError) as refused:
+            async with connected(server.url):  # SecurityPolicy None: not offered, no session
                 pass
+        assert ua.StatusCode(refused.value.code).name == "BadSecurityPolicyRejected"
         probe = asyncua.Client(server.url)
         endpoints = await probe.connect_and_get_server_endpoints()
         assert {e.SecurityMode for e in endpoints} == {ua.MessageSecurityMode.SignAndEncrypt}
@@ -205,3 +209,38 @@ def test_asyncua_still_has_what_the_hooks_reach_past_its_api() -> None:
     factory = SecurityPolicyFactory(None, ua.MessageSecurityMode.Sign)
     assert hasattr(factory, "permission_ruleset")
     assert factory.mode == ua.MessageSecurityMode.Sign
+    assert hasattr(iserver, "endpoints")
+    assert callable(iserver.decrypt_user_token)
+    assert callable(iserver.lookup_external_session)
+
+
+def test_asyncua_is_a_release_the_request_guards_were_tested_with() -> None:
+    """guard_requests wraps asyncua's connection and request processing: an asyncua of
+    another release is guarded only if those have the same shape; moving to one means
+    running these tests against it and naming it in TESTED_ASYNCUA."""
+    assert importlib.metadata.version("asyncua") in _hooks.TESTED_ASYNCUA
+    for (owner, name), parameters in _hooks._WRAPPED.items():
+        assert list(inspect.signature(getattr(owner, name)).parameters) == parameters, name
+
+
+async def test_an_asyncua_processing_otherwise_falls_back_to_checking_passwords_itself(
+    tmp_path: Path,
+    client_pair: Pair,
+    monkeypatch: pytest.MonkeyPatch,
+    caplog: pytest.LogCaptureFixture,
+) -> None:
+    """The public path: no request guard, and the user manager checks each password on the
+    loop within the budget every client shares (bounded, counted)."""
+    wrapped = dict(_hooks._WRAPPED)
+    wrapped[(UaProcessor, "_process_message")] = ["self", "moved"]
+    monkeypatch.setattr(_hooks, "_WRAPPED", wrapped)
+    async with opcua_gateway(opcua_toml(tmp_path)) as (_, server):
+        assert not server._defences.guarded
+        assert "differs from" in caplog.text
+        async with connected(server.url, pair=client_pair, user=USER, password=PASSWORD) as ok:
+            assert await ok.get_namespace_index(NAMESPACE) > 0
+        with pytest.raises(UaStatusCodeError):
+            async with connected(server.url, pair=client_pair, user=USER, password="wrong"):
+                pass
+        assert server._users.refusals["password"] == 1
+        assert server._defences.checks.checked == 0  # none went through the guarded path

@@ -9,6 +9,12 @@
     certificate = "opcua/cert.der"     # generated at first start when missing
     private_key = "opcua/key.pem"
     trusted_clients = "opcua/trusted"  # optional: only these client certificates
+    max_connections = 32               # the hardening's limits (docs/OPCUA.md, "Hardening")
+    connections_per_address = 8
+    unactivated_per_address = 4
+    activate_within_s = 5.0
+    login_burst = 5
+    login_interval_s = 5.0
     [[opcua.users]]
     name = "operator"
     password_hash = "scrypt$16384$8$1$..."   # sj300 gateway --hash-password
@@ -31,6 +37,13 @@ Decisions:
   PEM certificates) only those clients may open a session; without it,
   any client certificate opens the encrypted channel, and the user's
   password is what authenticates (documented in docs/OPCUA.md).
+- **Limits for what costs the server before a client proves anything**
+  (issue 41; docs/OPCUA.md, "Hardening"): connections per client address
+  (a quarter of ``max_connections`` by default, so that one address never
+  holds them all), sessions not yet activated per address and the time
+  they have to activate (:mod:`._admission`), and each address's password
+  budget (:mod:`._logins`). Each has a default that a plant's clients never
+  meet; a key tunes it, within bounds that keep it a limit.
 - Port 0 picks a free port (the tests' way); the announce line names it.
 """
 
@@ -54,7 +67,8 @@ __all__ = [
 
 OPCUA_KEYS: Final = (
     *("endpoint", "security", "certificate", "private_key", "trusted_clients"),
-    *("users", "namespace", "max_connections"),
+    *("users", "namespace", "max_connections", "connections_per_address"),
+    *("unactivated_per_address", "activate_within_s", "login_burst", "login_interval_s"),
 )
 #: The security modes a configuration may name, strongest first.
 SECURITY_MODES: Final = ("Basic256Sha256_SignAndEncrypt", "Basic256Sha256_Sign", "None")
@@ -63,6 +77,13 @@ DEFAULT_CERTIFICATE: Final = "opcua/cert.der"
 DEFAULT_PRIVATE_KEY: Final = "opcua/key.pem"
 #: Client connections at once, at most (more are refused at accept).
 DEFAULT_MAX_CONNECTIONS: Final = 32
+#: Sessions one client address may hold not yet activated, and the seconds a session has
+#: to activate before it is closed (asyncua: unlimited, and as long as its connection).
+DEFAULT_UNACTIVATED_PER_ADDRESS: Final = 4
+DEFAULT_ACTIVATE_WITHIN_S: Final = 5.0
+#: Password checks one client address may have at once, then one more every interval.
+DEFAULT_LOGIN_BURST: Final = 5
+DEFAULT_LOGIN_INTERVAL_S: Final = 5.0
 
 
 @dataclass(frozen=True, slots=True)
@@ -80,6 +101,12 @@ class OpcuaConfig:
     #: The namespace URI of the drives' nodes (default ``urn:sj300-async:<gateway id>``).
     namespace: str = ""
     max_connections: int = DEFAULT_MAX_CONNECTIONS
+    #: Connections one client address may hold (default: a quarter of max_connections).
+    connections_per_address: int = DEFAULT_MAX_CONNECTIONS // 4
+    unactivated_per_address: int = DEFAULT_UNACTIVATED_PER_ADDRESS
+    activate_within_s: float = DEFAULT_ACTIVATE_WITHIN_S
+    login_burst: int = DEFAULT_LOGIN_BURST
+    login_interval_s: float = DEFAULT_LOGIN_INTERVAL_S
 
     @property
     def url(self) -> str:
@@ -133,9 +160,16 @@ def parse_opcua_section(table: ConfigTable, context: SectionContext) -> OpcuaCon
     namespace = table.string("namespace")
     if namespace is not None and not namespace.strip():
         raise table.error("namespace", "expected a namespace URI, got an empty string")
-    max_connections = table.integer("max_connections")
-    if max_connections is not None and not 1 <= max_connections <= 1000:
-        raise table.error("max_connections", f"must be 1..1000, got {max_connections}")
+    max_connections = _bounded(table, "max_connections", 1, 1000, DEFAULT_MAX_CONNECTIONS)
+    per_address = _bounded(
+        table, "connections_per_address", 1, max_connections, max(1, max_connections // 4)
+    )
+    unactivated = _bounded(
+        table, "unactivated_per_address", 1, 100, DEFAULT_UNACTIVATED_PER_ADDRESS
+    )
+    login_burst = _bounded(table, "login_burst", 1, 100, DEFAULT_LOGIN_BURST)
+    activate_within_s = _seconds(table, "activate_within_s", 0.5, 60.0, DEFAULT_ACTIVATE_WITHIN_S)
+    login_interval_s = _seconds(table, "login_interval_s", 0.1, 3600.0, DEFAULT_LOGIN_INTERVAL_S)
     return OpcuaConfig(
         endpoint=Endpoint(host, port),
         host_text=host,
@@ -145,8 +179,33 @@ def parse_opcua_section(table: ConfigTable, context: SectionContext) -> OpcuaCon
         trusted_clients=trusted,
         users=parse_users(table),
         namespace=namespace or f"urn:sj300-async:{context.gateway_id}",
-        max_connections=DEFAULT_MAX_CONNECTIONS if max_connections is None else max_connections,
+        max_connections=max_connections,
+        connections_per_address=per_address,
+        unactivated_per_address=unactivated,
+        activate_within_s=activate_within_s,
+        login_burst=login_burst,
+        login_interval_s=login_interval_s,
     )
+
+
+def _bounded(table: ConfigTable, key: str, low: int, high: int, default: int) -> int:
+    """An integer key within low..high (*default* when absent)."""
+    value = table.integer(key)
+    if value is None:
+        return default
+    if not low <= value <= high:
+        raise table.error(key, f"must be {low}..{high}, got {value}")
+    return value
+
+
+def _seconds(table: ConfigTable, key: str, low: float, high: float, default: float) -> float:
+    """A number of seconds within low..high (*default* when absent)."""
+    value = table.number(key, minimum=low, inclusive=True)
+    if value is None:
+        return default
+    if value > high:
+        raise table.error(key, f"must be {low:g}..{high:g} s, got {value:g}")
+    return value
 
 
 def _security(table: ConfigTable) -> tuple[str, ...]:

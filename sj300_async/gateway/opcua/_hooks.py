@@ -21,10 +21,24 @@ it is done here, each on the one server instance, and checked by
 - **Sessions** (:func:`guard_sessions`). asyncua numbers authentication
   tokens 1000, 1001, ...: a client that guesses another's could activate
   that session on its own channel. Each session gets 32 random bytes
-  instead. A session never activated is closed after
-  :data:`ACTIVATE_WITHIN_S` (asyncua would keep it forever), sessions are
-  capped, and the northbound hears each session's creation and
-  activation (its lease's connection is the session).
+  instead. The northbound hears each session's creation (which it may
+  refuse) and activation: :mod:`._admission` rations the unactivated and
+  closes them in time (:func:`close_session`; asyncua would keep them as
+  long as their connection), and a lease's connection is the session.
+- **Requests** (:func:`guard_requests`, issue 41): asyncua's connection
+  and request processing, for the servers handed to it, through the
+  northbound's :class:`._defences.Door`: connections admitted by address;
+  a chunk longer than the receive buffer refused at its header (asyncua
+  buffered all it announced, up to 4 GiB); a session's message before any
+  OpenSecureChannel refused (asyncua served it with no channel and no
+  ruleset: reads past ``trusted_clients``); a chunk or a request asyncua
+  cannot take closes its connection, counted, logged once at DEBUG
+  (asyncua logged a traceback each and read on); CreateSession admitted
+  and ActivateSession's user name token judged, awaited, before asyncua's
+  synchronous activation (:mod:`._logins`), their refusals answered here
+  without asyncua's ERROR line each. An asyncua processing otherwise than
+  the releases tested (:data:`TESTED_ASYNCUA`) gets none of it, with a
+  warning: passwords are then checked by the user manager, bounded.
 - **Sessions closing** (:func:`on_session_closed`): a connection-scoped
   lease lapses when its OPC UA session closes.
 - **Writes that wait for the line** (:func:`route_writes`): asyncua's
@@ -58,28 +72,39 @@ it is done here, each on the one server instance, and checked by
 from __future__ import annotations
 
 import asyncio
+import contextvars
 import functools
+import importlib.metadata
+import inspect
 import logging
 import secrets
+import weakref
 from collections.abc import Awaitable, Callable
 from dataclasses import dataclass
-from typing import Any, Final
+from typing import TYPE_CHECKING, Any, Final
 
 from asyncua import Server, ua
 from asyncua.common.utils import ServiceError
 from asyncua.crypto.permission_rules import PermissionRuleset
 from asyncua.crypto.security_policies import SecurityPolicyNone
+from asyncua.server.binary_server_asyncio import OPCUAProtocol
 from asyncua.server.monitored_item_service import MonitoredItemService, MonitoredItemValues
+from asyncua.server.uaprocessor import UaProcessor
 from asyncua.ua import ua_binary
 
 from ._wire import datavalue_binary
 
+if TYPE_CHECKING:
+    from ._defences import Door
+
 __all__ = [
-    "ACTIVATE_WITHIN_S",
+    "TESTED_ASYNCUA",
     "FrozenDataValue",
+    "close_session",
     "encode_frozen_values",
     "follow_watchers",
     "guard_channels",
+    "guard_requests",
     "guard_sessions",
     "on_session_closed",
     "push_frozen",
@@ -89,9 +114,6 @@ __all__ = [
 ]
 
 _log = logging.getLogger("sj300_async.gateway.opcua")
-
-#: Seconds a created session may wait for its activation before it is closed.
-ACTIVATE_WITHIN_S: Final = 30.0
 
 WriteHandler = Callable[[ua.WriteValue, Any], Awaitable[ua.StatusCode]]
 
@@ -166,21 +188,23 @@ def guard_channels(
 def guard_sessions(
     server: Server,
     *,
-    limit: int,
-    created: Callable[[Any], None],
+    created: Callable[[Any, Any, bool], int | None],
     activated: Callable[[Any], None],
 ) -> None:
-    """Random tokens, activation in time, at most *limit* sessions (module docstring)."""
+    """Random tokens; *created* (session, its peer, whether guard_requests admitted it:
+    None or a status code refusing it) and *activated* hear each external session
+    (module docstring)."""
     iserver = server.iserver
     create = iserver.create_session
 
     def create_session(name: Any, user: Any = None, external: bool = False) -> Any:
-        if external and len(iserver._external_sessions) >= limit:
-            raise ServiceError(ua.StatusCodes.BadTooManySessions)
         session = create(name, external=external) if user is None else create(name, user, external)
         if not external:
             return session
         iserver.unregister_external_session(session)
+        refused = created(session, name, _admitted.get())
+        if refused is not None:
+            raise ServiceError(refused)  # never registered: no client can reach it
         session.auth_token = ua.NodeId(secrets.token_bytes(32), 0, ua.NodeIdType.ByteString)
         iserver.register_external_session(session)
         activate = session.activate_session
@@ -191,18 +215,14 @@ def guard_sessions(
             return result
 
         session.activate_session = activate_session
-        asyncio.get_running_loop().call_later(ACTIVATE_WITHIN_S, _unactivated, session)
-        created(session)
         return session
 
     iserver.create_session = create_session
 
 
-def _unactivated(session: Any) -> None:
-    """Close *session* if it was never activated (its creator went away or never meant to)."""
-    if session.is_activated() or session.state.name == "Closed":
-        return
-    _log.info("opcua: closing a session never activated (%s)", session.name)
+def close_session(session: Any) -> None:
+    """Close one of asyncua's sessions (its close is a coroutine: a task, whose failure is
+    dropped: the session is being thrown away)."""
     task = asyncio.get_running_loop().create_task(session.close_session(True))
     task.add_done_callback(lambda done: done.cancelled() or done.exception())
 
@@ -259,6 +279,182 @@ def refuse_registration(server: Server) -> None:
 
     server.iserver.register_server = refuse
     server.iserver.register_server2 = refuse
+
+
+#: The asyncua releases guard_requests was written against and tested with; another is
+#: guarded only where its processing has the same shape (_wrappable).
+TESTED_ASYNCUA: Final = ("2.1.0",)
+_CREATE: Final = ua.NodeId(ua.ObjectIds.CreateSessionRequest_Encoding_DefaultBinary)
+_ACTIVATE: Final = ua.NodeId(ua.ObjectIds.ActivateSessionRequest_Encoding_DefaultBinary)
+#: What guard_requests wraps, and the parameters each has in the releases tested.
+_WRAPPED: Final = {
+    (OPCUAProtocol, "connection_made"): ["self", "transport"],
+    (OPCUAProtocol, "connection_lost"): ["self", "ex"],
+    (OPCUAProtocol, "data_received"): ["self", "data"],
+    (OPCUAProtocol, "_process_one_msg"): ["self", "header", "buf"],
+    (UaProcessor, "_process_message"): ["self", "typeid", "requesthdr", "seqhdr", "body"],
+}
+#: A frame of asyncua's binary decoding: what it raises there is the client's malformed bytes.
+_DECODERS: Final = ("unpack", "from_binary", "deserial", "decode")
+
+
+#: True while asyncua serves a CreateSession that guard_requests admitted.
+_admitted: contextvars.ContextVar[bool] = contextvars.ContextVar("sj300_admitted", default=False)
+#: Each guarded server's door, and the ruleset of its discovery-only channels.
+_doors: weakref.WeakKeyDictionary[Any, tuple[Door, PermissionRuleset]] = weakref.WeakKeyDictionary()
+
+
+def guard_requests(server: Server, door: Door, discovery: PermissionRuleset) -> bool:
+    """Guard *server*'s connections and requests through *door* (module docstring); False,
+    nothing guarded, when asyncua's processing is not of the shape wrapped (logged)."""
+    unlike = [
+        f"{owner.__name__}.{name}"
+        for (owner, name), parameters in _WRAPPED.items()
+        if list(inspect.signature(getattr(owner, name, None) or _gone).parameters) != parameters
+    ]
+    if unlike:
+        _log.warning(
+            "opcua: asyncua %s differs from %s where the gateway guards it (%s): connections "
+            "and sessions unrationed, malformed requests logged by asyncua, passwords checked "
+            "on the event loop",
+            importlib.metadata.version("asyncua"), ", ".join(TESTED_ASYNCUA), ", ".join(unlike),
+        )  # fmt: skip
+        return False
+    _doors[server.iserver] = (door, discovery)
+    if not getattr(OPCUAProtocol, "_sj300_guarded", False):
+        _wrap_processing()
+    return True
+
+
+def _gone() -> None:
+    """Stands for a method asyncua no longer has."""
+
+
+def _wrap_processing() -> None:
+    """Wrap asyncua's connection and request processing, once per process; a server not
+    handed to guard_requests is processed exactly as asyncua does."""
+    made, lost = OPCUAProtocol.connection_made, OPCUAProtocol.connection_lost
+    received, process_one = OPCUAProtocol.data_received, OPCUAProtocol._process_one_msg
+    process = UaProcessor._process_message
+
+    def connection_made(self: Any, transport: Any) -> None:
+        guarded = _doors.get(self.iserver)
+        peer = transport.get_extra_info("peername")
+        if guarded is not None:
+            if not guarded[0].connection_opened(peer):
+                transport.close()  # as asyncua refuses one past max_connections
+                return
+            self._sj300_peer = peer
+        made(self, transport)
+
+    def connection_lost(self: Any, ex: BaseException | None) -> None:
+        lost(self, ex)
+        guarded, peer = _doors.get(self.iserver), getattr(self, "_sj300_peer", None)
+        if guarded is not None and peer is not None:
+            guarded[0].connection_closed(peer)
+
+    def data_received(self: Any, data: bytes) -> None:
+        received(self, data)
+        guarded, waiting = _doors.get(self.iserver), self._buffer  # a chunk's first part
+        if guarded is None or self.transport is None or len(waiting) < 8:
+            return
+        if int.from_bytes(waiting[4:8], "little") > self.limits.max_recv_buffer:
+            self._buffer = b""
+            status = guarded[0].malformed(self.peer_name, "oversize", None, waiting[:32])
+            _close_with(self.transport, status)
+
+    async def process_one_msg(self: Any, header: Any, buf: Any) -> bool:
+        guarded = _doors.get(self.iserver)
+        if guarded is None or self.processor is None or self.transport is None:
+            return bool(await process_one(self, header, buf))
+        secure = header.MessageType in (ua.MessageType.SecureMessage, ua.MessageType.SecureClose)
+        try:
+            if secure and not self.processor._connection.is_open():
+                status = guarded[0].malformed(self.peer_name, "unopened", None, bytes(buf)[:32])
+            else:
+                return bool(await process_one(self, header, buf))
+        except Exception as exc:  # what asyncua logs with its traceback, and reads on
+            status = guarded[0].malformed(self.peer_name, "chunk", exc, bytes(buf)[:32])
+        _close_with(self.transport, status)
+        return False
+
+    async def process_message(
+        self: Any, typeid: Any, requesthdr: Any, seqhdr: Any, body: Any
+    ) -> Any:
+        guarded = _doors.get(self.iserver)
+        if guarded is None:
+            return await process(self, typeid, requesthdr, seqhdr, body)
+        door, discovery = guarded
+        admitted = _admitted.set(False)
+        try:
+            status = None
+            if typeid == _CREATE:
+                policy = self._connection.security_policy
+                status = door.admit(self.name, discovery=policy.permissions is discovery)
+                _admitted.set(status is None)
+            elif typeid == _ACTIVATE:
+                status = await _login(self, door, requesthdr, body)
+            if status is None:
+                return await process(self, typeid, requesthdr, seqhdr, body)
+        except Exception as exc:
+            if not _decoding(exc):
+                raise  # ours or asyncua's own failure: asyncua answers and logs it
+            door.malformed(self.name, "request", exc, bytes(body)[:32])
+            _fault(self, requesthdr, seqhdr, ua.StatusCodes.BadDecodingError)
+            return False  # asyncua closes the connection
+        finally:
+            _admitted.reset(admitted)
+        _fault(self, requesthdr, seqhdr, status)
+        return True
+
+    OPCUAProtocol.connection_made = connection_made
+    OPCUAProtocol.connection_lost = connection_lost
+    OPCUAProtocol.data_received = data_received
+    OPCUAProtocol._process_one_msg = process_one_msg
+    UaProcessor._process_message = process_message
+    OPCUAProtocol._sj300_guarded = True
+
+
+async def _login(processor: Any, door: Door, requesthdr: Any, body: Any) -> int | None:
+    """*door*'s judgement of an ActivateSession's user name token (None: asyncua goes on)."""
+    params = ua_binary.struct_from_binary(ua.ActivateSessionParameters, body.copy())
+    token = params.UserIdentityToken
+    session = processor.session or processor.iserver.lookup_external_session(
+        requesthdr.AuthenticationToken
+    )
+    if not isinstance(token, ua.UserNameIdentityToken) or session is None:
+        return None  # asyncua's own answer (anonymous; no such session)
+    policy = processor._connection.security_policy
+    channel = (policy.URI, policy.Mode, processor.iserver.endpoints)
+    return await door.login(
+        processor.name, token, channel, lambda: processor.iserver.decrypt_user_token(session, token)
+    )
+
+
+def _fault(processor: Any, requesthdr: Any, seqhdr: Any, status: int) -> None:
+    response = ua.ServiceFault()
+    response.ResponseHeader.ServiceResult = ua.StatusCode(status)
+    processor.send_response(requesthdr.RequestHandle, seqhdr, response)
+
+
+def _close_with(transport: Any, status: int) -> None:
+    """An Error message, then the connection closed (OPC UA Part 6, 7.1.5)."""
+    error = ua.ErrorMessage(ua.StatusCode(status), ua.StatusCode(status).name)
+    transport.write(ua_binary.uatcp_to_binary(ua.MessageType.Error, error))
+    transport.close()
+
+
+def _decoding(exc: BaseException) -> bool:
+    """Whether *exc* came from decoding a client's bytes (a frame of asyncua's decoders)."""
+    trace = exc.__traceback__
+    while trace is not None:
+        code = trace.tb_frame.f_code
+        if code.co_filename.endswith(("ua_binary.py", "utils.py")) and any(
+            word in code.co_name for word in (*_DECODERS, "read")
+        ):
+            return True
+        trace = trace.tb_next
+    return False
 
 
 def follow_watchers(server: Server, changed: Callable[[ua.NodeId, int], None]) -> None:

@@ -21,18 +21,24 @@ to every session, anonymous included. The handlers judge that, so each
 refused call gets its own status code instead of the whole request
 failing.
 
-Password checks are scrypt (about 65 ms of the event loop each, the loop
-that also polls the lines and runs the lapse stops), and asyncua asks for
-them synchronously. A client repeating wrong passwords must not stall the
-gateway, so the checks have a budget (:data:`CHECKS_BURST` at once,
-:data:`CHECKS_PER_S` after): past it a login is refused unchecked and
-counted (``reason="rate"``), whoever sends it.
+Password checks are scrypt (about 65 ms of a core each), and asyncua asks
+for them synchronously, on the event loop that also polls the lines and
+runs the lapse stops. So :mod:`._logins` checks each password first, off
+the loop, within budgets per client address and per name, awaited by
+:mod:`._hooks` before asyncua's activation runs, and hands the login it
+accepted over (:func:`hand_over`): :class:`Users` then answers asyncua from
+it. Only where asyncua's request processing could not be reached (an
+asyncua release the hooks do not know) does :class:`Users` check a
+password itself, on the loop, within a budget shared by every client
+(:data:`CHECKS_BURST` at once, :data:`CHECKS_PER_S` after): bounded, and
+that path's refusals counted too.
 """
 
 from __future__ import annotations
 
 import contextvars
 import time
+from collections import Counter
 from dataclasses import dataclass
 from typing import Any, Final
 
@@ -43,6 +49,7 @@ from asyncua.crypto.permission_rules import User as UaUser
 from .. import User, verify_password
 
 __all__ = [
+    "DUMMY_HASH",
     "MAX_OPERATIONS",
     "Caller",
     "ChannelRules",
@@ -50,6 +57,7 @@ __all__ = [
     "Principal",
     "Users",
     "current_caller",
+    "hand_over",
 ]
 
 _NODE_MANAGEMENT: Final = frozenset(
@@ -61,7 +69,7 @@ _NODE_MANAGEMENT: Final = frozenset(
         ua.ObjectIds.DeleteReferencesRequest_Encoding_DefaultBinary,
     )
 )
-#: Password checks allowed at once, and per second after.
+#: Password checks allowed at once, and per second after, where Users checks them itself.
 CHECKS_BURST: Final = 3
 CHECKS_PER_S: Final = 1.0
 #: Operations (method calls, variable writes) one request may carry.
@@ -119,17 +127,32 @@ def current_caller() -> Caller | None:
     return _caller.get()
 
 
+#: The login :mod:`._logins` accepted for the ActivateSession being served: (name, password).
+_accepted: contextvars.ContextVar[tuple[str, str] | None] = contextvars.ContextVar(
+    "sj300_opcua_accepted", default=None
+)
+
+
+def hand_over(name: str, password: str) -> None:
+    """The login of the ActivateSession being served is accepted: asyncua's synchronous
+    question that follows, in this task, is answered from it (see the module docstring)."""
+    _accepted.set((name, password))
+
+
 class Users:
     """asyncua's user manager over ``[[opcua.users]]`` (anonymous sessions read only)."""
 
     def __init__(self, users: tuple[User, ...]) -> None:
         self._hashes = {user.name: user.password_hash for user in users}
-        #: Failed password checks (each is also asyncua's BadUserAccessDenied).
-        self.refused = 0
-        #: Logins refused unchecked: the checks' budget was spent.
-        self.throttled = 0
+        #: Logins refused, by reason (the metric's label): ``password``, ``rate``,
+        #: ``busy``, ``unencrypted``, ``token`` (each also a refusal asyncua answers).
+        self.refusals: Counter[str] = Counter()
         self._budget = float(CHECKS_BURST)
         self._budget_at = time.monotonic()
+
+    def stored(self, name: str) -> str | None:
+        """The password hash of the user *name* (None: no such user)."""
+        return self._hashes.get(name)
 
     def _afford(self) -> bool:
         now = time.monotonic()
@@ -149,15 +172,22 @@ class Users:
     ) -> Principal | None:
         if username is None:
             return Principal(role=UserRole.Anonymous, name=None)
+        accepted = _accepted.get()
+        if accepted is not None:
+            _accepted.set(None)  # once: the next activation is judged again
+            if accepted == (username, password):
+                return Principal(role=UserRole.User, name=username)
+        # Not judged before (the hooks could not reach asyncua's processing): on the
+        # loop, within the shared budget.
         if not self._afford():
-            self.throttled += 1
+            self.refusals["rate"] += 1
             return None
         stored = self._hashes.get(username)
         # The hash is checked for unknown names too (against a fixed one): the time
         # a refusal takes does not tell which names exist.
-        verified = verify_password(password or "", stored or _DUMMY_HASH)
+        verified = verify_password(password or "", stored or DUMMY_HASH)
         if stored is None or not verified:
-            self.refused += 1
+            self.refusals["password"] += 1
             return None
         return Principal(role=UserRole.User, name=username)
 
@@ -177,7 +207,7 @@ class ChannelRules(PermissionRuleset):  # type: ignore[misc]
 
 
 #: A valid scrypt hash of a random password nobody knows (the timing of unknown names).
-_DUMMY_HASH: Final = (
+DUMMY_HASH: Final = (
     "scrypt$16384$8$1$c2ozMDAtYXN5bmMtZHVtbXk=$2xJ1dWJXKYvTgvtn0hvDxrxAgG2o1vXjS3Tm2v0Mrjk="
 )
 

@@ -16,7 +16,8 @@ Decisions:
   Uncertain) and the lines' counters.
 - **Writes** are :mod:`._calls`'s; asyncua's own write path is kept for
   nothing of ours (:mod:`._hooks`).
-- **Security**: :mod:`._security`; the certificate: :mod:`._certificate`.
+- **Security**: :mod:`._security`; the certificate: :mod:`._certificate`; what a
+  client that proved nothing may cost: :mod:`._defences`.
 
 asyncua is imported with this module, when the northbound is created.
 """
@@ -52,13 +53,12 @@ from .. import (
 from ._calls import Calls
 from ._certificate import ServerCertificate, load_or_generate
 from ._config import OpcuaConfig
+from ._defences import Defences
 from ._hooks import (
     FrozenDataValue,
     encode_frozen_values,
     follow_watchers,
     guard_channels,
-    guard_sessions,
-    on_session_closed,
     push_frozen,
     refuse_registration,
     route_writes,
@@ -73,7 +73,7 @@ from ._model import (
     build_line,
 )
 from ._quality import BAD_WAITING, GOOD, utc
-from ._security import ChannelRules, DiscoveryOnly, Principal, Users
+from ._security import ChannelRules, Principal, Users
 from ._space import SpaceBuilder
 
 if TYPE_CHECKING:
@@ -148,12 +148,11 @@ class OpcuaServer:
         self.pushed = 0
         #: Values that could not be pushed (a bug: logged with its traceback).
         self.push_errors = 0
-        #: Client certificates refused (not in trusted_clients).
-        self.untrusted = 0
         self._server: Server | None = None
         self._gateway: GatewayView | None = None
         self._calls: Calls | None = None
         self._users = Users(config.users)
+        self._defences = Defences(config, self._users)
         #: The DER bytes of every trusted client certificate (``trusted_clients``).
         self._trusted: set[bytes] = set()
         #: Each open session's number (its connection-scoped leases' connection).
@@ -288,13 +287,12 @@ class OpcuaServer:
         route_writes(server, self.namespace, self._write)
         share_frozen_values()
         encode_frozen_values()
-        guard_sessions(
+        self._defences.install(
             server,
-            limit=self.config.max_connections,
             created=self._session_created,
             activated=self._session_activated,
+            closed=self._session_closed,
         )
-        on_session_closed(server, self._session_closed)
         refuse_registration(server)
 
     def _bind(self, server: Server, nodes: DriveNodes) -> None:
@@ -333,7 +331,7 @@ class OpcuaServer:
         except OSError as exc:
             raise GatewayStartError.of("opcua", (config.endpoint,), exc) from None
         admit = self._admit if config.trusted_clients is not None else None
-        guard_channels(server, ChannelRules, admit, DiscoveryOnly())
+        guard_channels(server, ChannelRules, admit, self._defences.discovery)
 
     def announce(self) -> str | None:
         certificate = self.certificate
@@ -383,16 +381,7 @@ class OpcuaServer:
         )
         pushed.add_metric([], self.pushed)
         yield pushed
-        refused = CounterMetricFamily(
-            "sj300_opcua_refused_logins",
-            "Sessions refused: a wrong user or password, too many password checks at once, "
-            "an untrusted certificate.",
-            labels=["reason"],
-        )
-        refused.add_metric(["password"], self._users.refused)
-        refused.add_metric(["rate"], self._users.throttled)
-        refused.add_metric(["certificate"], self.untrusted)
-        yield refused
+        yield from self._defences.metrics()
 
     async def close(self) -> None:
         tasks, self._tasks = self._tasks, []
@@ -404,8 +393,14 @@ class OpcuaServer:
         finally:
             if server is not None:
                 await server.stop()
+            self._defences.close()
 
     # -- what the tests and the benchmark read ---------------------------------------
+
+    @property
+    def untrusted(self) -> int:
+        """Client certificates refused (not in trusted_clients)."""
+        return self._users.refusals["certificate"]
 
     @property
     def session_count(self) -> int:
@@ -601,7 +596,7 @@ class OpcuaServer:
         """True when *certificate* (DER) is one of ``trusted_clients`` (counted when not)."""
         if certificate is not None and certificate in self._trusted:
             return True
-        self.untrusted += 1
+        self._defences.refuse_certificate()
         _log.info("opcua: refused a client certificate not in trusted_clients")
         return False
 
