@@ -2,7 +2,8 @@
 
 Brokers in the field were seen to answer every PINGREQ and never send a
 PUBACK, and to refuse a subscription (SUBACK 0x80: EMQX and HiveMQ on an
-ACL deny) while taking the connection and every publish. mosquitto does
+ACL deny) while taking the connection and every publish; a broker that
+never answers a SUBSCRIBE is the same stall one packet earlier. mosquitto does
 neither, so :class:`MisbehavingBroker` does, over a real loopback socket:
 an asyncio TCP server speaking just enough MQTT 3.1.1, parsed here with
 code of its own (not the gateway's codec, which is what is under test):
@@ -15,7 +16,9 @@ code of its own (not the gateway's codec, which is what is under test):
   :attr:`MisbehavingBroker.acknowledge` is true, else swallowed (its
   arrival time kept: when the stall began).
 - SUBSCRIBE: SUBACK granting each filter the QoS asked, 0x80 for the
-  filters in :attr:`MisbehavingBroker.refuse`. UNSUBSCRIBE: UNSUBACK.
+  filters in :attr:`MisbehavingBroker.refuse` (after ``suback_delay_s``),
+  while :attr:`MisbehavingBroker.suback` is true; else swallowed, never
+  answered (each filter and its arrival time kept). UNSUBSCRIBE: UNSUBACK.
 
 Nothing is delivered to the clients. Tests wait on :meth:`MisbehavingBroker.until`,
 woken by each packet (a condition), never on a guessed time.
@@ -47,6 +50,8 @@ class Connection:
     first_swallowed_at: float | None = None
     #: (filter, qos asked, code answered) of every subscription.
     subscriptions: list[tuple[str, int, int]] = field(default_factory=list)
+    #: (filter, loop time) of every subscription left unanswered (no SUBACK).
+    swallowed: list[tuple[str, float]] = field(default_factory=list)
     #: Loop time of every PINGREQ (each answered).
     pings: list[float] = field(default_factory=list)
     #: The client sent DISCONNECT (a clean end: no will).
@@ -65,6 +70,10 @@ class MisbehavingBroker:
     puback_delay_s: float = 0.0
     #: Topic filters whose subscription is refused (SUBACK 0x80).
     refuse: set[str] = field(default_factory=set)
+    #: SUBSCRIBEs get their SUBACK while this is true (else never: swallowed).
+    suback: bool = True
+    #: How late each SUBACK goes.
+    suback_delay_s: float = 0.0
     port: int = 0
     connections: list[Connection] = field(default_factory=list)
     #: Set on the way out: a connection that still arrives is closed at once.
@@ -115,7 +124,7 @@ class MisbehavingBroker:
                 elif kind == 3:  # PUBLISH
                     self._publish(connection, first, body, writer, loop.time())
                 elif kind == 8:  # SUBSCRIBE
-                    writer.write(self._subscribe(connection, body))
+                    self._subscribe(connection, body, writer, loop.time())
                 elif kind == 10:  # UNSUBSCRIBE
                     writer.write(b"\xb0\x02" + body[:2])
                 elif kind == 12:  # PINGREQ
@@ -158,17 +167,28 @@ class MisbehavingBroker:
         elif connection.first_swallowed_at is None:
             connection.first_swallowed_at = now
 
-    def _subscribe(self, connection: Connection, body: bytes) -> bytes:
+    def _subscribe(
+        self, connection: Connection, body: bytes, writer: asyncio.StreamWriter, now: float
+    ) -> None:
         codes = bytearray()
         at = 2
         while at < len(body):
             topic_filter, at = _string(body, at)
             qos = body[at]
             at += 1
+            if not self.suback:
+                connection.swallowed.append((topic_filter.decode(), now))
+                continue
             code = 0x80 if topic_filter.decode() in self.refuse else qos
             connection.subscriptions.append((topic_filter.decode(), qos, code))
             codes.append(code)
-        return bytes((0x90, 2 + len(codes))) + body[:2] + codes
+        if not self.suback:
+            return
+        suback = bytes((0x90, 2 + len(codes))) + body[:2] + codes
+        if self.suback_delay_s:
+            asyncio.get_running_loop().call_later(self.suback_delay_s, writer.write, suback)
+        else:
+            writer.write(suback)
 
 
 def _string(data: bytes, at: int) -> tuple[bytes, int]:
@@ -206,10 +226,17 @@ def _connect(body: bytes, now: float) -> Connection:
 
 @contextlib.asynccontextmanager
 async def misbehaving_broker(
-    *, acknowledge: bool = True, refuse: set[str] | None = None, puback_delay_s: float = 0.0
+    *,
+    acknowledge: bool = True,
+    refuse: set[str] | None = None,
+    puback_delay_s: float = 0.0,
+    suback: bool = True,
+    suback_delay_s: float = 0.0,
 ) -> AsyncIterator[MisbehavingBroker]:
     """A :class:`MisbehavingBroker` on a free loopback port; closed, clients and all, on exit."""
-    broker = MisbehavingBroker(acknowledge, puback_delay_s, set(refuse or ()))
+    broker = MisbehavingBroker(
+        acknowledge, puback_delay_s, set(refuse or ()), suback=suback, suback_delay_s=suback_delay_s
+    )
     tasks: set[asyncio.Task[None]] = set()
 
     async def serve(reader: asyncio.StreamReader, writer: asyncio.StreamWriter) -> None:

@@ -166,3 +166,47 @@ async def test_a_refused_subscription_is_said_counted_and_on_healthz_until_grant
         f"Sparkplug: the broker granted the subscription to {DCMD!r} again",
         f"MQTT: the broker granted the subscription to {TOPICS.command_filter!r} again",
     ], granted
+
+
+async def test_a_subscribe_never_answered_ends_the_set_up_within_the_keepalive(
+    sim_line: SimLine, caplog: pytest.LogCaptureFixture
+) -> None:
+    """The bridge subscribes before it says online: a SUBACK that never came hung it there
+    for ever, silent, with nothing published and /healthz none the wiser."""
+    caplog.set_level(logging.DEBUG, logger="sj300_async.gateway.mqtt")
+    async with (
+        misbehaving_broker(suback=False) as broker,
+        running_gateway(toml(sim_line.url, broker, keepalive_s=1)) as gateway,
+    ):
+        mqtt = bridge(gateway)
+        await broker.until(lambda: broker.connections and broker.connections[0].swallowed,
+                           "the first SUBSCRIBE swallowed")  # fmt: skip
+        first = broker.connections[0]
+        await broker.until(lambda: first.closed_at is not None, "the connection ended")
+        broker.suback = True  # the next connection is served well
+        await wait_for(lambda: mqtt.connected, "connected", timeout=10)
+        async with asyncio.timeout(10):
+            samples = await scrape(metrics_port(gateway))
+        stats = mqtt.stats
+    asked = first.swallowed[0][1]
+    assert first.swallowed == [(TOPICS.command_filter, asked)]  # the first of its two
+    assert first.closed_at is not None
+    stalled_s = first.closed_at - asked
+    assert 0.9 <= stalled_s <= 2.25, stalled_s  # keepalive_s to 1.5 keepalive_s, and slack
+    assert any(t > asked for t in first.pings)  # alive by its pings meanwhile
+    assert not first.disconnected  # a real broker publishes the will ("offline")
+    assert not first.publishes  # it never got as far as "online"
+    # Never up, so not one of the losses; counted as what it was.
+    assert (stats.suback_timeouts, stats.losses, stats.connects) == (1, 0, 1)
+    assert value(samples, "sj300_mqtt_suback_timeouts_total") == 1
+    assert value(samples, "sj300_mqtt_puback_timeouts_total") == 0
+    (warning,) = warnings(caplog, "sj300_async.gateway.mqtt")
+    assert warning.startswith(f"MQTT: cannot connect to {broker.url} (no SUBACK for 1."), warning
+    assert warning.endswith(
+        f"(keepalive_s 1): SUBSCRIBE packet 1 ({TOPICS.command_filter}) of client sj300-gw1, "
+        "the oldest of 1 waiting); retrying"
+    ), warning
+    second = broker.connections[1]
+    assert [f for f, _, _ in second.subscriptions] == [TOPICS.command_filter,
+                                                       "homeassistant/status"]  # fmt: skip
+    assert (TOPICS.availability, b"online", 1) in second.publishes

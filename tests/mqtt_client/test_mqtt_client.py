@@ -29,6 +29,7 @@ from sj300_async.gateway.mqtt.client import (
     Message,
     MqttError,
     PublishUnacknowledged,
+    SubscribeUnacknowledged,
     Will,
 )
 from sj300_async.gateway.mqtt.client._acks import PubackWatch
@@ -514,6 +515,48 @@ async def test_publishes_acknowledged_slowly_but_within_the_keepalive_keep_the_c
         await c.publish("t/last", b"x", qos=1)
     (seen,) = broker.connections
     assert len(seen.publishes) == 13
+    assert seen.pings  # the keepalive ran meanwhile
+    assert seen.disconnected
+
+
+async def test_a_broker_that_never_answers_a_subscribe_ends_the_connection() -> None:
+    """A SUBACK is due within the keepalive too: before, the subscribe (a session's set-up)
+    waited for ever while the broker answered every ping."""
+    async with misbehaving_broker(suback=False) as broker:
+        c = Client("127.0.0.1", broker.port, identifier="c", keepalive_s=1)
+        async with c, asyncio.timeout(10):  # a hang fails, not at the suite's time-out
+            with pytest.raises(SubscribeUnacknowledged) as raised:
+                await c.subscribe([("cmd/#", 1), ("status", 0)])
+            with pytest.raises(SubscribeUnacknowledged):  # what comes after hears it too
+                await c.publish("t", b"after", qos=1)
+        await broker.until(lambda: broker.connections[0].closed_at is not None, "the end")
+    (seen,) = broker.connections
+    assert [f for f, _ in seen.swallowed] == ["cmd/#", "status"]
+    asked = seen.swallowed[0][1]
+    assert seen.closed_at is not None
+    stalled_s = seen.closed_at - asked
+    assert 0.9 <= stalled_s <= 2.25, stalled_s  # keepalive_s to 1.5 keepalive_s, and slack
+    assert any(t > asked for t in seen.pings)  # answered meanwhile: it looked alive
+    assert not seen.disconnected  # aborted: a real broker publishes the will
+    assert isinstance(raised.value, MqttError)  # what a session catches
+    text = str(raised.value)
+    assert text.startswith("no SUBACK for 1."), text
+    assert text.endswith(
+        "(keepalive_s 1): SUBSCRIBE packet 1 (cmd/#, status) of client c, the oldest of 1 waiting"
+    ), text
+
+
+async def test_subscribes_answered_slowly_but_within_the_keepalive_keep_the_connection() -> None:
+    """Three SUBACKs 0.6 s late each: 1.8 s of set-up, longer than the keepalive, no stall."""
+    async with (
+        misbehaving_broker(suback_delay_s=0.6) as broker,
+        Client("127.0.0.1", broker.port, identifier="c", keepalive_s=1) as c,
+    ):
+        for name in ("a", "b", "c"):
+            assert await c.subscribe(name, qos=1) == (1,)
+        await c.unsubscribe("a")  # answered at once: the UNSUBACK is watched the same way
+    (seen,) = broker.connections
+    assert [f for f, _, _ in seen.subscriptions] == ["a", "b", "c"]
     assert seen.pings  # the keepalive ran meanwhile
     assert seen.disconnected
 

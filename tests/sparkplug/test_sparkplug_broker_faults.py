@@ -60,3 +60,32 @@ async def test_refused_state_ncmd_and_dcmd_are_each_said_counted_and_a_problem(
         DCMD: 1,
     }
     assert not born  # the host's STATE cannot come: /healthz says why
+
+
+async def test_a_subscribe_never_answered_is_counted_and_the_node_connects_again(
+    sim_line: SimLine, caplog: pytest.LogCaptureFixture
+) -> None:
+    """The edge node subscribes before its birth: a SUBACK that never came held it unborn."""
+    caplog.set_level(logging.DEBUG, logger="sj300_async.gateway.sparkplug")
+    async with misbehaving_broker(suback=False) as broker:
+        text = spb_toml(sim_line.url, broker, mqtt_extra="keepalive_s = 1")
+        async with running_gateway(text) as gateway:
+            node = edge(gateway)
+            await broker.until(lambda: broker.connections and broker.connections[0].swallowed,
+                               "the first SUBSCRIBE swallowed")  # fmt: skip
+            first = broker.connections[0]
+            await broker.until(lambda: first.closed_at is not None, "the connection ended")
+            broker.suback = True
+            await wait_for(lambda: node.born, "born on the next connection", timeout=10)
+            families = {f.name: f for f in node.metrics()}
+    assert first.closed_at is not None
+    stalled_s = first.closed_at - first.swallowed[0][1]
+    assert 0.9 <= stalled_s <= 2.25, stalled_s
+    assert not first.disconnected  # its will, the NDEATH, is published
+    assert [f for f, _ in first.swallowed] == [NCMD]
+    (timeouts,) = families["sj300_sparkplug_suback_timeouts"].samples
+    assert timeouts.value == 1
+    said = [r.getMessage() for r in caplog.records if r.levelno >= logging.WARNING]
+    assert len(said) == 1, said
+    assert said[0].startswith(f"MQTT: cannot connect to {broker.url} (no SUBACK for 1."), said
+    assert f"SUBSCRIBE packet 1 ({NCMD}) of client sj300-gw1-spb" in said[0], said

@@ -23,7 +23,13 @@ Decisions:
   up, and logged as any other end is (the outage's one WARNING carries the
   client's reason: the packet, how long, how many waited). The client
   ended it without DISCONNECT, so the broker publishes the will:
-  "offline" is the truth while nothing gets through.
+  "offline" is the truth while nothing gets through. A SUBSCRIBE whose
+  SUBACK never came (:class:`~.client.SubscribeUnacknowledged`) is the
+  same, counted in ``SessionStats.suback_timeouts``: the session
+  subscribes while it sets up, so it is usually still setting up (its
+  WARNING says "cannot connect ... no SUBACK for ..."; not one of the
+  ``losses``, which count connections that were up), and the next attempt
+  follows the back-off.
 - ``on_link`` hears every change: None when connected, else a sentence
   saying what happened and when the next attempt comes.
 - A bug in the session body (any exception but the client's MqttError) is, for a
@@ -48,7 +54,7 @@ from collections.abc import Awaitable, Callable
 from dataclasses import dataclass, field
 from typing import TYPE_CHECKING, Final
 
-from .client import Client, MqttError, PublishUnacknowledged, Will
+from .client import Client, MqttError, PublishUnacknowledged, SubscribeUnacknowledged, Will
 
 if TYPE_CHECKING:
     from ._config import MqttConfig
@@ -87,6 +93,9 @@ class SessionStats:
     #: Connections ended because a QoS 1 publish waited past keepalive_s for its
     #: PUBACK (up or still setting up; those up are also in ``losses``).
     puback_timeouts: int = 0
+    #: Connections ended because a SUBSCRIBE (or UNSUBSCRIBE) waited past keepalive_s
+    #: for its answer (usually while setting up: not in ``losses`` then).
+    suback_timeouts: int = 0
     #: SUBACKs that refused a subscription, per topic filter (every filter
     #: subscribed is here, at 0 until refused): see :mod:`._subscriptions`.
     subscriptions_refused: collections.Counter[str] = field(default_factory=collections.Counter)
@@ -193,6 +202,8 @@ async def keep_connected(
             reason = " ".join(str(exc).split()) or type(exc).__name__
             if isinstance(exc, PublishUnacknowledged):
                 stats.puback_timeouts += 1
+            elif isinstance(exc, SubscribeUnacknowledged):
+                stats.suback_timeouts += 1
         except Exception as exc:  # a bug of ours must not end a service's connection for good
             if not survive_errors:
                 raise

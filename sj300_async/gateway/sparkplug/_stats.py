@@ -71,6 +71,11 @@ _COUNTERS: Final = (
         "Connections ended because a QoS 1 publish waited keepalive_s for its PUBACK.",
         "puback_timeouts",
     ),
+    (
+        "sj300_sparkplug_suback_timeouts",
+        "Connections ended because a SUBSCRIBE waited keepalive_s for its SUBACK.",
+        "suback_timeouts",
+    ),
 )
 
 

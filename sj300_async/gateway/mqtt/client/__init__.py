@@ -6,8 +6,9 @@ publishes.
 
 from __future__ import annotations
 
-from ._client import Client, Message, MqttError, PublishUnacknowledged, Will
+from ._client import Client
 from ._packets import MalformedPacket, PacketParser
+from ._types import Message, MqttError, PublishUnacknowledged, SubscribeUnacknowledged, Will
 
 __all__ = [
     "Client",
@@ -16,5 +17,6 @@ __all__ = [
     "MqttError",
     "PacketParser",
     "PublishUnacknowledged",
+    "SubscribeUnacknowledged",
     "Will",
 ]

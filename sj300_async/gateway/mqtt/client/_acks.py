@@ -1,4 +1,4 @@
-"""The PUBACK watch: a QoS 1 publish unacknowledged for ``keepalive_s`` ends the connection.
+"""The PUBACK watch: a QoS 1 publish (or a SUBSCRIBE) unanswered for ``keepalive_s`` ends the link.
 
 A broker may answer every PINGREQ and never acknowledge a publish: the
 connection looks alive, the publisher would wait for ever, and the will
@@ -22,6 +22,12 @@ Decisions:
 - While the reader is behind, the broker's answers wait behind the
   messages it has not taken (reading is paused): nothing is judged before
   reading goes on (:meth:`PubackWatch.hold`), as the PINGRESP is not.
+- **A SUBSCRIBE or UNSUBSCRIBE is judged the same way**, by a second
+  watch over the client's :class:`Request` objects: a broker that never
+  sends the SUBACK otherwise hung a session's set-up for ever (it
+  subscribes before it starts reading or publishing, so nothing else
+  noticed). A request is its own "batch", written when it is sent (one
+  clock read per request: they are few); :func:`unanswered` says which.
 
 Sans-IO: the caller gives the time.
 """
@@ -30,9 +36,18 @@ from __future__ import annotations
 
 import math
 from collections.abc import Mapping
-from typing import Protocol
+from typing import Final, Generic, Protocol, TypeVar
 
-__all__ = ["PubackWatch", "Written"]
+from ._types import SubscribeUnacknowledged
+
+__all__ = ["PubackWatch", "Request", "Written", "unanswered"]
+
+#: How much of a request's topic filters an error shows.
+_EXCERPT: Final = 80
+#: The packet that answers each request.
+_ANSWERS: Final = {"SUBSCRIBE": "SUBACK", "UNSUBSCRIBE": "UNSUBACK"}
+
+F = TypeVar("F")
 
 
 class Written(Protocol):
@@ -69,3 +84,34 @@ class PubackWatch:
             oldest = self._oldest = (packet_id, batch, since)
         waited = now - oldest[2]
         return (packet_id, waited) if waited >= self.keepalive_s else None
+
+
+class Request(Generic[F]):
+    """A SUBSCRIBE or UNSUBSCRIBE waiting for its answer: *future* gets it (the client's)."""
+
+    __slots__ = ("filters", "future", "packet", "written")
+
+    def __init__(self, future: F, written: float, packet: str, filters: str) -> None:
+        self.future = future
+        #: Loop time it was written.
+        self.written = written
+        #: ``"SUBSCRIBE"`` or ``"UNSUBSCRIBE"``.
+        self.packet = packet
+        #: Its topic filters, comma-separated (for the error).
+        self.filters = filters
+
+
+def unanswered(
+    packet_id: int, waited: float, requests: Mapping[int, Request[F]], *, keepalive_s: float,
+    client: str,
+) -> SubscribeUnacknowledged:  # fmt: skip
+    """The error that ends a connection whose request *packet_id* waited *waited* s."""
+    request = requests[packet_id]
+    filters = request.filters
+    if len(filters) > _EXCERPT:
+        filters = filters[: _EXCERPT - 1] + "…"
+    return SubscribeUnacknowledged(
+        f"no {_ANSWERS.get(request.packet, 'answer')} for {waited:.1f} s (keepalive_s "
+        f"{keepalive_s:g}): {request.packet} packet {packet_id} ({filters}) of client {client}, "
+        f"the oldest of {len(requests)} waiting"
+    )

@@ -26,7 +26,9 @@ small, and is shaped for the one job:
   PINGREQ and never acknowledge a publish; the same tick ends the
   connection (:class:`PublishUnacknowledged`, without DISCONNECT: the will
   speaks) once the oldest QoS 1 publish in flight has waited
-  ``keepalive_s`` (:mod:`._acks`).
+  ``keepalive_s`` (:mod:`._acks`). So is a SUBSCRIBE's SUBACK
+  (:class:`SubscribeUnacknowledged`): a session subscribes before
+  anything else, and hung there for ever.
 - **Incoming messages are bounded.** Past ``max_queued_messages`` not yet
   taken by the reader (give or take one read of the socket, at most 256
   KiB), the connection stops reading the socket (TCP then holds the
@@ -46,8 +48,8 @@ small, and is shaped for the one job:
   what a will would say themselves before they leave.
 
 Failures (refused or lost connections, time-outs, a broker breaking the
-protocol) raise :class:`MqttError` (an unacknowledged publish its subclass
-:class:`PublishUnacknowledged`, which a session counts); every waiting
+protocol) raise :class:`MqttError` (an unacknowledged publish or subscribe
+its subclasses, which a session counts, :mod:`._types`); every waiting
 publish, subscribe and reader gets it.
 """
 
@@ -60,10 +62,10 @@ import logging
 import math
 import ssl
 from collections.abc import Callable, Iterable, Sequence
-from dataclasses import dataclass
+from functools import partial
 from typing import Final, cast
 
-from ._acks import PubackWatch
+from ._acks import PubackWatch, Request, unanswered
 from ._packets import (
     CONNACK_REASONS,
     DISCONNECT,
@@ -83,8 +85,9 @@ from ._packets import (
     encode_subscribe,
     encode_unsubscribe,
 )
+from ._types import Message, MqttError, PublishUnacknowledged, Will
 
-__all__ = ["MAX_IN_FLIGHT", "Client", "Message", "MqttError", "PublishUnacknowledged", "Will"]
+__all__ = ["MAX_IN_FLIGHT", "Client", "Message", "Will"]
 
 _log = logging.getLogger("sj300_async.gateway.mqtt.client")
 
@@ -98,42 +101,6 @@ FLUSH_BYTES: Final = 1 << 16
 MAX_IN_FLIGHT: Final = 65_000
 #: How much of a topic a DEBUG line shows.
 _EXCERPT: Final = 80
-
-
-class MqttError(Exception):
-    """The connection could not be made, was refused, or was lost."""
-
-
-class PublishUnacknowledged(MqttError):
-    """A QoS 1 publish waited ``keepalive_s`` for its PUBACK: the connection was ended."""
-
-
-@dataclass(frozen=True, slots=True)
-class Will:
-    """The message the broker publishes for us if the connection ends without DISCONNECT."""
-
-    topic: str
-    payload: bytes | str
-    qos: int = 0
-    retain: bool = False
-
-
-@dataclass(frozen=True, slots=True)
-class Message:
-    """A message the broker delivered."""
-
-    topic: str
-    #: Only the first bytes when ``length`` is past the client's ``max_publish_bytes``.
-    payload: bytes
-    qos: int
-    retain: bool
-    #: The payload's length as the broker sent it.
-    length: int
-
-    @property
-    def skipped(self) -> bool:
-        """The payload was too long to read (``payload`` is only its first bytes)."""
-        return self.length != len(self.payload)
 
 
 class _Batch:
@@ -222,7 +189,7 @@ class Client:
         self._writable: asyncio.Future[None] | None = None  # set while writing is paused
         self._slot: asyncio.Future[None] | None = None  # a waiter for an in-flight slot
         self._inflight: dict[int, _Batch] = {}
-        self._acks: dict[int, asyncio.Future[tuple[int, ...]]] = {}
+        self._acks: dict[int, Request[asyncio.Future[tuple[int, ...]]]] = {}
         self._ids = itertools.cycle(range(1, 0x10000))
         self._messages: collections.deque[Message] = collections.deque()
         self._message_waiter: asyncio.Future[None] | None = None
@@ -230,6 +197,7 @@ class Client:
         self._keepalive: asyncio.TimerHandle | None = None
         self._ping_sent: float | None = None
         self._pubacks = PubackWatch(keepalive_s)
+        self._subacks = PubackWatch(keepalive_s)  # the SUBSCRIBEs' (and UNSUBSCRIBEs')
         #: PUBLISH packets longer than ``max_publish_bytes``, skipped.
         self.oversized = 0
 
@@ -392,13 +360,17 @@ class Client:
     ) -> tuple[int, ...]:
         """Subscribe; the QoS granted per filter (0x80: refused)."""
         pairs = [(filters, qos)] if isinstance(filters, str) else list(filters)
-        return await self._acknowledged(lambda pid: encode_subscribe(pid, pairs))
+        packet = partial(encode_subscribe, filters=pairs)
+        return await self._acknowledged(packet, "SUBSCRIBE", ", ".join(f for f, _ in pairs))
 
     async def unsubscribe(self, filters: str | Sequence[str]) -> None:
         names = [filters] if isinstance(filters, str) else list(filters)
-        await self._acknowledged(lambda pid: encode_unsubscribe(pid, names))
+        await self._acknowledged(partial(encode_unsubscribe, filters=names), "UNSUBSCRIBE",
+                                 ", ".join(names))  # fmt: skip
 
-    async def _acknowledged(self, packet: Callable[[int], bytes]) -> tuple[int, ...]:
+    async def _acknowledged(
+        self, packet: Callable[[int], bytes], name: str, filters: str
+    ) -> tuple[int, ...]:
         if self._error is not None:
             raise self._error
         assert self._loop is not None
@@ -406,7 +378,7 @@ class Client:
         future: asyncio.Future[tuple[int, ...]] = self._loop.create_future()
         # The id stays taken until its acknowledgement comes (or the connection ends),
         # even for a caller that stopped waiting: a late one must not answer another.
-        self._acks[packet_id] = future
+        self._acks[packet_id] = Request(future, self._loop.time(), name, filters)
         self._write(packet(packet_id))
         return await future
 
@@ -440,6 +412,7 @@ class Client:
                 if self._ping_sent is not None:
                     self._ping_sent = now
                 self._pubacks.hold(now)
+                self._subacks.hold(now)
             protocol = self._protocol
             if protocol is not None and protocol.transport is not None and self._error is None:
                 protocol.transport.resume_reading()
@@ -494,7 +467,8 @@ class Client:
             elif isinstance(packet, Publish):
                 self._publish_received(packet)
             elif isinstance(packet, SubAck | UnsubAck):
-                future = self._acks.pop(packet.packet_id, None)
+                request = self._acks.pop(packet.packet_id, None)
+                future = None if request is None else request.future
                 if future is not None and not future.done():
                     future.set_result(packet.return_codes if isinstance(packet, SubAck) else ())
             elif isinstance(packet, ConnAck):
@@ -562,6 +536,7 @@ class Client:
             if self._ping_sent is not None:
                 self._ping_sent = now
             self._pubacks.hold(now)
+            self._subacks.hold(now)
         elif self._ping_sent is not None and now - self._ping_sent >= self.keepalive_s:
             self._fail(MqttError(f"no answer from the broker within {self.keepalive_s} s"))
             return
@@ -571,6 +546,10 @@ class Client:
                 f"no PUBACK for {waited:.1f} s (keepalive_s {self.keepalive_s}): QoS 1 publish, "
                 f"packet {packet_id} of client {self.identifier}, the oldest of "
                 f"{len(self._inflight)} waiting"))  # fmt: skip
+            return
+        elif (late := self._subacks.overdue(now, self._acks)) is not None:
+            self._fail(unanswered(*late, self._acks, keepalive_s=self.keepalive_s,
+                                  client=self.identifier))  # fmt: skip
             return
         if self._ping_sent is None:
             self._ping_sent = now
@@ -600,7 +579,7 @@ class Client:
             self._flush_handle.cancel()
             self._flush_handle = None
         batches, self._inflight = list(self._inflight.values()), {}
-        acks, self._acks = list(self._acks.values()), {}
+        acks, self._acks = [request.future for request in self._acks.values()], {}
         futures: list[asyncio.Future[None] | None] = [batch.future for batch in batches]
         futures += [self._slot, self._writable, self._message_waiter]
         for future in (*futures, self._connack, *acks):
