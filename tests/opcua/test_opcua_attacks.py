@@ -1,0 +1,551 @@
+"""The OPC UA door under issue 41's attacks, each against a real gateway over loopback.
+
+Each attack comes from client addresses of its own (127.0.0.2, 127.0.0.3:
+Linux routes all of 127/8 to the loopback), and each test shows that the
+attack happened (its refusals and counters), that a legitimate client at
+127.0.0.1 still logs in and reads, and that the event loop was not stalled:
+a probe scheduled every 20 ms records how late it ran, at most 200 ms.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import contextlib
+import logging
+import struct
+from collections.abc import AsyncIterator, Iterator
+from pathlib import Path
+from typing import Any
+
+import pytest
+from asyncua import Client, ua
+from asyncua.client.ua_client import UaClient, UaClientState, UASocketState
+from asyncua.ua.ua_binary import nodeid_to_binary, struct_to_binary
+from asyncua.ua.uaerrors import UaError, UaStatusCodeError
+from waiting import wait_for
+
+from sj300_async.gateway.opcua._server import OpcuaServer
+
+from .conftest import (
+    CLIENT_URI,
+    NAMESPACE,
+    PASSWORD,
+    USER,
+    Pair,
+    opcua_gateway,
+    opcua_toml,
+    polled,
+)
+
+ATTACKER, SECOND_ATTACKER = "127.0.0.2", "127.0.0.3"
+#: The loop probe's period and the bound on its lateness (issue 41: max under 200 ms).
+PROBE_S, LATE_S = 0.02, 0.2
+SECURE_ONLY = '["Basic256Sha256_SignAndEncrypt", "Basic256Sha256_Sign"]'
+
+
+class LagProbe:
+    """A callback every :data:`PROBE_S` on the loop; how late each ran."""
+
+    def __init__(self) -> None:
+        self.late: list[float] = []
+        self._loop = asyncio.get_running_loop()
+        self._due = self._loop.time() + PROBE_S
+        self._handle = self._loop.call_at(self._due, self._tick)
+
+    def _tick(self) -> None:
+        now = self._loop.time()
+        self.late.append(now - self._due)
+        self._due = now + PROBE_S
+        self._handle = self._loop.call_at(self._due, self._tick)
+
+    def stop(self) -> float:
+        """Stop probing; the greatest lateness seen (checked: the probe ran)."""
+        self._handle.cancel()
+        assert self.late, "the probe never ran"
+        return max(self.late)
+
+
+@contextlib.contextmanager
+def probed() -> Iterator[LagProbe]:
+    """A :class:`LagProbe` for the block (its :meth:`~LagProbe.stop` after it, once more,
+    is the lateness seen in it)."""
+    probe = LagProbe()
+    try:
+        yield probe
+    finally:
+        probe._handle.cancel()
+
+
+def _port(url: str) -> int:
+    return int(url.rsplit(":", 1)[1])
+
+
+def _from(uaclient: UaClient, source: str) -> None:
+    """Make *uaclient* connect from the loopback address *source*."""
+
+    async def connect_socket(host: str, port: int) -> None:
+        loop = asyncio.get_running_loop()
+        await loop.create_connection(uaclient._make_protocol, host, port, local_addr=(source, 0))
+        uaclient._set_state(UaClientState.SOCKET_OPEN)
+
+    uaclient.connect_socket = connect_socket
+
+
+@contextlib.asynccontextmanager
+async def channel(url: str, source: str) -> AsyncIterator[UaClient]:
+    """A raw client on an unsecured channel, from *source*."""
+    client = UaClient(timeout=10)
+    _from(client, source)
+    await client.connect_socket("127.0.0.1", _port(url))
+    try:
+        await client.send_hello(url)
+        params = ua.OpenSecureChannelParameters(
+            RequestType=ua.SecurityTokenRequestType.Issue,
+            SecurityMode=ua.MessageSecurityMode.None_,
+            ClientNonce=b"",
+            RequestedLifetime=3_600_000,
+        )
+        await client.open_secure_channel(params)
+        yield client
+    finally:
+        client.disconnect_socket()
+
+
+def _create(url: str) -> ua.CreateSessionParameters:
+    return ua.CreateSessionParameters(
+        ClientNonce=b"\0" * 32,
+        SessionName="never activated",
+        RequestedSessionTimeout=60_000,
+        EndpointUrl=url,
+        MaxResponseMessageSize=0,
+    )
+
+
+async def _sessions(client: UaClient, url: str, count: int) -> list[str]:
+    """*count* CreateSession on *client*'s channel, never activated: each one's answer."""
+    answers = []
+    for _ in range(count):
+        try:
+            await client.create_session(_create(url))
+            answers.append("Good")
+        except UaStatusCodeError as refused:
+            answers.append(ua.StatusCode(refused.code).name)
+    return answers
+
+
+def _counts(server: OpcuaServer, family: str) -> dict[str, float]:
+    (found,) = [f for f in server.metrics() if f.name == family]
+    return {next(iter(s.labels.values())): s.value for s in found.samples}
+
+
+@contextlib.asynccontextmanager
+async def operator(url: str, pair: Pair) -> AsyncIterator[Client]:
+    """The operator's session from 127.0.0.1: SignAndEncrypt, logged in."""
+    client = Client(url, timeout=10)
+    client.application_uri = CLIENT_URI
+    await client.set_security_string(f"Basic256Sha256,SignAndEncrypt,{pair.certificate},{pair.key}")
+    client.set_user(USER)
+    client.set_password(PASSWORD)
+    async with client:
+        yield client
+
+
+async def _read_online(client: Client) -> bool:
+    ns = await client.get_namespace_index(NAMESPACE)
+    return bool(await client.get_node(ua.NodeId("hall/Drive1/Online", ns)).read_value())
+
+
+# -- sessions never activated ---------------------------------------------------------------
+
+
+async def test_unactivated_sessions_are_rationed_and_the_operator_still_logs_in(
+    tmp_path: Path, client_pair: Pair
+) -> None:
+    """Issue 41: 100 CreateSession never activated refused the operator's login
+    (BadTooManySessions) for 30 s. Two attacking addresses, three connections each, 200
+    CreateSession: each connection holds two unactivated sessions and each address four,
+    which fills the eight slots; the operator's login closes the oldest of them."""
+    extra = "max_connections = 8\nconnections_per_address = 3\nactivate_within_s = 60"
+    text = opcua_toml(tmp_path, opcua_extra=extra)
+    async with opcua_gateway(text) as (_, server), contextlib.AsyncExitStack() as stack:
+        with probed() as probe:
+            answers, clients = [], []
+            for source in (ATTACKER, SECOND_ATTACKER):
+                for _ in range(3):
+                    clients.append(await stack.enter_async_context(channel(server.url, source)))
+                    answers += await _sessions(clients[-1], server.url, 100 // 3)
+            first = clients[0]
+            with pytest.raises((UaError, OSError)):  # a fourth connection of the address
+                async with channel(server.url, ATTACKER):
+                    pass
+            assert answers.count("Good") == 8
+            assert server.session_count == 8
+            async with operator(server.url, client_pair) as client:
+                assert await _read_online(client)
+                refused = _counts(server, "sj300_opcua_refused_sessions")
+                # The attack again: it pushes out its own unactivated sessions, never the
+                # operator's activated one.
+                again = await _sessions(first, server.url, 10)
+                assert await _read_online(client)
+                assert server.session_count == 8
+            evicted = _counts(server, "sj300_opcua_refused_sessions")["evicted"]
+        connections = _counts(server, "sj300_opcua_refused_connections")
+    assert probe.stop() < LATE_S
+    # Per address: two connections' two sessions each, then the third connection's 33
+    # refused for the address; the operator's session pushed the oldest out.
+    assert refused["per_connection"] == 4 * (33 - 2)
+    assert refused["per_address"] == 2 * 33
+    assert refused["evicted"] == 1
+    assert "Good" in again
+    assert evicted == 1 + again.count("Good")
+    assert connections["per_address"] == 1
+
+
+async def test_no_session_on_a_discovery_only_channel(tmp_path: Path) -> None:
+    """The default configuration's unsecured channel (issue 41's way in) discovers only."""
+    text = opcua_toml(tmp_path, security=SECURE_ONLY)
+    async with opcua_gateway(text) as (_, server), channel(server.url, ATTACKER) as client:
+        endpoints = await client.get_endpoints(ua.GetEndpointsParameters(EndpointUrl=server.url))
+        assert {e.SecurityMode for e in endpoints} == {
+            ua.MessageSecurityMode.Sign, ua.MessageSecurityMode.SignAndEncrypt
+        }  # fmt: skip
+        answers = await _sessions(client, server.url, 100)
+        assert set(answers) == {"BadSecurityPolicyRejected"}
+        assert server.session_count == 0
+        assert _counts(server, "sj300_opcua_refused_sessions")["discovery"] == 100
+
+
+# -- passwords --------------------------------------------------------------------------------
+
+
+async def test_a_stream_of_wrong_passwords_refuses_only_its_own_address(
+    tmp_path: Path, client_pair: Pair
+) -> None:
+    """Issue 41: a stream of wrong passwords spent the one budget every client shared,
+    and the operator was refused 6 of 6 times. Now the stream spends its address's budget
+    (and at most that of the name), the operator logs in every time, and every check
+    runs off the event loop."""
+    async with opcua_gateway(opcua_toml(tmp_path)) as (_, server):
+        attacker = Client(server.url, timeout=10)
+        attacker.application_uri = CLIENT_URI
+        _from(attacker.uaclient, ATTACKER)
+        await attacker.connect()  # anonymous over None; its logins' passwords encrypted
+        tried = 0
+        stop = asyncio.Event()
+
+        async def stream() -> None:
+            nonlocal tried
+            while not stop.is_set():
+                with contextlib.suppress(UaStatusCodeError):
+                    await attacker.activate_session(USER, f"guess-{tried}")
+                tried += 1
+
+        refusals = server._users.refusals
+        with probed() as probe:
+            task = asyncio.create_task(stream())
+            try:
+                await wait_for(lambda: refusals["rate"] >= 20, "the stream past its budget")
+                logins = 0
+                for _ in range(6):
+                    async with operator(server.url, client_pair) as client:
+                        assert await _read_online(client)
+                        logins += 1
+            finally:
+                stop.set()
+                await task
+                await attacker.disconnect()
+    assert logins == 6
+    assert refusals["password"] >= 5  # the attacker's address's burst, checked
+    assert refusals["rate"] >= 20
+    assert tried == refusals["password"] + refusals["rate"]
+    assert server._defences.checks.checked == refusals["password"] + 6  # all off the loop
+    assert probe.stop() < LATE_S
+
+
+def _token(password: bytes, algorithm: str | None) -> ua.UserNameIdentityToken:
+    return ua.UserNameIdentityToken(
+        PolicyId="username", UserName=USER, Password=password, EncryptionAlgorithm=algorithm
+    )
+
+
+async def test_a_password_in_clear_is_refused_where_its_policy_asks_for_encryption(
+    tmp_path: Path, client_pair: Pair
+) -> None:
+    """Issue 41: the None and Sign endpoints' UserName policy is Basic256Sha256 (OPC UA
+    Part 4, 7.36.4), and the password was accepted in clear there."""
+    async with opcua_gateway(opcua_toml(tmp_path)) as (_, server):
+        refused = []
+        with probed() as probe:
+            # Over None, as a raw client would send it.
+            async with channel(server.url, ATTACKER) as client:
+                for token in (
+                    _token(PASSWORD.encode(), None),
+                    _token(PASSWORD.encode(), "http://www.w3.org/2001/04/xmlenc#rsa-1_5"),
+                ):
+                    await client.create_session(_create(server.url))
+                    params = ua.ActivateSessionParameters(UserIdentityToken=token)
+                    with pytest.raises(UaStatusCodeError) as answer:
+                        await client.activate_session(params)
+                    refused.append(ua.StatusCode(answer.value.code).name)
+            # Over Sign: an anonymous session first, then the user in clear.
+            signed = Client(server.url, timeout=10)
+            signed.application_uri = CLIENT_URI
+            security = f"Basic256Sha256,Sign,{client_pair.certificate},{client_pair.key}"
+            await signed.set_security_string(security)
+            async with signed:
+                params = ua.ActivateSessionParameters(
+                    UserIdentityToken=_token(PASSWORD.encode(), None)
+                )
+                with pytest.raises(UaStatusCodeError) as answer:
+                    await signed.uaclient.activate_session(params)
+                refused.append(ua.StatusCode(answer.value.code).name)
+            # Encrypted as the policies ask (asyncua's client does): logged in on both.
+            for mode in ("None", "Sign"):
+                client = Client(server.url, timeout=10)
+                client.application_uri = CLIENT_URI
+                if mode == "Sign":
+                    await client.set_security_string(security)
+                client.set_user(USER)
+                client.set_password(PASSWORD)
+                async with client:
+                    assert await _read_online(client)
+    assert refused == [
+        "BadIdentityTokenInvalid", "BadSecurityPolicyRejected", "BadIdentityTokenInvalid",
+    ]  # fmt: skip
+    assert server._users.refusals["unencrypted"] == 3
+    assert server._users.refusals["password"] == 0  # none of them was checked
+    assert probe.stop() < LATE_S
+
+
+# -- malformed messages -----------------------------------------------------------------------
+
+
+def _hello(url: str) -> bytes:
+    body: bytes = struct_to_binary(ua.Hello(EndpointUrl=url))
+    return b"HELF" + struct.pack("<I", 8 + len(body)) + body
+
+
+def _chunk(channel_id: int, token_id: int, sequence: int, body: bytes) -> bytes:
+    """A MSG chunk of the None policy (no signature, no padding)."""
+    payload = struct.pack("<III", token_id, sequence, sequence) + body
+    return b"MSGF" + struct.pack("<II", 12 + len(payload), channel_id) + payload
+
+
+def _request(typeid: int, tail: bytes) -> bytes:
+    head: bytes = nodeid_to_binary(ua.NodeId(typeid)) + struct_to_binary(ua.RequestHeader())
+    return head + tail
+
+
+async def _raw(url: str, first: bytes) -> bytes:
+    """HEL, then *first*, from the attacker's address: all the server answered until it
+    closed the connection."""
+    reader, writer = await asyncio.open_connection(
+        "127.0.0.1", _port(url), local_addr=(ATTACKER, 0)
+    )
+    try:
+        writer.write(_hello(url))
+        header = await reader.readexactly(8)
+        assert header[:3] == b"ACK"
+        await reader.readexactly(struct.unpack("<I", header[4:])[0] - 8)
+        writer.write(first)
+        answered: bytes = await asyncio.wait_for(reader.read(), 10)  # until the server closes
+        return answered
+    finally:
+        writer.close()
+
+
+async def _on_channel(url: str, make: Any) -> bytes:
+    """*make*(the channel's connection) written on an open unsecured channel: all the
+    server answered until it closed the connection."""
+    async with channel(url, ATTACKER) as client:
+        protocol = client.protocol
+        assert protocol is not None
+        assert protocol.transport is not None
+        answered: list[bytes] = []
+        protocol.data_received = answered.append
+        protocol.transport.write(make(protocol._connection))
+        await wait_for(lambda: protocol.state is UASocketState.CLOSED, "closed", timeout=10)
+        joined: bytes = b"".join(answered)
+        return joined
+
+
+def _wrong_tokens(connection: Any, count: int = 1) -> bytes:
+    """*count* chunks with a wrong token id (issue 41's: 2,000, 48 KB)."""
+    channel_id = connection.security_token.ChannelId
+    body = _request(ua.ObjectIds.ReadRequest_Encoding_DefaultBinary, b"")
+    return b"".join(_chunk(channel_id, 999, 100 + n, body[:4]) for n in range(count))
+
+
+def _undecodable(connection: Any) -> bytes:
+    """A well-made chunk whose CreateSession cannot be decoded (a string of 2 GiB)."""
+    body = _request(ua.ObjectIds.CreateSessionRequest_Encoding_DefaultBinary, b"\xff\xff\xff\x7f")
+    data: bytes = connection.message_to_binary(body, request_id=7)
+    return data
+
+
+@pytest.mark.parametrize(
+    ("kind", "error"),
+    [
+        ("chunk", "BadSecurityChecksFailed"),
+        ("request", "BadDecodingError"),
+        ("unopened", "BadTcpSecureChannelUnknown"),
+        ("oversize", "BadTcpMessageTooLarge"),
+    ],
+)
+async def test_a_malformed_message_closes_its_connection_once(
+    tmp_path: Path, client_pair: Pair, caplog: pytest.LogCaptureFixture, kind: str, error: str
+) -> None:
+    """Issue 41: 2,000 chunks with a wrong token id gave 2,000 tracebacks and the
+    connection stayed open. Now the first malformed message closes it (after an Error
+    message, or a ServiceFault for a request), counted, one DEBUG line; no traceback."""
+    caplog.set_level(logging.WARNING)
+    caplog.set_level(logging.DEBUG, logger="sj300_async.gateway.opcua")
+    async with opcua_gateway(opcua_toml(tmp_path)) as (_, server):
+        url = server.url
+        with probed() as probe:
+            if kind == "chunk":
+                answer = await _on_channel(url, _wrong_tokens)
+            elif kind == "request":
+                answer = await _on_channel(url, _undecodable)
+            elif kind == "unopened":  # a session's request with no secure channel at all
+                create = _request(ua.ObjectIds.CreateSessionRequest_Encoding_DefaultBinary, b"")
+                answer = await _raw(url, _chunk(0, 0, 1, create + struct_to_binary(_create(url))))
+            else:  # a chunk announcing 2 GiB, then a trickle
+                answer = await _raw(url, b"MSGF" + struct.pack("<II", 2**31, 0) + b"\0" * 4096)
+            async with operator(url, client_pair) as client:
+                assert await _read_online(client)
+        malformed = _counts(server, "sj300_opcua_malformed")
+    assert probe.stop() < LATE_S
+    assert malformed == {name: float(name == kind) for name in malformed}
+    status = getattr(ua.StatusCodes, error)
+    if kind == "request":  # a ServiceFault on the channel
+        assert answer[:3] == b"MSG"
+        assert struct.pack("<I", status) in answer
+    else:
+        assert answer[:3] == b"ERR"
+        assert answer[8:12] == struct.pack("<I", status)
+    lines = [r for r in caplog.records if "a malformed message" in r.getMessage()]
+    assert len(lines) == 1
+    assert lines[0].levelno == logging.DEBUG
+    assert len(lines[0].getMessage()) < 400  # a bounded excerpt
+    tracebacks = [r for r in caplog.records if r.exc_info]
+    assert not tracebacks, tracebacks[0].getMessage()
+    errors = [r for r in caplog.records if r.levelno >= logging.ERROR]
+    assert not [r for r in errors if r.name.startswith("asyncua.server")]
+
+
+async def test_2000_chunks_with_a_wrong_token_id_close_their_connection_quietly(
+    tmp_path: Path, client_pair: Pair, caplog: pytest.LogCaptureFixture
+) -> None:
+    """Issue 41's flood, 48 KB at once: asyncua's queue (64 messages) or the first chunk
+    closes the connection, whichever comes first; at most that chunk is counted, and no
+    traceback is logged."""
+    caplog.set_level(logging.WARNING)
+    async with opcua_gateway(opcua_toml(tmp_path)) as (_, server):
+        with probed() as probe:
+            await _on_channel(server.url, lambda connection: _wrong_tokens(connection, 2000))
+            async with operator(server.url, client_pair) as client:
+                assert await _read_online(client)
+        malformed = _counts(server, "sj300_opcua_malformed")
+    assert probe.stop() < LATE_S
+    assert malformed["chunk"] <= 1
+    assert not [r for r in caplog.records if r.exc_info]
+    assert len([r for r in caplog.records if r.name.startswith("asyncua.server")]) <= 2
+
+
+async def test_a_request_before_any_secure_channel_is_not_served(tmp_path: Path) -> None:
+    """asyncua served a session's requests on a connection that never opened a secure
+    channel, with no ruleset: reads on a server offering no unsecured endpoint."""
+    text = opcua_toml(tmp_path, security=SECURE_ONLY)
+    async with opcua_gateway(text) as (_, server):
+        create = _request(ua.ObjectIds.CreateSessionRequest_Encoding_DefaultBinary, b"")
+        body = create + struct_to_binary(_create(server.url))
+        answer = await _raw(server.url, _chunk(0, 0, 1, body))
+        assert answer[:3] == b"ERR"
+        assert server.session_count == 0
+        assert _counts(server, "sj300_opcua_malformed")["unopened"] == 1
+
+
+# -- all at once ------------------------------------------------------------------------------
+
+
+async def test_a_well_behaved_client_keeps_reading_through_the_attacks(
+    tmp_path: Path, client_pair: Pair
+) -> None:
+    """Issue 41: a well-behaved OPC UA client got 3 of 17 reads during the combined
+    attack. Every attack above at once, from two addresses, while a SCADA connects and
+    logs in, reads every 100 ms, then connects again: every read answered, none late."""
+    async with opcua_gateway(opcua_toml(tmp_path)) as (gateway, server):
+        await polled(gateway)
+        stop = asyncio.Event()
+
+        async def again(attack: Any) -> None:
+            while not stop.is_set():
+                with contextlib.suppress(UaError, OSError, AssertionError):
+                    await attack()
+
+        async def sessions() -> None:  # 100 never activated, held (issue 41's)
+            async with contextlib.AsyncExitStack() as stack:
+                for _ in range(4):
+                    client = await stack.enter_async_context(channel(server.url, ATTACKER))
+                    await _sessions(client, server.url, 25)
+                await stop.wait()
+
+        async def passwords() -> None:
+            attacker = Client(server.url, timeout=10)
+            attacker.application_uri = CLIENT_URI
+            _from(attacker.uaclient, ATTACKER)
+            async with attacker:
+                for n in range(50):
+                    with contextlib.suppress(UaStatusCodeError):
+                        await attacker.activate_session(USER, f"guess-{n}")
+
+        async def chunks() -> None:
+            await _on_channel(server.url, _wrong_tokens)
+            await _on_channel(server.url, lambda connection: _wrong_tokens(connection, 2000))
+            await _on_channel(server.url, _undecodable)
+
+        async def raw() -> None:
+            create = _request(ua.ObjectIds.CreateSessionRequest_Encoding_DefaultBinary, b"")
+            await _raw(server.url, _chunk(0, 0, 1, create + struct_to_binary(_create(server.url))))
+            await _raw(server.url, b"MSGF" + struct.pack("<II", 2**31, 0) + b"\0" * 4096)
+
+        idle = [  # connections that say nothing, past the address's share
+            await asyncio.open_connection(
+                "127.0.0.1", _port(server.url), local_addr=(SECOND_ATTACKER, 0)
+            )
+            for _ in range(10)
+        ]
+        attacks = [asyncio.create_task(again(a)) for a in (sessions, passwords, chunks, raw)]
+        refusals = server._users.refusals
+        try:
+            await wait_for(
+                lambda: refusals["rate"] and server._defences.door.malformed_counts["unopened"],
+                "every attack under way",
+                timeout=30,
+            )
+            late: list[float] = []
+            loop = asyncio.get_running_loop()
+            with probed() as probe:
+                for _ in range(2):  # a SCADA that reconnects during the attack
+                    async with operator(server.url, client_pair) as scada:
+                        for _ in range(10):
+                            asked = loop.time()
+                            assert await _read_online(scada)
+                            late.append(loop.time() - asked)
+                            await asyncio.sleep(0.1)
+        finally:
+            stop.set()
+            await asyncio.gather(*attacks)
+            for _, writer in idle:
+                writer.close()
+        sessions_refused = _counts(server, "sj300_opcua_refused_sessions")
+        connections = _counts(server, "sj300_opcua_refused_connections")
+        malformed = _counts(server, "sj300_opcua_malformed")
+    assert len(late) == 20
+    assert max(late) < 1.0, f"a read took {max(late):.2f} s"
+    assert probe.stop() < LATE_S
+    assert sessions_refused["per_connection"] > 0
+    assert connections["per_address"] >= 2
+    assert refusals["rate"] > 0
+    assert min(malformed.values()) > 0  # every kind
