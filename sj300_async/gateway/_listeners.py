@@ -5,9 +5,9 @@ network can open. Without limits, idle sockets take every file descriptor
 of the process, and then nothing works: not the listeners, not the lines'
 reconnects (the issue's outage: 345 idle sockets against a limit of 256).
 Each listener therefore has :class:`ListenerLimits`, configured in its own
-section (``max_connections``, ``idle_timeout_s``, parsed by
-:meth:`ListenerLimits.parse`), and a :class:`ConnectionLimit` that admits
-or refuses each new connection.
+section (``max_connections``, ``max_connections_per_address``,
+``idle_timeout_s``, parsed by :meth:`ListenerLimits.parse`), and a
+:class:`ConnectionLimit` that admits or refuses each new connection.
 
 Decisions:
 
@@ -25,6 +25,18 @@ Decisions:
   (EMFILE, ENFILE, ENOBUFS) pauses that listener for
   :data:`ACCEPT_RETRY_S` with one log line, where asyncio's loop logs a
   traceback per attempt.
+- **One address cannot hold every slot** (issue 41: 64 POSTs whose bodies
+  never came, from one address, held all of HTTP's slots, and /healthz,
+  the workbench's Stop button and its lease heartbeats got resets). Each
+  client address (the accept's peer address, not a port) may hold at most
+  ``max_connections_per_address``, by default half the listener's cap, so
+  a second address always finds a slot while one misbehaves. The count is
+  kept from the accept's own address, handed to the connection's protocol
+  (the factory's argument), which gives it back on release: a transport's
+  ``peername`` can be missing for a connection reset before it was set
+  up, and a count released under another key would lock that address out
+  for good. One address is one host; a NAT or a reverse proxy puts many
+  clients behind one, and then the per-address cap needs raising.
 - **Refusals are logged once per interval** (:class:`RateLimitedLog`: one
   WARNING per :data:`LOG_INTERVAL_S`, the others at DEBUG) and counted: a
   flood of connections must not become a flood of log lines.
@@ -54,13 +66,15 @@ __all__ = [
     "Listener",
     "ListenerLimits",
     "RateLimitedLog",
+    "default_per_address",
     "listener_families",
+    "peer_address",
 ]
 
 _log = logging.getLogger("sj300_async.gateway")
 
 #: The keys of a listening northbound's section that :meth:`ListenerLimits.parse` reads.
-LIMIT_KEYS: Final = ("max_connections", "idle_timeout_s")
+LIMIT_KEYS: Final = ("max_connections", "max_connections_per_address", "idle_timeout_s")
 #: Seconds between two WARNING lines of one :class:`RateLimitedLog`.
 LOG_INTERVAL_S: Final = 10.0
 #: Seconds a listener stops accepting after an accept failed for want of resources.
@@ -71,26 +85,50 @@ ACCEPT_BURST: Final = 16
 BACKLOG: Final = 64
 
 
+def default_per_address(max_connections: int) -> int:
+    """The per-address cap where none is configured: half the listener's (at least 1)."""
+    return max(1, max_connections // 2)
+
+
 @dataclass(frozen=True, slots=True)
 class ListenerLimits:
-    """A listener's limits: open connections at most, and seconds a connection may idle."""
+    """A listener's limits: open connections at most, in all and from one address, and
+    seconds a connection may idle."""
 
     max_connections: int
     idle_timeout_s: float
+    #: None: :func:`default_per_address` of ``max_connections``.
+    max_connections_per_address: int | None = None
+
+    @property
+    def per_address(self) -> int:
+        """The per-address cap in force."""
+        if self.max_connections_per_address is None:
+            return default_per_address(self.max_connections)
+        return self.max_connections_per_address
 
     def parse(self, table: ConfigTable) -> ListenerLimits:
         """The limits *table* sets (:data:`LIMIT_KEYS`), these where it sets none.
 
         Raises:
-            GatewayConfigError: not an integer >= 1, or not a number > 0.
+            GatewayConfigError: not an integer >= 1, not a number > 0, or a per-address
+                cap above the listener's.
         """
         cap = table.integer("max_connections")
         if cap is not None and cap < 1:
             raise table.error("max_connections", f"must be >= 1, got {cap}")
+        cap = self.max_connections if cap is None else cap
+        per_address = table.integer("max_connections_per_address")
+        if per_address is not None and not 1 <= per_address <= cap:
+            raise table.error(
+                "max_connections_per_address",
+                f"must be 1..max_connections ({cap}), got {per_address}",
+            )
         idle = table.number("idle_timeout_s", minimum=0, inclusive=False)
         return ListenerLimits(
-            self.max_connections if cap is None else cap,
+            cap,
             self.idle_timeout_s if idle is None else idle,
+            self.max_connections_per_address if per_address is None else per_address,
         )
 
 
@@ -126,57 +164,98 @@ class RateLimitedLog:
         self._logger.warning(message, *args)
 
 
+def peer_address(peer: object) -> str:
+    """The client address of an accept's *peer* (``(host, port, ...)``): what is counted."""
+    if isinstance(peer, tuple) and peer:
+        return str(peer[0])
+    return str(peer)
+
+
 class ConnectionLimit:
-    """One listener's open connections: admitted up to the cap, refused past it.
+    """One listener's open connections: admitted up to the caps, refused past them.
 
     Args:
         listener: its name in log lines and metrics (``"modbus"``, ``"http"``).
         max_connections: the cap.
         log: where refusals are logged (rate-limited).
+        max_per_address: the cap of one client address (None: half of *max_connections*).
     """
 
-    def __init__(self, listener: str, max_connections: int, log: logging.Logger) -> None:
+    def __init__(
+        self,
+        listener: str,
+        max_connections: int,
+        log: logging.Logger,
+        max_per_address: int | None = None,
+    ) -> None:
         self.listener = listener
         self.max_connections = max_connections
-        #: Connections open now.
+        self.max_per_address = (
+            default_per_address(max_connections) if max_per_address is None else max_per_address
+        )
+        #: Connections open now, in all and per client address (an address with none
+        #: is not kept: the table holds at most the open connections' addresses).
         self.open = 0
-        #: Connections refused at the cap, and closed for idling, since the start.
+        self._by_address: dict[str, int] = {}
+        #: Connections refused at the cap, refused at the per-address cap, and closed
+        #: for idling, since the start.
         self.refused = 0
+        self.refused_per_address = 0
         self.timed_out = 0
         self.log = RateLimitedLog(log)
 
-    def admit(self, peer: object) -> bool:
-        """Count a new connection from *peer* in; at the cap, count and log a refusal."""
-        if self.open < self.max_connections:
-            self.open += 1
-            return True
-        self.refused += 1
-        self.log.log(
-            "%s: %d connections open (max_connections): refused %s",
-            self.listener,
-            self.open,
-            peer,
-        )
-        return False
+    def open_from(self, address: str) -> int:
+        """Connections open now from *address*."""
+        return self._by_address.get(address, 0)
 
-    def release(self) -> None:
-        """An admitted connection closed (its protocol's ``connection_lost`` says so)."""
+    def admit(self, address: str) -> bool:
+        """Count a new connection from *address* in; past a cap, count and log a refusal."""
+        if self.open >= self.max_connections:
+            self.refused += 1
+            self.log.log(
+                "%s: %d connections open (max_connections): refused %s",
+                self.listener,
+                self.open,
+                address,
+            )
+            return False
+        held = self._by_address.get(address, 0)
+        if held >= self.max_per_address:
+            self.refused_per_address += 1
+            self.log.log(
+                "%s: %d connections open from %s (max_connections_per_address): refused",
+                self.listener,
+                held,
+                address,
+            )
+            return False
+        self.open += 1
+        self._by_address[address] = held + 1
+        return True
+
+    def release(self, address: str) -> None:
+        """A connection admitted from *address* closed (its protocol's ``connection_lost``)."""
         self.open -= 1
+        held = self._by_address.get(address, 0) - 1
+        if held > 0:
+            self._by_address[address] = held
+        else:
+            self._by_address.pop(address, None)
 
 
 class Listener:
     """Listening sockets with an accept loop that applies a :class:`ConnectionLimit`.
 
-    Each admitted connection gets a protocol from *factory* (through
-    ``loop.connect_accepted_socket``), whose ``connection_lost`` must call
-    ``limit.release()``; a refused one is closed in the accept. The
-    sockets, ``close()`` and ``wait_closed()`` are those of an
-    :class:`asyncio.Server`.
+    Each admitted connection gets a protocol from *factory*, called with the
+    client's address as admitted (through ``loop.connect_accepted_socket``),
+    whose ``connection_lost`` must call ``limit.release(address)`` with it;
+    a refused one is closed in the accept. The sockets, ``close()`` and
+    ``wait_closed()`` are those of an :class:`asyncio.Server`.
     """
 
     def __init__(
         self,
-        factory: Callable[[], asyncio.BaseProtocol],
+        factory: Callable[[str], asyncio.BaseProtocol],
         limit: ConnectionLimit,
         *,
         tls: ssl.SSLContext | None = None,
@@ -237,19 +316,23 @@ class Listener:
                 self._loop.remove_reader(sock.fileno())
                 self._loop.call_later(ACCEPT_RETRY_S, self._resume, sock)
                 return
-            if not self.limit.admit(peer):
+            address = peer_address(peer)
+            if not self.limit.admit(address):
                 connection.close()  # now: the descriptor is free for the next accept
                 continue
             connection.setblocking(False)
-            self._loop.create_task(self._connect(connection))
+            self._loop.create_task(self._connect(connection, address))
 
-    async def _connect(self, connection: socket.socket) -> None:
+    async def _connect(self, connection: socket.socket, address: str) -> None:
+        def factory() -> asyncio.BaseProtocol:
+            return self._factory(address)
+
         try:
             if self._tls is None:
-                await self._loop.connect_accepted_socket(self._factory, connection)
+                await self._loop.connect_accepted_socket(factory, connection)
             else:
                 await self._loop.connect_accepted_socket(
-                    self._factory,
+                    factory,
                     connection,
                     ssl=self._tls,
                     ssl_handshake_timeout=self._handshake_timeout_s,
@@ -259,7 +342,7 @@ class Listener:
             # HTTP to an HTTPS port, an old client): nothing to serve.
             _log.debug("%s: connection not set up: %r", self.limit.listener, exc)
             connection.close()
-            self.limit.release()
+            self.limit.release(address)
 
     def _resume(self, sock: socket.socket) -> None:
         if not self._closed:
@@ -277,7 +360,8 @@ class Listener:
 
 
 def listener_families(prefix: str, limit: ConnectionLimit) -> Iterator[Metric]:
-    """``<prefix>_connections`` and its ``_refused_total`` / ``_timed_out_total``, built now."""
+    """``<prefix>_connections`` and its ``_refused_total``, ``_refused_per_address_total``
+    and ``_timed_out_total``, built now."""
     from prometheus_client.core import CounterMetricFamily, GaugeMetricFamily
 
     name = limit.listener
@@ -286,6 +370,11 @@ def listener_families(prefix: str, limit: ConnectionLimit) -> Iterator[Metric]:
         f"{prefix}_connections_refused",
         f"{name} connections refused at max_connections (accepted and closed at once).",
         limit.refused,
+    )
+    yield CounterMetricFamily(
+        f"{prefix}_connections_refused_per_address",
+        f"{name} connections refused at max_connections_per_address (one client address's cap).",
+        limit.refused_per_address,
     )
     yield CounterMetricFamily(
         f"{prefix}_connections_timed_out",

@@ -100,6 +100,8 @@ async def test_a_gateway_over_its_descriptor_limit_keeps_polling_and_recovers(
             """\
             [modbus]
             listen = "127.0.0.1:0"
+            # every socket comes from 127.0.0.1: the whole cap open to one address
+            max_connections_per_address = 64
             [metrics]
             listen = "127.0.0.1:0"
             [[lines]]

@@ -1,4 +1,5 @@
-"""The listeners' limits (gateway/_listeners.py): configuration, the HTTP cap, the log."""
+"""The listeners' limits (gateway/_listeners.py): configuration, the HTTP cap and the
+per-address cap, the log."""
 
 from __future__ import annotations
 
@@ -55,6 +56,32 @@ def test_the_limits_are_configured_per_listener() -> None:
     assert defaults.northbounds["modbus"] == ModbusConfig(
         Endpoint("127.0.0.1", 1502), ListenerLimits(64, 60.0)
     )
+    assert ListenerLimits(64, 60.0).per_address == 32  # half the cap when not set
+    assert ListenerLimits(1, 60.0).per_address == 1
+
+
+def test_the_per_address_cap_is_configured_per_listener() -> None:
+    config = parse_config(
+        _config(
+            """\
+            [modbus]
+            listen = "127.0.0.1:1502"
+            max_connections = 8
+            max_connections_per_address = 8
+            [http]
+            listen = "127.0.0.1:9300"
+            max_connections_per_address = 3
+            """
+        ),
+        "test.toml",
+    )
+    modbus = config.northbounds["modbus"]
+    assert isinstance(modbus, ModbusConfig)
+    assert modbus.limits == ListenerLimits(8, 60.0, 8)
+    http = config.northbounds["http"]
+    assert isinstance(http, HttpConfig)
+    assert http.limits == ListenerLimits(64, 5.0, 3)
+    assert http.limits.per_address == 3
 
 
 @pytest.mark.parametrize(
@@ -64,6 +91,16 @@ def test_the_limits_are_configured_per_listener() -> None:
         ("max_connections = 1.5", "test.toml:3: modbus.max_connections: expected an integer"),
         ("idle_timeout_s = 0", "test.toml:3: modbus.idle_timeout_s: must be > 0, got 0"),
         ('idle_timeout_s = "1"', "test.toml:3: modbus.idle_timeout_s: expected a number"),
+        (
+            "max_connections_per_address = 65",
+            "test.toml:3: modbus.max_connections_per_address: must be 1..max_connections (64), "
+            "got 65",
+        ),
+        (
+            "max_connections = 4\nmax_connections_per_address = 0",
+            "test.toml:4: modbus.max_connections_per_address: must be 1..max_connections (4), "
+            "got 0",
+        ),
     ],
 )
 def test_a_bad_limit_names_file_line_and_key(line: str, message: str) -> None:
@@ -73,7 +110,7 @@ def test_a_bad_limit_names_file_line_and_key(line: str, message: str) -> None:
 
 
 async def test_the_http_listener_refuses_past_its_cap() -> None:
-    limit = ConnectionLimit("http", 2, logging.getLogger("test.http"))
+    limit = ConnectionLimit("http", 2, logging.getLogger("test.http"), max_per_address=2)
     server = await serve_http(Endpoint("127.0.0.1", 0), make_registry(list), list, limit=limit)
     port = server.sockets[0].getsockname()[1]
     try:
@@ -87,6 +124,37 @@ async def test_the_http_listener_refuses_past_its_cap() -> None:
             idle_writer.close()
         await wait_for(lambda: limit.open == 0, "the idle connections released")
         assert (await fetch(port, "/healthz")).status == 200
+    finally:
+        server.close()
+        await server.wait_closed()
+
+
+async def test_one_address_holds_at_most_its_share_and_another_still_gets_in() -> None:
+    limit = ConnectionLimit("http", 4, logging.getLogger("test.http"))  # 2 per address
+    server = await serve_http(Endpoint("127.0.0.1", 0), make_registry(list), list, limit=limit)
+    port = server.port
+
+    async def connect(source: str) -> tuple[asyncio.StreamReader, asyncio.StreamWriter]:
+        return await asyncio.open_connection("127.0.0.1", port, local_addr=(source, 0))
+
+    try:
+        mine = [await connect("127.0.0.1") for _ in range(2)]
+        await wait_for(lambda: limit.open_from("127.0.0.1") == 2, "two admitted")
+        reader, writer = await connect("127.0.0.1")
+        async with asyncio.timeout(5):
+            assert await reader.read() == b""  # closed at once: the address's share is used
+        writer.close()
+        assert (limit.open, limit.refused, limit.refused_per_address) == (2, 0, 1)
+        other_reader, other_writer = await connect("127.0.0.2")  # another address: in
+        other_writer.write(b"GET /healthz HTTP/1.1\r\nHost: x\r\nConnection: close\r\n\r\n")
+        async with asyncio.timeout(5):
+            assert (await other_reader.read()).startswith(b"HTTP/1.1 200")
+        other_writer.close()
+        for _, idle_writer in mine:
+            idle_writer.close()
+        await wait_for(lambda: limit.open == 0, "every slot released")
+        assert limit.open_from("127.0.0.1") == 0
+        assert (await fetch(port, "/healthz")).status == 200  # its share is back
     finally:
         server.close()
         await server.wait_closed()

@@ -281,7 +281,8 @@ async def test_the_connection_cap_refuses_newcomers_at_once(
     sim_line: SimLine, caplog: pytest.LogCaptureFixture
 ) -> None:
     caplog.set_level(logging.DEBUG, logger="sj300_async.gateway.modbus")
-    text = gateway_toml(sim_line.url, extra="max_connections = 2")
+    # All from 127.0.0.1: the per-address cap (half the cap by default) raised to the cap.
+    text = gateway_toml(sim_line.url, extra="max_connections = 2\nmax_connections_per_address = 2")
     async with running_gateway(text) as gateway:
         await polled(gateway)
         limit = server_of(gateway).limit

@@ -2,9 +2,11 @@
 
 Configured by ``[http] listen = "HOST:PORT"`` or ``--http HOST:PORT``
 (``[metrics]`` and ``--metrics``, its older names, still work), with the
-listener's limits ``max_connections`` (default 64) and ``idle_timeout_s``
-(default 5: the time a connection may stay open without a request in
-progress), and ``trend_s``, the window of each drive's trend (default 900).
+listener's limits ``max_connections`` (default 64),
+``max_connections_per_address`` (default half of it) and
+``idle_timeout_s`` (default 5: the time a connection may stay open
+without a request in progress), and ``trend_s``, the window of each
+drive's trend (default 900).
 
 On one listener: the workbench (``/``, docs/guide/workbench.md), its API
 under ``/api/v1/`` (docs/WORKBENCH_API.md), ``/metrics`` with every family

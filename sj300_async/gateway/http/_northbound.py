@@ -33,8 +33,10 @@ class HttpNorthbound:
         #: The routes that write, when there are any (module _write_api).
         self.writes: WriteRoutes | None = None
         self._ticker: asyncio.Task[None] | None = None
-        #: Open connections, and those refused at the cap or timed out.
-        self.limit = ConnectionLimit("http", config.limits.max_connections, _log)
+        #: Open connections, and those refused at the caps or timed out.
+        self.limit = ConnectionLimit(
+            "http", config.limits.max_connections, _log, config.limits.per_address
+        )
 
     async def start(self, gateway: GatewayView) -> None:
         config = self.config

@@ -168,8 +168,8 @@ class HttpServer:
         server = self._runner.server
         assert server is not None
 
-        def factory() -> asyncio.BaseProtocol:
-            return _Connection(server(), self)
+        def factory(address: str) -> asyncio.BaseProtocol:
+            return _Connection(server(), self, address)
 
         self._listener = Listener(
             factory, self.limit, tls=self.tls, handshake_timeout_s=self.idle_timeout_s
@@ -241,9 +241,11 @@ class _Refusals(AbstractAccessLogger):
 class _Connection(asyncio.Protocol):
     """aiohttp's protocol for one connection, releasing its slot and closing it when idle."""
 
-    def __init__(self, handler: RequestHandler, server: HttpServer) -> None:
+    def __init__(self, handler: RequestHandler, server: HttpServer, address: str) -> None:
         self._handler = handler
         self._server = server
+        #: The client's address as the listener admitted it (the slot's key).
+        self.address = address
         self._transport: asyncio.Transport | None = None
         self._busy = 0
         self._timer: asyncio.TimerHandle | None = None
@@ -285,7 +287,7 @@ class _Connection(asyncio.Protocol):
         try:
             self._handler.connection_lost(exc)
         finally:
-            self._server.limit.release()
+            self._server.limit.release(self.address)
 
     # -- the idle rule (module docstring) --------------------------------------------------
 

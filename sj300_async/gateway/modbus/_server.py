@@ -116,7 +116,9 @@ class ModbusServer:
         self.idle_timeout_s = limits.idle_timeout_s
         self.counters = counters
         #: Shared by every listener of the northbound: max_connections is for them all.
-        self.limit = limit or ConnectionLimit("modbus", limits.max_connections, _log)
+        self.limit = limit or ConnectionLimit(
+            "modbus", limits.max_connections, _log, limits.per_address
+        )
         #: Frames that could not be framed (each closed its connection).
         self.bad_frames = 0
         self._bad_frame_log = RateLimitedLog(_log)
@@ -129,7 +131,7 @@ class ModbusServer:
         Raises:
             OSError: the address cannot be bound.
         """
-        server = Listener(lambda: _Connection(self), self.limit)
+        server = Listener(lambda address: _Connection(self, address), self.limit)
         await server.start(endpoint.host, endpoint.port)
         self._server = server
         _log.info("Modbus TCP on %s:%d, units %s", endpoint.host, self.port, sorted(self.units))
@@ -166,8 +168,10 @@ class ModbusServer:
 class _Connection(asyncio.Protocol):
     """One client connection: frames in, answers out, in order (module docstring)."""
 
-    def __init__(self, server: ModbusServer) -> None:
+    def __init__(self, server: ModbusServer, address: str) -> None:
         self.server = server
+        #: The client's address as the listener admitted it (its slot is released under it).
+        self.address = address
         self.framer = Framer()
         self.transport: asyncio.Transport | None = None
         self.client = "?"
@@ -217,7 +221,7 @@ class _Connection(asyncio.Protocol):
         if self._lost:
             return
         self._lost = True
-        self.server.limit.release()
+        self.server.limit.release(self.address)
         self.server._connections.discard(self)
         if self._idle is not None:
             self._idle.cancel()
