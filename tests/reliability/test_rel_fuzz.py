@@ -11,6 +11,7 @@ hang), and decoding does not keep memory per distinct value seen.
 from __future__ import annotations
 
 import gc
+import json
 import multiprocessing
 import os
 import re
@@ -29,7 +30,7 @@ from hypothesis import strategies as st
 from sj300_async import sj300 as sj3
 
 from .rel_fuzz_targets import Mutator, check_decoders, check_simulator, check_stream, mutation_loop
-from .rel_leaks import peak_rss_mib
+from .rel_leaks import counting_its_own_peak, peak_rss_mib
 from .rel_sizes import Sizes
 
 pytestmark = pytest.mark.soak
@@ -161,7 +162,10 @@ def test_atheris_harness(
             "-print_final_stats=1",
             str(corpus),
         ]
-        running.append((subprocess.Popen(command, stderr=log, env=env, cwd=tmp_path), log))
+        # libFuzzer's -rss_limit_mb reads ru_maxrss, which a child started directly
+        # inherits from this worker's peak (2,070 MB after the OPC UA tests once).
+        fuzzer = subprocess.Popen(counting_its_own_peak(command), stderr=log, env=env, cwd=tmp_path)
+        running.append((fuzzer, log))
     executed = 0
     coverage: list[tuple[str, str]] = []
     peaks = []
@@ -185,6 +189,38 @@ def test_atheris_harness(
         "coverage_features": max((int(c[1]) for c in coverage), default=None),
         "peak_rss_mb": max(peaks, default=None),
     }
+
+
+# Grows its peak to argv[1] MiB and gives the memory back, then runs each command of
+# argv[2] (JSON) in turn, as the test's xdist worker runs the fuzzer, and prints what each
+# printed: a worker that once held much and holds little now.
+_ONCE_FAT = """\
+import json, subprocess, sys
+held = bytearray(int(sys.argv[1]) << 20)
+for page in range(0, len(held), 4096):  # resident, page by page
+    held[page] = 1
+del held
+for command in json.loads(sys.argv[2]):
+    print(subprocess.run(command, capture_output=True, text=True, check=True).stdout.strip())
+"""
+_PRINT_PEAK_MIB = "import resource; print(resource.getrusage(resource.RUSAGE_SELF).ru_maxrss >> 10)"
+
+
+def test_the_fuzzer_is_started_counting_its_own_peak_memory() -> None:
+    """A child's ru_maxrss, which libFuzzer's -rss_limit_mb checks, is its own (issue 41):
+    test_atheris_harness passed alone and failed after the suite's heaviest tests."""
+    probe = [sys.executable, "-c", _PRINT_PEAK_MIB]
+    commands = json.dumps([probe, counting_its_own_peak(probe)])
+    ran = subprocess.run(
+        [sys.executable, "-c", _ONCE_FAT, "400", commands],
+        capture_output=True,
+        text=True,
+        check=True,
+        timeout=60,
+    )
+    direct, launched = map(int, ran.stdout.split())
+    assert direct >= 400, ran.stdout  # the trap: started directly, it counts from 400 MiB
+    assert launched < 64, ran.stdout  # its own: an interpreter's few MiB
 
 
 # -- no hang, bounded memory -----------------------------------------------------------
