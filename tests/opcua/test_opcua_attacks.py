@@ -165,7 +165,7 @@ async def test_unactivated_sessions_are_rationed_and_the_operator_still_logs_in(
     (BadTooManySessions) for 30 s. Two attacking addresses, three connections each, 200
     CreateSession: each connection holds two unactivated sessions and each address four,
     which fills the eight slots; the operator's login closes the oldest of them."""
-    extra = "max_connections = 8\nconnections_per_address = 3\nactivate_within_s = 60"
+    extra = "max_connections = 8\nmax_connections_per_address = 3\nactivate_within_s = 60"
     text = opcua_toml(tmp_path, opcua_extra=extra)
     async with opcua_gateway(text) as (_, server), contextlib.AsyncExitStack() as stack:
         with probed() as probe:
@@ -514,7 +514,7 @@ async def test_a_well_behaved_client_keeps_reading_through_the_attacks(
             await asyncio.open_connection(
                 "127.0.0.1", _port(server.url), local_addr=(SECOND_ATTACKER, 0)
             )
-            for _ in range(10)
+            for _ in range(18)
         ]
         attacks = [asyncio.create_task(again(a)) for a in (sessions, passwords, chunks, raw)]
         refusals = server._users.refusals

@@ -58,6 +58,10 @@ def test_the_defaults_are_secure_and_relative_to_the_file(tmp_path: Path) -> Non
     assert config.namespace == NAMESPACE
     assert config.users == ()
     assert config.url == "opc.tcp://0.0.0.0:4840"
+    # The hardening's limits (docs/OPCUA.md, "Hardening").
+    assert (config.max_connections, config.max_connections_per_address) == (32, 16)
+    assert (config.max_unactivated_per_address, config.activate_within_s) == (4, 5.0)
+    assert (config.login_burst, config.login_interval_s) == (5, 12.0)
 
 
 @pytest.mark.parametrize(
@@ -77,6 +81,17 @@ def test_the_defaults_are_secure_and_relative_to_the_file(tmp_path: Path) -> Non
         ('endpoint = "opc.tcp://h:1"\nsecurity = ["None", "None"]', "named twice"),
         ('endpoint = "opc.tcp://h:1"\ntrusted_clients = "nowhere"', "no such directory"),
         ('endpoint = "opc.tcp://h:1"\nmax_connections = 0', "must be 1..1000"),
+        (
+            'endpoint = "opc.tcp://h:1"\nmax_connections = 8\nmax_connections_per_address = 9',
+            "opcua.max_connections_per_address: must be 1..8, got 9",
+        ),
+        (
+            'endpoint = "opc.tcp://h:1"\nmax_unactivated_per_address = "4"',
+            "opcua.max_unactivated_per_address: expected an integer",
+        ),
+        ('endpoint = "opc.tcp://h:1"\nactivate_within_s = 0.1', "must be >= 0.5, got 0.1"),
+        ('endpoint = "opc.tcp://h:1"\nlogin_interval_s = 7200', "must be 0.1..3600 s"),
+        ('endpoint = "opc.tcp://h:1"\nlogin_burst = 0', "opcua.login_burst: must be 1..100"),
         ('endpoint = "opc.tcp://h:1"\ncolour = "red"', "opcua.colour: unknown key 'colour'"),
         (
             'endpoint = "opc.tcp://h:1"\n[[opcua.users]]\nname = "a"\npassword_hash = "x"',

@@ -9,10 +9,10 @@ session costs an attacker one request; so the slots are rationed by what
 the attacker cannot choose freely, the connection and the client's address,
 and a slot that never becomes a working session is taken back soon:
 
-- **Connections per address** (:attr:`Admission.per_address_connections`):
-  one address cannot hold every connection the server takes.
+- **Connections per address** (``max_connections_per_address``): one
+  address cannot hold every connection the server takes.
 - **Unactivated sessions** per connection (:data:`UNACTIVATED_PER_CONNECTION`)
-  and per address (``unactivated_per_address``): past either, CreateSession
+  and per address (``max_unactivated_per_address``): past either, CreateSession
   is refused (``BadTooManySessions``), counted. A client creates one
   session and activates it at once; two per connection leave room for a
   client that retries before its first attempt timed out.
@@ -65,9 +65,9 @@ class SessionLimits:
     #: Sessions at most, activated or not (``max_connections``).
     sessions: int
     #: Connections one client address may hold at once.
-    connections_per_address: int
+    max_connections_per_address: int
     #: Sessions one client address may hold not yet activated.
-    unactivated_per_address: int
+    max_unactivated_per_address: int
     #: Seconds a session may wait for its activation before it is closed.
     activate_within_s: float
     unactivated_per_connection: int = UNACTIVATED_PER_CONNECTION
@@ -107,7 +107,7 @@ class Admission:
     def connection_opened(self, peer: Peer) -> bool:
         """Count a new connection of *peer*; False (counted): its address holds its share."""
         address = _address(peer)
-        if self._connections[address] >= self.limits.connections_per_address:
+        if self._connections[address] >= self.limits.max_connections_per_address:
             self.connections_refused["per_address"] += 1
             _log.debug("opcua: refused a connection from %s: its address holds its share", peer)
             return False
@@ -144,7 +144,7 @@ class Admission:
             reason, status = "discovery", ua.StatusCodes.BadSecurityPolicyRejected
         elif self._count(lambda p: p.peer == peer) >= limits.unactivated_per_connection:
             reason = "per_connection"
-        elif self._count(lambda p: p.address == address) >= limits.unactivated_per_address:
+        elif self._count(lambda p: p.address == address) >= limits.max_unactivated_per_address:
             reason = "per_address"
         elif len(self._open) >= limits.sessions:
             if not self._pending:

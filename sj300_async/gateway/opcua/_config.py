@@ -10,11 +10,11 @@
     private_key = "opcua/key.pem"
     trusted_clients = "opcua/trusted"  # optional: only these client certificates
     max_connections = 32               # the hardening's limits (docs/OPCUA.md, "Hardening")
-    connections_per_address = 8
-    unactivated_per_address = 4
+    max_connections_per_address = 16
+    max_unactivated_per_address = 4
     activate_within_s = 5.0
     login_burst = 5
-    login_interval_s = 5.0
+    login_interval_s = 12.0
     [[opcua.users]]
     name = "operator"
     password_hash = "scrypt$16384$8$1$..."   # sj300 gateway --hash-password
@@ -39,11 +39,13 @@ Decisions:
   password is what authenticates (documented in docs/OPCUA.md).
 - **Limits for what costs the server before a client proves anything**
   (issue 41; docs/OPCUA.md, "Hardening"): connections per client address
-  (a quarter of ``max_connections`` by default, so that one address never
-  holds them all), sessions not yet activated per address and the time
-  they have to activate (:mod:`._admission`), and each address's password
-  budget (:mod:`._logins`). Each has a default that a plant's clients never
-  meet; a key tunes it, within bounds that keep it a limit.
+  (half of ``max_connections`` by default, as the HTTP and Modbus doors'
+  ``max_connections_per_address``: one address never holds them all),
+  sessions not yet activated per address and the time they have to
+  activate (:mod:`._admission`), and each address's password budget
+  (:mod:`._logins`: five at once, then five a minute, the HTTP door's).
+  Each default is far above what a plant's clients do; a key tunes it,
+  within bounds that keep it a limit.
 - Port 0 picks a free port (the tests' way); the announce line names it.
 """
 
@@ -67,8 +69,8 @@ __all__ = [
 
 OPCUA_KEYS: Final = (
     *("endpoint", "security", "certificate", "private_key", "trusted_clients"),
-    *("users", "namespace", "max_connections", "connections_per_address"),
-    *("unactivated_per_address", "activate_within_s", "login_burst", "login_interval_s"),
+    *("users", "namespace", "max_connections", "max_connections_per_address"),
+    *("max_unactivated_per_address", "activate_within_s", "login_burst", "login_interval_s"),
 )
 #: The security modes a configuration may name, strongest first.
 SECURITY_MODES: Final = ("Basic256Sha256_SignAndEncrypt", "Basic256Sha256_Sign", "None")
@@ -81,9 +83,10 @@ DEFAULT_MAX_CONNECTIONS: Final = 32
 #: to activate before it is closed (asyncua: unlimited, and as long as its connection).
 DEFAULT_UNACTIVATED_PER_ADDRESS: Final = 4
 DEFAULT_ACTIVATE_WITHIN_S: Final = 5.0
-#: Password checks one client address may have at once, then one more every interval.
+#: Password checks one client address may have at once, then one more every interval
+#: (five a minute: the HTTP door's login budget).
 DEFAULT_LOGIN_BURST: Final = 5
-DEFAULT_LOGIN_INTERVAL_S: Final = 5.0
+DEFAULT_LOGIN_INTERVAL_S: Final = 12.0
 
 
 @dataclass(frozen=True, slots=True)
@@ -101,9 +104,9 @@ class OpcuaConfig:
     #: The namespace URI of the drives' nodes (default ``urn:sj300-async:<gateway id>``).
     namespace: str = ""
     max_connections: int = DEFAULT_MAX_CONNECTIONS
-    #: Connections one client address may hold (default: a quarter of max_connections).
-    connections_per_address: int = DEFAULT_MAX_CONNECTIONS // 4
-    unactivated_per_address: int = DEFAULT_UNACTIVATED_PER_ADDRESS
+    #: Connections one client address may hold (default: half of max_connections).
+    max_connections_per_address: int = DEFAULT_MAX_CONNECTIONS // 2
+    max_unactivated_per_address: int = DEFAULT_UNACTIVATED_PER_ADDRESS
     activate_within_s: float = DEFAULT_ACTIVATE_WITHIN_S
     login_burst: int = DEFAULT_LOGIN_BURST
     login_interval_s: float = DEFAULT_LOGIN_INTERVAL_S
@@ -162,10 +165,10 @@ def parse_opcua_section(table: ConfigTable, context: SectionContext) -> OpcuaCon
         raise table.error("namespace", "expected a namespace URI, got an empty string")
     max_connections = _bounded(table, "max_connections", 1, 1000, DEFAULT_MAX_CONNECTIONS)
     per_address = _bounded(
-        table, "connections_per_address", 1, max_connections, max(1, max_connections // 4)
+        table, "max_connections_per_address", 1, max_connections, max(1, max_connections // 2)
     )
     unactivated = _bounded(
-        table, "unactivated_per_address", 1, 100, DEFAULT_UNACTIVATED_PER_ADDRESS
+        table, "max_unactivated_per_address", 1, 100, DEFAULT_UNACTIVATED_PER_ADDRESS
     )
     login_burst = _bounded(table, "login_burst", 1, 100, DEFAULT_LOGIN_BURST)
     activate_within_s = _seconds(table, "activate_within_s", 0.5, 60.0, DEFAULT_ACTIVATE_WITHIN_S)
@@ -180,8 +183,8 @@ def parse_opcua_section(table: ConfigTable, context: SectionContext) -> OpcuaCon
         users=parse_users(table),
         namespace=namespace or f"urn:sj300-async:{context.gateway_id}",
         max_connections=max_connections,
-        connections_per_address=per_address,
-        unactivated_per_address=unactivated,
+        max_connections_per_address=per_address,
+        max_unactivated_per_address=unactivated,
         activate_within_s=activate_within_s,
         login_burst=login_burst,
         login_interval_s=login_interval_s,

@@ -105,8 +105,8 @@ class Defences:
     def __init__(self, config: OpcuaConfig, users: Users) -> None:
         limits = SessionLimits(
             sessions=config.max_connections,
-            connections_per_address=config.connections_per_address,
-            unactivated_per_address=config.unactivated_per_address,
+            max_connections_per_address=config.max_connections_per_address,
+            max_unactivated_per_address=config.max_unactivated_per_address,
             activate_within_s=config.activate_within_s,
         )
         self.users = users
