@@ -293,8 +293,8 @@ REFUSALS = [
     pytest.param(
         "[metrics]\nport = 9300\n",
         "gateway.toml:2: metrics.port: unknown key 'port' "
-        "(use listen, max_connections, max_connections_per_address, idle_timeout_s, trend_s, "
-        "users, tokens, tls_cert, tls_key)",
+        "(use listen, max_connections, max_connections_per_address, idle_timeout_s, "
+        "body_timeout_s, max_streams_per_address, trend_s, users, tokens, tls_cert, tls_key)",
         id="unknown-key-no-close-match",
     ),
     pytest.param(

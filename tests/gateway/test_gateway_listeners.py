@@ -60,7 +60,7 @@ def test_the_limits_are_configured_per_listener() -> None:
     assert ListenerLimits(1, 60.0).per_address == 1
 
 
-def test_the_per_address_cap_is_configured_per_listener() -> None:
+def test_the_per_address_cap_and_the_http_door_limits_are_configured() -> None:
     config = parse_config(
         _config(
             """\
@@ -71,6 +71,8 @@ def test_the_per_address_cap_is_configured_per_listener() -> None:
             [http]
             listen = "127.0.0.1:9300"
             max_connections_per_address = 3
+            body_timeout_s = 2.5
+            max_streams_per_address = 6
             """
         ),
         "test.toml",
@@ -82,6 +84,7 @@ def test_the_per_address_cap_is_configured_per_listener() -> None:
     assert isinstance(http, HttpConfig)
     assert http.limits == ListenerLimits(64, 5.0, 3)
     assert http.limits.per_address == 3
+    assert (http.body_timeout_s, http.max_streams_per_address) == (2.5, 6)
 
 
 @pytest.mark.parametrize(
@@ -106,6 +109,19 @@ def test_the_per_address_cap_is_configured_per_listener() -> None:
 def test_a_bad_limit_names_file_line_and_key(line: str, message: str) -> None:
     with pytest.raises(GatewayConfigError) as raised:
         parse_config(_config(f'[modbus]\nlisten = "127.0.0.1:1502"\n{line}\n'), "test.toml")
+    assert str(raised.value).startswith(message), str(raised.value)
+
+
+@pytest.mark.parametrize(
+    ("line", "message"),
+    [
+        ("body_timeout_s = 0", "test.toml:3: http.body_timeout_s: must be > 0, got 0"),
+        ("max_streams_per_address = 0", "test.toml:3: http.max_streams_per_address: must be >= 1"),
+    ],
+)
+def test_a_bad_http_door_limit_names_file_line_and_key(line: str, message: str) -> None:
+    with pytest.raises(GatewayConfigError) as raised:
+        parse_config(_config(f'[http]\nlisten = "127.0.0.1:9300"\n{line}\n'), "test.toml")
     assert str(raised.value).startswith(message), str(raised.value)
 
 

@@ -5,8 +5,11 @@ Configured by ``[http] listen = "HOST:PORT"`` or ``--http HOST:PORT``
 listener's limits ``max_connections`` (default 64),
 ``max_connections_per_address`` (default half of it) and
 ``idle_timeout_s`` (default 5: the time a connection may stay open
-without a request in progress), and ``trend_s``, the window of each
-drive's trend (default 900).
+without a request in progress), ``body_timeout_s`` (default 5: the time a
+request's head and body may take), ``max_streams_per_address`` (default
+4: event streams open at once from one address), and ``trend_s``, the
+window of each drive's trend (default 900). What each limit is for:
+docs/GATEWAY.md, "Hardening".
 
 On one listener: the workbench (``/``, docs/guide/workbench.md), its API
 under ``/api/v1/`` (docs/WORKBENCH_API.md), ``/metrics`` with every family
@@ -41,6 +44,12 @@ from .. import (
 )
 from ._auth import ApiToken, hash_token, new_token
 from ._trend import SAMPLE_BYTES, Trend, trend_capacity
+
+#: Seconds a request's head and body may take, from its first byte (``_server``): a
+#: 1 MiB backup needs 1.7 Mbit/s, a login or a write a few hundred bytes.
+DEFAULT_BODY_TIMEOUT_S: Final = 5.0
+#: Event streams one client address may hold at once (``_guards``).
+DEFAULT_STREAMS_PER_ADDRESS: Final = 4
 
 __all__ = [
     "DEFAULT_LIMITS",
@@ -84,6 +93,10 @@ class HttpConfig:
     #: HTTPS: the certificate chain and its key (PEM files), both or neither.
     tls_cert: Path | None = None
     tls_key: Path | None = None
+    #: Seconds a request's head and body may take, from its first byte (then 408).
+    body_timeout_s: float = DEFAULT_BODY_TIMEOUT_S
+    #: Event streams one client address may hold at once (then 429).
+    max_streams_per_address: int = DEFAULT_STREAMS_PER_ADDRESS
 
     @property
     def authentication(self) -> bool:
@@ -139,7 +152,17 @@ def _tls(table: ConfigTable, base_dir: Path) -> tuple[Path | None, Path | None]:
 class _Spec:
     section = "http"
     aliases = ("metrics",)
-    keys = ("listen", *LIMIT_KEYS, "trend_s", "users", "tokens", "tls_cert", "tls_key")
+    keys = (
+        "listen",
+        *LIMIT_KEYS,
+        "body_timeout_s",
+        "max_streams_per_address",
+        "trend_s",
+        "users",
+        "tokens",
+        "tls_cert",
+        "tls_key",
+    )
     flag = Flag(
         "--http",
         "listen",
@@ -154,6 +177,10 @@ class _Spec:
         if trend_s is not None and trend_s > MAX_TREND_S:
             raise table.error("trend_s", f"must be <= {MAX_TREND_S:g} (a day), got {trend_s:g}")
         tls_cert, tls_key = _tls(table, context.base_dir)
+        body_timeout_s = table.number("body_timeout_s", minimum=0, inclusive=False)
+        streams = table.integer("max_streams_per_address")
+        if streams is not None and streams < 1:
+            raise table.error("max_streams_per_address", f"must be >= 1, got {streams}")
         return HttpConfig(
             table.required_endpoint("listen"),
             DEFAULT_LIMITS.parse(table),
@@ -162,6 +189,8 @@ class _Spec:
             tokens=_tokens(table),
             tls_cert=tls_cert,
             tls_key=tls_key,
+            body_timeout_s=DEFAULT_BODY_TIMEOUT_S if body_timeout_s is None else body_timeout_s,
+            max_streams_per_address=DEFAULT_STREAMS_PER_ADDRESS if streams is None else streams,
         )
 
     def endpoints(self, config: object) -> Sequence[tuple[str, Endpoint]]:

@@ -16,6 +16,8 @@ Decisions:
   are air-gapped, so nothing is fetched from elsewhere at run time, and
   the Content-Security-Policy says so to the browser (``'self'`` only).
 - Every response says ``nosniff``, refuses framing and sends no referrer.
+- An event stream counts against its client address's streams
+  (``max_streams_per_address``, :mod:`._guards`): past them, 429.
 """
 
 from __future__ import annotations
@@ -36,11 +38,18 @@ from prometheus_client import CollectorRegistry
 
 from .. import ConnectionLimit, Endpoint, GatewayDrive
 from ._events import GATHER_S, KEEPALIVE
+from ._guards import PerAddress, client_address
 from ._json import trip_log_json, unix_time
 from ._linetrace import KEEP_S, LineTrace
 from ._parameters import ParameterRoutes
 from ._replies import find_drive, json_error, json_reply
-from ._server import HttpServer, health_response, metrics_response, serve_app
+from ._server import (
+    DEFAULT_BODY_TIMEOUT_S,
+    HttpServer,
+    health_response,
+    metrics_response,
+    serve_app,
+)
 from ._workbench import Workbench
 from ._write_api import WriteRoutes
 
@@ -65,6 +74,7 @@ _HEADERS: Final = {
     ),
 }
 _WORKBENCH: Final = web.AppKey("workbench", Workbench)
+_PER_ADDRESS: Final = web.AppKey("per_address", PerAddress)
 
 
 def operations_app(registry: CollectorRegistry, health: Callable[[], list[str]]) -> web.Application:
@@ -88,12 +98,15 @@ def make_app(
     registry: CollectorRegistry,
     health: Callable[[], list[str]],
     writes: WriteRoutes | None = None,
+    per_address: PerAddress | None = None,
 ) -> web.Application:
     """The whole application: page, API, events, /metrics and /healthz; with *writes*,
-    the routes that write (module _write_api)."""
+    the routes that write (module _write_api). *per_address*: what each client address
+    may hold and spend (module _guards; the defaults when None)."""
     app = operations_app(registry, health)
     app[_WORKBENCH] = workbench
-    ParameterRoutes(workbench.gateway).add_to(app)
+    app[_PER_ADDRESS] = per_address = PerAddress() if per_address is None else per_address
+    ParameterRoutes(workbench.gateway, per_address).add_to(app)
     if writes is not None:
         writes.add_to(app)
     app.router.add_get("/", _index)
@@ -256,6 +269,15 @@ async def _trips(request: web.Request) -> web.Response:
 
 async def _events(request: web.Request) -> web.StreamResponse:
     """Server-sent events: everything as of now, then each change (module _events)."""
+    streams, address = request.app[_PER_ADDRESS].streams, client_address(request)
+    streams.acquire(address)
+    try:
+        return await _stream_events(request)
+    finally:
+        streams.release(address)
+
+
+async def _stream_events(request: web.Request) -> web.StreamResponse:
     bench = _bench(request)
     response = web.StreamResponse(
         headers={
@@ -298,8 +320,13 @@ async def serve_http(
     *,
     limit: ConnectionLimit | None = None,
     idle_timeout_s: float = 5.0,
+    body_timeout_s: float = DEFAULT_BODY_TIMEOUT_S,
 ) -> HttpServer:
     """Serve /metrics and /healthz alone at *endpoint* (what a test or a tool needs)."""
     return await serve_app(
-        endpoint, operations_app(registry, health), limit=limit, idle_timeout_s=idle_timeout_s
+        endpoint,
+        operations_app(registry, health),
+        limit=limit,
+        idle_timeout_s=idle_timeout_s,
+        body_timeout_s=body_timeout_s,
     )

@@ -11,6 +11,7 @@ from ...profiles import DriveSnapshot
 from .. import ConnectionLimit, GatewayView, listener_families
 from . import HttpConfig
 from ._api import make_app
+from ._guards import AddressSlots, PerAddress
 from ._server import HttpServer, make_registry, serve_app
 from ._workbench import Workbench
 from ._write_api import WriteRoutes
@@ -37,6 +38,8 @@ class HttpNorthbound:
         self.limit = ConnectionLimit(
             "http", config.limits.max_connections, _log, config.limits.per_address
         )
+        #: What each client address may hold and spend (module _guards).
+        self.per_address = PerAddress(AddressSlots(config.max_streams_per_address))
 
     async def start(self, gateway: GatewayView) -> None:
         config = self.config
@@ -53,7 +56,11 @@ class HttpNorthbound:
             )
         self.workbench = Workbench(gateway, config.trend_s, writes=self.writes is not None)
         app = make_app(
-            self.workbench, make_registry(gateway.metrics), gateway.problems, self.writes
+            self.workbench,
+            make_registry(gateway.metrics),
+            gateway.problems,
+            self.writes,
+            self.per_address,
         )
         self.server = await serve_app(
             config.listen,
@@ -61,6 +68,7 @@ class HttpNorthbound:
             limit=self.limit,
             idle_timeout_s=config.limits.idle_timeout_s,
             tls=tls,
+            body_timeout_s=config.body_timeout_s,
         )
         self._ticker = asyncio.create_task(self.workbench.run(), name="sj300-http-lines")
 
@@ -83,6 +91,7 @@ class HttpNorthbound:
         from prometheus_client.core import CounterMetricFamily, GaugeMetricFamily
 
         yield from listener_families("sj300_http", self.limit)
+        yield from self._refusals()
         if self.workbench is None:
             return
         hub = self.workbench.hub
@@ -98,6 +107,37 @@ class HttpNorthbound:
             hub.replaced,
         )
 
+    def _refusals(self) -> Iterator[Metric]:
+        """What the door refused or cut per client (docs/GATEWAY.md, "Hardening")."""
+        from prometheus_client.core import CounterMetricFamily
+
+        timed_out = 0 if self.server is None else self.server.timed_out
+        yield CounterMetricFamily(
+            "sj300_http_requests_timed_out",
+            "HTTP requests whose head and body did not come within body_timeout_s "
+            "(answered 408 or cut; their connections closed).",
+            timed_out,
+        )
+        refused = CounterMetricFamily(
+            "sj300_http_requests_refused",
+            "HTTP requests refused by a per-address limit or a busy password check.",
+            labels=["reason"],
+        )
+        refused.add_metric(["streams"], self.per_address.streams.refused)
+        refused.add_metric(["check_rate"], self.per_address.checks.refused)
+        writes = self.writes
+        if writes is not None:
+            refused.add_metric(["login_rate"], writes.budget.refused)
+            refused.add_metric(["login_failures"], writes.guard.refused)
+            refused.add_metric(["login_busy"], writes.checks.busy)
+        yield refused
+        if writes is not None:
+            yield CounterMetricFamily(
+                "sj300_http_password_checks",
+                "Login passwords checked (scrypt, off the event loop).",
+                writes.checks.checked,
+            )
+
     async def close(self) -> None:
         if self._ticker is not None:
             self._ticker.cancel()
@@ -111,3 +151,5 @@ class HttpNorthbound:
             self.server.close()
             await self.server.wait_closed()
             self.server = None
+        if self.writes is not None:
+            self.writes.close()

@@ -21,7 +21,14 @@ Decisions:
   :meth:`~sj300_async.profiles.Profile.absent` NAK) is recorded absent, as
   a backup records it; any other failure ends the stream with an ``error``
   event naming the code, after the codes read so far.
-- The stream carries no CSRF token and needs no login: it reads.
+- The stream carries no CSRF token and needs no login: it reads. It
+  counts against its address's streams (:mod:`._guards`), and a client
+  that closes it, the documented way to stop it, is a DEBUG line.
+- A backup file to check is read whole (at most :data:`MAX_BACKUP_BYTES`,
+  within the request's time), its nesting and its number of arrays and
+  objects (:data:`MAX_BACKUP_CONTAINERS`) checked before it is parsed
+  (:mod:`._bodies`), and each address has a budget of checks
+  (:mod:`._guards`), spent before the body is read.
 """
 
 from __future__ import annotations
@@ -34,23 +41,30 @@ from aiohttp import web
 
 from ...profiles import BackupFormatError, ParameterBackup, catalogued, utc_now
 from ...wire import LocalProtocolError, NakError, SJ300Error
-from .. import GatewayView
+from .. import GatewayDrive, GatewayView
+from ._bodies import MAX_DEPTH, read_body, shape_problem
 from ._events import sse_frame
+from ._guards import PerAddress, client_address, spend
 from ._replies import find_drive, json_error, json_reply
 
-__all__ = ["MAX_BACKUP_BYTES", "ParameterRoutes"]
+__all__ = ["MAX_BACKUP_BYTES", "MAX_BACKUP_CONTAINERS", "ParameterRoutes"]
 
 _log = logging.getLogger("sj300_async.gateway.http")
 
 #: The largest backup file accepted (an FR-700 one is about 165 kB).
 MAX_BACKUP_BYTES: Final = 1024 * 1024
+#: The arrays and objects a backup file may hold (a whole FR-700 set: 1,002).
+MAX_BACKUP_CONTAINERS: Final = 4096
 
 
 class ParameterRoutes:
     """The parameter routes of one gateway's workbench (see the module docstring)."""
 
-    def __init__(self, gateway: GatewayView) -> None:
+    def __init__(self, gateway: GatewayView, per_address: PerAddress) -> None:
         self.gateway = gateway
+        #: Each address's open streams (shared with the event stream's route) and
+        #: budget of backup checks.
+        self.per_address = per_address
         #: Lines reading a whole set now.
         self._busy: set[str] = set()
 
@@ -71,6 +85,18 @@ class ParameterRoutes:
             raise json_error(
                 409, f"line {name} is reading a drive's parameters already: wait for it"
             )
+        address = client_address(request)
+        streams = self.per_address.streams
+        streams.acquire(address)
+        try:
+            return await self._read_set(request, name, drive)
+        finally:
+            streams.release(address)
+
+    async def _read_set(
+        self, request: web.Request, name: str, drive: GatewayDrive
+    ) -> web.StreamResponse:
+        profile = drive.profile
         line = next(line for line in self.gateway.lines if line.config.name == name)
         target: Any = line.bus.drive(drive.node)
         codes = list(profile.parameters.addressable())
@@ -105,8 +131,12 @@ class ParameterRoutes:
             message = f"{code}: {exc}" if codes else str(exc)
             _log.info("line %s node %d: parameter read stopped: %s", name, drive.node, message)
             await response.write(sse_frame("error", {"error": message, "done": len(raw)}))
-        except (ConnectionError, asyncio.CancelledError):
-            _log.debug("line %s node %d: parameter read abandoned by its client", name, drive.node)
+        except ConnectionError:
+            # The client closed the stream: the documented way to stop it, not an error.
+            _log.debug("line %s node %d: parameter read stopped by its client", name, drive.node)
+            return response
+        except asyncio.CancelledError:
+            _log.debug("line %s node %d: parameter read cancelled", name, drive.node)
             raise
         finally:
             self._busy.discard(name)
@@ -142,23 +172,18 @@ class ParameterRoutes:
             raise json_error(
                 400, f"protocol: none of this gateway's lines speaks {protocol[:32]!r}"
             )
-        if request.content_length is not None and request.content_length > MAX_BACKUP_BYTES:
-            raise json_error(413, f"a backup is at most {MAX_BACKUP_BYTES // 1024} KiB")
-        # read(n) gives what has arrived so far, not n bytes: read to the end (or past
-        # the limit). The application's 64 KiB body limit is for requests, not backups.
-        body = bytearray()
-        while len(body) <= MAX_BACKUP_BYTES:
-            chunk = await request.content.read(64 * 1024)
-            if not chunk:
-                break
-            body += chunk
-        if len(body) > MAX_BACKUP_BYTES:
-            raise json_error(413, f"a backup is at most {MAX_BACKUP_BYTES // 1024} KiB")
-        data = bytes(body)
+        spend(self.per_address.checks, client_address(request), "backup checks")
+        # The application's 64 KiB body limit is for requests, not backups.
+        data = await read_body(request, MAX_BACKUP_BYTES, "a backup")
+        problem = shape_problem(data, MAX_DEPTH, MAX_BACKUP_CONTAINERS)
+        if problem is not None:  # before the parser (module _bodies)
+            raise json_error(400, f"the file: not JSON the gateway reads: {problem}")
         try:
             backup = ParameterBackup.from_bytes(data, profile, source="the file")
         except BackupFormatError as exc:
             raise json_error(400, str(exc)) from None
+        except RecursionError:  # the check above makes it impossible: a last guard
+            raise json_error(400, "the file: not JSON the gateway reads: too deep") from None
         return json_reply(
             {
                 "node": backup.node,

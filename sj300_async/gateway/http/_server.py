@@ -20,11 +20,34 @@ Decisions:
   never timed out by this rule, so an event stream stays open as long as
   its client reads it. aiohttp's own keep-alive timer, at twice the
   value, is a second guard.
+- **A request has ``body_timeout_s`` for its head and its body** (default
+  :data:`DEFAULT_BODY_TIMEOUT_S`), counted from its first byte (issue 41:
+  64 POSTs announcing 100 kB and sending nothing held every slot for
+  24-32 s, and /healthz, the workbench's Stop button and its lease
+  heartbeats got resets). Past it, a handler waiting for the body gets
+  :class:`BodyTimeout` from its read, answered 408 and the connection
+  closed; a body nobody reads (a route that answered first, or a stream)
+  is cut by closing the connection. Each is counted
+  (``sj300_http_requests_timed_out_total``) and logged at DEBUG.
+- **aiohttp's lingering is bounded by the same deadline.** A handler that
+  answers before reading the body (a 429, a 405) leaves aiohttp reading
+  and discarding it for up to its ``lingering_time`` (10 s by default),
+  the slot held all the while: the deadline ends that too (the lingering
+  read gets :class:`BodyTimeout`, a ``TimeoutError``, which aiohttp takes
+  as the end of lingering and closes), and ``lingering_time`` is set to
+  ``body_timeout_s`` besides.
 - The request head is bounded by aiohttp's limits (:data:`MAX_LINE_BYTES`
-  per line and per header field); a body by each route's own limit.
+  per line and per header field); a body by each route's own limit
+  (:mod:`._bodies`).
 - The scrape (``/metrics``) runs on the event loop, like everything that
   updates the counters it reads, so one scrape sees one consistent state;
   prometheus_client's own server would read them from a thread.
+- **A client that goes away is not an error**: a stream it closed (the
+  documented way to stop one), a body it cut. What a handler then raises
+  (``ConnectionError``, aiohttp's ``ClientConnectionResetError`` among
+  them, or ``ClientPayloadError``) is one DEBUG line with a bounded
+  excerpt, never an ERROR with a traceback: a client must not be able to
+  write the gateway's log.
 - Nothing is dropped silently: an error inside a handler is logged with its
   traceback and answered 500; every refusal (4xx: a malformed request
   aiohttp's parser refused, an unknown path, a wrong method) is logged at
@@ -42,11 +65,13 @@ import ssl
 from collections.abc import Awaitable, Callable, Iterable
 from typing import TYPE_CHECKING, Final, cast
 
-from aiohttp import web
+from aiohttp import ClientPayloadError, web
 from aiohttp.abc import AbstractAccessLogger
 from prometheus_client import CONTENT_TYPE_LATEST, CollectorRegistry, generate_latest
 
 from .. import ConnectionLimit, Endpoint, Listener, excerpt
+from . import DEFAULT_BODY_TIMEOUT_S
+from ._replies import json_error
 
 if TYPE_CHECKING:
     from aiohttp.web_protocol import RequestHandler
@@ -54,7 +79,9 @@ if TYPE_CHECKING:
     from prometheus_client.core import Metric
 
 __all__ = [
+    "DEFAULT_BODY_TIMEOUT_S",
     "MAX_LINE_BYTES",
+    "BodyTimeout",
     "HttpServer",
     "health_response",
     "make_registry",
@@ -66,6 +93,16 @@ _log = logging.getLogger("sj300_async.gateway.http")
 
 #: The longest request line, and the longest header field, accepted (aiohttp's limits).
 MAX_LINE_BYTES: Final = 8190
+#: What a handler raises when its client went away (module docstring).
+_CLIENT_GONE: Final = (ConnectionError, ClientPayloadError)
+
+
+class BodyTimeout(TimeoutError):
+    """The request's body did not come within ``body_timeout_s`` (its read raises this).
+
+    A ``TimeoutError``: aiohttp's lingering read takes it as the end of lingering.
+    """
+
 
 Handler = Callable[[web.Request], Awaitable[web.StreamResponse]]
 
@@ -118,10 +155,14 @@ class HttpServer:
         limit: ConnectionLimit,
         idle_timeout_s: float,
         tls: ssl.SSLContext | None = None,
+        body_timeout_s: float = DEFAULT_BODY_TIMEOUT_S,
     ):
         self.limit = limit
         self.tls = tls
         self.idle_timeout_s = idle_timeout_s
+        self.body_timeout_s = body_timeout_s
+        #: Requests whose head and body did not come within body_timeout_s, since the start.
+        self.timed_out = 0
         server = self
 
         class Refusals(_Refusals):
@@ -138,6 +179,9 @@ class HttpServer:
             keepalive_timeout=2 * idle_timeout_s,
             max_line_size=MAX_LINE_BYTES,
             max_field_size=MAX_LINE_BYTES,
+            # An unread body is read and dropped at most this long after the answer
+            # (the body's deadline usually ends it sooner: module docstring).
+            lingering_time=body_timeout_s,
             # A stopping gateway waits this long for requests in progress (event
             # streams end on their own when the northbound closes them first).
             shutdown_timeout=2.0,
@@ -198,13 +242,32 @@ class HttpServer:
     async def _track(self, request: web.Request, handler: Handler) -> web.StreamResponse:
         connection = self._connections.get(request.protocol)
         if connection is not None:
-            connection.begin()
+            connection.begin(request)
         try:
             return await handler(request)
         except web.HTTPException:
             raise
+        except BodyTimeout:
+            error = json_error(
+                408, f"the request did not come whole within {self.body_timeout_s:g} s"
+            )
+            error.force_close()
+            raise error from None
+        except _CLIENT_GONE as exc:  # module docstring: a DEBUG line, not an ERROR
+            _log.debug(
+                "http %s: %s %s: the client went away: %s",
+                request.remote,
+                request.method,
+                excerpt(request.path),
+                excerpt(repr(exc)),
+            )
+            gone = web.Response(status=400, text="the connection was cut\n")
+            gone.force_close()  # its write fails quietly, or ends what is left
+            return gone
         except Exception:
-            _log.exception("http %s: %s %s failed", request.remote, request.method, request.path)
+            _log.exception(
+                "http %s: %s %s failed", request.remote, request.method, excerpt(request.path)
+            )
             raise web.HTTPInternalServerError(text="internal error\n") from None
         finally:
             if connection is not None:
@@ -239,16 +302,23 @@ class _Refusals(AbstractAccessLogger):
 
 
 class _Connection(asyncio.Protocol):
-    """aiohttp's protocol for one connection, releasing its slot and closing it when idle."""
+    """aiohttp's protocol for one connection: releases its slot, closes it when idle, and
+    holds each request to its deadline."""
 
     def __init__(self, handler: RequestHandler, server: HttpServer, address: str) -> None:
         self._handler = handler
         self._server = server
         #: The client's address as the listener admitted it (the slot's key).
         self.address = address
+        self._loop = asyncio.get_running_loop()
         self._transport: asyncio.Transport | None = None
         self._busy = 0
         self._timer: asyncio.TimerHandle | None = None
+        #: The request begun last (kept until its body is in: its deadline's subject).
+        self._request: BaseRequest | None = None
+        #: Loop time of the next request's first byte (None: none of it seen yet).
+        self._first_byte_at: float | None = None
+        self._deadline: asyncio.TimerHandle | None = None
         #: The first bytes received since the last request ended (for a refusal's log).
         self.received = bytearray()
 
@@ -262,6 +332,10 @@ class _Connection(asyncio.Protocol):
         self._arm()
 
     def data_received(self, data: bytes) -> None:
+        if self._first_byte_at is None and (
+            self._request is None or self._request.content.is_eof()
+        ):  # not the last request's body: the next request's first bytes
+            self._first_byte_at = self._loop.time()
         if len(self.received) < _KEPT_BYTES:
             self.received += data[: _KEPT_BYTES - len(self.received)]
         self._handler.data_received(data)
@@ -277,6 +351,8 @@ class _Connection(asyncio.Protocol):
 
     def connection_lost(self, exc: Exception | None) -> None:
         self._disarm()
+        self._cancel_deadline()
+        self._request = None
         if self.received and not self._busy:  # bytes of a request that never came whole
             _log.debug(
                 "http %s: closed before a whole request came; received: %s",
@@ -289,11 +365,19 @@ class _Connection(asyncio.Protocol):
         finally:
             self._server.limit.release(self.address)
 
-    # -- the idle rule (module docstring) --------------------------------------------------
+    # -- the idle rule and the body's deadline (module docstring) --------------------------
 
-    def begin(self) -> None:
+    def begin(self, request: BaseRequest) -> None:
         self._busy += 1
         self._disarm()
+        started = self._loop.time() if self._first_byte_at is None else self._first_byte_at
+        self._first_byte_at = None
+        self._request = request
+        self._cancel_deadline()
+        if not request.content.is_eof():
+            self._deadline = self._loop.call_at(
+                started + self._server.body_timeout_s, self._body_late
+            )
 
     def end(self) -> None:
         self._busy -= 1
@@ -302,8 +386,36 @@ class _Connection(asyncio.Protocol):
 
     def _arm(self) -> None:
         self._disarm()
-        loop = asyncio.get_running_loop()
-        self._timer = loop.call_later(self._server.idle_timeout_s, self._expire)
+        self._timer = self._loop.call_later(self._server.idle_timeout_s, self._expire)
+
+    def _cancel_deadline(self) -> None:
+        if self._deadline is not None:
+            self._deadline.cancel()
+            self._deadline = None
+
+    def _body_late(self) -> None:
+        """The request's deadline: a body not in yet is cut (module docstring)."""
+        self._deadline = None
+        request, transport = self._request, self._transport
+        if request is None or request.content.is_eof() or transport is None:
+            return
+        if transport.is_closing():
+            return
+        self._server.timed_out += 1
+        _log.debug(
+            "http %s: %s %s: not whole within %g s, closed; received: %s",
+            self.address,
+            request.method,
+            excerpt(request.path),
+            self._server.body_timeout_s,
+            excerpt(bytes(self.received)),
+        )
+        # A handler reading the body gets the error and answers 408; aiohttp's lingering
+        # read takes it as the end. With nobody to answer (the handler is done, or its
+        # answer is under way: a stream), the connection is closed now.
+        request.content.set_exception(BodyTimeout())
+        if not self._busy or request.writer.output_size > 0:
+            transport.close()
 
     def _disarm(self) -> None:
         if self._timer is not None:
@@ -332,6 +444,7 @@ async def serve_app(
     limit: ConnectionLimit | None = None,
     idle_timeout_s: float = 5.0,
     tls: ssl.SSLContext | None = None,
+    body_timeout_s: float = DEFAULT_BODY_TIMEOUT_S,
 ) -> HttpServer:
     """Serve *app* at *endpoint* (port 0: a free one, :attr:`HttpServer.port`), over TLS
     when *tls* is given.
@@ -340,6 +453,6 @@ async def serve_app(
         OSError: the address cannot be bound.
     """
     connections = ConnectionLimit("http", 1 << 30, _log) if limit is None else limit
-    server = HttpServer(app, connections, idle_timeout_s, tls)
+    server = HttpServer(app, connections, idle_timeout_s, tls, body_timeout_s)
     await server.start(endpoint)
     return server

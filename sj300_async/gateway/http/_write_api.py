@@ -23,14 +23,21 @@ Decisions:
   another's), 422 an invalid value, 400 a malformed body, 404 an unknown
   target, 503 busy, 502 the drive refused or did not confirm, 504 no
   answer.
-- **Bad input** (not JSON, a body over 64 KiB, a missing or mistyped
-  field) is refused before the gateway is asked, and audited through
+- **Bad input** (not JSON, a body over 64 KiB or nested deeper than
+  :mod:`._bodies` reads, a missing or mistyped field) is refused before
+  the gateway is asked, and audited through
   :meth:`~sj300_async.gateway.GatewayView.refused` like every refusal.
+  A write's body is read only once its credentials are known good.
+- **A login costs the loop nothing**: its address's budget is spent
+  before the body is read (:mod:`._guards`: 429 with ``Retry-After``
+  past it), and the password is checked in the gateway's
+  :class:`~sj300_async.gateway.PasswordChecks` thread, off the loop
+  (scrypt takes about 65 ms of a core). When too many checks wait
+  already, the login is refused unchecked: 503 ``busy``, counted.
 """
 
 from __future__ import annotations
 
-import json
 import math
 import re
 from collections.abc import Awaitable, Callable
@@ -43,7 +50,9 @@ from .. import (
     GatewayDrive,
     GatewayView,
     Heartbeat,
+    KeyedBudget,
     ParameterWrite,
+    PasswordChecks,
     Refusal,
     RunCommand,
     SetFrequency,
@@ -51,23 +60,19 @@ from .. import (
     WriteResult,
     excerpt,
 )
-from ._auth import (
-    ApiToken,
-    Identity,
-    LoginGuard,
-    Sessions,
-    User,
-    verify_password,
-    verify_token,
-)
+from ._auth import FAILURE_WINDOW_S, ApiToken, Identity, LoginGuard, Sessions, User, verify_token
+from ._bodies import read_json_object
+from ._guards import LOGIN_BURST, LOGIN_PER_S, client_address, spend, too_many
 from ._replies import find_drive, json_error, json_reply
 
-__all__ = ["REFUSAL_STATUS", "SESSION_COOKIE", "WriteRoutes"]
+__all__ = ["MAX_BODY_BYTES", "REFUSAL_STATUS", "SESSION_COOKIE", "WriteRoutes"]
 
 #: The cookie that carries a page's session id.
 SESSION_COOKIE: Final = "sj300_session"
 #: The header that carries a session's CSRF token.
 CSRF_HEADER: Final = "X-CSRF-Token"
+#: The largest body of a login or a write.
+MAX_BODY_BYTES: Final = 64 * 1024
 #: Each refusal's HTTP status (module docstring).
 REFUSAL_STATUS: Final = {
     Refusal.NOT_ALLOWED: 403,
@@ -104,6 +109,13 @@ class WriteRoutes:
         self._secure = secure_cookie
         self.sessions = Sessions()
         self.guard = LoginGuard()
+        #: Each address's budget of password checks (module _guards), and the checks.
+        self.budget = KeyedBudget(LOGIN_BURST, LOGIN_PER_S)
+        self.checks = PasswordChecks()
+
+    def close(self) -> None:
+        """Stop the password checks' thread (a check under way finishes in it)."""
+        self.checks.close()
 
     def add_to(self, app: web.Application) -> None:
         router = app.router
@@ -151,20 +163,29 @@ class WriteRoutes:
 
     async def _login(self, request: web.Request) -> web.Response:
         _same_origin(request)
-        address = request.remote or "?"
+        address = client_address(request)
         if self.guard.blocked(address):
-            raise json_error(429, "too many failed logins from this address: wait 5 minutes")
-        body = await _body(request)
+            raise too_many(
+                "too many failed logins from this address: wait 5 minutes", FAILURE_WINDOW_S
+            )
+        spend(self.budget, address, "logins")  # before the body is read (module docstring)
+        body = await read_json_object(request, MAX_BODY_BYTES)
         name, password = body.get("name"), body.get("password")
         if not isinstance(name, str) or not isinstance(password, str):
             raise json_error(400, 'expected {"name": ..., "password": ...}')
         user = self._users.get(name)
         # The hash is computed for an unknown name too: the time does not tell names apart.
         stored = user.password_hash if user is not None else _DUMMY_HASH
-        if not verify_password(password, stored) or user is None:
+        verdict = await self.checks.verify(password, stored)
+        if verdict is None:
+            error = json_error(503, "busy: too many logins being checked", refusal="busy")
+            error.headers["Retry-After"] = "1"
+            raise error
+        if not verdict or user is None:
             self.guard.failed(address)
             raise json_error(401, "unknown user or wrong password")
         self.guard.succeeded(address)
+        self.budget.refund(address)  # a login that succeeds costs its address nothing
         session = self.sessions.create(user.name)
         response = json_reply({"user": user.name, "csrf": session.csrf})
         response.set_cookie(
@@ -249,7 +270,7 @@ class WriteRoutes:
     ) -> web.Response:
         identity = self.writer(request)
         drive = find_drive(self.gateway, request)
-        body = await _body(request)
+        body = await read_json_object(request, MAX_BODY_BYTES)
         client = identity.client
         tab = body.get("tab")
         if identity.kind == "user":
@@ -300,29 +321,6 @@ def _answer(result: WriteResult, client: str, drive: GatewayDrive) -> web.Respon
         {"error": result.detail or result.refusal.value, "refusal": result.refusal.value},
         REFUSAL_STATUS[result.refusal],
     )
-
-
-async def _body(request: web.Request) -> dict[str, Any]:
-    """The request's JSON object (an empty body is ``{}``).
-
-    Raises:
-        HTTPException: 415 not JSON, 413 too large (aiohttp's limit), 400 malformed.
-    """
-    if not request.body_exists:
-        return {}
-    if request.content_type != "application/json":
-        raise json_error(415, f"expected application/json, got {excerpt(request.content_type)}")
-    try:
-        text = await request.text()
-    except web.HTTPRequestEntityTooLarge:
-        raise json_error(413, "the body is over 64 KiB") from None
-    try:
-        body = json.loads(text)
-    except ValueError:
-        raise json_error(400, f"not JSON: {excerpt(text)}") from None
-    if not isinstance(body, dict):
-        raise json_error(400, f"expected a JSON object, got {excerpt(text)}")
-    return body
 
 
 def _same_origin(request: web.Request) -> None:
