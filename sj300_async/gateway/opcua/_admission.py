@@ -186,6 +186,13 @@ class Admission:
     def closed(self, session: object) -> None:
         self._drop(session)
 
+    def close(self) -> None:
+        """The server stopped: no session is left to expire."""
+        for pending in self._pending.values():
+            pending.timer.cancel()
+        self._pending.clear()
+        self._open.clear()
+
     @property
     def sessions(self) -> int:
         return len(self._open)

@@ -188,4 +188,5 @@ class Defences:
             yield family
 
     def close(self) -> None:
+        self.admission.close()
         self.checks.close()

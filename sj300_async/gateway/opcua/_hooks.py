@@ -282,7 +282,7 @@ def refuse_registration(server: Server) -> None:
 
 
 #: The asyncua releases guard_requests was written against and tested with; another is
-#: guarded only where its processing has the same shape (_wrappable).
+#: guarded only where its processing has the same shape (_WRAPPED).
 TESTED_ASYNCUA: Final = ("2.1.0",)
 _CREATE: Final = ua.NodeId(ua.ObjectIds.CreateSessionRequest_Encoding_DefaultBinary)
 _ACTIVATE: Final = ua.NodeId(ua.ObjectIds.ActivateSessionRequest_Encoding_DefaultBinary)
@@ -310,13 +310,13 @@ def guard_requests(server: Server, door: Door, discovery: PermissionRuleset) -> 
     unlike = [
         f"{owner.__name__}.{name}"
         for (owner, name), parameters in _WRAPPED.items()
-        if list(inspect.signature(getattr(owner, name, None) or _gone).parameters) != parameters
+        if list(inspect.signature(getattr(owner, name, _gone)).parameters) != parameters
     ]
     if unlike:
         _log.warning(
             "opcua: asyncua %s differs from %s where the gateway guards it (%s): connections "
-            "and sessions unrationed, malformed requests logged by asyncua, passwords checked "
-            "on the event loop",
+            "not rationed, malformed requests left to asyncua, passwords checked on the "
+            "event loop",
             importlib.metadata.version("asyncua"), ", ".join(TESTED_ASYNCUA), ", ".join(unlike),
         )  # fmt: skip
         return False
@@ -327,7 +327,7 @@ def guard_requests(server: Server, door: Door, discovery: PermissionRuleset) -> 
 
 
 def _gone() -> None:
-    """Stands for a method asyncua no longer has."""
+    """Stands for a method asyncua no longer has (its parameters match none)."""
 
 
 def _wrap_processing() -> None:
