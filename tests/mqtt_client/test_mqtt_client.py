@@ -483,6 +483,33 @@ async def test_a_host_name_that_cannot_be_one_is_an_mqtt_error() -> None:
             pass
 
 
+async def test_a_flood_of_oversized_payloads_is_read_into_one_buffer_of_its_own() -> None:
+    """30 MB of 300 KB payloads past max_publish_bytes: skipped as they come, each read of the
+    socket into the protocol's one reused buffer. Before, each read was a fresh 256 KiB
+    object, about one page fault per 6 KB read: 2.1-2.5 times the CPU per MB of a flood."""
+    resource = pytest.importorskip("resource")
+    count, size = 100, 300_000
+    stream = memoryview(b"".join(encode_publish(b"set/x", b"x" * size) for _ in range(count)))
+
+    async def flood(reader: asyncio.StreamReader, writer: asyncio.StreamWriter) -> None:
+        await _connack(reader, writer)
+        for at in range(0, len(stream), 1 << 16):  # drained: the sender's buffer stays small
+            writer.write(stream[at : at + (1 << 16)])
+            await writer.drain()
+        await reader.read()
+
+    async with (
+        scripted(flood) as port,
+        Client("127.0.0.1", port, identifier="c", max_publish_bytes=4096) as c,
+    ):
+        faults = resource.getrusage(resource.RUSAGE_SELF).ru_minflt
+        got = [await anext(c.messages) for _ in range(count)]
+        faults = resource.getrusage(resource.RUSAGE_SELF).ru_minflt - faults
+    assert c.oversized == count
+    assert all(m.length == size and m.skipped for m in got)
+    assert faults < 1000, faults  # fresh buffers: about 4,500
+
+
 async def test_a_broker_that_answers_pings_but_never_acknowledges_ends_the_connection() -> None:
     """The keepalive judges PUBACKs too: pings answered do not keep a stalled publish alive."""
     async with misbehaving_broker(acknowledge=False) as broker:

@@ -225,8 +225,12 @@ class PacketParser:
         self.max_publish_bytes = max_publish_bytes
         self.head_bytes = head_bytes
 
-    def feed(self, data: bytes) -> list[Packet]:
-        """The packets completed by *data* (raises :class:`MalformedPacket`)."""
+    def feed(self, data: bytes | memoryview) -> list[Packet]:
+        """The packets completed by *data* (raises :class:`MalformedPacket`).
+
+        *data* may be a view of the caller's reused read buffer: nothing refers to
+        it once this returns (what is kept, and every packet, is a copy).
+        """
         if self._skip:
             taken = min(self._skip, len(data))
             self._skip -= taken
