@@ -39,6 +39,12 @@ Decisions:
   in ``BridgeStats.oversized``) and never queued; what a client sent (the
   payload, the end of the topic) reaches the error reply, the log and the
   audit log only as a short escaped excerpt (:func:`~sj300_async.gateway.excerpt`).
+- **A flood costs a lookup per message** (:mod:`._intake`): each command
+  spends from a budget per drive and in all before its payload is read;
+  past it, it is dropped unread (counted ``throttled``: no reply, no
+  audit, one log line now and then). Error replies have a budget too
+  (past it counted in ``errors_dropped``): junk must not become a flood
+  of publishes back through the broker.
 - **Never block the poller.** :meth:`MqttBridge.publish` only builds the
   message and leaves it in the outbox, which holds at most one state and
   one availability per drive: a newer one replaces the one not sent yet
@@ -86,6 +92,7 @@ from .. import GATHER_S, GatewayDrive, GatewayView, Refusal, WriteResult, excerp
 from ._commands import DROPPED_BY_STOP, MAX_PAYLOAD_BYTES, error_text, oversized, parse_command
 from ._config import MqttConfig
 from ._discovery import discovery
+from ._intake import CommandIntake
 from ._messages import drive_state
 from ._session import cancel_and_wait, keep_connected, new_client
 from ._stats import BridgeStats, mqtt_families
@@ -135,6 +142,7 @@ class MqttBridge:
         self.config = config
         self.stats = BridgeStats()
         self._subscriptions = Subscriptions(self.stats, _log, "MQTT")
+        self._intake = CommandIntake(_log)
         self.topics = Topics("", config.prefix)  # the gateway's id is known at start
         self.stale_after_s = math.inf
         self._gateway: GatewayView | None = None
@@ -390,9 +398,15 @@ class MqttBridge:
         drive = None if parsed is None else self._drive(*parsed[:2])
         if parsed is None or drive is None:
             self.stats.ignored += 1
-            _log.debug("MQTT: %s names no drive of this gateway: ignored", excerpt(topic))
+            if _log.isEnabledFor(logging.DEBUG):  # the excerpt costs more than the rest
+                _log.debug("MQTT: %s names no drive of this gateway: ignored", excerpt(topic))
             return
         line, node, what = parsed
+        # Spent before the payload is read: past the budget, this is all a flood costs.
+        stop = what == "command" and len(payload) < 64 and payload.strip() == b"stop"
+        if not self._intake.admit((line, node), stop=stop, topic=lambda: excerpt(topic)):
+            self.stats.throttled += 1
+            return
         # The topic as replies and logs show it: the client's part of it excerpted.
         topic = topic[: len(topic) - len(what)] + excerpt(what)
         too_long = oversized(len(payload) if length is None else length)
@@ -496,6 +510,10 @@ class MqttBridge:
         if not audited and self._gateway is not None:
             # The gateway audits what it judges; this was refused before it got there.
             self._gateway.refused(CLIENT, drive, f"mqtt {excerpt(what)}", text, result)
+        if not self._intake.reply((drive.line.name, drive.node)):
+            # Counted and audited, not answered: a flood gets no flood of replies.
+            self.stats.errors_dropped += 1
+            return
         reason = None if result.refusal is None else result.refusal.value
         body = {"topic": topic, "payload": text, "error": error, "reason": reason,
                 "time": time.time()}  # fmt: skip

@@ -34,7 +34,8 @@ class BridgeStats(SessionStats):
     states: collections.Counter[Key] = field(default_factory=collections.Counter)
     #: State messages replaced by a newer one before they were sent, per drive.
     replaced: collections.Counter[Key] = field(default_factory=collections.Counter)
-    #: Error replies dropped: more than MAX_ERRORS were waiting.
+    #: Error replies not published: past the replies' budget (:mod:`._intake`), or
+    #: more than MAX_ERRORS were waiting.
     errors_dropped: int = 0
     #: Command messages received, refused, and discarded (received but not
     #: started before the connection they came on was lost).
@@ -45,6 +46,9 @@ class BridgeStats(SessionStats):
     ignored: int = 0
     #: Commands refused unread: longer than MAX_PAYLOAD_BYTES (also in ``refused``).
     oversized: int = 0
+    #: Commands dropped unread: past the intake budget (:mod:`._intake`); not in
+    #: ``refused`` (no reply, no audit).
+    throttled: int = 0
     #: Commands a bug stopped (logged with its traceback; also in ``refused``): the
     #: drive's command worker goes on with the next.
     failed: int = 0
@@ -56,7 +60,11 @@ _COUNTERS: Final = (
     ("sj300_mqtt_losses", "Connections to the broker lost.", "losses"),
     ("sj300_mqtt_published", "Messages the broker took.", "published"),
     ("sj300_mqtt_lost", "Messages being sent when the connection broke.", "lost"),
-    ("sj300_mqtt_errors_dropped", "Error replies dropped (too many waiting).", "errors_dropped"),
+    (
+        "sj300_mqtt_errors_dropped",
+        "Error replies not published (past their budget, or too many waiting).",
+        "errors_dropped",
+    ),
     (
         "sj300_mqtt_puback_timeouts",
         "Connections ended because a QoS 1 publish waited keepalive_s for its PUBACK.",
@@ -76,6 +84,7 @@ _COMMAND_RESULTS: Final = (
     ("ignored", "ignored"),
     ("oversized", "oversized"),
     ("failed", "failed"),
+    ("throttled", "throttled"),
 )
 
 
@@ -91,7 +100,8 @@ def mqtt_families(stats: BridgeStats) -> Iterator[Metric]:
         "sj300_mqtt_commands",
         "Command messages: received, refused (answered on the error topic), discarded "
         "(the connection was lost first), ignored (no drive of this gateway), oversized "
-        "(refused unread: too long; also counted as refused).",
+        "(refused unread: too long; also counted as refused), throttled (dropped unread, past "
+        "the intake budget: no reply, no audit).",
         labels=["result"],
     )
     for label, attribute in _COMMAND_RESULTS:
