@@ -11,11 +11,16 @@ and a slot that never becomes a working session is taken back soon:
 
 - **Connections per address** (``max_connections_per_address``): one
   address cannot hold every connection the server takes.
-- **Unactivated sessions** per connection (:data:`UNACTIVATED_PER_CONNECTION`)
-  and per address (``max_unactivated_per_address``): past either, CreateSession
-  is refused (``BadTooManySessions``), counted. A client creates one
-  session and activates it at once; two per connection leave room for a
-  client that retries before its first attempt timed out.
+- **Sessions per connection** (:data:`SESSIONS_PER_CONNECTION`, activated
+  or not) **and per address** (``max_connections_per_address``, the
+  connections' share), and **unactivated sessions per address**
+  (``max_unactivated_per_address``): past any, CreateSession is refused
+  (``BadTooManySessions``), counted. A client creates one session on its
+  connection and activates it at once (asyncua serves one session per
+  connection: the last created); two leave room for a client that retries
+  before its first attempt timed out. Anonymous sessions activate without
+  a password, so without the caps on all sessions an attacker would only
+  need to activate them to fill the server.
 - **Closed when not activated in time** (``activate_within_s``, 5 s):
   activation follows creation within a round trip; 5 s is a slow link's
   many round trips, not a 30 s hold.
@@ -47,12 +52,12 @@ from typing import Final
 
 from asyncua import ua
 
-__all__ = ["UNACTIVATED_PER_CONNECTION", "Admission", "Peer", "SessionLimits"]
+__all__ = ["SESSIONS_PER_CONNECTION", "Admission", "Peer", "SessionLimits"]
 
 _log = logging.getLogger("sj300_async.gateway.opcua")
 
-#: Sessions one connection may hold not yet activated (see the module docstring).
-UNACTIVATED_PER_CONNECTION: Final = 2
+#: Sessions one connection may hold, activated or not (see the module docstring).
+SESSIONS_PER_CONNECTION: Final = 2
 
 #: A connection's peer as asyncua names it: (host, port), (host, port, flow, scope).
 Peer = tuple[object, ...]
@@ -64,13 +69,13 @@ class SessionLimits:
 
     #: Sessions at most, activated or not (``max_connections``).
     sessions: int
-    #: Connections one client address may hold at once.
+    #: Connections one client address may hold at once, and sessions.
     max_connections_per_address: int
     #: Sessions one client address may hold not yet activated.
     max_unactivated_per_address: int
     #: Seconds a session may wait for its activation before it is closed.
     activate_within_s: float
-    unactivated_per_connection: int = UNACTIVATED_PER_CONNECTION
+    sessions_per_connection: int = SESSIONS_PER_CONNECTION
 
 
 @dataclass(slots=True)
@@ -93,9 +98,9 @@ class Admission:
         self._close = close
         #: Connections open, by client address.
         self._connections: Counter[Hashable] = Counter()
-        #: Every session open (those the gateway let in), and the unactivated ones,
-        #: oldest first.
-        self._open: set[object] = set()
+        #: Every session open (those the gateway let in): its connection's peer and its
+        #: address; and the unactivated ones, oldest first.
+        self._open: dict[object, tuple[Peer, Hashable]] = {}
         self._pending: OrderedDict[object, _Pending] = OrderedDict()
         #: Sessions refused or closed unactivated, by reason (the metric's label).
         self.sessions_refused: Counter[str] = Counter()
@@ -142,10 +147,12 @@ class Admission:
         limits = self.limits
         if discovery:
             reason, status = "discovery", ua.StatusCodes.BadSecurityPolicyRejected
-        elif self._count(lambda p: p.peer == peer) >= limits.unactivated_per_connection:
+        elif self._held(0, peer) >= limits.sessions_per_connection:
             reason = "per_connection"
-        elif self._count(lambda p: p.address == address) >= limits.max_unactivated_per_address:
+        elif self._held(1, address) >= limits.max_connections_per_address:
             reason = "per_address"
+        elif self._count(lambda p: p.address == address) >= limits.max_unactivated_per_address:
+            reason = "unactivated_per_address"
         elif len(self._open) >= limits.sessions:
             if not self._pending:
                 reason = "full"  # every slot holds an activated session
@@ -174,7 +181,7 @@ class Admission:
                 return status
         loop = asyncio.get_running_loop()
         timer = loop.call_later(self.limits.activate_within_s, self._expire, session)
-        self._open.add(session)
+        self._open[session] = (peer, _address(peer))
         self._pending[session] = _Pending(peer, _address(peer), timer)
         return None
 
@@ -210,7 +217,7 @@ class Admission:
         self._close(session)
 
     def _drop(self, session: object) -> None:
-        self._open.discard(session)
+        self._open.pop(session, None)
         pending = self._pending.pop(session, None)
         if pending is not None:
             pending.timer.cancel()
@@ -218,6 +225,11 @@ class Admission:
     def _count(self, match: Callable[[_Pending], bool]) -> int:
         # The unactivated are few (each connection and address holds a handful): a scan.
         return sum(1 for pending in self._pending.values() if match(pending))
+
+    def _held(self, field: int, key: Hashable) -> int:
+        """Sessions open whose peer (*field* 0) or address (1) is *key* (at most
+        max_connections: a scan, once per CreateSession)."""
+        return sum(1 for held in self._open.values() if held[field] == key)
 
 
 def _address(peer: Peer) -> Hashable:

@@ -55,7 +55,8 @@ _ANSWERS: Final = {
 #: The label values each family always shows (zero until counted).
 _LOGIN_REASONS: Final = ("password", "rate", "busy", "unencrypted", "token", "certificate")
 _SESSION_REASONS: Final = (
-    "per_connection", "per_address", "discovery", "full", "expired", "evicted",
+    "per_connection", "per_address", "unactivated_per_address", "discovery", "full", "expired",
+    "evicted",
 )  # fmt: skip
 
 
@@ -166,8 +167,9 @@ class Defences:
             ),
             (
                 "sj300_opcua_refused_sessions",
-                "Sessions refused at creation (unactivated caps, a discovery-only channel, "
-                "every slot activated) or closed unactivated (expired, evicted).",
+                "Sessions refused at creation (a connection's or an address's share, an "
+                "address's unactivated ones, a discovery-only channel, every slot activated) "
+                "or closed unactivated (expired, evicted).",
                 "reason", _SESSION_REASONS, self.admission.sessions_refused,
             ),
             (
