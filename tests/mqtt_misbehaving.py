@@ -19,8 +19,10 @@ code of its own (not the gateway's codec, which is what is under test):
   filters in :attr:`MisbehavingBroker.refuse` (after ``suback_delay_s``),
   while :attr:`MisbehavingBroker.suback` is true; else swallowed, never
   answered (each filter and its arrival time kept). UNSUBSCRIBE: UNSUBACK.
+  Right after a SUBACK granting a filter of :attr:`MisbehavingBroker.deliver`,
+  its messages (QoS 0), as a broker relays a flood already under way.
 
-Nothing is delivered to the clients. Tests wait on :meth:`MisbehavingBroker.until`,
+Nothing else is delivered to the clients. Tests wait on :meth:`MisbehavingBroker.until`,
 woken by each packet (a condition), never on a guessed time.
 """
 
@@ -74,6 +76,8 @@ class MisbehavingBroker:
     suback: bool = True
     #: How late each SUBACK goes.
     suback_delay_s: float = 0.0
+    #: Messages (topic, payload) sent at QoS 0 right after the SUBACK granting a filter.
+    deliver: dict[str, list[tuple[str, bytes]]] = field(default_factory=dict)
     port: int = 0
     connections: list[Connection] = field(default_factory=list)
     #: Set on the way out: a connection that still arrives is closed at once.
@@ -171,6 +175,7 @@ class MisbehavingBroker:
         self, connection: Connection, body: bytes, writer: asyncio.StreamWriter, now: float
     ) -> None:
         codes = bytearray()
+        relayed: list[bytes] = []
         at = 2
         while at < len(body):
             topic_filter, at = _string(body, at)
@@ -182,13 +187,30 @@ class MisbehavingBroker:
             code = 0x80 if topic_filter.decode() in self.refuse else qos
             connection.subscriptions.append((topic_filter.decode(), qos, code))
             codes.append(code)
+            if code != 0x80:
+                relayed += [
+                    _publish_packet(t, p) for t, p in self.deliver.get(topic_filter.decode(), ())
+                ]
         if not self.suback:
             return
-        suback = bytes((0x90, 2 + len(codes))) + body[:2] + codes
+        suback = bytes((0x90, 2 + len(codes))) + body[:2] + codes + b"".join(relayed)
         if self.suback_delay_s:
             asyncio.get_running_loop().call_later(self.suback_delay_s, writer.write, suback)
         else:
             writer.write(suback)
+
+
+def _publish_packet(topic: str, payload: bytes) -> bytes:
+    """PUBLISH at QoS 0."""
+    name = topic.encode()
+    size = 2 + len(name) + len(payload)
+    length = bytearray()
+    while True:
+        size, digit = divmod(size, 128)
+        length.append(digit | (0x80 if size else 0))
+        if not size:
+            break
+    return b"\x30" + bytes(length) + struct.pack("!H", len(name)) + name + payload
 
 
 def _string(data: bytes, at: int) -> tuple[bytes, int]:
@@ -232,10 +254,16 @@ async def misbehaving_broker(
     puback_delay_s: float = 0.0,
     suback: bool = True,
     suback_delay_s: float = 0.0,
+    deliver: dict[str, list[tuple[str, bytes]]] | None = None,
 ) -> AsyncIterator[MisbehavingBroker]:
     """A :class:`MisbehavingBroker` on a free loopback port; closed, clients and all, on exit."""
     broker = MisbehavingBroker(
-        acknowledge, puback_delay_s, set(refuse or ()), suback=suback, suback_delay_s=suback_delay_s
+        acknowledge,
+        puback_delay_s,
+        set(refuse or ()),
+        suback=suback,
+        suback_delay_s=suback_delay_s,
+        deliver=dict(deliver or {}),
     )
     tasks: set[asyncio.Task[None]] = set()
 

@@ -22,6 +22,7 @@ from typing import Any
 
 import pytest
 from mqtt_broker import Broker, publish, running_broker
+from mqtt_misbehaving import misbehaving_broker
 from waiting import wait_for
 
 from sj300_async.gateway.mqtt import Topics
@@ -29,6 +30,7 @@ from sj300_async.gateway.mqtt._intake import COMMANDS, REPLIES, SAY_EVERY_S, Com
 
 from .conftest import SimLine, drive_of, running_gateway
 from .test_gateway_mqtt import errors, leased, mqtt_toml, subscriber
+from .test_gateway_mqtt_broker_faults import bridge, toml
 
 ATTACKER = Path(__file__).parents[1] / "adversarial" / "attacker.py"
 TOPICS = Topics("gw1")
@@ -109,6 +111,30 @@ async def test_a_flood_is_dropped_unread_answered_within_a_budget_and_a_stop_get
     assert lag.samples >= 10 * elapsed, lag  # the probe ran
     assert lag.p99_s < P99_BOUND_S, lag
     assert lag.max_s < MAX_BOUND_S, lag
+
+
+async def test_a_flood_under_way_at_a_connection_does_not_hang_its_set_up(
+    sim_line: SimLine,
+) -> None:
+    """Junk right after the commands' SUBACK, ahead of the answers the set-up still waits for
+    (Home Assistant's SUBACK, the PUBACK of "online"). Before the receiver ran during the
+    set-up, 3,000 messages stopped the client reading past its 1,000 queued: those answers
+    never came, and the bridge hung for ever, silent (the keepalive judges nothing while
+    the reader is behind)."""
+    junk = [(TOPICS.command("hall", 1, "x"), b"junk")] * 3000
+    async with (
+        misbehaving_broker(deliver={TOPICS.command_filter: junk}) as broker,
+        running_gateway(toml(sim_line.url, broker, keepalive_s=1)) as gateway,
+    ):
+        mqtt = bridge(gateway)
+        await wait_for(lambda: mqtt.connected, "the set-up done", timeout=10)
+        await wait_for(lambda: mqtt.stats.commands == len(junk), "the junk read")
+        stats = mqtt.stats
+    (connection,) = broker.connections  # the first connection, never given up
+    assert (stats.connects, stats.suback_timeouts, stats.losses) == (1, 0, 0)
+    assert (TOPICS.availability, b"online", 1) in connection.publishes
+    assert stats.throttled >= len(junk) - COMMANDS.burst - COMMANDS.per_s * 2, stats
+    assert stats.discarded == 0  # taken as this connection's, not as a stale one's
 
 
 # -- the budgets, sans-IO ------------------------------------------------------------------------

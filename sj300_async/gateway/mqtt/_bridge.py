@@ -45,6 +45,8 @@ Decisions:
   audit, one log line now and then). Error replies have a budget too
   (past it counted in ``errors_dropped``): junk must not become a flood
   of publishes back through the broker.
+  Messages are read from the connection's first moment, its set-up
+  included: the broker's answers the set-up waits for come behind them.
 - **Never block the poller.** :meth:`MqttBridge.publish` only builds the
   message and leaves it in the outbox, which holds at most one state and
   one availability per drive: a newer one replaces the one not sent yet
@@ -314,15 +316,25 @@ class MqttBridge:
 
     async def _connection(self, client: Client, connected: Callable[[], None]) -> None:
         """One connection: set up, then publish and receive until it fails."""
+        self._epoch += 1  # the commands of this connection, from its first message
+        self._session_name = f"mqtt session {self._epoch}"
+        # The receiver runs from the start: the set-up waits for the broker's answers (a
+        # SUBACK, the PUBACK of "online"), which come behind the messages sent to us
+        # before them. Left unread, past the client's max_queued_messages, they stop it
+        # reading, and those answers never came: a flood on the command topics at a
+        # (re)connection hung the bridge for ever, silent.
+        receiver = asyncio.create_task(self._receiver(client), name="mqtt receiver")
+        receiver.add_done_callback(_retrieved)  # its error is the set-up's too
         try:
             await self._setup(client)
             connected()
-            await self._session(client)
+            await self._session(client, receiver)
         except asyncio.CancelledError:
             if self._closing:
                 await self._say_offline(client)
             raise  # and the clean disconnect: the broker drops the will
         finally:
+            receiver.cancel()  # (awaited by the session, when there was one)
             self._client = None
             self._epoch += 1  # commands received on that connection are stale now
             session, self._session_name = self._session_name, None
@@ -354,17 +366,12 @@ class MqttBridge:
         if self.config.discovery:
             await subscribe(client, self._birth, qos=qos, unheard="Home Assistant's status")
         await client.publish(self.topics.availability, AVAILABLE, qos=qos, retain=True)
-        self._epoch += 1
-        self._session_name = f"mqtt session {self._epoch}"
         self._client = client
         self._announce()
 
-    async def _session(self, client: Client) -> None:
-        """Publish and receive until the connection fails (raises its MqttError)."""
-        tasks = {
-            asyncio.create_task(self._publisher(client), name="mqtt publisher"),
-            asyncio.create_task(self._receiver(client), name="mqtt receiver"),
-        }
+    async def _session(self, client: Client, receiver: asyncio.Task[None]) -> None:
+        """Publish, and receive (*receiver*), until the connection fails (raises its MqttError)."""
+        tasks = {asyncio.create_task(self._publisher(client), name="mqtt publisher"), receiver}
         try:
             done, _ = await asyncio.wait(tasks, return_when=asyncio.FIRST_COMPLETED)
         finally:
@@ -554,3 +561,9 @@ class MqttBridge:
         if pending:
             self.stats.lost += pending
             _log.debug("MQTT: %d messages not published before stopping", pending)
+
+
+def _retrieved(task: asyncio.Task[None]) -> None:
+    """Mark *task*'s error seen: a set-up that failed first has it already."""
+    if not task.cancelled():
+        task.exception()
