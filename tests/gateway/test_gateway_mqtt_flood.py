@@ -26,7 +26,12 @@ from mqtt_misbehaving import misbehaving_broker
 from waiting import wait_for
 
 from sj300_async.gateway.mqtt import Topics
-from sj300_async.gateway.mqtt._intake import COMMANDS, REPLIES, SAY_EVERY_S, CommandIntake
+from sj300_async.gateway.mqtt._intake import (
+    COMMAND_BUDGET,
+    REPLY_BUDGET,
+    SAY_EVERY_S,
+    CommandIntake,
+)
 
 from .conftest import SimLine, drive_of, running_gateway
 from .test_gateway_mqtt import errors, leased, mqtt_toml, subscriber
@@ -96,12 +101,12 @@ async def test_a_flood_is_dropped_unread_answered_within_a_budget_and_a_stop_get
     assert report["sent"] >= 1000, report  # the attack happened
     # What the budget let through for drive 1 (the stop has its own), and no more.
     taken = stats.commands - stats.throttled
-    assert taken <= COMMANDS.burst + COMMANDS.per_s * elapsed + 5, (taken, elapsed)
+    assert taken <= COMMAND_BUDGET.burst + COMMAND_BUDGET.per_s * elapsed + 5, (taken, elapsed)
     assert stats.throttled >= report["sent"] - taken, (stats, report)
     assert stats.refused <= taken
     # Refusals answered within their own budget; the rest counted, not published.
     replies = errors(sub, 1)
-    assert 1 <= len(replies) <= REPLIES.burst + REPLIES.per_s * elapsed + 1, len(replies)
+    assert 1 <= len(replies) <= REPLY_BUDGET.burst + REPLY_BUDGET.per_s * elapsed + 1, len(replies)
     assert stats.errors_dropped >= stats.refused - len(replies) - 1
     commands = {s.labels["result"]: s.value for s in families["sj300_mqtt_commands"].samples}
     assert commands["throttled"] == stats.throttled
@@ -133,7 +138,7 @@ async def test_a_flood_under_way_at_a_connection_does_not_hang_its_set_up(
     (connection,) = broker.connections  # the first connection, never given up
     assert (stats.connects, stats.suback_timeouts, stats.losses) == (1, 0, 0)
     assert (TOPICS.availability, b"online", 1) in connection.publishes
-    assert stats.throttled >= len(junk) - COMMANDS.burst - COMMANDS.per_s * 2, stats
+    assert stats.throttled >= len(junk) - COMMAND_BUDGET.burst - COMMAND_BUDGET.per_s * 2, stats
     assert stats.discarded == 0  # taken as this connection's, not as a stale one's
 
 
@@ -159,9 +164,9 @@ def _taken(intake: CommandIntake, drive: tuple[str, int], n: int, *, stop: bool 
 def test_a_drive_gets_its_burst_then_its_rate_and_its_flood_leaves_the_others_theirs() -> None:
     clock = Clock()
     intake = _intake(clock)
-    assert _taken(intake, ("hall", 1), 100) == COMMANDS.burst
+    assert _taken(intake, ("hall", 1), 100) == COMMAND_BUDGET.burst
     clock.now += 1.0
-    assert _taken(intake, ("hall", 1), 100) == COMMANDS.per_s
+    assert _taken(intake, ("hall", 1), 100) == COMMAND_BUDGET.per_s
     assert _taken(intake, ("hall", 2), 5) == 5  # another drive: untouched
     # A stop has budgets of its own: junk never uses them up.
     assert _taken(intake, ("hall", 1), 1, stop=True) == 1
@@ -172,27 +177,27 @@ def test_a_flood_spread_over_every_drive_is_bounded_in_all() -> None:
     intake = _intake(clock)
     drives = [("hall", node) for node in range(1, 101)]
     taken = sum(_taken(intake, drive, 5) for drive in drives)
-    assert taken == COMMANDS.all_burst
+    assert taken == COMMAND_BUDGET.all_burst
     clock.now += 1.0
-    assert sum(_taken(intake, drive, 5) for drive in drives) == COMMANDS.all_per_s
+    assert sum(_taken(intake, drive, 5) for drive in drives) == COMMAND_BUDGET.all_per_s
     # Refused in all, a drive's own budget was given back: full once "all" refills.
-    clock.now += COMMANDS.all_burst / COMMANDS.all_per_s
-    assert _taken(intake, ("hall", 100), COMMANDS.burst) == COMMANDS.burst
+    clock.now += COMMAND_BUDGET.all_burst / COMMAND_BUDGET.all_per_s
+    assert _taken(intake, ("hall", 100), COMMAND_BUDGET.burst) == COMMAND_BUDGET.burst
 
 
 def test_error_replies_have_a_smaller_budget() -> None:
     clock = Clock()
     intake = _intake(clock)
-    assert sum(intake.reply(("hall", 1)) for _ in range(100)) == REPLIES.burst
+    assert sum(intake.reply(("hall", 1)) for _ in range(100)) == REPLY_BUDGET.burst
     clock.now += 1.0
-    assert sum(intake.reply(("hall", 1)) for _ in range(100)) == REPLIES.per_s
+    assert sum(intake.reply(("hall", 1)) for _ in range(100)) == REPLY_BUDGET.per_s
 
 
 def test_drops_are_said_once_then_at_most_every_interval(caplog: pytest.LogCaptureFixture) -> None:
     caplog.set_level(logging.WARNING, logger="test.intake")
     clock = Clock()
     intake = _intake(clock)
-    _taken(intake, ("hall", 1), COMMANDS.burst)
+    _taken(intake, ("hall", 1), COMMAND_BUDGET.burst)
     topics: list[str] = []
 
     def topic() -> str:
@@ -209,7 +214,8 @@ def test_drops_are_said_once_then_at_most_every_interval(caplog: pytest.LogCaptu
                                "intake budget (20 at once and 10/s per drive, 200 and 100/s "
                                "in all)")  # fmt: skip
     clock.now += SAY_EVERY_S
-    assert _taken(intake, ("hall", 1), COMMANDS.burst) == COMMANDS.burst  # refilled: silent
+    burst = COMMAND_BUDGET.burst
+    assert _taken(intake, ("hall", 1), burst) == burst  # refilled: taken, nothing said
     assert not intake.admit(("hall", 1), stop=False, topic=topic)  # said: the first one's
     lines = [r.getMessage() for r in caplog.records]
     assert len(lines) == 2, lines

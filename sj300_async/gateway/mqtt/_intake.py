@@ -9,7 +9,7 @@ error publishes a second back through the broker. So the bridge spends
 from :class:`CommandIntake` before it reads a command's payload, and
 before it publishes a refusal:
 
-- **Commands, per drive and in all** (:data:`COMMANDS`): past either, a
+- **Commands, per drive and in all** (:data:`COMMAND_BUDGET`): past either, a
   command is dropped unread, counted (``result="throttled"``), with no
   reply and no audit record (that would be the flood again). Per drive,
   so that junk aimed at one drive leaves the others' commands through; in
@@ -18,7 +18,7 @@ before it publishes a refusal:
   flood is refused there without using up the common budget.
 - **Stops have budgets of their own**, the same size: junk never uses up
   a stop's. A flood of stops only stops the motor, which one stop does.
-- **Error replies** (:data:`REPLIES`): past the budget, a refusal is still
+- **Error replies** (:data:`REPLY_BUDGET`): past the budget, a refusal is still
   counted and audited, but not answered on ``…/error`` (counted in
   ``errors_dropped``).
 - **Generous defaults.** A person or Home Assistant sends a few commands a
@@ -42,7 +42,7 @@ from typing import Final
 
 from .. import KeyedBudget
 
-__all__ = ["COMMANDS", "REPLIES", "SAY_EVERY_S", "Budget", "CommandIntake"]
+__all__ = ["COMMAND_BUDGET", "REPLY_BUDGET", "SAY_EVERY_S", "Budget", "CommandIntake"]
 
 #: At most one "commands dropped" line this often.
 SAY_EVERY_S: Final = 10.0
@@ -66,9 +66,9 @@ class Budget:
 
 
 #: Commands taken (stops: the same again, apart).
-COMMANDS: Final = Budget(burst=20, per_s=10, all_burst=200, all_per_s=100)
+COMMAND_BUDGET: Final = Budget(burst=20, per_s=10, all_burst=200, all_per_s=100)
 #: Error replies published.
-REPLIES: Final = Budget(burst=10, per_s=2, all_burst=50, all_per_s=20)
+REPLY_BUDGET: Final = Budget(burst=10, per_s=2, all_burst=50, all_per_s=20)
 
 
 class _TwoLevel:
@@ -96,8 +96,8 @@ class CommandIntake:
         self,
         log: logging.Logger,
         *,
-        commands: Budget = COMMANDS,
-        replies: Budget = REPLIES,
+        commands: Budget = COMMAND_BUDGET,
+        replies: Budget = REPLY_BUDGET,
         clock: Callable[[], float] = time.monotonic,
     ) -> None:
         self._log = log
