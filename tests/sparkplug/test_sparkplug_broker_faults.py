@@ -89,3 +89,22 @@ async def test_a_subscribe_never_answered_is_counted_and_the_node_connects_again
     assert len(said) == 1, said
     assert said[0].startswith(f"MQTT: cannot connect to {broker.url} (no SUBACK for 1."), said
     assert f"SUBSCRIBE packet 1 ({NCMD}) of client sj300-gw1-spb" in said[0], said
+
+
+async def test_a_flood_under_way_at_a_connection_does_not_hang_its_set_up(
+    sim_line: SimLine,
+) -> None:
+    """3,000 NCMDs right after NCMD's SUBACK, ahead of DCMD's: before the receiver ran while
+    the node subscribed, the client stopped reading past its 1,000 queued, DCMD's SUBACK
+    never came, and the node stayed unborn for ever, silent."""
+    junk = [(NCMD, b"junk")] * 3000
+    async with misbehaving_broker(deliver={NCMD: junk}) as broker:
+        text = spb_toml(sim_line.url, broker, mqtt_extra="keepalive_s = 1")
+        async with running_gateway(text) as gateway:
+            node = edge(gateway)
+            await wait_for(lambda: node.born, "born", timeout=10)
+            await wait_for(lambda: node.stats.commands == len(junk), "the junk read")
+            stats = node.stats
+    assert len(broker.connections) == 1
+    assert (stats.connects, stats.suback_timeouts, stats.losses) == (1, 0, 0)
+    assert stats.bad_input["malformed"] == len(junk)

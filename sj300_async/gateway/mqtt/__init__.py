@@ -49,6 +49,7 @@ from ._session import (
     cancel_and_wait,
     keep_connected,
     new_client,
+    reader,
 )
 from ._stats import BridgeStats, mqtt_families, refused_subscriptions
 from ._subscriptions import Subscriptions
@@ -101,6 +102,7 @@ __all__ = [
     "parse_command",
     "parse_fleet_url",
     "parse_state_topic",
+    "reader",
     "refused_subscriptions",
     "state_message",
 ]

@@ -96,7 +96,7 @@ from ._config import MqttConfig
 from ._discovery import discovery
 from ._intake import CommandIntake
 from ._messages import drive_state
-from ._session import cancel_and_wait, keep_connected, new_client
+from ._session import cancel_and_wait, keep_connected, new_client, reader
 from ._stats import BridgeStats, mqtt_families
 from ._subscriptions import Subscriptions
 from ._topics import AVAILABLE, UNAVAILABLE, StateMessage, Topics
@@ -323,8 +323,7 @@ class MqttBridge:
         # before them. Left unread, past the client's max_queued_messages, they stop it
         # reading, and those answers never came: a flood on the command topics at a
         # (re)connection hung the bridge for ever, silent.
-        receiver = asyncio.create_task(self._receiver(client), name="mqtt receiver")
-        receiver.add_done_callback(_retrieved)  # its error is the set-up's too
+        receiver = reader(self._receiver(client), "mqtt receiver")
         try:
             await self._setup(client)
             connected()
@@ -561,9 +560,3 @@ class MqttBridge:
         if pending:
             self.stats.lost += pending
             _log.debug("MQTT: %d messages not published before stopping", pending)
-
-
-def _retrieved(task: asyncio.Task[None]) -> None:
-    """Mark *task*'s error seen: a set-up that failed first has it already."""
-    if not task.cancelled():
-        task.exception()

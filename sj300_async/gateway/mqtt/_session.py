@@ -42,6 +42,11 @@ Decisions:
 - Cancellation ends the loop at once (whatever it was doing); the body's
   own ``except CancelledError`` runs first, inside the connection (the
   bridge says "offline" there).
+- A body reads its messages from the connection's first moment, while it
+  sets up (:func:`reader`): the broker's answers the set-up waits for
+  (SUBACKs, PUBACKs) come behind the messages it sent before them, and a
+  client whose reader is behind stops reading: unread, 1,000 messages of
+  a flood under way at a (re)connection hung the set-up for ever.
 """
 
 from __future__ import annotations
@@ -50,9 +55,9 @@ import asyncio
 import collections
 import logging
 import ssl
-from collections.abc import Awaitable, Callable
+from collections.abc import Awaitable, Callable, Coroutine
 from dataclasses import dataclass, field
-from typing import TYPE_CHECKING, Final
+from typing import TYPE_CHECKING, Any, Final
 
 from .client import Client, MqttError, PublishUnacknowledged, SubscribeUnacknowledged, Will
 
@@ -67,6 +72,7 @@ __all__ = [
     "cancel_and_wait",
     "keep_connected",
     "new_client",
+    "reader",
 ]
 
 BACKOFF_FIRST_S: Final = 0.5
@@ -228,6 +234,17 @@ async def keep_connected(
         await asyncio.sleep(delay)
         if on_attempt is not None:
             on_attempt(attempt)
+
+
+def reader(receive: Coroutine[Any, Any, None], name: str) -> asyncio.Task[None]:
+    """*receive* (a body's reader) as a task started now, to run while the body sets up.
+
+    Its error is marked retrieved: it is the connection's, which the set-up
+    meets too when it fails first. The body cancels it when it ends.
+    """
+    task = asyncio.get_running_loop().create_task(receive, name=name)
+    task.add_done_callback(lambda done: None if done.cancelled() else done.exception())
+    return task
 
 
 async def cancel_and_wait(

@@ -88,6 +88,7 @@ from ..mqtt import (
     error_text,
     keep_connected,
     new_client,
+    reader,
 )
 from ..mqtt.client import Client, MqttError, Will
 from ._commands import judge
@@ -450,8 +451,17 @@ class EdgeNode:
         )
 
     async def _connection(self, client: Client, connected: Callable[[], None]) -> None:
+        state = self._state_topic
+        self._born = False
+        if state is not None:
+            # The host's word counts on the connection it came on: a broker that
+            # restarted empty may hold no STATE at all (the stamp stays, to order).
+            self.host_online = None
+        self._epoch += 1
+        self._session_name = f"sparkplug session {self._epoch}"
+        # Read while subscribing: a flood on NCMD ahead of DCMD's SUBACK hung it (reader).
+        receiver = reader(self._receiver(client), "sparkplug receiver")
         try:
-            state = self._state_topic
             subscribe = self._subscriptions.subscribe  # a refusal: said, counted, a problem
             if state is not None:
                 await subscribe(client, state, qos=1, unheard="the primary host's STATE")
@@ -459,17 +469,10 @@ class EdgeNode:
             await subscribe(
                 client, self.topic("DCMD", "+"), qos=1, unheard="device commands (DCMD)"
             )
-            self._born = False
-            if state is not None:
-                # The host's word counts on the connection it came on: a broker that
-                # restarted empty may hold no STATE at all (the stamp stays, to order).
-                self.host_online = None
-            self._epoch += 1
-            self._session_name = f"sparkplug session {self._epoch}"
             self._client = client
             connected()
             self._wake.set()
-            await self._session(client)
+            await self._session(client, receiver)
         except asyncio.CancelledError:
             if self._closing and self._born:
                 await self._say_dead(client)
@@ -483,6 +486,7 @@ class EdgeNode:
                 await self._say_dead(client, lost_is_expected=True)
             raise
         finally:
+            receiver.cancel()  # (awaited by the session, when there was one)
             self._client = None
             self._born = False
             self._end_session()
@@ -509,10 +513,10 @@ class EdgeNode:
             level = logging.DEBUG if lost_is_expected else logging.WARNING
             _log.log(level, "Sparkplug: could not publish NDEATH: %s", exc or "time-out")
 
-    async def _session(self, client: Client) -> None:
+    async def _session(self, client: Client, receiver: asyncio.Task[None]) -> None:
         tasks = {
             asyncio.create_task(self._publisher(client), name="sparkplug publisher"),
-            asyncio.create_task(self._receiver(client), name="sparkplug receiver"),
+            receiver,
             asyncio.create_task(self._ticker(client), name="sparkplug ticker"),
         }
         try:
