@@ -32,6 +32,7 @@ BENCHMARKS: dict[str, str] = {
     "workbench": "benchmarks.bench_workbench",
     "opcua": "benchmarks.bench_opcua",
     "plant": "benchmarks.bench_plant",
+    "attack": "benchmarks.bench_attack",
 }
 
 

@@ -254,7 +254,7 @@ def test_best_time_runs_once_untimed_then_each_repeat(harness: ModuleType) -> No
 
 #: Every benchmark, in the order they run and print.
 ALL_BENCHMARKS = ("codec", "tcp", "loopback", "latency", "wire", "scale", "gateway", "mqtt",
-                  "workbench", "opcua", "plant")  # fmt: skip
+                  "workbench", "opcua", "plant", "attack")  # fmt: skip
 
 
 def test_every_registered_benchmark_has_the_module_contract(harness: ModuleType) -> None:
