@@ -32,11 +32,11 @@ collector frees (reference cycles) still starts a collection once
 
 Why 5,000 and not more: a young collection holds the event loop for as
 long as it scans, about a microsecond per object on a loaded edge box.
-At 20,000 (issue 30's choice, for CPU alone) each one held it 13–46 ms,
+At 20,000 (issue 30's choice, for CPU alone) each one held it 13-46 ms,
 and a client sending requests as fast as the gateway answers them
 (issue 41's attacks) made one every few hundred milliseconds: the loop's
-p99 lag went to 53 ms against a budget of 50. At 5,000 they hold it 5–8
-ms (3–14 ms under the combined attack).
+p99 lag went to 53 ms against a budget of 50. At 5,000 they hold it 5-8
+ms (3-14 ms under the combined attack).
 """
 
 from __future__ import annotations

@@ -15,8 +15,9 @@ is read.
 A check costs about 65 ms of one core. The gateway's event loop also polls
 the lines and runs the lapse stops, so a door never checks a password on
 it: :class:`PasswordChecks` runs the checks in a thread (hashlib's scrypt
-releases the GIL), :data:`CHECK_THREADS` at a time, with at most
-:data:`CHECKS_QUEUED` more waiting; past that a check is refused unchecked
+releases the GIL), :data:`CHECK_THREADS` at a time in the whole process,
+with at most :data:`CHECKS_QUEUED` more waiting per door; past that a check
+is refused unchecked
 (``None``: the door answers "busy" and counts it). One thread, not one per
 core: a burst then takes one core and leaves the other to the loop, and
 the queue bounds how long a legitimate login waits behind it (about
@@ -122,24 +123,41 @@ def verify_password(password: str, stored: str) -> bool:
     return hmac.compare_digest(candidate, digest)
 
 
-#: Password checks running at once (threads), and waiting beyond them, per :class:`PasswordChecks`.
+#: Password checks running at once in the process (threads), and waiting beyond them,
+#: per :class:`PasswordChecks` (per door).
 CHECK_THREADS: Final = 1
 CHECKS_QUEUED: Final = 8
+
+
+_executor: concurrent.futures.ThreadPoolExecutor | None = None
+
+
+def _checking_thread() -> concurrent.futures.ThreadPoolExecutor:
+    """The process's one password-checking thread, made when first needed."""
+    global _executor
+    if _executor is None:
+        _executor = concurrent.futures.ThreadPoolExecutor(
+            max_workers=CHECK_THREADS, thread_name_prefix="sj300-password"
+        )
+    return _executor
 
 
 class PasswordChecks:
     """Password checks off the event loop, bounded (see the module docstring).
 
+    Every door has its own (its own queue and counts), and all of them share the
+    process's one checking thread: a flood of logins on two doors at once still takes
+    one core, not two, and leaves the other to the loop.
+
     Args:
-        threads: checks running at once.
-        queued: checks waiting beyond those; past them, :meth:`verify` refuses.
+        queued: checks this door may have submitted and not finished beyond the one
+            running; past them, :meth:`verify` refuses.
     """
 
-    def __init__(self, threads: int = CHECK_THREADS, queued: int = CHECKS_QUEUED) -> None:
-        self._executor = concurrent.futures.ThreadPoolExecutor(
-            max_workers=threads, thread_name_prefix="sj300-password"
-        )
-        self._capacity = threads + queued
+    def __init__(self, queued: int = CHECKS_QUEUED) -> None:
+        self._capacity = CHECK_THREADS + queued
+        self._futures: set[concurrent.futures.Future[bool]] = set()
+        self._closed = False
         #: Checks submitted and not finished (a cancelled waiter's check still runs).
         self.pending = 0
         #: Checks run, and checks refused because the queue was full, since the start.
@@ -153,29 +171,33 @@ class PasswordChecks:
         away): the check then finishes in its thread and still counts as pending
         until it does, so a flood of abandoned logins cannot grow the queue.
         """
-        if self.pending >= self._capacity:
+        if self._closed or self.pending >= self._capacity:
             self.busy += 1
             return None
         loop = asyncio.get_running_loop()
         self.pending += 1
         self.checked += 1
-        future = self._executor.submit(verify_password, password, stored)
+        future = _checking_thread().submit(verify_password, password, stored)
+        self._futures.add(future)
 
-        def finished(_: concurrent.futures.Future[bool]) -> None:
+        def finished(done: concurrent.futures.Future[bool]) -> None:
             # In the worker thread: the count is the loop's, so it is changed there.
             # A loop already closed (the process stopping) has nobody left to tell.
             with contextlib.suppress(RuntimeError):
-                loop.call_soon_threadsafe(self._finished)
+                loop.call_soon_threadsafe(self._finished, done)
 
         future.add_done_callback(finished)
         return await asyncio.wrap_future(future, loop=loop)
 
-    def _finished(self) -> None:
+    def _finished(self, future: concurrent.futures.Future[bool]) -> None:
+        self._futures.discard(future)
         self.pending -= 1
 
     def close(self) -> None:
-        """Stop the thread once the running check ends; waiting checks are cancelled."""
-        self._executor.shutdown(wait=False, cancel_futures=True)
+        """Refuse new checks and cancel this door's waiting ones (a running one finishes)."""
+        self._closed = True
+        for future in list(self._futures):
+            future.cancel()
 
 
 def _password_problem(stored: str) -> str | None:

@@ -124,6 +124,8 @@ GATEWAY_NAMES = (
     "AuditLog", "COMMAND_LINE", "ConfigContext", "ConfigTable", "Controller", "DEFAULT_LEASE_S",
     "DEFAULT_STALE_AFTER_S", "DriveView", "Endpoint", "Flag", "Gateway", "GatewayConfig",
     "GatewayConfigError", "GatewayDrive", "GatewayLine", "GatewayView", "Heartbeat",
+    # the doors' shared defences (issue 41)
+    "KeyedBudget", "PasswordChecks",
     # a northbound that cannot start (its port in use...)
     "GatewayStartError",
     "LAPSE_ACTIONS", "POLL_READS", "LapseAction", "Lease", "LineConfig", "LineView", "Northbound",
@@ -159,8 +161,10 @@ GATEWAY_MODBUS_NAMES = (
 GATEWAY_MQTT_NAMES = (
     "AVAILABLE", "BridgeStats", "BrokerUnreachable", "COMMANDS", "COMMAND_DIRECTIONS",
     "DEFAULT_PREFIX", "DISCOVERY_PREFIX", "FLEET_SCHEMES", "Fleet", "FleetUrl", "Malformed",
-    "MqttConfig", "NORTHBOUND", "SessionStats", "StateMessage", "SubscriptionRefused", "Topics",
-    "UNAVAILABLE", "backoff", "cancel_and_wait", "discovery", "error_text", "follow",
+    "MqttConfig", "NORTHBOUND", "SessionStats", "StateMessage", "SubscriptionRefused",
+    "Subscriptions", "Topics",
+    "UNAVAILABLE", "backoff", "cancel_and_wait", "discovery", "error_text", "follow", "reader",
+    "refused_subscriptions",
     "is_fleet_url", "keep_connected", "mqtt_families", "node_id", "parse_command",
     "parse_fleet_url", "parse_state_topic", "state_message",
     # Sparkplug B's settings, and the command checks it shares with the JSON topics (issue 30)

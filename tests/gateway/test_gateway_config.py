@@ -534,7 +534,8 @@ REFUSALS = [
     ),
     pytest.param(
         '[gateway]\nid = "gw1"\n\nmodbus.listen = ":502"\n' + LINE,
-        "gateway.toml:4: gateway.modbus: unknown key 'modbus' (use id, stale_after_s, audit_log, loop_lag_limit_s)",
+        "gateway.toml:4: gateway.modbus: unknown key 'modbus' "
+        "(use id, stale_after_s, audit_log, loop_lag_limit_s)",
         id="dotted-key-under-a-table",  # [gateway]'s, not the top level's: its own line
     ),
     pytest.param(
