@@ -109,13 +109,14 @@ async def slow_bodies(args: Args) -> Report:
     statuses: Counter[str] = Counter()
     longest = 0.0
     deadline = time.monotonic() + args.get("duration_s", 0.0)
-    while True:  # round after round for duration_s: a refused round ends at once
+    while True:  # a round a second for duration_s (a refused round ends at once)
         round_started = time.monotonic()
         ends = await asyncio.gather(*(one() for _ in range(args.get("count", 64))))
         statuses.update(status for status, _ in ends)
         longest = max(longest, max(at for _, at in ends) - (round_started - started))
         if time.monotonic() >= deadline:
             break
+        await asyncio.sleep(max(0.0, round_started + 1.0 - time.monotonic()))
     return {"statuses": dict(statuses), "longest_s": longest}
 
 
@@ -377,6 +378,215 @@ async def mqtt_junk(args: Args) -> Report:
     return {"sent": sent}
 
 
+# -- probes (tests/adversarial/test_probe_findings.py) -------------------------------------
+
+
+async def held_connections(args: Args) -> Report:
+    """*per_source* connections from each of *sources*, each kept busy enough never to be
+    idle (an HTTP ``GET`` or a one-register Modbus read every *every_s*), for *hold_s*:
+    how many were admitted, and how many of them were still open at the end."""
+    port, kind = args["port"], args.get("kind", "http")
+    every_s, hold_s = args.get("every_s", 3.0), args.get("hold_s", 8.0)
+    if kind == "http":
+        request = b"GET /healthz HTTP/1.1\r\nHost: 127.0.0.1\r\n\r\n"
+    else:  # Modbus: read holding register 0 of unit 1
+        request = struct.pack(">HHHBBHH", 1, 0, 6, 1, 3, 0, 1)
+    opened = alive = answered = 0
+    streams: list[tuple[asyncio.StreamReader, asyncio.StreamWriter]] = []
+    for source in args["sources"]:
+        for _ in range(args.get("per_source", 32)):
+            try:
+                streams.append(await _open(port, source))
+                opened += 1
+            except OSError:
+                pass
+
+    async def keep(reader: asyncio.StreamReader, writer: asyncio.StreamWriter) -> int:
+        got = 0
+        deadline = time.monotonic() + hold_s
+        while time.monotonic() < deadline:
+            writer.write(request)
+            try:
+                await writer.drain()
+                data = await asyncio.wait_for(reader.read(4096), 2.0)
+            except (ConnectionError, TimeoutError):
+                return -1
+            if not data:
+                return -1
+            got += 1
+            await asyncio.sleep(min(every_s, max(0.0, deadline - time.monotonic())))
+        return got
+
+    results = await asyncio.gather(*(keep(r, w) for r, w in streams))
+    alive = sum(1 for n in results if n >= 0)
+    answered = sum(n for n in results if n > 0)
+    for _, writer in streams:
+        writer.close()
+    return {"opened": opened, "alive_at_end": alive, "answers": answered}
+
+
+async def http_pipeline(args: Args) -> Report:
+    """*count* requests for *path* written at once on one connection (pipelined), over and
+    over for *duration_s*: how many answers came back."""
+    request = f"GET {args.get('path', '/metrics')} HTTP/1.1\r\nHost: 127.0.0.1\r\n\r\n".encode()
+    answers = rounds = 0
+    deadline = time.monotonic() + args.get("duration_s", 5.0)
+    while time.monotonic() < deadline:
+        try:
+            reader, writer = await _open(args["port"], args.get("source", "127.0.0.1"))
+        except OSError:
+            await asyncio.sleep(0.05)
+            continue
+        rounds += 1
+        writer.write(request * args.get("count", 200))
+        with contextlib.suppress(ConnectionError):
+            await writer.drain()
+        buffer = b""
+        while time.monotonic() < deadline:
+            try:
+                data = await asyncio.wait_for(reader.read(1 << 16), 2.0)
+            except (ConnectionError, TimeoutError):
+                break
+            if not data:
+                break
+            buffer = buffer[-16:] + data
+            answers += data.count(b"HTTP/1.1 ")
+        writer.close()
+    return {"rounds": rounds, "answers": answers}
+
+
+async def modbus_reads(args: Args) -> Report:
+    """Well-formed reads of 125 registers, pipelined *window* at a time on one connection,
+    across every unit id in *units*, for *duration_s*: how many answers came back."""
+    units = args.get("units", [1, 2, 3, 4, 255])
+    window = args.get("window", 50)
+    address = args.get("address", 0)
+    reader, writer = await _open(args["port"], args.get("source", "127.0.0.1"))
+    sent = answers = exceptions = 0
+    deadline = time.monotonic() + args.get("duration_s", 5.0)
+    tid = 0
+    while time.monotonic() < deadline:
+        frames = []
+        for _ in range(window):
+            tid = (tid + 1) & 0xFFFF
+            frames.append(
+                struct.pack(">HHHBBHH", tid, 0, 6, units[tid % len(units)], 3, address, 125)
+            )
+        writer.write(b"".join(frames))
+        sent += window
+        try:
+            await writer.drain()
+            for _ in range(window):
+                head = await asyncio.wait_for(reader.readexactly(7), 2.0)
+                length = struct.unpack(">H", head[4:6])[0]
+                body = await asyncio.wait_for(reader.readexactly(length - 1), 2.0)
+                answers += 1
+                exceptions += body[0] & 0x80 != 0
+        except (ConnectionError, TimeoutError, asyncio.IncompleteReadError):
+            break
+    writer.close()
+    return {"sent": sent, "answers": answers, "exceptions": exceptions}
+
+
+async def mqtt_flap(args: Args) -> Report:
+    """*payloads* in turn on *topic*, not retained, *count* of them as fast as the broker
+    takes them, and the messages the broker carried on *watch* meanwhile."""
+    import aiomqtt
+
+    payloads = [p.encode() for p in args.get("payloads", ["online", "offline"])]
+    sent = seen = 0
+    async with (
+        aiomqtt.Client("127.0.0.1", args["port"], identifier="flapper") as client,
+        aiomqtt.Client("127.0.0.1", args["port"], identifier="watcher") as watcher,
+    ):
+        await watcher.subscribe(args.get("watch", "#"))
+
+        async def count() -> None:
+            nonlocal seen
+            async for _ in watcher.messages:
+                seen += 1
+
+        counter = asyncio.create_task(count())
+        await asyncio.sleep(0.5)
+        seen = 0  # the retained ones on subscribing are not the attack's
+        deadline = time.monotonic() + args.get("duration_s", 5.0)
+        while sent < args.get("count", 1000) and time.monotonic() < deadline:
+            await client.publish(args["topic"], payloads[sent % len(payloads)], qos=0)
+            sent += 1
+            if sent % 20 == 0:
+                await asyncio.sleep(0.001)
+        await asyncio.sleep(args.get("settle_s", 2.0))
+        counter.cancel()
+    return {"sent": sent, "carried": seen}
+
+
+async def opcua_anonymous(args: Args) -> Report:
+    """Anonymous sessions over SignAndEncrypt with a certificate of the attacker's own
+    (*security*), each with a subscription of *items* monitored items sampled as fast as
+    allowed, or a Read of *items* values in a loop (*mode* "read"), for *duration_s*."""
+    from asyncua import Client, ua
+
+    _bind(args.get("source", "127.0.0.1"))
+    outcomes: Counter[str] = Counter()
+    clients = []
+    nodes: list[Any] = []
+    for _ in range(args.get("sessions", 4)):
+        client = Client(args["url"], timeout=10)
+        await client.set_security_string(args["security"])
+        try:
+            await client.connect()
+        except Exception as exc:
+            outcomes[f"connect: {type(exc).__name__}"] += 1
+            continue
+        clients.append(client)
+    if not clients:
+        return {"outcomes": dict(outcomes)}
+    namespace = await clients[0].get_namespace_index(args["namespace"])
+    names = args["variables"]
+    for n in range(args.get("items", 500)):
+        nodes.append(ua.NodeId(names[n % len(names)], namespace))
+    deadline = time.monotonic() + args.get("duration_s", 5.0)
+    notified = 0
+
+    class Handler:
+        def datachange_notification(self, *_: Any) -> None:
+            nonlocal notified
+            notified += 1
+
+    async def one(client: Any) -> None:
+        if args.get("mode") == "read":
+            params = ua.ReadParameters()
+            for node in nodes:
+                rv = ua.ReadValueId()
+                rv.NodeId = node
+                rv.AttributeId = ua.AttributeIds.Value
+                params.NodesToRead.append(rv)
+            while time.monotonic() < deadline:
+                try:
+                    await client.uaclient.read(params)
+                    outcomes["read"] += 1
+                except Exception as exc:
+                    outcomes[type(exc).__name__] += 1
+            return
+        try:
+            subscription = await client.create_subscription(
+                args.get("publishing_ms", 10), Handler()
+            )
+            results = await subscription.subscribe_data_change(
+                [client.get_node(node) for node in nodes], sampling_interval=0
+            )
+            outcomes["items"] += sum(1 for r in results if isinstance(r, int))
+        except Exception as exc:
+            outcomes[f"subscribe: {type(exc).__name__}"] += 1
+        await asyncio.sleep(max(0.0, deadline - time.monotonic()))
+
+    await asyncio.gather(*(one(c) for c in clients))
+    for client in clients:
+        with contextlib.suppress(Exception):
+            await client.disconnect()
+    return {"outcomes": dict(outcomes), "notified": notified, "sessions": len(clients)}
+
+
 ATTACKS: dict[str, Callable[[Args], Coroutine[Any, Any, Report]]] = {
     "logins": logins,
     "slow_bodies": slow_bodies,
@@ -388,6 +598,11 @@ ATTACKS: dict[str, Callable[[Args], Coroutine[Any, Any, Report]]] = {
     "opcua_reader": opcua_reader,
     "modbus_junk": modbus_junk,
     "mqtt_junk": mqtt_junk,
+    "held_connections": held_connections,
+    "http_pipeline": http_pipeline,
+    "modbus_reads": modbus_reads,
+    "mqtt_flap": mqtt_flap,
+    "opcua_anonymous": opcua_anonymous,
 }
 
 

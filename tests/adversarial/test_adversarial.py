@@ -132,6 +132,10 @@ async def test_bodies_that_never_come_cannot_hold_every_slot(tmp_path: Path) -> 
         assert report["longest_s"] < 30, report
         assert "no answer" not in report["statuses"], report
         assert set(health) == {"200"}, health
+        metrics = await _metrics(site)
+        cut = metrics["sj300_http_requests_timed_out_total{}"]
+        per_address = metrics["sj300_http_connections_refused_per_address_total{}"]
+        assert cut + per_address > 0, metrics
 
 
 async def test_nested_json_is_a_400_with_no_traceback(
@@ -179,6 +183,8 @@ async def test_sessions_never_activated_do_not_lock_the_operator_out(
         assert report["outcomes"].get("created", 0) < 100, report  # refused past the cap
         assert reader["login"] == "ok", reader
         assert reader["reads"].get("ok", 0) >= 8, reader
+        metrics = await _metrics(site)
+        assert _total(metrics, "sj300_opcua_refused_sessions") > 0, metrics
 
 
 async def test_wrong_passwords_from_one_address_leave_the_operator_in(
@@ -198,6 +204,8 @@ async def test_wrong_passwords_from_one_address_leave_the_operator_in(
         assert "accepted" not in report["outcomes"], report
         assert sum(report["outcomes"].values()) >= 5, report
         assert reader["login"] == "ok", reader
+        metrics = await _metrics(site)
+        assert _total(metrics, "sj300_opcua_refused_logins") >= 5, metrics
 
 
 async def test_chunks_with_a_wrong_token_close_the_connection_quietly(
@@ -215,6 +223,8 @@ async def test_chunks_with_a_wrong_token_close_the_connection_quietly(
         assert report["sent"] <= 51 * report["channels"], report
         tracebacks = [r for r in caplog.records if r.exc_info is not None]
         assert len(tracebacks) <= 10, len(tracebacks)
+        metrics = await _metrics(site)
+        assert _total(metrics, "sj300_opcua_malformed") >= report["channels"], metrics
 
 
 # -- Modbus, MQTT -------------------------------------------------------------------------
