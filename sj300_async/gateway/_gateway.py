@@ -235,7 +235,6 @@ class Gateway:
     # -- running -----------------------------------------------------------------
 
     async def __aenter__(self) -> Gateway:
-        self.loop_monitor.start()
         self._flood = logflood.install()
         try:
             if self.capture_path is not None:
@@ -255,6 +254,9 @@ class Gateway:
             for line in self.lines:
                 await self._stack.enter_async_context(line.poller)
                 self._tasks.append(asyncio.create_task(self._background_reads(line)))
+            # From here: the start (an OPC UA address space built in one go) is not a
+            # stall of the gateway serving, and /healthz must not call it one.
+            self.loop_monitor.start()
         except BaseException:
             await self._shutdown()
             raise
