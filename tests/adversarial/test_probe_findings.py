@@ -110,13 +110,6 @@ async def test_two_addresses_cannot_hold_every_modbus_slot(tmp_path: Path) -> No
 # -- MQTT: Home Assistant's status -------------------------------------------------------
 
 
-@pytest.mark.xfail(
-    strict=True,
-    reason="every non-retained 'online' on homeassistant/status rebuilds and re-queues "
-    "the whole discovery on the loop, unbudgeted: 1,000 of them stalled the loop "
-    "1.3 s (p99 = max) and the poll fell to 43 % of its rate; 3,000 online/offline "
-    "p99 111 ms, max 352 ms",
-)
 async def test_a_storm_of_home_assistant_births_costs_the_loop_nothing(tmp_path: Path) -> None:
     async with plant(tmp_path) as site:
         async with site.window() as window:

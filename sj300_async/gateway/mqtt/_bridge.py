@@ -67,6 +67,8 @@ Decisions:
   slow broker makes the outbox coalesce, never grow. A broker that never
   acknowledges loses the connection after ``keepalive_s`` (:mod:`.client`,
   counted by :mod:`._session`): its will then says ``offline``.
+- **Home Assistant's births coalesce** (:mod:`._births`): anyone may publish
+  one; a storm of them costs one re-discovery per 10 s, never one each.
 - A subscription the broker refuses (an ACL: the commands, Home
   Assistant's status) is said, counted and one of :meth:`MqttBridge.problems`
   (/healthz) until granted (:mod:`._subscriptions`); the bridge goes on
@@ -91,6 +93,7 @@ from typing import TYPE_CHECKING, Final
 
 from ...profiles import DriveSnapshot
 from .. import GATHER_S, GatewayDrive, GatewayView, Refusal, WriteResult, excerpt
+from ._births import Rediscovery
 from ._commands import DROPPED_BY_STOP, MAX_PAYLOAD_BYTES, error_text, oversized, parse_command
 from ._config import MqttConfig
 from ._discovery import discovery
@@ -149,6 +152,8 @@ class MqttBridge:
         self.stale_after_s = math.inf
         self._gateway: GatewayView | None = None
         self._birth = f"{config.discovery_prefix}/status"
+        #: Home Assistant's births, coalesced: anyone may publish them (see _births).
+        self._rediscovery = Rediscovery(self._announce, self.stats, _log)
         #: Waiting to be published: the latest per topic (state, availability, discovery).
         self._pending: dict[str, _Out] = {}
         #: Error replies, in order (each is an answer: never coalesced).
@@ -386,8 +391,7 @@ class MqttBridge:
                 # Home Assistant (re)started: it needs the configs and states again. A
                 # retained birth is the one it sent before we connected: already covered.
                 if payload == AVAILABLE.encode() and not message.retain:
-                    _log.info("MQTT: Home Assistant is online: republishing discovery")
-                    self._announce()
+                    self._rediscovery.birth()
                 continue
             self._receive_command(topic, payload, retained=message.retain, length=message.length)
 
@@ -534,6 +538,7 @@ class MqttBridge:
         if self._task is None:
             return
         self._closing = True
+        self._rediscovery.cancel()
         self._epoch += 1  # commands waiting are not carried out any more
         loop = asyncio.get_running_loop()
         # A write under way finishes (a write and its read-back stay together; its

@@ -52,6 +52,10 @@ class BridgeStats(SessionStats):
     #: Commands a bug stopped (logged with its traceback; also in ``refused``): the
     #: drive's command worker goes on with the next.
     failed: int = 0
+    #: Re-discoveries for Home Assistant's births, and the births that added nothing
+    #: (one was scheduled already: :mod:`._births`).
+    rediscoveries: int = 0
+    births_coalesced: int = 0
 
 
 #: The bridge's counters: (name, HELP, BridgeStats attribute).
@@ -64,6 +68,16 @@ _COUNTERS: Final = (
         "sj300_mqtt_errors_dropped",
         "Error replies not published (past their budget, or too many waiting).",
         "errors_dropped",
+    ),
+    (
+        "sj300_mqtt_rediscoveries",
+        "Discovery republished for Home Assistant's births (at most one per 10 s).",
+        "rediscoveries",
+    ),
+    (
+        "sj300_mqtt_births_coalesced",
+        "Home Assistant births that added nothing: a re-discovery was scheduled already.",
+        "births_coalesced",
     ),
     (
         "sj300_mqtt_puback_timeouts",
