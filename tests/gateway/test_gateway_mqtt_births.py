@@ -46,6 +46,10 @@ class _Gate:
         self.announced += 1
 
 
+async def _announced(g: _Gate, count: int) -> None:
+    await wait_for(lambda: g.announced == count, f"re-discovery {count}")
+
+
 def test_the_window_is_ten_seconds() -> None:
     assert MIN_INTERVAL_S == 10.0
 
@@ -75,8 +79,7 @@ async def test_a_flapping_storm_over_three_windows_is_exactly_four_re_discoverie
             g.gate.birth()
         # Each burst after the first lands within the window of the re-discovery that
         # just ran: one more at that window's end, the rest coalesced.
-        expected = burst + 2
-        await wait_for(lambda: g.announced == expected, f"burst {burst}'s re-discovery")
+        await _announced(g, burst + 2)
         assert not g.gate.scheduled
     assert g.announced == 4
     assert g.stats.births_coalesced == 300 - 2 + 2 * (300 - 1)
