@@ -37,6 +37,38 @@ Decisions:
   up, and a count released under another key would lock that address out
   for good. One address is one host; a NAT or a reverse proxy puts many
   clients behind one, and then the per-address cap needs raising.
+- **At the cap, a newcomer takes a slot from the heaviest holder**
+  (fair share; the probe after issue 41: two addresses with 32 keep-alive
+  connections each, a request every 3 s, held all 64 of HTTP's slots, and
+  /healthz, the Stop button and a reconnecting SCADA were closed at once
+  for as long as they stayed). The per-address cap stops one address, not
+  two. So when the listener is full, a newcomer whose address would, once
+  in, still hold fewer connections than the address holding the most is
+  admitted by closing one connection of that address: the one idle the
+  longest (for HTTP, one with no request in progress, the longest since
+  its last request ended; for Modbus, the one whose last request is
+  oldest), at once (``abort``: a client that does not read must not keep
+  the descriptor of a connection no longer counted), counted (``evicted``)
+  and logged (rate-limited). A newcomer from the top address itself, or
+  from one a connection short of it (admitting it would only swap the two
+  and close a connection for nothing, over and over), or when every
+  address holds the same share, is refused as before. Why this rule: a
+  newcomer from a fresh address always gets in (its address holds none,
+  and a full listener's top address holds at least two unless each of
+  ``max_connections`` addresses holds one); an attacker needs as many
+  addresses as it wants slots, and even then only pushes out the heaviest
+  holder, which is itself unless a legitimate client holds more than it
+  does. Ranking addresses by what they hold, rather than connections by
+  age, means the operator's one connection is never what a flood closes.
+  Connections still being set up (a TLS handshake) and, for HTTP, those
+  with a request in progress (an event stream being read) are never
+  closed this way: at most no slot is found and the newcomer is refused.
+  Each connection's protocol registers with the limit once it is made
+  (:meth:`ConnectionLimit.hold`: a :class:`Slot` with its close callback)
+  and says when it is busy and when it was last active; the limit keeps,
+  per address, its idle connections in order of last activity (a dict
+  used as an ordered set) and the addresses by the count they hold, so an
+  accept costs O(1) (a scan of the addresses tied at the top, at most).
 - **Refusals are logged once per interval** (:class:`RateLimitedLog`: one
   WARNING per :data:`LOG_INTERVAL_S`, the others at DEBUG) and counted: a
   flood of connections must not become a flood of log lines.
@@ -66,6 +98,7 @@ __all__ = [
     "Listener",
     "ListenerLimits",
     "RateLimitedLog",
+    "Slot",
     "default_per_address",
     "listener_families",
     "peer_address",
@@ -171,8 +204,51 @@ def peer_address(peer: object) -> str:
     return str(peer)
 
 
+class Slot:
+    """One admitted connection's place in its :class:`ConnectionLimit`.
+
+    Its protocol gets it from :meth:`ConnectionLimit.hold` once the connection
+    is made, calls :meth:`busy` when a request starts (not closed for a
+    newcomer while busy), :meth:`active` when one ended or came (the most
+    recently active are closed last), and :meth:`release` when the
+    connection is lost (a slot already released, by an eviction, is not
+    released twice).
+    """
+
+    __slots__ = ("_close", "_limit", "address", "released")
+
+    def __init__(self, limit: ConnectionLimit, address: str, close: Callable[[], None]) -> None:
+        self._limit = limit
+        self._close = close
+        #: The client's address as admitted (the count's key).
+        self.address = address
+        #: True once its place is given back (lost, or evicted for a newcomer).
+        self.released = False
+
+    def busy(self) -> None:
+        """A request is in progress: not to be closed for a newcomer until :meth:`active`."""
+        if not self.released:
+            self._limit._forget(self)
+
+    def active(self) -> None:
+        """Activity now, and nothing in progress: the last to close for a newcomer."""
+        if not self.released:
+            idle = self._limit._idle_of(self.address)
+            idle.pop(self, None)
+            idle[self] = None  # to the end: the order is last activity's
+
+    def release(self) -> None:
+        """The connection closed: its place is free (once)."""
+        if not self.released:
+            self.released = True
+            self._limit._forget(self)
+            self._limit.release(self.address)
+
+
 class ConnectionLimit:
-    """One listener's open connections: admitted up to the caps, refused past them.
+    """One listener's open connections: admitted up to the caps, refused past them, and at
+    the cap a newcomer from a lighter address admitted in place of a connection of the
+    heaviest (module docstring).
 
     Args:
         listener: its name in log lines and metrics (``"modbus"``, ``"http"``).
@@ -197,11 +273,19 @@ class ConnectionLimit:
         #: is not kept: the table holds at most the open connections' addresses).
         self.open = 0
         self._by_address: dict[str, int] = {}
-        #: Connections refused at the cap, refused at the per-address cap, and closed
-        #: for idling, since the start.
+        #: The addresses holding each count (none empty), and the largest count: the
+        #: heaviest holder in O(1).
+        self._holding: dict[int, set[str]] = {}
+        self._top = 0
+        #: Per address, its registered connections with nothing in progress, least
+        #: recently active first (dicts as ordered sets; an address with none not kept).
+        self._idle: dict[str, dict[Slot, None]] = {}
+        #: Connections refused at the cap, refused at the per-address cap, closed for
+        #: idling, and closed for a newcomer (fair share), since the start.
         self.refused = 0
         self.refused_per_address = 0
         self.timed_out = 0
+        self.evicted = 0
         self.log = RateLimitedLog(log)
 
     def open_from(self, address: str) -> int:
@@ -209,8 +293,12 @@ class ConnectionLimit:
         return self._by_address.get(address, 0)
 
     def admit(self, address: str) -> bool:
-        """Count a new connection from *address* in; past a cap, count and log a refusal."""
-        if self.open >= self.max_connections:
+        """Count a new connection from *address* in; past a cap, count and log a refusal.
+
+        At ``max_connections``, a connection of the heaviest address is closed for it
+        when its address is light enough (module docstring).
+        """
+        if self.open >= self.max_connections and not self._evict_for(address):
             self.refused += 1
             self.log.log(
                 "%s: %d connections open (max_connections): refused %s",
@@ -230,17 +318,78 @@ class ConnectionLimit:
             )
             return False
         self.open += 1
-        self._by_address[address] = held + 1
+        self._count(address, held, held + 1)
         return True
 
+    def hold(self, address: str, close: Callable[[], None]) -> Slot:
+        """Register the connection admitted from *address* once it is made: *close* closes
+        it at once (called at most once, for a newcomer). It is active now."""
+        slot = Slot(self, address, close)
+        slot.active()
+        return slot
+
     def release(self, address: str) -> None:
-        """A connection admitted from *address* closed (its protocol's ``connection_lost``)."""
+        """A connection admitted from *address* closed (its protocol's ``connection_lost``,
+        through its :class:`Slot` when it has one)."""
         self.open -= 1
-        held = self._by_address.get(address, 0) - 1
-        if held > 0:
-            self._by_address[address] = held
+        held = self._by_address.get(address, 0)
+        self._count(address, held, held - 1)
+
+    def _count(self, address: str, was: int, now: int) -> None:
+        """*address* goes from holding *was* to *now* (one more or one less)."""
+        if was > 0:
+            peers = self._holding[was]
+            peers.discard(address)
+            if not peers:
+                del self._holding[was]
+                if self._top == was and now < was:
+                    self._top = now  # the one that held the most now holds one less
+        if now > 0:
+            self._by_address[address] = now
+            self._holding.setdefault(now, set()).add(address)
+            self._top = max(self._top, now)
         else:
             self._by_address.pop(address, None)
+
+    def _idle_of(self, address: str) -> dict[Slot, None]:
+        idle = self._idle.get(address)
+        if idle is None:
+            idle = self._idle[address] = {}
+        return idle
+
+    def _forget(self, slot: Slot) -> None:
+        idle = self._idle.get(slot.address)
+        if idle is not None:
+            idle.pop(slot, None)
+            if not idle:
+                del self._idle[slot.address]
+
+    def _evict_for(self, address: str) -> bool:
+        """Close the idlest connection of the heaviest address for a newcomer from
+        *address*, if that address, once in, still holds fewer; True if one was closed."""
+        if self._by_address.get(address, 0) + 1 >= self._top:
+            return False  # it is the top, or would become it: refused as before
+        for heaviest in self._holding[self._top]:
+            idle = self._idle.get(heaviest)
+            if idle:
+                victim = next(iter(idle))
+                break
+        else:
+            return False  # every connection of theirs busy, or still being set up
+        self.evicted += 1
+        self.log.log(
+            "%s: %d connections open (max_connections): closed the idlest of %s's %d for %s",
+            self.listener,
+            self.open,
+            heaviest,
+            self._top,
+            address,
+        )
+        # Its place is free now, before its connection_lost (a loop turn later): the
+        # newcomer is counted in its place in this same accept.
+        victim.release()
+        victim._close()
+        return True
 
 
 class Listener:
@@ -248,7 +397,9 @@ class Listener:
 
     Each admitted connection gets a protocol from *factory*, called with the
     client's address as admitted (through ``loop.connect_accepted_socket``),
-    whose ``connection_lost`` must call ``limit.release(address)`` with it;
+    whose ``connection_made`` registers with ``limit.hold(address, close)``
+    (a :class:`Slot`, which tells the limit when the connection is busy and
+    when active, and whose ``release()`` its ``connection_lost`` must call);
     a refused one is closed in the accept. The sockets, ``close()`` and
     ``wait_closed()`` are those of an :class:`asyncio.Server`.
     """
@@ -360,8 +511,8 @@ class Listener:
 
 
 def listener_families(prefix: str, limit: ConnectionLimit) -> Iterator[Metric]:
-    """``<prefix>_connections`` and its ``_refused_total``, ``_refused_per_address_total``
-    and ``_timed_out_total``, built now."""
+    """``<prefix>_connections`` and its ``_refused_total``, ``_refused_per_address_total``,
+    ``_timed_out_total`` and ``_evicted_total``, built now."""
     from prometheus_client.core import CounterMetricFamily, GaugeMetricFamily
 
     name = limit.listener
@@ -380,4 +531,10 @@ def listener_families(prefix: str, limit: ConnectionLimit) -> Iterator[Metric]:
         f"{prefix}_connections_timed_out",
         f"{name} connections closed by the server for idling past idle_timeout_s.",
         limit.timed_out,
+    )
+    yield CounterMetricFamily(
+        f"{prefix}_connections_evicted",
+        f"{name} connections closed at max_connections for a newcomer from an address "
+        "holding fewer (the idlest of the address holding the most).",
+        limit.evicted,
     )

@@ -16,8 +16,10 @@ from sj300_async.gateway import (
     GatewayConfigError,
     ListenerLimits,
     RateLimitedLog,
+    listener_families,
     parse_config,
 )
+from sj300_async.gateway._listeners import Slot
 from sj300_async.gateway.http import HttpConfig
 from sj300_async.gateway.http._api import serve_http
 from sj300_async.gateway.http._server import make_registry
@@ -190,3 +192,144 @@ def test_the_rate_limited_log_warns_once_per_interval(caplog: pytest.LogCaptureF
         (logging.WARNING, "refused 110.0 (2 more since the last warning, at DEBUG)"),
         (logging.DEBUG, "refused 111.0"),
     ]
+
+
+# -- fair share: at the cap, a lighter address's newcomer takes the heaviest's idlest ------
+
+
+class _Door:
+    """A listener's admissions without sockets: each connection a slot and a closed flag."""
+
+    def __init__(self, cap: int, per_address: int | None = None) -> None:
+        self.limit = ConnectionLimit("test", cap, logging.getLogger("test.fair"), per_address)
+        self.closed: list[str] = []
+
+    def connect(self, address: str, name: str) -> Slot | None:
+        if not self.limit.admit(address):
+            return None
+        return self.limit.hold(address, lambda: self.closed.append(name))
+
+
+def test_a_newcomer_at_the_cap_closes_the_idlest_connection_of_the_heaviest_address(
+    caplog: pytest.LogCaptureFixture,
+) -> None:
+    caplog.set_level(logging.DEBUG, logger="test.fair")
+    door = _Door(8, per_address=4)
+    slots = {f"a{i}": door.connect("10.0.0.1", f"a{i}") for i in range(4)}
+    slots |= {f"b{i}": door.connect("10.0.0.2", f"b{i}") for i in range(3)}
+    slots["c0"] = door.connect("10.0.0.3", "c0")
+    assert door.limit.open == 8
+    a0, a1 = slots["a0"], slots["a1"]
+    assert a0 is not None
+    assert a1 is not None
+    a0.busy()  # a request in progress: never closed for a newcomer
+    a1.active()  # active since: the last of its address to go
+    assert door.connect("10.0.0.4", "d0") is not None  # a fresh address: in
+    assert door.closed == ["a2"]  # a0 busy, a1 active last: a2 idle the longest
+    assert (door.limit.open, door.limit.evicted, door.limit.refused) == (8, 1, 0)
+    assert door.limit.open_from("10.0.0.1") == 3
+    victim = slots["a2"]
+    assert victim is not None
+    assert victim.released
+    victim.release()  # its connection_lost, a loop turn later: not released twice
+    assert (door.limit.open, door.limit.open_from("10.0.0.1")) == (8, 3)
+    assert door.connect("10.0.0.5", "e0") is not None  # a and b tie at the top, 3 each
+    assert door.closed[1] in {"a3", "b0"}  # one of them gives way (its idlest), never c, d
+    assert door.limit.open_from("10.0.0.3") == door.limit.open_from("10.0.0.4") == 1
+    warned = [r.getMessage() for r in caplog.records if r.levelno == logging.WARNING]
+    assert warned == ["test: 8 connections open (max_connections): closed the idlest of "
+                      "10.0.0.1's 4 for 10.0.0.4"]  # fmt: skip
+
+
+def test_the_heaviest_address_itself_and_equal_shares_are_refused_as_before() -> None:
+    door = _Door(5, per_address=5)
+    for i in range(3):
+        door.connect("10.0.0.1", f"a{i}")
+    door.connect("10.0.0.2", "b0")
+    door.connect("10.0.0.2", "b1")
+    assert door.connect("10.0.0.1", "a3") is None  # the top address itself
+    assert door.connect("10.0.0.2", "b2") is None  # 3 once in, the top 3 less one: a swap
+    assert door.closed == []
+    assert (door.limit.refused, door.limit.evicted) == (2, 0)
+    even = _Door(4)  # two addresses, two each: every address holds the same share
+    for i in range(4):
+        even.connect(f"10.0.0.{i % 2}", f"x{i}")
+    assert even.connect("10.0.0.0", "x4") is None
+    assert even.connect("10.0.0.1", "x5") is None
+    assert even.connect("10.0.0.9", "y0") is not None  # but a fresh address gets in
+    assert (even.limit.refused, even.limit.evicted, len(even.closed)) == (2, 1, 1)
+
+
+def test_a_top_address_with_every_connection_busy_or_unmade_gives_nothing_up() -> None:
+    door = _Door(4, per_address=4)
+    busy = [door.connect("10.0.0.1", f"a{i}") for i in range(2)]
+    for slot in busy:
+        assert slot is not None
+        slot.busy()
+    assert door.limit.admit("10.0.0.1")  # admitted, its connection not made yet (TLS)
+    assert door.connect("10.0.0.2", "b0") is not None
+    assert door.connect("10.0.0.3", "c0") is None  # nothing of 10.0.0.1's to close
+    assert (door.closed, door.limit.refused) == ([], 1)
+    first = busy[0]
+    assert first is not None
+    first.active()  # its request ended: now it may go
+    assert door.connect("10.0.0.3", "c0") is not None
+    assert door.closed == ["a0"]
+
+
+def test_the_heaviest_address_is_tracked_as_connections_come_and_go() -> None:
+    door = _Door(6, per_address=6)
+    a = [door.connect("10.0.0.1", f"a{i}") for i in range(3)]
+    b = [door.connect("10.0.0.2", f"b{i}") for i in range(3)]
+    for slot in a[:2]:
+        assert slot is not None
+        slot.release()  # 10.0.0.1 holds 1, 10.0.0.2 3: the top is b
+    door.connect("10.0.0.3", "c0")
+    door.connect("10.0.0.3", "c1")
+    assert door.limit.open == 6
+    assert door.connect("10.0.0.1", "a3") is not None  # 1 + 1 < 3
+    assert door.closed == ["b0"]
+    for slot in b:
+        assert slot is not None
+        slot.release()  # b0 released already: once only
+    assert (door.limit.open, door.limit.open_from("10.0.0.2")) == (4, 0)
+    for name in ("d0", "d1"):
+        assert door.connect("10.0.0.4", name) is not None  # under the cap: no eviction
+    assert door.connect("10.0.0.4", "d2") is None  # 2, 2, 2 held: a tie
+    assert door.connect("10.0.0.5", "e0") is not None  # but a fresh address gets in
+    assert door.limit.evicted == 2
+
+
+def test_the_evictions_are_a_metric_of_the_listener() -> None:
+    door = _Door(2, per_address=2)
+    door.connect("10.0.0.1", "a0")
+    door.connect("10.0.0.1", "a1")
+    door.connect("10.0.0.2", "b0")
+    families = {family.name: family for family in listener_families("sj300_test", door.limit)}
+    assert families["sj300_test_connections_evicted"].samples[0].value == 1
+
+
+async def test_two_full_addresses_cannot_lock_a_third_out_of_http() -> None:
+    limit = ConnectionLimit("http", 4, logging.getLogger("test.http"))  # 2 per address
+    server = await serve_http(Endpoint("127.0.0.1", 0), make_registry(list), list, limit=limit)
+
+    async def connect(source: str) -> tuple[asyncio.StreamReader, asyncio.StreamWriter]:
+        return await asyncio.open_connection("127.0.0.1", server.port, local_addr=(source, 0))
+
+    try:
+        held = [await connect(f"127.0.0.{2 + i % 2}") for i in range(4)]
+        await wait_for(lambda: limit.open == 4, "every slot held")
+        reader, writer = await connect("127.0.0.4")
+        writer.write(b"GET /healthz HTTP/1.1\r\nHost: x\r\nConnection: close\r\n\r\n")
+        async with asyncio.timeout(5):
+            assert (await reader.read()).startswith(b"HTTP/1.1 200")
+        writer.close()
+        assert (limit.evicted, limit.refused) == (1, 0)
+        async with asyncio.timeout(5):  # the first connection of 127.0.0.2 was the idlest
+            assert await held[0][0].read() == b""
+        for _, held_writer in held:
+            held_writer.close()
+        await wait_for(lambda: limit.open == 0, "every slot released")
+    finally:
+        server.close()
+        await server.wait_closed()

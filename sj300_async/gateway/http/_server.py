@@ -11,7 +11,10 @@ Decisions:
   closed at once, and an accept that fails for want of descriptors pauses
   the listener instead of logging a traceback per attempt. Each admitted
   connection gets aiohttp's protocol wrapped in :class:`_Connection`, which
-  releases the slot when the connection ends.
+  releases the slot when the connection ends. At ``max_connections`` a
+  newcomer from an address holding fewer takes the place of the heaviest
+  address's connection idle the longest (no request in progress, the
+  longest since its last one ended: :class:`~sj300_async.gateway.Slot`).
 - **Idle connections are closed.** A connection may go ``idle_timeout_s``
   without a request in progress (from the moment it opens, and from the
   end of each request): a client that never sends a request, or sends its
@@ -70,6 +73,7 @@ from aiohttp.abc import AbstractAccessLogger
 from prometheus_client import CONTENT_TYPE_LATEST, CollectorRegistry, generate_latest
 
 from .. import ConnectionLimit, Endpoint, Listener, excerpt
+from .._listeners import Slot
 from . import DEFAULT_BODY_TIMEOUT_S
 from ._replies import json_error
 
@@ -321,6 +325,8 @@ class _Connection(asyncio.Protocol):
         self._deadline: asyncio.TimerHandle | None = None
         #: The first bytes received since the last request ended (for a refusal's log).
         self.received = bytearray()
+        #: Its place in the limit, once made (idle between requests: a newcomer's to take).
+        self._slot: Slot | None = None
 
     def connection_made(self, transport: asyncio.BaseTransport) -> None:
         # Not isinstance(): uvloop's transports implement the interface without
@@ -328,6 +334,7 @@ class _Connection(asyncio.Protocol):
         transport = cast(asyncio.Transport, transport)
         self._transport = transport
         self._server._connections[self._handler] = self
+        self._slot = self._server.limit.hold(self.address, self._evict)
         self._handler.connection_made(transport)
         self._arm()
 
@@ -363,13 +370,18 @@ class _Connection(asyncio.Protocol):
         try:
             self._handler.connection_lost(exc)
         finally:
-            self._server.limit.release(self.address)
+            if self._slot is None:
+                self._server.limit.release(self.address)
+            else:  # released already if it was closed for a newcomer
+                self._slot.release()
 
     # -- the idle rule and the body's deadline (module docstring) --------------------------
 
     def begin(self, request: BaseRequest) -> None:
         self._busy += 1
         self._disarm()
+        if self._slot is not None:  # a request in progress is never closed for a newcomer
+            self._slot.busy()
         started = self._loop.time() if self._first_byte_at is None else self._first_byte_at
         self._first_byte_at = None
         self._request = request
@@ -383,6 +395,8 @@ class _Connection(asyncio.Protocol):
         self._busy -= 1
         if self._busy == 0:
             self._arm()
+            if self._slot is not None:  # idle from now: the last of its address to go
+                self._slot.active()
 
     def _arm(self) -> None:
         self._disarm()
@@ -416,6 +430,14 @@ class _Connection(asyncio.Protocol):
         request.content.set_exception(BodyTimeout())
         if not self._busy or request.writer.output_size > 0:
             transport.close()
+
+    def _evict(self) -> None:
+        """Closed for a newcomer at max_connections (the limit counted and logged it).
+
+        Aborted, not closed: the slot is already the newcomer's, and a close would
+        wait for a client that does not read to take what is buffered."""
+        if self._transport is not None:
+            self._transport.abort()
 
     def _disarm(self) -> None:
         if self._timer is not None:

@@ -29,7 +29,10 @@ Decisions:
 - **Limits**: ``max_connections`` (newcomers past it are accepted and
   closed at once, by the :class:`~sj300_async.gateway.Listener`, the HTTP
   northbound's too) and ``idle_timeout_s`` (a connection with no request
-  for that long, and no write of its own in progress, is closed).
+  for that long, and no write of its own in progress, is closed). At
+  ``max_connections`` a newcomer from an address holding fewer takes the
+  place of the heaviest address's connection whose last request is oldest
+  (one with a write in progress excepted), closed at once.
 - **A connection is a client**: its IP address is the audit log's "who",
   the lease holder and the metrics' label; ``"IP:port"`` names the
   connection, whose end lapses a connection-scoped lease
@@ -61,6 +64,7 @@ from .. import (
     WriteRequest,
     WriteResult,
 )
+from .._listeners import Slot
 from ._clients import ClientCounters
 from ._framing import (
     NEED_DATA,
@@ -185,6 +189,8 @@ class _Connection(asyncio.Protocol):
         self._reading_paused = False
         self._lost = False
         self._eof = False
+        #: Its place in the limit, once made (ordered by its last request, for a newcomer).
+        self._slot: Slot | None = None
 
     # -- asyncio's callbacks ---------------------------------------------------------
 
@@ -198,6 +204,7 @@ class _Connection(asyncio.Protocol):
         self.client = host
         self.name = f"[{host}]:{port}" if ":" in host else f"{host}:{port}"
         self.server._connections.add(self)
+        self._slot = self.server.limit.hold(self.address, self._evict)
         self._last_active = self._loop.time()
         self._idle = self._loop.call_later(self.server.idle_timeout_s, self._check_idle)
 
@@ -206,6 +213,8 @@ class _Connection(asyncio.Protocol):
             return
         self.framer.receive_data(data)
         self._last_active = self._loop.time()
+        if self.pending is None and self._slot is not None:  # a write's turns it busy
+            self._slot.active()
         if self.pending is None and not self._writing_paused:
             self._serve()
         self._update_reading()
@@ -221,7 +230,10 @@ class _Connection(asyncio.Protocol):
         if self._lost:
             return
         self._lost = True
-        self.server.limit.release(self.address)
+        if self._slot is None:
+            self.server.limit.release(self.address)
+        else:  # released already if it was closed for a newcomer
+            self._slot.release()
         self.server._connections.discard(self)
         if self._idle is not None:
             self._idle.cancel()
@@ -245,6 +257,14 @@ class _Connection(asyncio.Protocol):
         if self.transport is not None:
             self.transport.close()
 
+    def _evict(self) -> None:
+        """Closed for a newcomer at max_connections (the limit counted and logged it).
+
+        Aborted, not closed: the slot is already the newcomer's, and a close would
+        wait for a client that does not read to take what is buffered."""
+        if self.transport is not None:
+            self.transport.abort()
+
     def _serve(self) -> None:
         """Answer every whole request buffered, up to a write (which the rest then waits for)."""
         answers: list[bytes] = []
@@ -263,6 +283,8 @@ class _Connection(asyncio.Protocol):
                 continue
             self.pending = self._loop.create_task(answer)
             self.pending.add_done_callback(self._written)
+            if self._slot is not None:  # its write is carried out: not closed for a newcomer
+                self._slot.busy()
             break
         self._send(answers)
 
@@ -342,6 +364,8 @@ class _Connection(asyncio.Protocol):
             return
         self._send([task.result()])
         self._last_active = self._loop.time()
+        if self._slot is not None:
+            self._slot.active()
         if not self._writing_paused:
             self._serve()
         if not self._finish_at_eof():
