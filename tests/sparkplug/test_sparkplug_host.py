@@ -58,12 +58,14 @@ async def test_the_edge_node_is_born_only_while_its_primary_host_is_online(
     async with host(broker, tahu) as h:
         async with running_gateway(text) as gateway:
             node = edge(gateway)
+            node.host_rebirth_s = 2.0  # (10 s in service) after the host's death
             await wait_for(lambda: node.host_online is False, "the host's STATE read")
             await polled(gateway)
             assert h.of("NBIRTH") == []
             assert node.bdseq == 0
             await say(broker, True, 2000)
             await h.until(lambda m: m.kind == "DBIRTH", "the births", count=4)
+            first_birth = node._nbirth_at
             await h.command("DCMD", [metric(h, "hall-1", "Control/Lease", "Boolean", True)],
                             "hall-1")  # fmt: skip
             one = drive(gateway, 1)
@@ -84,6 +86,8 @@ async def test_the_edge_node_is_born_only_while_its_primary_host_is_online(
             assert len(h.of("NBIRTH")) == 1
             await say(broker, True, 4000)
             await h.until(lambda m: m.kind == "DBIRTH", "the births again", count=8)
+            # A flapping STATE is a death and a rebirth at most once per window.
+            assert node._nbirth_at - first_birth >= node.host_rebirth_s
             assert node.stats.host_offline == 1
         await h.until(lambda m: m.kind == "NDEATH", "the clean stop's NDEATH", count=2)
     first, second = h.of("NBIRTH")

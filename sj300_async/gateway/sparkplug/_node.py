@@ -60,6 +60,7 @@ from __future__ import annotations
 import asyncio
 import json
 import logging
+import math
 import time
 from collections.abc import Callable, Iterator
 from typing import TYPE_CHECKING, Final
@@ -133,6 +134,9 @@ CLOSE_TIMEOUT_S: Final = 3.0
 #: never waits while the socket takes the bytes, and a burst of births for a
 #: plant's drives must not hold the polls up meanwhile.
 YIELD_EVERY: Final = 64
+#: After the primary host's death, the next NBIRTH waits this long after the last:
+#: anyone may publish a STATE, and a flapping one was a death and a rebirth each.
+HOST_REBIRTH_MIN_S: Final = 10.0
 
 #: Each line's metrics in the NBIRTH: (name under ``Lines/<line>/``, datatype).
 NODE_METRICS: Final = (
@@ -190,6 +194,10 @@ class EdgeNode:
         self._seq = 0
         self._born = False
         self._rebirth = False
+        #: Loop time of the last NBIRTH; the window births wait for after a host's death.
+        self._nbirth_at = -math.inf
+        self._births_after = -math.inf
+        self.host_rebirth_s = HOST_REBIRTH_MIN_S
         #: The primary host's latest STATE: online, and its timestamp (None: none seen).
         self.host_online: bool | None = None
         self._host_stamp: int | None = None
@@ -318,6 +326,7 @@ class EdgeNode:
         # Born from here on (the publisher sends nothing once not born: a death came).
         self._alive.clear()
         self._born, self._rebirth = True, False
+        self._nbirth_at = asyncio.get_running_loop().time()
         self.stats.published["NBIRTH"] += 1
         yield self.topic("NBIRTH"), nbirth
         for key in self._devices:
@@ -402,6 +411,9 @@ class EdgeNode:
             await self._wake.wait()
             await asyncio.sleep(GATHER_S)  # the samples that follow go out together
             self._wake.clear()
+            wait = self._births_after - asyncio.get_running_loop().time()
+            if not self._born and wait > 0:
+                await asyncio.sleep(wait)  # a flapping host: births at the window's end
             if not self._ready():
                 continue
             for sent, (topic, payload) in enumerate(self._outgoing(), 1):
@@ -538,6 +550,7 @@ class EdgeNode:
                         self.sparkplug.primary_host_id,
                     )
                     await self._say_dead(client)
+                    self._births_after = self._nbirth_at + self.host_rebirth_s
                     raise _HostOffline(f"primary host {self.sparkplug.primary_host_id} offline")
                 continue
             self.stats.commands += 1
