@@ -58,12 +58,6 @@ async def _modbus_connects(site: Plant, stop: asyncio.Event) -> dict[str, int]:
 # -- HTTP, Modbus: every slot held from two addresses ------------------------------------
 
 
-@pytest.mark.xfail(
-    strict=True,
-    reason="the per-address cap is half the global one: two attacker addresses with 32 "
-    "busy keep-alive connections each hold all 64 HTTP slots, and the operator's "
-    "/healthz (and the workbench's Stop and lease heartbeats) are refused",
-)
 async def test_two_addresses_cannot_hold_every_http_slot(tmp_path: Path) -> None:
     async with plant(tmp_path) as site:
         async with site.window() as window:
@@ -81,12 +75,6 @@ async def test_two_addresses_cannot_hold_every_http_slot(tmp_path: Path) -> None
         assert set(health) == {"200"}, health
 
 
-@pytest.mark.xfail(
-    strict=True,
-    reason="two attacker addresses with 32 Modbus connections each (a one-register read "
-    "every 3 s, under the 60 s idle timeout) hold every slot: a SCADA that reconnects "
-    "is accepted and closed at once for as long as they stay",
-)
 async def test_two_addresses_cannot_hold_every_modbus_slot(tmp_path: Path) -> None:
     async with plant(tmp_path) as site:
         stop = asyncio.Event()
