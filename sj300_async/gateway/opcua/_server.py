@@ -75,6 +75,7 @@ from ._model import (
 from ._quality import BAD_WAITING, GOOD, utc
 from ._security import ChannelRules, Principal, Users
 from ._space import SpaceBuilder
+from ._subscriptions import bound_subscriptions
 
 if TYPE_CHECKING:
     from prometheus_client.core import Metric
@@ -293,6 +294,7 @@ class OpcuaServer:
             activated=self._session_activated,
             closed=self._session_closed,
         )
+        bound_subscriptions(server)  # after install: it wraps guard_sessions' creation
         refuse_registration(server)
 
     def _bind(self, server: Server, nodes: DriveNodes) -> None:
