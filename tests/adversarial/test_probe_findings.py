@@ -114,11 +114,11 @@ async def test_a_storm_of_home_assistant_births_costs_the_loop_nothing(tmp_path:
 
 
 @pytest.mark.xfail(
-    strict=True,
-    reason="anonymous sessions over SignAndEncrypt with the attacker's own certificate "
-    "(no trusted_clients: any opens a channel): 16 of them (the address's share), each "
-    "a 10 ms subscription of 500 items sampled as fast as allowed, took the loop's p99 "
-    "to 134-268 ms, max 283-287 ms; 16 sessions of 1 item: p99 3 ms",
+    strict=False,
+    reason="16 anonymous sessions of 500 items: _subscriptions.py revises the 10 ms to "
+    "100 ms and creates items 50 a turn (before: p99 73-268 ms, max 234-287 ms); now p99 "
+    "48-59 ms, max 52-367 ms on a loaded machine, passing one run of two: the fan-out of "
+    "one value change to 8,000 items on one variable is still one turn of the loop",
 )
 async def test_anonymous_subscriptions_of_500_items_cost_the_loop_little(
     tmp_path: Path, pair: tuple[Path, Path]
