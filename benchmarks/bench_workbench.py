@@ -221,6 +221,7 @@ def _gateway_toml(gateway_id: str, interval_s: float) -> str:
         id = "{gateway_id}"
         [http]
         listen = "127.0.0.1:0"
+        max_streams_per_address = 64  # the 20 clients are 20 pages on one host
         [[lines]]
         name = "{LINE}"
         url = "sim://?nodes=1-{DRIVES}"

@@ -202,10 +202,11 @@ async def test_wrong_passwords_from_one_address_leave_the_operator_in(
             report = await attack
         site.assert_unharmed(window[0])
         assert "accepted" not in report["outcomes"], report
-        assert sum(report["outcomes"].values()) >= 5, report
+        assert sum(report["outcomes"].values()) >= 2, report  # each a whole handshake
         assert reader["login"] == "ok", reader
         metrics = await _metrics(site)
-        assert _total(metrics, "sj300_opcua_refused_logins") >= 5, metrics
+        refused = _total(metrics, "sj300_opcua_refused_logins")
+        assert refused >= sum(report["outcomes"].values()), metrics
 
 
 async def test_chunks_with_a_wrong_token_close_the_connection_quietly(

@@ -1,10 +1,11 @@
-"""Attacks that still harm the plant after issue 41, found by probing its doors: each an
-expected failure (``xfail(strict=True)``) until the gateway holds against it.
+"""Attacks found by probing the doors after issue 41's first defences, each fixed since:
+two addresses holding every slot, a storm of Home Assistant births, anonymous
+subscriptions of 500 items.
 
 Each test starts the plant (``plant.py``: every door, a SCADA heartbeating drive 1's lease
 every second under ``lease_s`` = 3), runs one attack from a process of its own at nice 19
 over real sockets (``attacker.py``), checks that the attack happened, then asserts the
-promise it breaks today: the loop's lag (p99 under 50 ms, max under 200 ms), the poll's
+promise it broke: the loop's lag (p99 under 50 ms, max under 200 ms), the poll's
 rate, the lease, or a legitimate client served while it goes on.
 """
 
@@ -16,6 +17,8 @@ import struct
 from pathlib import Path
 
 import pytest
+
+from sj300_async.gateway.opcua._subscriptions import ITEMS_PER_ADDRESS
 
 from .plant import OPERATOR_IP, Plant, client_pair, plant
 from .test_adversarial import _while_healthz
@@ -113,13 +116,6 @@ async def test_a_storm_of_home_assistant_births_costs_the_loop_nothing(tmp_path:
 # -- OPC UA: anonymous subscriptions -----------------------------------------------------
 
 
-@pytest.mark.xfail(
-    strict=False,
-    reason="16 anonymous sessions of 500 items: _subscriptions.py revises the 10 ms to "
-    "100 ms and creates items 50 a turn (before: p99 73-268 ms, max 234-287 ms); now p99 "
-    "48-59 ms, max 52-367 ms on a loaded machine, passing one run of two: the fan-out of "
-    "one value change to 8,000 items on one variable is still one turn of the loop",
-)
 async def test_anonymous_subscriptions_of_500_items_cost_the_loop_little(
     tmp_path: Path, pair: tuple[Path, Path]
 ) -> None:
@@ -132,5 +128,8 @@ async def test_anonymous_subscriptions_of_500_items_cost_the_loop_little(
                 sessions=16, items=500, mode="subscribe", publishing_ms=10, duration_s=8.0,
             )  # fmt: skip
         assert report["sessions"] == 16, report
-        assert report["outcomes"].get("items", 0) == 16 * 500, report
+        # Past the address's share of monitored items the rest are refused (sessions
+        # asking at once may each be refused part of theirs: at most the share is held).
+        assert 500 <= report["outcomes"].get("items", 0) <= ITEMS_PER_ADDRESS, report
+        assert report["notified"] > 0, report
         site.assert_unharmed(window[0])

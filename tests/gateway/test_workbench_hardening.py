@@ -37,6 +37,7 @@ import pytest
 from waiting import wait_for
 
 from sj300_async.gateway import Endpoint, Gateway
+from sj300_async.gateway.http import DEFAULT_STREAMS_PER_ADDRESS
 from sj300_async.gateway.http._api import serve_http
 from sj300_async.gateway.http._bodies import MAX_DEPTH
 from sj300_async.gateway.http._guards import LOGIN_BURST
@@ -403,7 +404,7 @@ async def test_event_streams_are_capped_per_address(sim_line: SimLine) -> None:
         base = f"http://127.0.0.1:{http.port}"
         events = base + "/api/v1/events"
         async with contextlib.AsyncExitStack() as streams:
-            for _ in range(4):  # the default max_streams_per_address
+            for _ in range(DEFAULT_STREAMS_PER_ADDRESS):
                 response = await streams.enter_async_context(mine.get(events))
                 assert response.status == 200
                 assert await response.content.readline() == b"retry: 2000\n"

@@ -48,8 +48,10 @@ from ._trend import SAMPLE_BYTES, Trend, trend_capacity
 #: Seconds a request's head and body may take, from its first byte (``_server``): a
 #: 1 MiB backup needs 1.7 Mbit/s, a login or a write a few hundred bytes.
 DEFAULT_BODY_TIMEOUT_S: Final = 5.0
-#: Event streams one client address may hold at once (``_guards``).
-DEFAULT_STREAMS_PER_ADDRESS: Final = 4
+#: Event streams one client address may hold at once (``_guards``): a control room's PC
+#: with a workbench tab on each of its screens, each tab one stream and, while it reads
+#: parameters, a second. Far below the address's connections (half of 64).
+DEFAULT_STREAMS_PER_ADDRESS: Final = 16
 
 __all__ = [
     "DEFAULT_LIMITS",
