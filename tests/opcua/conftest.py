@@ -9,6 +9,7 @@ in its own directory.
 
 from __future__ import annotations
 
+import asyncio
 import contextlib
 import gc
 import shutil
@@ -19,6 +20,7 @@ from pathlib import Path
 
 import pytest
 from asyncua import Client, ua
+from asyncua.client.ua_client import UaClient, UaClientState
 from asyncua.crypto import cert_gen
 from cryptography import x509
 from cryptography.hazmat.primitives import serialization
@@ -202,3 +204,37 @@ async def tcp_line() -> AsyncIterator[tuple[SimulatedBus, str]]:
     server = await serve_tcp(sim)
     async with server:
         yield sim, f"tcp://127.0.0.1:{server.port}"
+
+
+def from_address(uaclient: UaClient, source: str) -> None:
+    """Make *uaclient* connect from the loopback address *source* (asyncua binds none)."""
+
+    async def connect_socket(host: str, port: int) -> None:
+        loop = asyncio.get_running_loop()
+        await loop.create_connection(uaclient._make_protocol, host, port, local_addr=(source, 0))
+        uaclient._set_state(UaClientState.SOCKET_OPEN)
+
+    uaclient.connect_socket = connect_socket
+
+
+@contextlib.asynccontextmanager
+async def unsecured_channel(url: str, source: str | None = None) -> AsyncIterator[UaClient]:
+    """asyncua's raw client on a SecurityPolicy None channel with no certificate at all,
+    connecting from the loopback address *source* when given."""
+    client = UaClient(timeout=10)
+    if source is not None:
+        from_address(client, source)
+    await client.connect_socket("127.0.0.1", int(url.rsplit(":", 1)[1]))
+    try:
+        await client.send_hello(url)
+        params = ua.OpenSecureChannelParameters(
+            RequestType=ua.SecurityTokenRequestType.Issue,
+            SecurityMode=ua.MessageSecurityMode.None_,
+            ClientNonce=b"",
+            RequestedLifetime=3_600_000,
+        )
+        await client.open_secure_channel(params)
+        yield client
+    finally:
+        with contextlib.suppress(Exception):
+            client.disconnect_socket()

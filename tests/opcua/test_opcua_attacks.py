@@ -19,7 +19,7 @@ from typing import Any
 
 import pytest
 from asyncua import Client, ua
-from asyncua.client.ua_client import UaClient, UaClientState, UASocketState
+from asyncua.client.ua_client import UaClient, UASocketState
 from asyncua.ua.ua_binary import nodeid_to_binary, struct_to_binary
 from asyncua.ua.uaerrors import UaError, UaStatusCodeError
 from waiting import wait_for
@@ -32,9 +32,11 @@ from .conftest import (
     PASSWORD,
     USER,
     Pair,
+    from_address,
     opcua_gateway,
     opcua_toml,
     polled,
+    unsecured_channel,
 )
 
 ATTACKER, SECOND_ATTACKER = "127.0.0.2", "127.0.0.3"
@@ -78,37 +80,6 @@ def probed() -> Iterator[LagProbe]:
 
 def _port(url: str) -> int:
     return int(url.rsplit(":", 1)[1])
-
-
-def _from(uaclient: UaClient, source: str) -> None:
-    """Make *uaclient* connect from the loopback address *source*."""
-
-    async def connect_socket(host: str, port: int) -> None:
-        loop = asyncio.get_running_loop()
-        await loop.create_connection(uaclient._make_protocol, host, port, local_addr=(source, 0))
-        uaclient._set_state(UaClientState.SOCKET_OPEN)
-
-    uaclient.connect_socket = connect_socket
-
-
-@contextlib.asynccontextmanager
-async def channel(url: str, source: str) -> AsyncIterator[UaClient]:
-    """A raw client on an unsecured channel, from *source*."""
-    client = UaClient(timeout=10)
-    _from(client, source)
-    await client.connect_socket("127.0.0.1", _port(url))
-    try:
-        await client.send_hello(url)
-        params = ua.OpenSecureChannelParameters(
-            RequestType=ua.SecurityTokenRequestType.Issue,
-            SecurityMode=ua.MessageSecurityMode.None_,
-            ClientNonce=b"",
-            RequestedLifetime=3_600_000,
-        )
-        await client.open_secure_channel(params)
-        yield client
-    finally:
-        client.disconnect_socket()
 
 
 def _create(url: str) -> ua.CreateSessionParameters:
@@ -172,7 +143,9 @@ async def test_unactivated_sessions_are_rationed_and_the_operator_still_logs_in(
             answers, clients = [], []
             for source in (ATTACKER, SECOND_ATTACKER):
                 for _ in range(3):
-                    clients.append(await stack.enter_async_context(channel(server.url, source)))
+                    clients.append(
+                        await stack.enter_async_context(unsecured_channel(server.url, source))
+                    )
                     answers += await _sessions(clients[-1], server.url, 100 // 3)
             first = clients[0]
             assert answers.count("Good") == 8
@@ -223,7 +196,7 @@ async def test_activated_anonymous_sessions_hold_only_their_address_s_share(
         with probed() as probe:
             answers = []
             for _ in range(3):
-                client = await stack.enter_async_context(channel(server.url, ATTACKER))
+                client = await stack.enter_async_context(unsecured_channel(server.url, ATTACKER))
                 answers.append(await _activated(client, server.url, 4))
             assert server.session_count == 4
             async with operator(server.url, client_pair) as scada:
@@ -238,7 +211,10 @@ async def test_activated_anonymous_sessions_hold_only_their_address_s_share(
 async def test_no_session_on_a_discovery_only_channel(tmp_path: Path) -> None:
     """The default configuration's unsecured channel (issue 41's way in) discovers only."""
     text = opcua_toml(tmp_path, security=SECURE_ONLY)
-    async with opcua_gateway(text) as (_, server), channel(server.url, ATTACKER) as client:
+    async with (
+        opcua_gateway(text) as (_, server),
+        unsecured_channel(server.url, ATTACKER) as client,
+    ):
         endpoints = await client.get_endpoints(ua.GetEndpointsParameters(EndpointUrl=server.url))
         assert {e.SecurityMode for e in endpoints} == {
             ua.MessageSecurityMode.Sign, ua.MessageSecurityMode.SignAndEncrypt
@@ -262,7 +238,7 @@ async def test_a_stream_of_wrong_passwords_refuses_only_its_own_address(
     async with opcua_gateway(opcua_toml(tmp_path)) as (_, server):
         attacker = Client(server.url, timeout=10)
         attacker.application_uri = CLIENT_URI
-        _from(attacker.uaclient, ATTACKER)
+        from_address(attacker.uaclient, ATTACKER)
         await attacker.connect()  # anonymous over None; its logins' passwords encrypted
         tried = 0
         stop = asyncio.Event()
@@ -311,7 +287,7 @@ async def test_a_password_in_clear_is_refused_where_its_policy_asks_for_encrypti
         refused = []
         with probed() as probe:
             # Over None, as a raw client would send it.
-            async with channel(server.url, ATTACKER) as client:
+            async with unsecured_channel(server.url, ATTACKER) as client:
                 for token in (
                     _token(PASSWORD.encode(), None),
                     _token(PASSWORD.encode(), "http://www.w3.org/2001/04/xmlenc#rsa-1_5"),
@@ -391,7 +367,7 @@ async def _raw(url: str, first: bytes) -> bytes:
 async def _on_channel(url: str, make: Any) -> bytes:
     """*make*(the channel's connection) written on an open unsecured channel: all the
     server answered until it closed the connection."""
-    async with channel(url, ATTACKER) as client:
+    async with unsecured_channel(url, ATTACKER) as client:
         protocol = client.protocol
         assert protocol is not None
         assert protocol.transport is not None
@@ -521,14 +497,16 @@ async def test_a_well_behaved_client_keeps_reading_through_the_attacks(
         async def sessions() -> None:  # 100 never activated, held (issue 41's)
             async with contextlib.AsyncExitStack() as stack:
                 for _ in range(4):
-                    client = await stack.enter_async_context(channel(server.url, ATTACKER))
+                    client = await stack.enter_async_context(
+                        unsecured_channel(server.url, ATTACKER)
+                    )
                     await _sessions(client, server.url, 25)
                 await stop.wait()
 
         async def passwords() -> None:
             attacker = Client(server.url, timeout=10)
             attacker.application_uri = CLIENT_URI
-            _from(attacker.uaclient, ATTACKER)
+            from_address(attacker.uaclient, ATTACKER)
             async with attacker:
                 for n in range(50):
                     with contextlib.suppress(UaStatusCodeError):

@@ -16,7 +16,6 @@ import dataclasses
 import math
 import shutil
 import socket
-from collections.abc import AsyncIterator
 from pathlib import Path
 from typing import Any, cast
 
@@ -42,29 +41,10 @@ from .conftest import (
     opcua_toml,
     polled,
     tcp_line,
+    unsecured_channel,
 )
 
 SECURE_ONLY = '["Basic256Sha256_SignAndEncrypt", "Basic256Sha256_Sign"]'
-
-
-@contextlib.asynccontextmanager
-async def _unsecured_channel(url: str) -> AsyncIterator[UaClient]:
-    """A raw client on a SecurityPolicy None channel with no certificate at all."""
-    client = UaClient(timeout=5)
-    await client.connect_socket("127.0.0.1", int(url.rsplit(":", 1)[1]))
-    try:
-        await client.send_hello(url)
-        params = ua.OpenSecureChannelParameters(
-            RequestType=ua.SecurityTokenRequestType.Issue,
-            SecurityMode=ua.MessageSecurityMode.None_,
-            ClientNonce=b"",
-            RequestedLifetime=3_600_000,
-        )
-        await client.open_secure_channel(params)
-        yield client
-    finally:
-        with contextlib.suppress(Exception):
-            await client.disconnect_socket()
 
 
 async def _session_on(client: UaClient, url: str) -> None:
@@ -109,7 +89,7 @@ async def test_an_unoffered_or_uncertified_unsecured_channel_only_discovers(
         extra = f'trusted_clients = "{tmp_path / "trusted"}"'
     security = '["Basic256Sha256_SignAndEncrypt", "None"]' if trusted else SECURE_ONLY
     text = opcua_toml(tmp_path, security=security, opcua_extra=extra)
-    async with opcua_gateway(text) as (_, server), _unsecured_channel(server.url) as client:
+    async with opcua_gateway(text) as (_, server), unsecured_channel(server.url) as client:
         endpoints = await client.get_endpoints(ua.GetEndpointsParameters(EndpointUrl=server.url))
         assert ua.MessageSecurityMode.SignAndEncrypt in {e.SecurityMode for e in endpoints}
         with pytest.raises(UaStatusCodeError) as refused:
@@ -121,7 +101,7 @@ async def test_an_unoffered_or_uncertified_unsecured_channel_only_discovers(
 
 async def test_an_offered_unsecured_channel_reads(tmp_path: Path) -> None:
     text = opcua_toml(tmp_path, security='["None"]')
-    async with opcua_gateway(text) as (gateway, server), _unsecured_channel(server.url) as client:
+    async with opcua_gateway(text) as (gateway, server), unsecured_channel(server.url) as client:
         await polled(gateway)
         await _session_on(client, server.url)
         assert (await _read_state(client, 1)).Value.Value == "stopped"
@@ -172,7 +152,7 @@ async def test_session_tokens_are_random_and_another_s_cannot_be_activated(
         assert token.NodeIdType == ua.NodeIdType.ByteString
         assert len(token.Identifier) == 32
         # A client that guesses asyncua's counter (1000, 1001...) finds nothing to take over.
-        async with _unsecured_channel(server.url) as intruder:
+        async with unsecured_channel(server.url) as intruder:
             for guess in range(1000, 1010):
                 intruder.protocol.authentication_token = ua.NodeId(guess)
                 params = ua.ActivateSessionParameters(
@@ -215,7 +195,7 @@ async def test_a_reactivated_session_still_lapses_its_lease_when_it_closes(
 
 async def test_an_unactivated_session_is_closed(tmp_path: Path) -> None:
     text = opcua_toml(tmp_path, security='["None"]', opcua_extra="activate_within_s = 0.5")
-    async with opcua_gateway(text) as (_, server), _unsecured_channel(server.url) as client:
+    async with opcua_gateway(text) as (_, server), unsecured_channel(server.url) as client:
         params = ua.CreateSessionParameters(
             ClientNonce=b"\0" * 32,
             SessionName="never activated",
@@ -309,7 +289,7 @@ async def test_an_array_argument_is_a_type_mismatch_and_audited(
 
 async def test_discovery_registration_is_refused(tmp_path: Path) -> None:
     text = opcua_toml(tmp_path, security='["None"]')
-    async with opcua_gateway(text) as (_, server), _unsecured_channel(server.url) as client:
+    async with opcua_gateway(text) as (_, server), unsecured_channel(server.url) as client:
         registered = ua.RegisteredServer(
             ServerUri="urn:someone:else",
             ServerNames=[ua.LocalizedText("else")],
