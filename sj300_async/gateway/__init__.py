@@ -30,6 +30,7 @@ from ._listeners import (
     Listener,
     ListenerLimits,
     RateLimitedLog,
+    Slot,
     listener_families,
 )
 from ._metrics import (
@@ -132,6 +133,7 @@ __all__ = [
     "RunCommand",
     "SectionContext",
     "SetFrequency",
+    "Slot",
     "UnitScope",
     "User",
     "WriteGrant",

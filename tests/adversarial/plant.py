@@ -24,10 +24,9 @@ from __future__ import annotations
 import asyncio
 import contextlib
 import json
-import os
 import sys
 import textwrap
-from collections.abc import AsyncIterator, Iterator
+from collections.abc import AsyncIterator
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Final
@@ -36,7 +35,6 @@ from mqtt_broker import Broker, running_broker
 from waiting import wait_for
 
 from sj300_async.gateway import Gateway, hash_password, parse_config
-from sj300_async.gateway._passwords import _checking_thread
 from sj300_async.gateway.http._northbound import HttpNorthbound
 from sj300_async.gateway.modbus._northbound import ModbusNorthbound
 from sj300_async.gateway.opcua._server import OpcuaServer
@@ -223,7 +221,9 @@ class Plant:
     def _lapses(self) -> int:
         return sum(line.controller.lapses for line in self.gateway.lines)
 
-    def assert_unharmed(self, window: Window) -> None:
+    def assert_unharmed(
+        self, window: Window, p99_bound_s: float = P99_BOUND_S, max_bound_s: float = MAX_BOUND_S
+    ) -> None:
         """The issue's promise: the loop's lag bounded, the lease kept, the poll's rate kept."""
         print(
             f"\n{window.seconds:.1f} s: loop lag p99 {window.p99_s * 1000:.1f} ms, max "
@@ -231,8 +231,8 @@ class Plant:
             f"{window.lapses} lapses"
         )
         assert window.lag_samples >= window.seconds * 10, window  # the probe itself ran
-        assert window.p99_s < P99_BOUND_S, window
-        assert window.max_s < MAX_BOUND_S, window
+        assert window.p99_s < p99_bound_s, window
+        assert window.max_s < max_bound_s, window
         assert window.lapses == 0, window
         assert window.motor_running, window
         lease = self.gateway.drives[0].lease
@@ -263,45 +263,9 @@ def client_pair(directory: Path) -> tuple[Path, Path]:
     return pair
 
 
-#: How much more the gateway's thread weighs with the kernel's scheduler while a plant
-#: runs (a negative niceness: root only, as in CI; elsewhere the plant runs as it is).
-GATEWAY_PRIORITY: Final = -10
-
-
-@contextlib.contextmanager
-def _first_on_the_processor() -> Iterator[None]:
-    """The calling thread (the gateway's loop) scheduled before this machine's other work.
-
-    The bounds are on the gateway's own work. On this 2-core machine the test's
-    attackers (already at nice 19), mosquitto and the suite's other worker compete
-    for the same cores; on a plant, attackers have machines of their own. Linux keeps
-    a niceness per thread, so only the loop's thread is raised, and it is put back.
-    """
-    # The process's password thread is made now, so that it keeps the usual priority
-    # (a thread takes its creator's): the doors' scrypt checks must not outrank the loop.
-    _checking_thread()
-    before = os.getpriority(os.PRIO_PROCESS, 0)
-    try:
-        os.setpriority(os.PRIO_PROCESS, 0, GATEWAY_PRIORITY)
-    except PermissionError:  # not root: the plant runs at the machine's mercy
-        yield
-        return
-    try:
-        yield
-    finally:
-        os.setpriority(os.PRIO_PROCESS, 0, before)
-
-
 @contextlib.asynccontextmanager
 async def plant(directory: Path) -> AsyncIterator[Plant]:
     """The plant (module docstring); enter it in the test itself (the poller's task group)."""
-    with _first_on_the_processor():
-        async with _plant(directory) as site:
-            yield site
-
-
-@contextlib.asynccontextmanager
-async def _plant(directory: Path) -> AsyncIterator[Plant]:
     sim = SimulatedBus(range(1, DRIVES + 1))
     server = await serve_tcp(sim)
     async with server, running_broker(directory) as broker:

@@ -125,7 +125,7 @@ GATEWAY_NAMES = (
     "DEFAULT_STALE_AFTER_S", "DriveView", "Endpoint", "Flag", "Gateway", "GatewayConfig",
     "GatewayConfigError", "GatewayDrive", "GatewayLine", "GatewayView", "Heartbeat",
     # the doors' shared defences (issue 41)
-    "KeyedBudget", "PasswordChecks",
+    "KeyedBudget", "PasswordChecks", "Slot",
     # a northbound that cannot start (its port in use...)
     "GatewayStartError",
     "LAPSE_ACTIONS", "POLL_READS", "LapseAction", "Lease", "LineConfig", "LineView", "Northbound",

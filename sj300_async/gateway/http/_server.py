@@ -72,8 +72,7 @@ from aiohttp import ClientPayloadError, web
 from aiohttp.abc import AbstractAccessLogger
 from prometheus_client import CONTENT_TYPE_LATEST, CollectorRegistry, generate_latest
 
-from .. import ConnectionLimit, Endpoint, Listener, excerpt
-from .._listeners import Slot
+from .. import ConnectionLimit, Endpoint, Listener, Slot, excerpt
 from . import DEFAULT_BODY_TIMEOUT_S
 from ._replies import json_error
 

@@ -61,10 +61,10 @@ from .. import (
     ListenerLimits,
     RateLimitedLog,
     Refusal,
+    Slot,
     WriteRequest,
     WriteResult,
 )
-from .._listeners import Slot
 from ._clients import ClientCounters
 from ._framing import (
     NEED_DATA,
