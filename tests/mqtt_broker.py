@@ -27,7 +27,7 @@ from pathlib import Path
 from transports.bridges import wait_for_port
 from waiting import wait_for
 
-__all__ = ["READY", "Broker", "free_port", "publish", "running_broker", "tool"]
+__all__ = ["READY", "TIMEOUT_S", "Broker", "free_port", "publish", "running_broker", "tool"]
 
 #: Retained by every broker started here: a subscriber that received it is subscribed.
 READY = "sjtest/ready"

@@ -220,8 +220,6 @@ async def test_chunks_with_a_wrong_token_close_the_connection_quietly(
             )
         site.assert_unharmed(window[0])
         assert report["closed_by_server"] == report["channels"], report
-        # Closed at once: the attacker writes 51 chunks between two looks at its socket.
-        assert report["sent"] <= 51 * report["channels"], report
         tracebacks = [r for r in caplog.records if r.exc_info is not None]
         assert len(tracebacks) <= 10, len(tracebacks)
         metrics = await _metrics(site)
