@@ -325,8 +325,13 @@ async def test_two_full_addresses_cannot_lock_a_third_out_of_http() -> None:
             assert (await reader.read()).startswith(b"HTTP/1.1 200")
         writer.close()
         assert (limit.evicted, limit.refused) == (1, 0)
-        async with asyncio.timeout(5):  # the first connection of 127.0.0.2 was the idlest
-            assert await held[0][0].read() == b""
+        # The idlest connection of an address at the top was closed: the two tie, and
+        # which one goes is the limit's choice (a fourth clean run saw 127.0.0.3's).
+        reads = [asyncio.ensure_future(held_reader.read()) for held_reader, _ in held]
+        done, pending = await asyncio.wait(reads, timeout=5, return_when="FIRST_COMPLETED")
+        for read in pending:
+            read.cancel()
+        assert [read.result() for read in done] == [b""]
         for _, held_writer in held:
             held_writer.close()
         await wait_for(lambda: limit.open == 0, "every slot released")
