@@ -22,13 +22,15 @@ is read every 0.25 s, not with the failures' back-off, which read it at
 from __future__ import annotations
 
 import asyncio
+import contextlib
 import logging
+from collections.abc import AsyncIterator, Callable
 
 import pytest
 from waiting import wait_for
 
 from sj300_async import sj300 as sj3
-from sj300_async.gateway import _control
+from sj300_async.gateway import Gateway, _control
 from sj300_async.simulator import RunState, serve_tcp
 from sj300_async.simulator.sj300 import SimulatedBus
 
@@ -72,6 +74,19 @@ def _lapse_audits(caplog: pytest.LogCaptureFixture) -> list[str]:
     ]
 
 
+@contextlib.asynccontextmanager
+async def _leased_motor(
+    sim: SimulatedBus, tap: Callable[[str, bytes], None] | None = None
+) -> AsyncIterator[Gateway]:
+    """A gateway on *sim* (served over TCP, *tap* seeing its bytes) whose client holds
+    node NODE's lease and runs it; the gateway stops as the block ends, the line after."""
+    server = await serve_tcp(sim, tap=tap)
+    async with server, running_gateway(_config(server.port)) as gateway:
+        await polled(gateway)
+        await _running(gateway, sim, NODE)
+        yield gateway
+
+
 @pytest.fixture
 def close_soon(monkeypatch: pytest.MonkeyPatch, caplog: pytest.LogCaptureFixture) -> None:
     monkeypatch.setattr(_control, "CLOSE_LAPSE_S", CLOSE_S)
@@ -84,19 +99,15 @@ async def test_a_motor_still_decelerating_at_the_stop_is_a_warning_not_an_error(
 ) -> None:
     loop = asyncio.get_running_loop()
     sim = _sim()
-    server = await serve_tcp(sim)
-    async with server:
-        async with running_gateway(_config(server.port)) as gateway:
-            await polled(gateway)
-            await _running(gateway, sim, NODE)
-            await wait_for(
-                lambda: sim.drives[NODE].state(loop.time()) is RunState.CONSTANT_SPEED, "20 Hz"
-            )
-        # The stop reached the drive before the line closed: it ramps down on its own.
-        assert sim.drives[NODE].state(loop.time()) is RunState.DECELERATING
+    async with _leased_motor(sim) as gateway:
         await wait_for(
-            lambda: sim.drives[NODE].state(loop.time()) is RunState.STOPPED, "stopped", timeout=10
+            lambda: sim.drives[NODE].state(loop.time()) is RunState.CONSTANT_SPEED, "20 Hz"
         )
+    # The stop reached the drive before the line closed: it ramps down on its own.
+    assert sim.drives[NODE].state(loop.time()) is RunState.DECELERATING
+    await wait_for(
+        lambda: sim.drives[NODE].state(loop.time()) is RunState.STOPPED, "stopped", timeout=10
+    )
     assert _records(caplog, logging.ERROR) == []
     warned = [m for m in _records(caplog, logging.WARNING) if f"node {NODE}: lease lapsed" in m]
     assert len(warned) == 1, warned
@@ -132,16 +143,12 @@ async def test_a_drive_silent_after_taking_the_stop_is_a_warning_naming_the_fail
         elif stop_seen:
             sim.faults.silence(NODE)
 
-    server = await serve_tcp(sim, tap=tap)
-    async with server:
-        async with running_gateway(_config(server.port)) as gateway:
-            await polled(gateway)
-            await _running(gateway, sim, NODE)
-            await wait_for(
-                lambda: sim.drives[NODE].state(loop.time()) is RunState.CONSTANT_SPEED, "20 Hz"
-            )
-        assert sim.faults.is_silent(NODE)
-        assert sim.drives[NODE].state(loop.time()) is RunState.DECELERATING
+    async with _leased_motor(sim, tap=tap):
+        await wait_for(
+            lambda: sim.drives[NODE].state(loop.time()) is RunState.CONSTANT_SPEED, "20 Hz"
+        )
+    assert sim.faults.is_silent(NODE)
+    assert sim.drives[NODE].state(loop.time()) is RunState.DECELERATING
     # The failed status read is an ERROR as any lapse's first failure is; the give-up is not.
     assert not any("lease lapsed" in m for m in _records(caplog, logging.ERROR))
     warned = [m for m in _records(caplog, logging.WARNING) if f"node {NODE}: lease lapsed" in m]
@@ -157,13 +164,9 @@ async def test_a_drive_that_never_answers_the_stop_is_an_error_that_says_so(
 ) -> None:
     loop = asyncio.get_running_loop()
     sim = _sim()
-    server = await serve_tcp(sim)
-    async with server:
-        async with running_gateway(_config(server.port)) as gateway:
-            await polled(gateway)
-            await _running(gateway, sim, NODE)
-            sim.faults.silence(NODE)  # the stop at close never reaches it
-        assert sim.drives[NODE].state(loop.time()).outputting
+    async with _leased_motor(sim):
+        sim.faults.silence(NODE)  # the stop at close never reaches it
+    assert sim.drives[NODE].state(loop.time()).outputting
     errors = [m for m in _records(caplog, logging.ERROR) if f"node {NODE}: lease lapsed" in m]
     assert len(errors) == 1, _records(caplog, logging.ERROR)
     assert "given up" in errors[0]
@@ -178,15 +181,11 @@ async def test_a_motor_that_stops_within_the_wait_is_confirmed(
     loop = asyncio.get_running_loop()
     sim = _sim()
     sim.drives[NODE].set_parameter("F003", 225)  # 20 Hz to 0 in 0.9 s, within CLOSE_S
-    server = await serve_tcp(sim)
-    async with server:
-        async with running_gateway(_config(server.port)) as gateway:
-            await polled(gateway)
-            await _running(gateway, sim, NODE)
-            await wait_for(
-                lambda: sim.drives[NODE].state(loop.time()) is RunState.CONSTANT_SPEED, "20 Hz"
-            )
-        assert sim.drives[NODE].state(loop.time()) is RunState.STOPPED
+    async with _leased_motor(sim) as gateway:
+        await wait_for(
+            lambda: sim.drives[NODE].state(loop.time()) is RunState.CONSTANT_SPEED, "20 Hz"
+        )
+    assert sim.drives[NODE].state(loop.time()) is RunState.STOPPED
     assert _records(caplog, logging.ERROR) == []
     assert gateway.audit.counts.get("not_confirmed") is None, gateway.audit.counts
     audited = _lapse_audits(caplog)
