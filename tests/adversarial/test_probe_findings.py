@@ -18,8 +18,6 @@ from pathlib import Path
 
 import pytest
 
-from sj300_async.gateway.opcua._subscriptions import ITEMS_PER_ADDRESS
-
 from .plant import OPERATOR_IP, Plant, client_pair, plant
 from .test_adversarial import _while_healthz
 
@@ -27,6 +25,8 @@ pytestmark = pytest.mark.timeout(240)
 
 #: Addresses of the attacker's own (the whole of 127.0.0.0/8 is on the plant's loopback).
 SOURCES = ["127.0.0.10", "127.0.0.11"]
+#: [opcua] max_monitored_items_per_address, as the plant leaves it (its default).
+ITEMS_PER_ADDRESS = 2_000
 
 
 @pytest.fixture(scope="module")

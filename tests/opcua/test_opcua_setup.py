@@ -62,6 +62,8 @@ def test_the_defaults_are_secure_and_relative_to_the_file(tmp_path: Path) -> Non
     assert (config.max_connections, config.max_connections_per_address) == (32, 16)
     assert (config.max_unactivated_per_address, config.activate_within_s) == (4, 5.0)
     assert (config.login_burst, config.login_interval_s) == (5, 12.0)
+    items = (config.max_monitored_items_per_session, config.max_monitored_items_per_address)
+    assert items == (1000, 2000)
 
 
 @pytest.mark.parametrize(
@@ -92,6 +94,10 @@ def test_the_defaults_are_secure_and_relative_to_the_file(tmp_path: Path) -> Non
         ('endpoint = "opc.tcp://h:1"\nactivate_within_s = 0.1', "must be >= 0.5, got 0.1"),
         ('endpoint = "opc.tcp://h:1"\nlogin_interval_s = 7200', "must be 0.1..3600 s"),
         ('endpoint = "opc.tcp://h:1"\nlogin_burst = 0', "opcua.login_burst: must be 1..100"),
+        (
+            'endpoint = "opc.tcp://h:1"\nmax_monitored_items_per_address = 0',
+            "opcua.max_monitored_items_per_address: must be 1..100000, got 0",
+        ),
         ('endpoint = "opc.tcp://h:1"\ncolour = "red"', "opcua.colour: unknown key 'colour'"),
         (
             'endpoint = "opc.tcp://h:1"\n[[opcua.users]]\nname = "a"\npassword_hash = "x"',

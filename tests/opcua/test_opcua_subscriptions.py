@@ -98,7 +98,7 @@ async def test_a_publishing_interval_below_the_least_is_revised_up(tmp_path: Pat
 
 
 async def test_items_past_the_session_cap_are_refused(tmp_path: Path) -> None:
-    cap = _subscriptions.ITEMS_PER_SESSION
+    cap = 1000  # the default of [opcua] max_monitored_items_per_session
     async with opcua_gateway(opcua_toml(tmp_path)) as (_, server), connected(server.url) as c:
         first = (await _subscribe(c)).SubscriptionId
         results = await _items(c, first, cap + 5)  # in slices of ITEMS_PER_TURN
@@ -110,12 +110,11 @@ async def test_items_past_the_session_cap_are_refused(tmp_path: Path) -> None:
 
 
 async def test_items_past_the_address_cap_are_refused_and_freed_with_their_session(
-    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+    tmp_path: Path,
 ) -> None:
-    monkeypatch.setattr(_subscriptions, "ITEMS_PER_SESSION", 3)
-    monkeypatch.setattr(_subscriptions, "ITEMS_PER_ADDRESS", 5)
+    caps = "max_monitored_items_per_session = 3\nmax_monitored_items_per_address = 5"
     async with (
-        opcua_gateway(opcua_toml(tmp_path)) as (_, server),
+        opcua_gateway(opcua_toml(tmp_path, opcua_extra=caps)) as (_, server),
         _sessions(server.url, 2) as (one, two),
         connected(server.url) as three,
     ):

@@ -249,11 +249,13 @@ async def test_every_bad_input_gets_its_status_code_and_changes_nothing(
         offline = gateway.drive("hall", 2)
         assert offline is not None
         await wait_for(lambda: not offline.snapshot.online, "drive 2 offline", timeout=15)
-        assert await _status(_call(client, ns, "Run", "forward", node=2)) == ("BadNoCommunication")
-        assert await _status(_call(client, ns, "SetFrequency", _hz(5.0), node=2)) == (
-            "BadNoCommunication"
-        )
-        assert await _status(_call(client, ns, "Stop", node=2)) == "BadNoCommunication"
+        # Each answer beside what the drive's snapshot said then: one clean run in four
+        # saw SetFrequency refused for the lease (the door found drive 2 online), not
+        # reproduced in 8 runs alone; if it comes back, this says which state it was in.
+        for method, args in (("Run", ("forward",)), ("SetFrequency", (_hz(5.0),)), ("Stop", ())):
+            answer = await _status(_call(client, ns, method, *args, node=2))
+            seen = (offline.snapshot.online, offline.snapshot.taken_at, offline.snapshot.last_ok)
+            assert (method, answer) == (method, "BadNoCommunication"), seen
         assert _refusals(gateway)[-1]["reason"] == "no_answer"
         # Nobody may change the address space.
         with pytest.raises(UaStatusCodeError) as refused_add:

@@ -15,6 +15,8 @@
     activate_within_s = 5.0
     login_burst = 5
     login_interval_s = 12.0
+    max_monitored_items_per_session = 1000
+    max_monitored_items_per_address = 2000
     [[opcua.users]]
     name = "operator"
     password_hash = "scrypt$16384$8$1$..."   # sj300 gateway --hash-password
@@ -71,6 +73,7 @@ OPCUA_KEYS: Final = (
     *("endpoint", "security", "certificate", "private_key", "trusted_clients"),
     *("users", "namespace", "max_connections", "max_connections_per_address"),
     *("max_unactivated_per_address", "activate_within_s", "login_burst", "login_interval_s"),
+    *("max_monitored_items_per_session", "max_monitored_items_per_address"),
 )
 #: The security modes a configuration may name, strongest first.
 SECURITY_MODES: Final = ("Basic256Sha256_SignAndEncrypt", "Basic256Sha256_Sign", "None")
@@ -87,6 +90,12 @@ DEFAULT_ACTIVATE_WITHIN_S: Final = 5.0
 #: (five a minute: the HTTP door's login budget).
 DEFAULT_LOGIN_BURST: Final = 5
 DEFAULT_LOGIN_INTERVAL_S: Final = 12.0
+#: Monitored items one session may hold over its subscriptions, and one client address
+#: over its sessions. Far above a drive's 30-odd variables, and what the subscription
+#: probe measured (gateway/opcua/_subscriptions.py); a SCADA watching a large plant from
+#: one host raises them.
+DEFAULT_ITEMS_PER_SESSION: Final = 1_000
+DEFAULT_ITEMS_PER_ADDRESS: Final = 2_000
 
 
 @dataclass(frozen=True, slots=True)
@@ -110,6 +119,8 @@ class OpcuaConfig:
     activate_within_s: float = DEFAULT_ACTIVATE_WITHIN_S
     login_burst: int = DEFAULT_LOGIN_BURST
     login_interval_s: float = DEFAULT_LOGIN_INTERVAL_S
+    max_monitored_items_per_session: int = DEFAULT_ITEMS_PER_SESSION
+    max_monitored_items_per_address: int = DEFAULT_ITEMS_PER_ADDRESS
 
     @property
     def url(self) -> str:
@@ -173,6 +184,12 @@ def parse_opcua_section(table: ConfigTable, context: SectionContext) -> OpcuaCon
     login_burst = _bounded(table, "login_burst", 1, 100, DEFAULT_LOGIN_BURST)
     activate_within_s = _seconds(table, "activate_within_s", 0.5, 60.0, DEFAULT_ACTIVATE_WITHIN_S)
     login_interval_s = _seconds(table, "login_interval_s", 0.1, 3600.0, DEFAULT_LOGIN_INTERVAL_S)
+    items_per_session = _bounded(
+        table, "max_monitored_items_per_session", 1, 100_000, DEFAULT_ITEMS_PER_SESSION
+    )
+    items_per_address = _bounded(
+        table, "max_monitored_items_per_address", 1, 100_000, DEFAULT_ITEMS_PER_ADDRESS
+    )
     return OpcuaConfig(
         endpoint=Endpoint(host, port),
         host_text=host,
@@ -188,6 +205,8 @@ def parse_opcua_section(table: ConfigTable, context: SectionContext) -> OpcuaCon
         activate_within_s=activate_within_s,
         login_burst=login_burst,
         login_interval_s=login_interval_s,
+        max_monitored_items_per_session=items_per_session,
+        max_monitored_items_per_address=items_per_address,
     )
 
 

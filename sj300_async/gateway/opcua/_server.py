@@ -294,7 +294,12 @@ class OpcuaServer:
             activated=self._session_activated,
             closed=self._session_closed,
         )
-        bound_subscriptions(server)  # after install: it wraps guard_sessions' creation
+        # After install: it wraps guard_sessions' creation.
+        bound_subscriptions(
+            server,
+            items_per_session=self.config.max_monitored_items_per_session,
+            items_per_address=self.config.max_monitored_items_per_address,
+        )
         refuse_registration(server)
 
     def _bind(self, server: Server, nodes: DriveNodes) -> None:

@@ -17,15 +17,15 @@ turn of the loop) and the publishing at 10 ms. So, on the one server:
   (0.1 s and more): a faster publishing sends nothing new.
 - **Subscriptions per session** (:data:`SUBSCRIPTIONS_PER_SESSION`):
   past it, CreateSubscription ``BadTooManySubscriptions``.
-- **Monitored items per session** (:data:`ITEMS_PER_SESSION`) **and per
-  client address** (:data:`ITEMS_PER_ADDRESS`, its sessions together):
-  the items past either are answered ``BadTooManyMonitoredItems``, the
-  others created.
+- **Monitored items per session and per client address** (its sessions
+  together): ``[opcua] max_monitored_items_per_session`` (1,000) and
+  ``max_monitored_items_per_address`` (2,000). The items past either are
+  answered ``BadTooManyMonitoredItems``, the others created.
 - **A request's items a slice at a time** (:data:`ITEMS_PER_TURN`): the
   loop serves the poll and the leases between slices.
 
-Constants, not ``[opcua]`` keys: they are far above a SCADA's needs (a
-drive has 30-odd variables) and the probe measured them. This is private
+The rest are constants, not ``[opcua]`` keys: no client needs them
+moved. This is private
 asyncua access (``iserver.subscription_service``, its ``subscriptions``,
 a session's ``name`` and ``session_id``), checked against the installed
 asyncua by ``tests/opcua/test_opcua_subscriptions.py``.
@@ -44,8 +44,6 @@ from asyncua import Server, ua
 from asyncua.common.utils import ServiceError
 
 __all__ = [
-    "ITEMS_PER_ADDRESS",
-    "ITEMS_PER_SESSION",
     "ITEMS_PER_TURN",
     "MIN_PUBLISHING_INTERVAL_MS",
     "SUBSCRIPTIONS_PER_SESSION",
@@ -56,14 +54,10 @@ __all__ = [
 MIN_PUBLISHING_INTERVAL_MS: Final = 100.0
 #: Subscriptions one session may hold (a client uses one or two).
 SUBSCRIPTIONS_PER_SESSION: Final = 10
-#: Monitored items one session may hold, over its subscriptions.
-ITEMS_PER_SESSION: Final = 1_000
-#: Monitored items one client address may hold, over its sessions. 16 anonymous
-#: sessions of 500 items on one variable (8,000: a change of it is 8,000 notifications
-#: in one turn of the loop) held it p99 48-59 ms, max 52-367 ms on the loaded 2-core
-#: machine, over issue 41's bounds; 2,000 held them. A SCADA watching a large plant
-#: from one host needs more: a constant to make an [opcua] key of (not done yet).
-ITEMS_PER_ADDRESS: Final = 2_000
+# The monitored items' caps are [opcua] keys (_config.py). 16 anonymous sessions of 500
+# items on one variable from one address (8,000: a change of it is 8,000 notifications in
+# one turn of the loop) held the loop p99 48-59 ms, max 52-367 ms on the loaded 2-core
+# machine, over issue 41's bounds; the address cap of 2,000 brought it to 21 ms alone.
 #: Monitored items created per turn of the loop (500 in one turn: 30-70 ms).
 ITEMS_PER_TURN: Final = 50
 
@@ -84,8 +78,9 @@ def _interval(requested: float) -> float:
 class _Bounds:
     """The bounds on one server's subscription service (module docstring)."""
 
-    def __init__(self, service: Any) -> None:
+    def __init__(self, service: Any, per_session: int, per_address: int) -> None:
         self.service = service
+        self.per_session, self.per_address = per_session, per_address
         #: Each external session by its id, while it lives.
         self.sessions: weakref.WeakValueDictionary[Any, Any] = weakref.WeakValueDictionary()
         #: Items granted, not yet created (a request's slices yield the loop).
@@ -109,12 +104,12 @@ class _Bounds:
         )
 
 
-def bound_subscriptions(server: Server) -> None:
+def bound_subscriptions(server: Server, *, items_per_session: int, items_per_address: int) -> None:
     """Bound the subscriptions of *server*'s sessions (module docstring). Runs after
     :func:`._hooks.guard_sessions`, whose session creation it wraps."""
     iserver = server.iserver
     service = iserver.subscription_service
-    bounds = _Bounds(service)
+    bounds = _Bounds(service, items_per_session, items_per_address)
     create_session = iserver.create_session
     create_subscription = service.create_subscription
     create_items = service.create_monitored_items
@@ -151,7 +146,7 @@ def bound_subscriptions(server: Server) -> None:
         by_session, by_host = bounds.items(session_id, host)
         wanted = params.ItemsToCreate
         granted = max(
-            0, min(len(wanted), ITEMS_PER_SESSION - by_session, ITEMS_PER_ADDRESS - by_host)
+            0, min(len(wanted), bounds.per_session - by_session, bounds.per_address - by_host)
         )
         bounds.pending_session[session_id] += granted
         bounds.pending_host[host] += granted
