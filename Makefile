@@ -32,7 +32,7 @@ NODE_DIRS := tests/opcua/node tests/sparkplug/node
 NODE_STAMPS := $(addsuffix /node_modules/.installed,$(NODE_DIRS))
 
 .PHONY: demo gateway examples test lint typecheck lint-imports docs system-packages \
-	node-packages pytest bench bench-compare soak clean venv
+	node-packages pytest attacks bench bench-compare soak clean venv
 
 # No pip self-upgrade: the venv's pip installs the package (editable, PEP 660) as it
 # is, and upgrading it costs 1.5 s of the demo's first screen.
@@ -121,6 +121,11 @@ PYTEST_WORKERS ?= 2
 
 pytest: $(DEV_STAMP) system-packages node-packages
 	$(BIN)/pytest -n $(PYTEST_WORKERS) --dist worksteal $(PYTEST_ARGS)
+
+# Each attack of tests/adversarial alone, against a plant of its own (the default
+# suite runs them all at once in one test); .ci/run runs it after make test.
+attacks: $(DEV_STAMP) system-packages node-packages
+	$(BIN)/pytest -n $(PYTEST_WORKERS) --dist worksteal --attacks tests/adversarial $(PYTEST_ARGS)
 
 bench: $(DEV_STAMP)
 	$(BIN)/python -m benchmarks $(BENCH_ARGS)

@@ -47,6 +47,13 @@ def pytest_addoption(parser: pytest.Parser) -> None:
         help="write the reliability figures of this run to PATH as JSON",
     )
     group.addoption(
+        "--attacks",
+        action="store_true",
+        default=False,
+        help="run each attack of tests/adversarial by itself too (make attacks); "
+        "without it only the combined attack runs",
+    )
+    group.addoption(
         "--soak-seed",
         type=int,
         default=None,
@@ -57,6 +64,21 @@ def pytest_addoption(parser: pytest.Parser) -> None:
 def pytest_configure(config: pytest.Config) -> None:
     config.stash[_FIGURES] = {}
     config.stash[_WORKER_RSS] = []
+
+
+def pytest_collection_modifyitems(config: pytest.Config, items: list[pytest.Item]) -> None:
+    """Without ``--attacks``, the attacks run alone are deselected (not skipped).
+
+    Each of them starts a plant of its own for 15-30 s; the default suite runs
+    them all at once in one test (tests/adversarial), and ``make attacks``, which
+    .ci/run calls after ``make test``, runs each alone with its own assertions.
+    """
+    if config.getoption("--attacks"):
+        return
+    alone = [item for item in items if item.get_closest_marker("attack_alone") is not None]
+    if alone:
+        config.hook.pytest_deselected(items=alone)
+        items[:] = [item for item in items if item.get_closest_marker("attack_alone") is None]
 
 
 def _peak_rss_mib() -> float:

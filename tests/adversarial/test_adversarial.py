@@ -11,7 +11,9 @@ both halves of the promise:
   under 200 ms over the attack, no lease lapsed, the motor still running,
   the poll at 80 % of its idle rate or better.
 
-The last test runs them all at once.
+The last test runs them all at once: the only one the default suite runs.
+The others carry ``attack_alone`` and run with ``--attacks`` (``make
+attacks``, which .ci/run calls after ``make test``).
 """
 
 from __future__ import annotations
@@ -97,6 +99,7 @@ def pair(tmp_path_factory: pytest.TempPathFactory) -> tuple[Path, Path]:
 # -- HTTP ---------------------------------------------------------------------------------
 
 
+@pytest.mark.attack_alone
 async def test_a_burst_of_logins_is_refused_before_it_costs_the_loop(tmp_path: Path) -> None:
     async with plant(tmp_path) as site:
         async with site.window() as window:
@@ -118,6 +121,7 @@ async def test_a_burst_of_logins_is_refused_before_it_costs_the_loop(tmp_path: P
         assert metrics["sj300_http_password_checks_total{}"] == statuses["401"], metrics
 
 
+@pytest.mark.attack_alone
 async def test_bodies_that_never_come_cannot_hold_every_slot(tmp_path: Path) -> None:
     async with plant(tmp_path) as site:
         async with site.window() as window:
@@ -138,6 +142,7 @@ async def test_bodies_that_never_come_cannot_hold_every_slot(tmp_path: Path) -> 
         assert cut + per_address > 0, metrics
 
 
+@pytest.mark.attack_alone
 async def test_nested_json_is_a_400_with_no_traceback(
     tmp_path: Path, errors: list[logging.LogRecord]
 ) -> None:
@@ -154,6 +159,7 @@ async def test_nested_json_is_a_400_with_no_traceback(
     assert errors == []
 
 
+@pytest.mark.attack_alone
 async def test_a_closed_stream_or_a_cut_body_is_no_error(
     tmp_path: Path, errors: list[logging.LogRecord]
 ) -> None:
@@ -169,6 +175,7 @@ async def test_a_closed_stream_or_a_cut_body_is_no_error(
 # -- OPC UA -------------------------------------------------------------------------------
 
 
+@pytest.mark.attack_alone
 async def test_sessions_never_activated_do_not_lock_the_operator_out(
     tmp_path: Path, pair: tuple[Path, Path]
 ) -> None:
@@ -187,6 +194,7 @@ async def test_sessions_never_activated_do_not_lock_the_operator_out(
         assert _total(metrics, "sj300_opcua_refused_sessions") > 0, metrics
 
 
+@pytest.mark.attack_alone
 async def test_wrong_passwords_from_one_address_leave_the_operator_in(
     tmp_path: Path, pair: tuple[Path, Path]
 ) -> None:
@@ -209,6 +217,7 @@ async def test_wrong_passwords_from_one_address_leave_the_operator_in(
         assert refused >= sum(report["outcomes"].values()), metrics
 
 
+@pytest.mark.attack_alone
 async def test_chunks_with_a_wrong_token_close_the_connection_quietly(
     tmp_path: Path, caplog: pytest.LogCaptureFixture
 ) -> None:
@@ -229,6 +238,7 @@ async def test_chunks_with_a_wrong_token_close_the_connection_quietly(
 # -- Modbus, MQTT -------------------------------------------------------------------------
 
 
+@pytest.mark.attack_alone
 async def test_modbus_junk_changes_nothing(tmp_path: Path) -> None:
     async with plant(tmp_path) as site:
         async with site.window() as window:
@@ -239,6 +249,7 @@ async def test_modbus_junk_changes_nothing(tmp_path: Path) -> None:
         assert _total(metrics, "sj300_modbus_bad_frames") > 0, metrics
 
 
+@pytest.mark.attack_alone
 async def test_mqtt_junk_changes_nothing(tmp_path: Path) -> None:
     async with plant(tmp_path) as site:
         async with site.window() as window:

@@ -61,6 +61,7 @@ async def _modbus_connects(site: Plant, stop: asyncio.Event) -> dict[str, int]:
 # -- HTTP, Modbus: every slot held from two addresses ------------------------------------
 
 
+@pytest.mark.attack_alone
 async def test_two_addresses_cannot_hold_every_http_slot(tmp_path: Path) -> None:
     async with plant(tmp_path) as site:
         async with site.window() as window:
@@ -78,6 +79,7 @@ async def test_two_addresses_cannot_hold_every_http_slot(tmp_path: Path) -> None
         assert set(health) == {"200"}, health
 
 
+@pytest.mark.attack_alone
 async def test_two_addresses_cannot_hold_every_modbus_slot(tmp_path: Path) -> None:
     async with plant(tmp_path) as site:
         stop = asyncio.Event()
@@ -101,6 +103,7 @@ async def test_two_addresses_cannot_hold_every_modbus_slot(tmp_path: Path) -> No
 # -- MQTT: Home Assistant's status -------------------------------------------------------
 
 
+@pytest.mark.attack_alone
 async def test_a_storm_of_home_assistant_births_costs_the_loop_nothing(tmp_path: Path) -> None:
     async with plant(tmp_path) as site:
         async with site.window() as window:
@@ -116,6 +119,7 @@ async def test_a_storm_of_home_assistant_births_costs_the_loop_nothing(tmp_path:
 # -- OPC UA: anonymous subscriptions -----------------------------------------------------
 
 
+@pytest.mark.attack_alone
 async def test_anonymous_subscriptions_of_500_items_cost_the_loop_little(
     tmp_path: Path, pair: tuple[Path, Path]
 ) -> None:
