@@ -27,7 +27,16 @@ from pathlib import Path
 from transports.bridges import wait_for_port
 from waiting import wait_for
 
-__all__ = ["READY", "TIMEOUT_S", "Broker", "free_port", "publish", "running_broker", "tool"]
+__all__ = [
+    "READY",
+    "TIMEOUT_S",
+    "Broker",
+    "free_port",
+    "publish",
+    "running_broker",
+    "stop_process",
+    "tool",
+]
 
 #: Retained by every broker started here: a subscriber that received it is subscribed.
 READY = "sjtest/ready"
@@ -117,21 +126,33 @@ class Broker:
     async def stop(self) -> None:
         """Terminate it (killed if it lingers) and reap it."""
         proc, self.proc = self.proc, None
-        if proc is None:
-            return
-        if proc.returncode is None:
-            proc.terminate()
-            try:
-                await asyncio.wait_for(proc.wait(), TIMEOUT_S)
-            except TimeoutError:
-                proc.kill()
-        await proc.wait()
+        if proc is not None:
+            await stop_process(proc)
 
     async def publish(
         self, topic: str, payload: bytes | str | None, *, retain: bool = False
     ) -> None:
         """``mosquitto_pub`` at QoS 1 (None: empty, which clears a retained message)."""
         await publish(self, topic, payload, retain=retain)
+
+
+async def stop_process(proc: asyncio.subprocess.Process, grace_s: float = TIMEOUT_S) -> None:
+    """Terminate *proc*, kill it if it has not ended within *grace_s*, and reap it.
+
+    Never an unbounded wait: a mosquitto_sub whose reader had stopped reading sat
+    blocked writing to its full pipe, deaf to SIGTERM, and the suite's run with
+    it, the loop with no timer left, until pytest's 120 s time-out (twice, in the
+    MQTT and the Sparkplug tests' subscribers).
+    """
+    if proc.returncode is None:
+        with contextlib.suppress(ProcessLookupError):
+            proc.terminate()
+        try:
+            await asyncio.wait_for(proc.wait(), grace_s)
+        except TimeoutError:
+            with contextlib.suppress(ProcessLookupError):
+                proc.kill()
+    await proc.wait()
 
 
 async def publish(

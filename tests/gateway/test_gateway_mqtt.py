@@ -27,7 +27,7 @@ from typing import Any
 
 import pytest
 from cli.clirun import cli_env
-from mqtt_broker import READY, TIMEOUT_S, Broker, publish, running_broker
+from mqtt_broker import READY, TIMEOUT_S, Broker, publish, running_broker, stop_process
 from waiting import wait_for
 
 from sj300_async.gateway import (
@@ -150,16 +150,8 @@ async def subscriber(broker: Broker, *filters: str) -> AsyncIterator[Sub]:
         await sub.until(lambda m: m.topic == READY, "the subscriber to be subscribed")
         yield sub
     finally:
-        if proc.returncode is None:
-            proc.terminate()
-        # Bounded: a full suite's run once sat here for ever, the loop with no timer left
-        # (both child watchers' threads waiting), until pytest's 120 s time-out.
-        try:
-            await asyncio.wait_for(proc.wait(), TIMEOUT_S)
-        except TimeoutError:
-            proc.kill()
-            await proc.wait()
-        await asyncio.wait_for(reader, TIMEOUT_S)
+        await stop_process(proc)
+        await asyncio.wait_for(reader, TIMEOUT_S)  # a reader's failure is raised here
 
 
 # -- helpers --------------------------------------------------------------------------------

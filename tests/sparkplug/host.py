@@ -20,7 +20,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-from mqtt_broker import READY, Broker, tool
+from mqtt_broker import READY, TIMEOUT_S, Broker, stop_process, tool
 from waiting import wait_for
 
 __all__ = ["NODE_DIR", "Codec", "Host", "SpbMessage", "codec", "host"]
@@ -206,8 +206,6 @@ async def host(
         await wait_for(ready.is_set, "the Sparkplug host to be subscribed")
         yield found
     finally:
-        if proc.returncode is None:
-            proc.terminate()
-        await proc.wait()
-        await reader
+        await stop_process(proc)
+        await asyncio.wait_for(reader, TIMEOUT_S)  # a reader's failure is raised here
     assert found.undecodable == [], found.undecodable
