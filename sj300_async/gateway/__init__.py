@@ -80,6 +80,7 @@ from ._passwords import (
     parse_users,
     verify_password,
 )
+from ._served import DIRECTION_WORDS, Quality, ServedDrive, ServedValues
 from ._toml import COMMAND_LINE, ConfigContext, ConfigTable, GatewayConfigError, unknown_choice
 from ._writes import (
     Heartbeat,
@@ -95,6 +96,7 @@ __all__ = [
     "COMMAND_LINE",
     "DEFAULT_LEASE_S",
     "DEFAULT_STALE_AFTER_S",
+    "DIRECTION_WORDS",
     "GATHER_S",
     "LAPSE_ACTIONS",
     "LIMIT_KEYS",
@@ -128,10 +130,13 @@ __all__ = [
     "ParameterWrite",
     "PasswordChecks",
     "PollRead",
+    "Quality",
     "RateLimitedLog",
     "Refusal",
     "RunCommand",
     "SectionContext",
+    "ServedDrive",
+    "ServedValues",
     "SetFrequency",
     "Slot",
     "UnitScope",

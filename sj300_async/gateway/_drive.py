@@ -5,7 +5,8 @@ and the read-backs of writes go into its
 :class:`~sj300_async.profiles.DriveReadings`; after each, the gateway
 builds a new :class:`~sj300_async.profiles.DriveSnapshot` (:meth:`rebuild`)
 and hands it to every northbound. Northbounds read a drive through this
-object: ``snapshot`` (the latest), ``lease`` (live: a Modbus read of the
+object: ``snapshot`` (the latest), ``served`` (the same as served: the
+gateway's judgement of its values, :mod:`._served`), ``lease`` (live: a Modbus read of the
 lease registers sees it change between samples), ``line`` (its line's
 configuration: write grants), ``profile`` and ``unit``. They never write
 to it: writes go through the gateway (:meth:`~._northbound.GatewayView.write`).
@@ -22,7 +23,8 @@ import time
 from dataclasses import dataclass, field
 
 from ..profiles import DriveReadings, DriveSnapshot, Profile, build_snapshot
-from ._model import LineConfig
+from ._model import DEFAULT_STALE_AFTER_S, LineConfig
+from ._served import ServedDrive
 
 __all__ = ["GatewayDrive", "Lease"]
 
@@ -67,8 +69,13 @@ class GatewayDrive:
     profile: Profile
     lease: Lease
     readings: DriveReadings = field(default_factory=DriveReadings)
+    #: The gateway's ``stale_after_s``: how old a value may be and still be served.
+    stale_after_s: float = DEFAULT_STALE_AFTER_S
     #: The latest snapshot (one with nothing read before the first sample).
     snapshot: DriveSnapshot = field(init=False)
+    #: The latest snapshot as served (:mod:`._served`): built with it, what every
+    #: northbound serves.
+    served: ServedDrive = field(init=False)
     #: A lapsed lease's stop is not confirmed yet (it is being retried).
     lapse_pending: bool = False
     #: Why the pending lapse's last try failed ("" before the first failure).
@@ -78,6 +85,7 @@ class GatewayDrive:
 
     def __post_init__(self) -> None:
         self.snapshot = self._build(now=-math.inf, wall=0.0)
+        self.served = self._serve(self.snapshot)
 
     @property
     def unit(self) -> int:
@@ -90,9 +98,20 @@ class GatewayDrive:
         return self.line.name, self.node
 
     def rebuild(self, now: float, wall: float | None = None) -> DriveSnapshot:
-        """A new snapshot from the readings at loop time *now* (Unix time *wall*, default now)."""
-        self.snapshot = self._build(now, time.time() if wall is None else wall)
-        return self.snapshot
+        """A new snapshot from the readings at loop time *now* (Unix time *wall*, default now),
+        and the drive as served with it."""
+        self.snapshot = snapshot = self._build(now, time.time() if wall is None else wall)
+        self.served = self._serve(snapshot)
+        return snapshot
+
+    def _serve(self, snapshot: DriveSnapshot) -> ServedDrive:
+        return ServedDrive(
+            snapshot,
+            stale_after_s=self.stale_after_s,
+            lease=self.lease,
+            lapse_pending=self.lapse_pending,
+            trips_interval_s=self.line.trips_interval_s,
+        )
 
     def _build(self, now: float, wall: float) -> DriveSnapshot:
         return build_snapshot(

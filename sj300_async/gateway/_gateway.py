@@ -320,8 +320,11 @@ class Gateway:
             interval_s=config.interval_s, reads=config.reads, parameters=config.parameters
         )
         poller.add(bus, config.nodes)
+        stale_after_s = self.config.stale_after_s
         drives = {
-            node: GatewayDrive(config, node, profile, Lease(config.lease_s))
+            node: GatewayDrive(
+                config, node, profile, Lease(config.lease_s), stale_after_s=stale_after_s
+            )
             for node in config.nodes
         }
         for drive in drives.values():

@@ -112,7 +112,7 @@ SIMULATOR_SJ300_NAMES = (
 PROFILES_NAMES = (
     "Capabilities", "DriveReadings", "DriveSnapshot", "MonitorView", "NEVER",
     "ParameterCatalogue", "ParameterReading", "ParameterSpec", "PollResult", "Profile",
-    "RegisterField", "RegisterLayout", "StatusView", "Trip", "TripLog", "build_snapshot",
+    "ReadGroup", "RegisterField", "RegisterLayout", "StatusView", "Trip", "TripLog", "build_snapshot",
     "frame_text", "get_profile", "in_counts", "is_fresh", "profiled_protocols", "raw_value",
     "read_time", "words",
     # the parameter backup file (sj300 params, the workbench)
@@ -126,6 +126,8 @@ GATEWAY_NAMES = (
     "GatewayConfigError", "GatewayDrive", "GatewayLine", "GatewayView", "Heartbeat",
     # the doors' shared defences (issue 41)
     "KeyedBudget", "PasswordChecks", "Slot",
+    # a drive as served, decided once for every northbound (issue 42)
+    "DIRECTION_WORDS", "Quality", "ServedDrive", "ServedValues",
     # a northbound that cannot start (its port in use...)
     "GatewayStartError",
     "LAPSE_ACTIONS", "POLL_READS", "LapseAction", "Lease", "LineConfig", "LineView", "Northbound",
