@@ -150,8 +150,7 @@ if TYPE_CHECKING:
     import aiohttp
     from playwright.async_api import Browser, BrowserContext, ConsoleMessage, Page
 
-    from sj300_async.gateway import Gateway
-    from sj300_async.profiles import DriveSnapshot
+    from sj300_async.gateway import Gateway, ServedDrive
 
 __all__ = [
     "DRIVES",
@@ -250,12 +249,13 @@ class _Counts:
         gateway.lines[0].poller.on_sample(self._on_sample)
         publish = northbound.publish
 
-        def counted(snapshot: DriveSnapshot) -> None:
+        def counted(served: ServedDrive) -> None:
+            snapshot = served.snapshot
             self.published.append((snapshot.node, snapshot.time))
             self.seen.add(snapshot.node)
-            publish(snapshot)
+            publish(served)
 
-        # The instance's attribute: the gateway calls northbound.publish(snapshot).
+        # The instance's attribute: the gateway calls northbound.publish(served).
         northbound.publish = counted
 
     def _on_sample(self, sample: Any) -> None:

@@ -33,11 +33,12 @@ from __future__ import annotations
 
 import asyncio
 from collections.abc import Callable
-from typing import Final
-
-from ..profiles import DriveSnapshot
+from typing import Final, Generic, TypeVar
 
 __all__ = ["CHUNK", "PUBLISH_EVERY_S", "SnapshotBatch"]
+
+#: What is gathered: the gateway's are drives as served (:class:`~._served.ServedDrive`).
+T = TypeVar("T")
 
 #: Seconds snapshots are gathered before the northbounds take them.
 PUBLISH_EVERY_S: Final = 0.05
@@ -45,12 +46,12 @@ PUBLISH_EVERY_S: Final = 0.05
 CHUNK: Final = 256
 
 
-class SnapshotBatch:
+class SnapshotBatch(Generic[T]):
     """Snapshots gathered, then passed to *deliver* in order (see the module docstring)."""
 
     def __init__(
         self,
-        deliver: Callable[[list[DriveSnapshot]], None],
+        deliver: Callable[[list[T]], None],
         *,
         every_s: float = PUBLISH_EVERY_S,
         chunk: int = CHUNK,
@@ -58,14 +59,14 @@ class SnapshotBatch:
         self._deliver = deliver
         self._every_s = every_s
         self._chunk = chunk
-        self._pending: list[DriveSnapshot] = []
+        self._pending: list[T] = []
         #: The timer or the callback that delivers next (None: nothing pending).
         self._next: asyncio.Handle | None = None
 
     def __len__(self) -> int:
         return len(self._pending)
 
-    def add(self, snapshot: DriveSnapshot) -> None:
+    def add(self, snapshot: T) -> None:
         """Gather *snapshot*; it is delivered within :data:`PUBLISH_EVERY_S`."""
         self._pending.append(snapshot)
         if self._next is None:

@@ -48,7 +48,7 @@ from typing import TYPE_CHECKING, Any, TypeVar
 
 from .. import Poller, Sample
 from ..bus import Bus, CaptureFile, open_bus
-from ..profiles import NEVER, DriveSnapshot, Profile, get_profile
+from ..profiles import NEVER, Profile, get_profile
 from ..wire import SJ300Error
 from . import _logflood as logflood
 from ._audit import AuditLog
@@ -62,6 +62,7 @@ from ._looplag import LoopMonitor
 from ._metrics import LineView, drive_view, gateway_metrics, line_problems
 from ._model import GatewayConfig, LineConfig
 from ._northbound import Northbound, get_northbound
+from ._served import ServedDrive
 from ._writes import WriteRequest, WriteResult
 
 if TYPE_CHECKING:
@@ -345,7 +346,8 @@ class Gateway:
         drive.readings.take(sample, line.profile)
         # The poll ended at sample.timestamp, on the loop's clock: the same instant in Unix time.
         now = asyncio.get_running_loop().time()
-        self._publish(drive.rebuild(sample.timestamp, time.time() - (now - sample.timestamp)))
+        drive.rebuild(sample.timestamp, time.time() - (now - sample.timestamp))
+        self._publish(drive.served)
 
     def _changed(self, drive: GatewayDrive) -> None:
         """A write's read-back or a trip history changed *drive*'s readings: show it now.
@@ -353,24 +355,24 @@ class Gateway:
         Never raises: the write or the trip read that called it goes on.
         """
         try:
-            snapshot = drive.rebuild(asyncio.get_running_loop().time())
+            drive.rebuild(asyncio.get_running_loop().time())
         except Exception:  # a profile's bug: the last snapshot stays, the caller goes on
             _log.exception("line %s node %d: no snapshot after a change", *drive.key)
             return
         # Out now, after what was gathered before it (see ._batch): someone is waiting.
-        self._batch.add(snapshot)
+        self._batch.add(drive.served)
         self._batch.flush()
 
-    def _publish(self, snapshot: DriveSnapshot) -> None:
-        self._batch.add(snapshot)
+    def _publish(self, served: ServedDrive) -> None:
+        self._batch.add(served)
 
-    def _deliver(self, snapshots: list[DriveSnapshot]) -> None:
-        """Each northbound takes *snapshots* in turn (see ._batch)."""
+    def _deliver(self, drives: list[ServedDrive]) -> None:
+        """Each northbound takes *drives* (each a snapshot as served) in turn (see ._batch)."""
         for section, northbound in self.northbounds.items():
             publish = northbound.publish
-            for snapshot in snapshots:
+            for served in drives:
                 try:
-                    publish(snapshot)
+                    publish(served)
                 except Exception:  # its own failure: the others, and the caller, go on
                     count = self.publish_errors[section] = self.publish_errors.get(section, 0) + 1
                     if count == 1:

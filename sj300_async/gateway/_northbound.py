@@ -37,10 +37,10 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Final, Protocol
 
 from ..bus import load_object
-from ..profiles import DriveSnapshot
 from ..wire import LocalProtocolError
 from ._drive import GatewayDrive
 from ._model import Endpoint, GatewayConfig
+from ._served import ServedDrive
 from ._toml import ConfigTable
 from ._writes import WriteRequest, WriteResult
 
@@ -139,8 +139,10 @@ class Northbound(Protocol):
     def announce(self) -> str | None:
         """One line saying where it serves, once started (``modbus on 127.0.0.1:1502``)."""
 
-    def publish(self, snapshot: DriveSnapshot) -> None:
-        """A drive's new snapshot (after each sample and write). Must not block."""
+    def publish(self, drive: ServedDrive) -> None:
+        """A drive's new snapshot as served (after each sample and write): what to serve
+        of it is decided there (``drive.values()``, ``drive.quality(...)``); the
+        snapshot itself is ``drive.snapshot``. Must not block."""
 
     def metrics(self) -> Iterable[Metric]:
         """Its own metric families (its clients, its connection), built now."""

@@ -112,9 +112,9 @@ SIMULATOR_SJ300_NAMES = (
 PROFILES_NAMES = (
     "Capabilities", "DriveReadings", "DriveSnapshot", "MonitorView", "NEVER",
     "ParameterCatalogue", "ParameterReading", "ParameterSpec", "PollResult", "Profile",
-    "ReadGroup", "RegisterField", "RegisterLayout", "StatusView", "Trip", "TripLog", "build_snapshot",
-    "frame_text", "get_profile", "in_counts", "is_fresh", "profiled_protocols", "raw_value",
-    "read_time", "words",
+    "ReadGroup", "RegisterField", "RegisterLayout", "StatusView", "Trip", "TripLog",
+    "build_snapshot", "frame_text", "get_profile", "in_counts", "is_fresh", "profiled_protocols",
+    "raw_value", "read_time", "words",
     # the parameter backup file (sj300 params, the workbench)
     "BACKUP_FORMAT", "BACKUP_VERSION", "BackupFormatError", "ParameterBackup", "catalogued",
     "parameter_code", "utc_now",

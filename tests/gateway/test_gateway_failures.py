@@ -27,6 +27,7 @@ from sj300_async.gateway import (
     Northbound,
     RunCommand,
     SectionContext,
+    ServedDrive,
     SetFrequency,
     register_northbound,
     unregister_northbound,
@@ -51,7 +52,8 @@ class _Recorder:
     def announce(self) -> str | None:
         return None
 
-    def publish(self, snapshot: DriveSnapshot) -> None:
+    def publish(self, served: ServedDrive) -> None:
+        snapshot = served.snapshot
         if self.breaks:
             raise OSError("the northbound's disk is full")
         self.got.append(snapshot)
@@ -178,9 +180,9 @@ async def test_every_snapshot_made_before_the_gateway_stops_reaches_the_northbou
         recorder = recording.made[0]
         publish = gateway._publish
 
-        def counted(snapshot: DriveSnapshot) -> None:
-            made.append(snapshot)
-            publish(snapshot)
+        def counted(served: ServedDrive) -> None:
+            made.append(served.snapshot)
+            publish(served)
 
         gateway._publish = counted  # type: ignore[method-assign]
         await wait_for(lambda: len(made) >= 4, "snapshots made")

@@ -22,7 +22,7 @@ import aiohttp
 import pytest
 from waiting import wait_for
 
-from sj300_async.gateway import Gateway
+from sj300_async.gateway import Gateway, ServedDrive
 from sj300_async.gateway.http._northbound import HttpNorthbound
 from sj300_async.profiles import DriveSnapshot
 from sj300_async.wire import PacketDirection, read_pcapng
@@ -153,11 +153,11 @@ async def test_the_trend_is_every_monitor_sample_the_gateway_took(sim_line: SimL
     published: list[DriveSnapshot] = []
     async with running_gateway(gateway_toml(sim_line.url, extra=HTTP)) as gateway:
         northbound = http(gateway)
-        original: Callable[[DriveSnapshot], None] = northbound.publish
+        original: Callable[[ServedDrive], None] = northbound.publish
 
-        def spy(snapshot: DriveSnapshot) -> None:
-            published.append(snapshot)
-            original(snapshot)
+        def spy(served: ServedDrive) -> None:
+            published.append(served.snapshot)
+            original(served)
 
         northbound.publish = spy  # type: ignore[method-assign]
         await gateway.lines[0].bus.drive(3).set_frequency(20.0)

@@ -26,6 +26,7 @@ from asyncua.server.monitored_item_service import MonitoredItemData, MonitoredIt
 from asyncua.ua.uaerrors import UaError, UaStatusCodeError
 from waiting import wait_for
 
+from sj300_async.gateway import ServedDrive
 from sj300_async.gateway.opcua import _hooks
 from sj300_async.gateway.opcua._config import DEFAULT_LOGIN_BURST
 from sj300_async.gateway.opcua._server import OpcuaServer
@@ -429,11 +430,12 @@ async def test_a_group_watched_again_takes_the_next_sample(tmp_path: Path) -> No
         server._watch(frequency.node, +1)  # a SCADA keeps watching the drive's frequency
         server._watch(trips.node, +1)
         online = drive.snapshot
-        server.publish(online)
+        server.publish(drive.served)
         assert trips.online
         server._watch(trips.node, -1)
         offline = dataclasses.replace(online, online=False, taken_at=online.taken_at + 1)
-        server.publish(offline)  # its trips not read again: the same stamp
+        # Its trips not read again: the same stamp.
+        server.publish(ServedDrive(offline, stale_after_s=drive.stale_after_s))
         server._watch(trips.node, +1)
         trips.take(offline)  # asyncua's first read of a new monitored item
         assert not trips.online

@@ -34,6 +34,7 @@ from sj300_async.gateway import (
     GatewayView,
     Northbound,
     SectionContext,
+    ServedDrive,
 )
 from sj300_async.profiles import DriveSnapshot
 
@@ -93,7 +94,8 @@ class JsonlNorthbound:
     def announce(self) -> str | None:
         return f"jsonl to {self.config.path}"
 
-    def publish(self, snapshot: DriveSnapshot) -> None:
+    def publish(self, served: ServedDrive) -> None:
+        snapshot = served.snapshot
         if self._file is None:
             return
         self._file.write(json.dumps(snapshot_json(self._gateway, snapshot)) + "\n")

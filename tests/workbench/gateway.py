@@ -29,7 +29,7 @@ from typing import Any, Final, cast
 import aiohttp
 import pytest
 
-from sj300_async.gateway import Gateway, parse_config
+from sj300_async.gateway import Gateway, ServedDrive, parse_config
 from sj300_async.gateway.http._northbound import HttpNorthbound
 from sj300_async.profiles import DriveSnapshot
 from sj300_async.simulator import SimulatorServer, serve_tcp
@@ -164,9 +164,9 @@ async def workbench_gateway(lines: Mapping[str, range]) -> AsyncIterator[Bench]:
         assert isinstance(northbound, HttpNorthbound)
         publish = northbound.publish
 
-        def recorded(snapshot: DriveSnapshot) -> None:
-            bench.published.append(Published(time.time(), snapshot))
-            publish(snapshot)
+        def recorded(served: ServedDrive) -> None:
+            bench.published.append(Published(time.time(), served.snapshot))
+            publish(served)
 
         patch = stack.enter_context(pytest.MonkeyPatch.context())
         patch.setattr(northbound, "publish", recorded)

@@ -7,8 +7,7 @@ import logging
 from collections.abc import Iterator
 from typing import TYPE_CHECKING
 
-from ...profiles import DriveSnapshot
-from .. import ConnectionLimit, GatewayView, listener_families
+from .. import ConnectionLimit, GatewayView, ServedDrive, listener_families
 from . import HttpConfig
 from ._api import make_app
 from ._guards import AddressSlots, PerAddress
@@ -83,9 +82,9 @@ class HttpNorthbound:
         scheme = "https" if self.config.tls_cert is not None else "http"
         return f"http on {scheme}://{shown}:{self.port}/ (workbench, /metrics, /healthz)"
 
-    def publish(self, snapshot: DriveSnapshot) -> None:
+    def publish(self, served: ServedDrive) -> None:
         if self.workbench is not None:
-            self.workbench.publish(snapshot)
+            self.workbench.publish(served)
 
     def metrics(self) -> Iterator[Metric]:
         from prometheus_client.core import CounterMetricFamily, GaugeMetricFamily

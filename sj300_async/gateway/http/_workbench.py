@@ -24,7 +24,7 @@ from typing import Any, Final
 
 from ...profiles import NEVER, DriveSnapshot
 from ...version import __version__
-from .. import GatewayLine, GatewayView, busy_seconds
+from .. import GatewayLine, GatewayView, ServedDrive, busy_seconds
 from ._events import EventHub, sse_frame
 from ._json import Json, drive_json, monitor_time
 from ._linetrace import LineTrace
@@ -77,8 +77,9 @@ class Workbench:
 
     # -- drives ----------------------------------------------------------------------------
 
-    def publish(self, snapshot: DriveSnapshot) -> None:
+    def publish(self, served: ServedDrive) -> None:
         """A drive's new snapshot: into its trend, and to every open stream."""
+        snapshot = served.snapshot
         key = (snapshot.line, snapshot.node)
         trend = self.trends.get(key)
         if trend is not None and snapshot.monitor_at != self._monitor_at.get(key, NEVER):

@@ -6,8 +6,14 @@ import logging
 from collections.abc import Iterator
 from typing import TYPE_CHECKING
 
-from ...profiles import DriveSnapshot
-from .. import ConnectionLimit, Endpoint, GatewayView, LineConfig, listener_families
+from .. import (
+    ConnectionLimit,
+    Endpoint,
+    GatewayView,
+    LineConfig,
+    ServedDrive,
+    listener_families,
+)
 from . import ModbusConfig
 from ._clients import ClientCounters, bad_frames_family, client_families
 from ._registers import RegisterMap
@@ -87,7 +93,7 @@ class ModbusNorthbound:
             lines.append(line)
         return "\n".join(lines)
 
-    def publish(self, snapshot: DriveSnapshot) -> None:
+    def publish(self, served: ServedDrive) -> None:
         """Nothing to do: reads are served from each drive's latest snapshot."""
 
     def metrics(self) -> Iterator[Metric]:

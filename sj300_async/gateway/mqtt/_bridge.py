@@ -92,7 +92,7 @@ from dataclasses import dataclass
 from typing import TYPE_CHECKING, Final
 
 from ...profiles import DriveSnapshot
-from .. import GATHER_S, GatewayDrive, GatewayView, Refusal, WriteResult, excerpt
+from .. import GATHER_S, GatewayDrive, GatewayView, Refusal, ServedDrive, WriteResult, excerpt
 from ._births import Rediscovery
 from ._commands import DROPPED_BY_STOP, MAX_PAYLOAD_BYTES, error_text, oversized, parse_command
 from ._config import MqttConfig
@@ -194,11 +194,12 @@ class MqttBridge:
     def announce(self) -> str | None:
         return f"mqtt to {self.config.url} as {self.topics.gateway}"
 
-    def publish(self, snapshot: DriveSnapshot) -> None:
+    def publish(self, served: ServedDrive) -> None:
         """A drive's new snapshot: publish its state (and availability when it changed).
 
         Never blocks: the message waits in the outbox (see the module docstring).
         """
+        snapshot = served.snapshot
         self.publish_state(snapshot, self.state_of(snapshot))
 
     def state_of(self, snapshot: DriveSnapshot) -> StateMessage:

@@ -16,7 +16,7 @@ from collections.abc import Iterator, Sequence
 from typing import TYPE_CHECKING, Protocol
 
 from ...profiles import DriveSnapshot
-from .. import GatewayView, Northbound
+from .. import GatewayView, Northbound, ServedDrive
 from ._topics import StateMessage
 
 if TYPE_CHECKING:
@@ -58,7 +58,8 @@ class Clients:
         lines = [line for part in self.parts if (line := part.announce()) is not None]
         return "\n".join(lines) if lines else None
 
-    def publish(self, snapshot: DriveSnapshot) -> None:
+    def publish(self, served: ServedDrive) -> None:
+        snapshot = served.snapshot
         failure: Exception | None = None
         message = self.parts[0].state_of(snapshot)
         for part in self.parts:

@@ -41,13 +41,13 @@ from asyncua.crypto import uacrypto
 from asyncua.server.address_space import NodeData
 from cryptography import x509
 
-from ...profiles import DriveSnapshot
 from .. import (
     GATHER_S,
     GatewayDrive,
     GatewayLine,
     GatewayStartError,
     GatewayView,
+    ServedDrive,
     busy_seconds,
 )
 from ._calls import Calls
@@ -349,7 +349,8 @@ class OpcuaServer:
             line += f"; {made} {certificate.certificate} (SHA-1 {certificate.thumbprint})"
         return line
 
-    def publish(self, snapshot: DriveSnapshot) -> None:
+    def publish(self, served: ServedDrive) -> None:
+        snapshot = served.snapshot
         nodes = self._drives.get((snapshot.line, snapshot.node))
         if nodes is None or not nodes.watched or self._server is None:
             return  # unwatched: a read takes the latest snapshot itself

@@ -74,6 +74,7 @@ from .. import (
     Heartbeat,
     Refusal,
     RunCommand,
+    ServedDrive,
     WriteRequest,
     WriteResult,
     excerpt,
@@ -255,8 +256,9 @@ class EdgeNode:
         waits = f", primary host {host}" if host is not None else ""
         return f"sparkplug to {self.config.url} as {self.topic('NBIRTH')}{waits}"
 
-    def publish(self, snapshot: DriveSnapshot) -> None:
+    def publish(self, served: ServedDrive) -> None:
         """A drive's new sample: kept, and marked for the edge node's task (never blocks)."""
+        snapshot = served.snapshot
         self.publish_state(snapshot, self.state_of(snapshot))
 
     def state_of(self, snapshot: DriveSnapshot) -> StateMessage:
