@@ -216,7 +216,7 @@ async def _serve_gateway(drives: int, interval_s: float) -> None:
     from sj300_async.gateway import Gateway, parse_config
 
     config = parse_config(_gateway_toml(drives, interval_s), "bench_gateway.toml")
-    async with Gateway(config) as gateway:
+    async with Gateway(config, tune_collector=True) as gateway:
         marks = _CycleMarks(gateway)
         await marks.next()  # ready: every drive polled once
         print(f"port {_modbus(gateway).port}", flush=True)

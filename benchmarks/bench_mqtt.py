@@ -288,7 +288,7 @@ async def _serve_gateway(gateway_id: str, url: str, interval_s: float, broker_po
     config = parse_config(text, f"bench_mqtt_{gateway_id}.toml")
     loop = asyncio.get_running_loop()
     loop.add_signal_handler(signal.SIGUSR1, _print_tasks)  # the parent's hang diagnosis
-    async with Gateway(config) as gateway:
+    async with Gateway(config, tune_collector=True) as gateway:
         counts = _Counts(gateway)
         deadline = loop.time() + READY_TIMEOUT_S
         while not counts.ready():  # a child's start-up: polling its own counters is fine

@@ -382,7 +382,7 @@ async def _time_startups(
     timed: list[dict[str, float]] = []
     for index in range(rounds + int(warm_up)):
         gc.collect()
-        gateway = Gateway(parse_config(off, "bench_opcua_off.toml"))
+        gateway = Gateway(parse_config(off, "bench_opcua_off.toml"), tune_collector=True)
         began = time.perf_counter()
         await gateway.__aenter__()
         gateway_s = time.perf_counter() - began
@@ -394,7 +394,7 @@ async def _time_startups(
         init_alone_s = time.perf_counter() - began
         del server
         gc.collect()
-        gateway = Gateway(parse_config(on, "bench_opcua_on.toml"))
+        gateway = Gateway(parse_config(on, "bench_opcua_on.toml"), tune_collector=True)
         began = time.perf_counter()
         await gateway.__aenter__()
         with_opcua_s = time.perf_counter() - began
@@ -435,7 +435,7 @@ async def _serve_gateway(args: argparse.Namespace) -> None:
             stack.push_async_exit(gateway)
         else:
             config = parse_config(text, f"bench_opcua_{args.id}.toml")
-            gateway = await stack.enter_async_context(Gateway(config))
+            gateway = await stack.enter_async_context(Gateway(config, tune_collector=True))
         counts = _Counts(gateway)
         await _start_drives(gateway)
         deadline = loop.time() + READY_TIMEOUT_S

@@ -240,7 +240,7 @@ async def _child(args: argparse.Namespace) -> dict[str, Any]:
     )
     loop = asyncio.get_running_loop()
     began = loop.time()
-    async with Gateway(parse_config(text, "bench_plant.toml")) as gateway:
+    async with Gateway(parse_config(text, "bench_plant.toml"), tune_collector=True) as gateway:
         started_s = loop.time() - began
         samples = 0
 

@@ -317,7 +317,7 @@ async def _serve_gateway(gateway_id: str, interval_s: float, *, running: bool) -
     config = parse_config(_gateway_toml(gateway_id, interval_s), f"bench_{gateway_id}.toml")
     loop = asyncio.get_running_loop()
     loop.add_signal_handler(signal.SIGUSR1, _print_tasks)  # the parent's hang diagnosis
-    async with Gateway(config) as gateway:
+    async with Gateway(config, tune_collector=True) as gateway:
         counts = _Counts(gateway)
         if running:
             await _start_drives(gateway)

@@ -106,6 +106,13 @@ def add_parser(subparsers: Any) -> None:
         help="print a new API token for a script and the [[http.tokens]] entry that "
         "admits it, then exit",
     )
+    p.add_argument(
+        "--no-collector-tuning",
+        dest="tune_collector",
+        action="store_false",
+        help="leave Python's garbage collector as it is (by default the start-up's objects "
+        "are frozen and young collections run less often: docs/GATEWAY.md)",
+    )
     p.add_argument("-v", "--verbose", action="count", default=0, help="log more (-vv: debug)")
     p.set_defaults(run=run)
 
@@ -216,10 +223,14 @@ def run(args: argparse.Namespace) -> int:
         )
     config = _config(args)  # a bad one raises here: nothing has started
     _check_requirements(config)
-    return asyncio.run(_serve(config, args.capture, demo=args.demo))
+    return asyncio.run(
+        _serve(config, args.capture, demo=args.demo, tune_collector=args.tune_collector)
+    )
 
 
-async def _serve(config: GatewayConfig, capture: str | None, *, demo: bool = False) -> int:
+async def _serve(
+    config: GatewayConfig, capture: str | None, *, demo: bool = False, tune_collector: bool = True
+) -> int:
     from ..gateway import Gateway, GatewayStartError
 
     loop = asyncio.get_running_loop()
@@ -241,7 +252,7 @@ async def _serve(config: GatewayConfig, capture: str | None, *, demo: bool = Fal
     for sig in EXIT_ON_SIGNAL:
         loop.add_signal_handler(sig, on_signal, sig)
     try:
-        async with Gateway(config, capture=capture) as gateway:
+        async with Gateway(config, capture=capture, tune_collector=tune_collector) as gateway:
             starting = False
             for northbound in gateway.northbounds.values():
                 line = northbound.announce()

@@ -89,8 +89,14 @@ class GatewayLine:
 class Gateway:
     """The whole gateway (see the module docstring); the northbounds' :class:`GatewayView`."""
 
-    def __init__(self, config: GatewayConfig, *, capture: str | None = None) -> None:
+    def __init__(
+        self, config: GatewayConfig, *, capture: str | None = None, tune_collector: bool = False
+    ) -> None:
         self.config = config
+        #: Tune Python's garbage collector for the process while this runs (._heap): the
+        #: ``sj300 gateway`` command does (``--no-collector-tuning`` not), an application
+        #: that embeds a Gateway decides for its own process, so the default is not to.
+        self.tune_collector = tune_collector
         #: Where every line's frames go (``--capture``: one pcapng, one interface
         #: per line in the configuration's order), or None.
         self.capture_path = capture
@@ -244,14 +250,16 @@ class Gateway:
             buses = await self._open_buses()
             for config, bus in zip(self.config.lines, buses, strict=True):
                 self.lines.append(self._open_line(config, bus))
-            with collector_paused():  # the northbounds' models: docstring of ._heap
+            tune = self.tune_collector
+            # The northbounds' models: docstring of ._heap.
+            with collector_paused() if tune else contextlib.nullcontext():
                 for section, settings in self.config.northbounds.items():
                     await self._start_northbound(section, settings)
-                # Before the collector runs again: its first full collection would
-                # scan all of it once more.
-                freeze_long_lived()
-                self._frozen = True
-            self._stack.enter_context(young_collections_raised())
+                if tune:  # before the collector runs again: it would scan it all once more
+                    freeze_long_lived()
+                    self._frozen = True
+            if tune:
+                self._stack.enter_context(young_collections_raised())
             for line in self.lines:
                 await self._stack.enter_async_context(line.poller)
                 self._tasks.append(asyncio.create_task(self._background_reads(line)))

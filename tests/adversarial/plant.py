@@ -270,7 +270,9 @@ async def plant(directory: Path) -> AsyncIterator[Plant]:
     server = await serve_tcp(sim)
     async with server, running_broker(directory) as broker:
         text = _config(directory, f"tcp://127.0.0.1:{server.port}", broker)
-        async with Gateway(parse_config(text, str(directory / "gateway.toml"))) as gateway:
+        config = parse_config(text, str(directory / "gateway.toml"))
+        # The collector as the sj300 gateway command tunes it: the program under attack.
+        async with Gateway(config, tune_collector=True) as gateway:
             site = Plant(gateway, sim, broker, directory)
 
             def counted(sample: Any) -> None:

@@ -137,8 +137,8 @@ async def polled(gateway: Gateway) -> None:
 
 
 @contextlib.asynccontextmanager
-async def running_gateway(text: str) -> AsyncIterator[Gateway]:
-    async with Gateway(parse_config(text, "test.toml")) as gateway:
+async def running_gateway(text: str, *, tune_collector: bool = False) -> AsyncIterator[Gateway]:
+    async with Gateway(parse_config(text, "test.toml"), tune_collector=tune_collector) as gateway:
         yield gateway
 
 

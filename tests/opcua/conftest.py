@@ -11,10 +11,9 @@ from __future__ import annotations
 
 import asyncio
 import contextlib
-import gc
 import shutil
 import textwrap
-from collections.abc import AsyncIterator, Iterator
+from collections.abc import AsyncIterator
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -61,27 +60,6 @@ def make_pair(directory: Path, name: str, uri: str) -> Pair:
     pair.certificate.write_bytes(certificate.public_bytes(serialization.Encoding.DER))
     pair.key.write_bytes(cert_gen.dump_private_key_as_pem(key))
     return pair
-
-
-@pytest.fixture(autouse=True)
-def _collect_the_address_space() -> Iterator[None]:
-    """A full collection after each test: the stopped gateway's address space is freed.
-
-    Nothing in these tests starts the collection that would (issue 41). A gateway
-    builds its OPC UA address space with the collector paused and freezes it
-    (gateway/_heap.py); at its stop gc.unfreeze() hands it back straight into
-    the oldest generation, which only a full collection scans, and CPython
-    starts one only when a quarter more objects were *promoted* there since
-    the last: these were not counted, and a test promotes few. So each test's
-    gateway stayed: some 430,000 objects (asyncua's standard nodes with ours),
-    40-54 MB. The 61 tests of tests/opcua took an xdist worker from 214 MB to
-    2,070 MB (no full collection in between), and the atheris test that ran
-    next in it inherited that peak. With this, the 91 tests of tests/opcua in
-    one process: 146-271 MB throughout, for 0.3-0.7 s a test on 2 loaded cores
-    (most of it freeing what a later full collection would free anyway).
-    """
-    yield
-    gc.collect()
 
 
 @pytest.fixture(scope="session")
