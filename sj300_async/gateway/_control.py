@@ -9,7 +9,13 @@ the safe direction). Values are validated by the drive classes before
 anything reaches the wire; a set frequency outside 0..the drive's maximum
 is refused before the lease is looked at (no client may send it), naming
 the maximum and where it comes from (the drive's own, A004 / Pr.1 when
-polled, else its protocol's highest). Every write goes through the same
+polled, else its protocol's highest), and so is one finer than
+:data:`FREQUENCY_STEP_HZ` (every protocol's step), or not a number. A run,
+a frequency or a parameter for a drive the poller holds offline is refused
+unsent (no answer: nothing could confirm it); a stop is always tried. The
+order, the same whichever door the write came by (issue 42): the
+configuration's grants, the value, then (all but a stop) the drive
+offline, then the lease. Every write goes through the same
 :class:`~sj300_async.Bus` as the polls, so the arbiter never interleaves it
 with them, and is confirmed by a read-back whose value also goes into the
 drive's readings (and so into its next snapshot, built at once). Every
@@ -54,6 +60,7 @@ from __future__ import annotations
 
 import asyncio
 import logging
+import math
 from collections.abc import Awaitable, Callable
 from typing import Any, Final
 
@@ -77,6 +84,8 @@ from ._writes import (
 __all__ = ["Controller"]
 
 _log = logging.getLogger("sj300_async.gateway")
+#: The set frequency's step, every protocol's (SJ300 F001, FR-700's frequency: 0.01 Hz).
+FREQUENCY_STEP_HZ: Final = 0.01
 #: Seconds of the loop's stall a lease is extended by at most, per heartbeat (_credit_stall).
 MAX_STALL_CREDIT_S: Final = 10.0
 #: How long stopping the gateway waits for pending lapses to be confirmed.
@@ -268,12 +277,12 @@ class Controller:
         self, client: str, drive: GatewayDrive, request: WriteRequest, now: float
     ) -> WriteResult | None:
         if isinstance(request, ParameterWrite):
-            if request.code in self.config.writable_parameters(drive.node):
-                return None
-            return WriteResult(
-                Refusal.NOT_ALLOWED,
-                f"the configuration does not allow writing {request.code} to this drive",
-            )
+            if request.code not in self.config.writable_parameters(drive.node):
+                return WriteResult(
+                    Refusal.NOT_ALLOWED,
+                    f"the configuration does not allow writing {request.code} to this drive",
+                )
+            return _offline(drive)
         if not self.config.control_allowed(drive.node):
             return WriteResult(
                 Refusal.NOT_ALLOWED, "the configuration does not allow control of this drive"
@@ -284,6 +293,8 @@ class Controller:
                 return refused
         if isinstance(request, RunCommand) and request.direction == Direction.STOP:
             return None  # the safe direction: no lease needed (module docstring)
+        if not isinstance(request, Heartbeat) and (offline := _offline(drive)) is not None:
+            return offline
         lease = drive.lease
         if lease.held(now) and not lease.held_by(client, now):
             return WriteResult(
@@ -300,13 +311,21 @@ class Controller:
         return None
 
     def _frequency_refusal(self, drive: GatewayDrive, hz: float) -> WriteResult | None:
-        """A set frequency above the drive's maximum (or below 0), refused with both named."""
+        """A set frequency that is no number, above the drive's maximum (or below 0), refused
+        with both named, or finer than the step."""
+        if not math.isfinite(hz):
+            return WriteResult(Refusal.INVALID_VALUE, f"{hz} Hz is no frequency")
         highest, source = self._max_hz(drive)
-        if 0 <= hz <= highest:
-            return None
-        return WriteResult(
-            Refusal.INVALID_VALUE, f"{hz:g} Hz is outside 0..{highest:g} Hz ({source})"
-        )
+        if not 0 <= hz <= highest:
+            return WriteResult(
+                Refusal.INVALID_VALUE, f"{hz:g} Hz is outside 0..{highest:g} Hz ({source})"
+            )
+        steps = hz / FREQUENCY_STEP_HZ
+        if abs(round(steps) - steps) > 1e-6:
+            return WriteResult(
+                Refusal.INVALID_VALUE, f"{hz:g} Hz is finer than {FREQUENCY_STEP_HZ:g} Hz"
+            )
+        return None
 
     def _max_hz(self, drive: GatewayDrive) -> tuple[float, str]:
         """The drive's maximum frequency, and where it comes from: its own setting when
@@ -510,6 +529,14 @@ class Controller:
     def pending_lapses(self) -> int:
         """Lapse actions not finished (their stop not confirmed yet)."""
         return len(self._lapses)
+
+
+def _offline(drive: GatewayDrive) -> WriteResult | None:
+    """Refused unsent while the poller holds *drive* offline (None: it is not)."""
+    snapshot = drive.snapshot
+    if snapshot.online or snapshot.taken_at == -math.inf:  # no verdict yet: try it
+        return None
+    return WriteResult(Refusal.NO_ANSWER, "the drive is offline: nothing was sent")
 
 
 def _needs_lease(request: WriteRequest) -> bool:

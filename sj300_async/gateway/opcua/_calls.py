@@ -17,9 +17,11 @@ the gateway need not see, in this order:
   number that is NaN, infinite or out of range (``BadOutOfRange``),
   an array where one value is expected (``BadTypeMismatch``), a value
   written with a status code other than Good (``BadWriteNotSupported``),
-  nothing of it sent;
-- a run, a frequency or a parameter for a drive the poller holds offline
-  (``BadNoCommunication``): nothing is sent. A stop is always tried.
+  nothing of it sent.
+
+A run, a frequency or a parameter for a drive the poller holds offline is
+the gateway's to refuse (``no_answer``, so ``BadNoCommunication``):
+nothing is sent; a stop is always tried.
 
 The gateway's own refusals map through
 :data:`~._quality.REFUSAL_STATUS`. The lease: ``TakeControl()`` takes or
@@ -122,13 +124,6 @@ def _number(variant: ua.Variant) -> float:
     return value
 
 
-def _moves(request: WriteRequest) -> bool:
-    """A request that changes what the drive does (a stop and a lease do not)."""
-    if isinstance(request, RunCommand):
-        return request.direction != Direction.STOP
-    return not isinstance(request, Heartbeat)
-
-
 Build = Callable[[list[object]], WriteRequest]
 
 
@@ -180,12 +175,6 @@ class Calls:
         try:
             writer = self._writer()
             request = build()
-            if _moves(request) and not drive.snapshot.online:
-                raise _Refused(
-                    ua.StatusCodes.BadNoCommunication,
-                    Refusal.NO_ANSWER,
-                    "the drive is offline: nothing was sent",
-                )
         except _Refused as refused:
             return self._refuse(drive, what, shown, refused)
         except Exception:  # a bug of ours: audited, answered, logged with its traceback
