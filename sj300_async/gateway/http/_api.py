@@ -215,11 +215,11 @@ async def _lines(request: web.Request) -> web.Response:
 
 async def _drives(request: web.Request) -> web.Response:
     bench = _bench(request)
-    return json_reply([bench.drive_json(drive.snapshot) for drive in bench.gateway.drives])
+    return json_reply([bench.drive_json(drive.served) for drive in bench.gateway.drives])
 
 
 async def _drive(request: web.Request) -> web.Response:
-    return json_reply(_bench(request).drive_json(_find(request).snapshot))
+    return json_reply(_bench(request).drive_json(_find(request).served))
 
 
 def _since(request: web.Request) -> float | None:

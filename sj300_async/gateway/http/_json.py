@@ -6,9 +6,11 @@ description of each field.
 
 Decisions:
 
-- The staleness rule is the other northbounds': a value older than the
-  gateway's ``stale_after_s`` at the moment it is encoded is null (MQTT
-  publishes null, Modbus refuses the read), never served as if current.
+- What is served of a drive is the gateway's judgement, not this
+  module's: the values come masked (:class:`~sj300_async.gateway.ServedValues`,
+  a stale, unavailable or unread value None, the direction in words), and
+  this module only writes them as JSON. So a value is null here exactly
+  when MQTT publishes null and Modbus refuses the read.
 - Times are Unix seconds: the sample's (``time``) and the monitor read's
   (``monitor_time``, the trend's clock), so that a page can place a live
   event on the trend it loaded.
@@ -19,20 +21,14 @@ Decisions:
 
 from __future__ import annotations
 
-from typing import Any, Final
+from typing import Any
 
 from ...profiles import NEVER, DriveSnapshot, Trip, TripLog
-from ...wire import Direction
+from .. import ServedValues
 
 __all__ = ["drive_json", "monitor_time", "trip_json", "trip_log_json", "unix_time"]
 
 Json = dict[str, Any]
-
-_DIRECTIONS: Final = {
-    Direction.STOP: "stop",
-    Direction.FORWARD: "forward",
-    Direction.REVERSE: "reverse",
-}
 
 
 def unix_time(snapshot: DriveSnapshot, at: float) -> float | None:
@@ -72,48 +68,40 @@ def trip_log_json(log: TripLog | None, time: float | None) -> Json:
     }
 
 
-def drive_json(snapshot: DriveSnapshot, *, now: float, stale_after_s: float) -> Json:
-    """*snapshot* at loop time *now* (see the module docstring)."""
-    # Every sample of every drive comes here while an event stream is open: each
-    # freshness test is is_fresh's, inline (no closure made per call).
-    status = now - snapshot.status_at <= stale_after_s
-    monitor = now - snapshot.monitor_at <= stale_after_s
-    direction = snapshot.direction
-    trip = snapshot.trip if status and snapshot.tripped else None
+def drive_json(snapshot: DriveSnapshot, values: ServedValues) -> Json:
+    """*snapshot* as served: *values* are the gateway's, as of the sample or of a reader's now.
+
+    The snapshot gives what is not judged (the drive's name, its times); every
+    value comes from *values* (see the module docstring).
+    """
+    trip = values.trip
+    status = values.status_fields
     parameters: dict[str, Json | None] = {
-        code: {"value": reading.value, "raw": reading.raw, "unit": reading.unit}
-        if now - reading.at <= stale_after_s
-        else None
-        for code, reading in snapshot.parameters.items()
+        code: None
+        if reading is None
+        else {"value": reading.value, "raw": reading.raw, "unit": reading.unit}
+        for code, reading in values.parameters.items()
     }
-    for code in snapshot.unavailable_parameters:
-        parameters[code] = None
     return {
         "line": snapshot.line,
         "node": snapshot.node,
         "protocol": snapshot.protocol,
         "unit": snapshot.unit,
         "time": snapshot.time,
-        "online": snapshot.available,
-        "sample_age_s": snapshot.sample_age_s(now),
-        "state": snapshot.state if status else None,
-        "running": snapshot.running if status else None,
-        "tripped": snapshot.tripped if status else None,
-        "status": dict(snapshot.status_fields)
-        if status and snapshot.status_fields is not None
-        else None,
-        "direction": _DIRECTIONS.get(direction)
-        if direction is not None and now - snapshot.direction_at <= stale_after_s
-        else None,
+        "online": values.online,
+        "sample_age_s": values.sample_age_s,
+        "state": values.state,
+        "running": values.running,
+        "tripped": values.tripped,
+        "status": None if status is None else dict(status),
+        "direction": values.direction,
         "monitor_time": monitor_time(snapshot),
-        "output_frequency_hz": snapshot.output_frequency_hz if monitor else None,
-        "output_current_a": snapshot.output_current_a if monitor else None,
-        "output_voltage_v": snapshot.output_voltage_v if monitor else None,
-        "output_torque_percent": snapshot.output_torque_percent if monitor else None,
-        "power_kw": snapshot.power_kw if monitor else None,
-        "set_frequency_hz": snapshot.set_frequency_hz
-        if now - snapshot.set_frequency_at <= stale_after_s
-        else None,
+        "output_frequency_hz": values.output_frequency_hz,
+        "output_current_a": values.output_current_a,
+        "output_voltage_v": values.output_voltage_v,
+        "output_torque_percent": values.output_torque_percent,
+        "power_kw": values.power_kw,
+        "set_frequency_hz": values.set_frequency_hz,
         "trip": None if trip is None else trip_json(trip),
         "trips_time": unix_time(snapshot, snapshot.trips_at),
         "parameters": parameters,

@@ -10,6 +10,12 @@ Decisions:
 
 - A drive event is encoded only when some stream is open: with no
   workbench page open, a sample costs the trend's append and nothing else.
+- What a drive is as served comes from the gateway's served view
+  (:class:`~sj300_async.gateway.ServedDrive`), never judged here: a pushed
+  event carries the values as of the sample (``served.values()``, built once
+  and shared with the other northbounds), a GET and a new stream's first
+  frames the values as of the request; the lease holder and its seconds left
+  are the served drive's, at the moment the JSON is written.
 - Line utilisation is the fraction of the last tick the line carried bytes
   (:func:`~sj300_async.gateway.busy_seconds` over the tick's length), the
   same figure ``rate(sj300_line_busy_seconds_total[1s])`` would give.
@@ -22,7 +28,7 @@ import time
 from collections.abc import Callable
 from typing import Any, Final
 
-from ...profiles import NEVER, DriveSnapshot
+from ...profiles import NEVER
 from ...version import __version__
 from .. import GatewayLine, GatewayView, ServedDrive, busy_seconds
 from ._events import EventHub, sse_frame
@@ -68,10 +74,6 @@ class Workbench:
         self._marks: dict[str, tuple[float, float]] = {}
         self._utilisation: dict[str, float | None] = {}
 
-    @property
-    def stale_after_s(self) -> float:
-        return self.gateway.config.stale_after_s
-
     def now(self) -> float:
         return self._clock()
 
@@ -99,24 +101,22 @@ class Workbench:
         if len(self.hub):
             self.hub.publish(
                 f"drive/{snapshot.line}/{snapshot.node}",
-                sse_frame("drive", self.drive_json(snapshot)),
+                sse_frame("drive", self.drive_json(served, at_sample=True)),
             )
 
-    def drive_json(self, snapshot: DriveSnapshot) -> Json:
+    def drive_json(self, served: ServedDrive, *, at_sample: bool = False) -> Json:
+        """*served* as JSON: its values as of the sample (a push) or as of now (a GET)."""
         now = self.now()
-        data = drive_json(snapshot, now=now, stale_after_s=self.stale_after_s)
-        drive = self.gateway.drive(snapshot.line, snapshot.node)
-        if drive is not None:  # who controls it (the lease), so every page shows it
-            lease = drive.lease
-            held = lease.held(now)
-            data["control"] = {
-                "holder": lease.holder if held else None,
-                "seconds_left": lease.seconds_left(now) if held else 0.0,
-            }
-        known = self._monitor_time.get((snapshot.line, snapshot.node))
-        if known is not None and snapshot.monitor_at == self._monitor_at.get(
-            (snapshot.line, snapshot.node)
-        ):
+        snapshot = served.snapshot
+        data = drive_json(snapshot, served.values() if at_sample else served.values(now))
+        # Who controls it (the lease), so every page shows it: live, as of now.
+        data["control"] = {
+            "holder": served.lease_holder(now),
+            "seconds_left": served.lease_seconds_left(now),
+        }
+        key = (snapshot.line, snapshot.node)
+        known = self._monitor_time.get(key)
+        if known is not None and snapshot.monitor_at == self._monitor_at.get(key):
             data["monitor_time"] = known  # the trend's own time of this read
         return data
 
@@ -220,9 +220,9 @@ class Workbench:
         for line in self.gateway.lines:
             out.append((f"line/{line.config.name}", sse_frame("line", self.line_json(line))))
         for drive in self.gateway.drives:
-            snapshot = drive.snapshot
-            subject = f"drive/{snapshot.line}/{snapshot.node}"
-            out.append((subject, sse_frame("drive", self.drive_json(snapshot))))
+            served = drive.served
+            subject = f"drive/{served.snapshot.line}/{served.snapshot.node}"
+            out.append((subject, sse_frame("drive", self.drive_json(served))))
         return out
 
     def extra(self) -> dict[str, Any]:
