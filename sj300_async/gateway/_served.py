@@ -174,6 +174,15 @@ class ServedDrive:
             _verdict(s), getattr(s, f"{group}_at"), self.fresh_until(group), present, now
         )
 
+    def parameter_until(self, code: str) -> float:
+        """Loop time until which polled parameter *code* is fresh (-inf: never read, or refused).
+
+        A parameter's :meth:`fresh_until`: a reader between samples (a Modbus
+        read, and its cache of answers) compares one number.
+        """
+        reading = self.snapshot.parameters.get(code)
+        return -math.inf if reading is None else reading.at + self._parameter_window_s
+
     def parameter_quality(self, code: str, now: float) -> Quality:
         """The quality of polled parameter *code* at loop time *now*."""
         s = self.snapshot
