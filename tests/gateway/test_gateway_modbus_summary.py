@@ -17,7 +17,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 from waiting import wait_for
 
-from sj300_async.gateway import GatewayDrive, Lease, LineConfig
+from sj300_async.gateway import GatewayDrive, Lease, LineConfig, ServedDrive
 from sj300_async.gateway.modbus import (
     SUMMARY_RECORD,
     SUMMARY_SLOTS,
@@ -28,7 +28,7 @@ from sj300_async.gateway.modbus import (
     SummaryBits,
     SummaryField,
 )
-from sj300_async.profiles import Trip, get_profile
+from sj300_async.profiles import DriveSnapshot, Trip, get_profile
 from sj300_async.wire import Direction
 
 from .conftest import SimLine, gateway_toml, modbus_client, modbus_port, polled, running_gateway
@@ -118,6 +118,15 @@ async def test_the_summary_refuses_writes_and_reads_past_its_last_record(
 
 # -- sans-IO: any read is the slice of the whole table ------------------------------------
 
+STALE_S = 5.0
+
+
+def _serve(drive: GatewayDrive, snapshot: DriveSnapshot) -> ServedDrive:
+    """*snapshot* as *drive*'s latest, served as the gateway serves it (stale after 5 s)."""
+    drive.snapshot = snapshot
+    drive.served = ServedDrive(snapshot, stale_after_s=STALE_S, lease=drive.lease)
+    return drive.served
+
 
 def _drives() -> dict[int, GatewayDrive]:
     line = LineConfig("l", "sim://", "sj300", (1, 2, 3), unit_offset=0)
@@ -126,20 +135,20 @@ def _drives() -> dict[int, GatewayDrive]:
 
 
 SUMMARY = Summary(_drives())
-TABLE = SUMMARY.read(0, 125, 0.0, 5.0)
+TABLE = SUMMARY.read(0, 125, 0.0)
 
 
 @settings(max_examples=300)
 @given(st.integers(0, SUMMARY_RECORD * SUMMARY_SLOTS - 1), st.integers(1, 125))
 def test_any_read_is_its_slice_of_the_table(address: int, count: int) -> None:
     end = SUMMARY_RECORD * SUMMARY_SLOTS
-    got = SUMMARY.read(address, count, 0.0, 5.0)
+    got = SUMMARY.read(address, count, 0.0)
     if address + count > end:
         assert got == Exc.ILLEGAL_ADDRESS
         return
     whole: list[int] = []
     for first in range(0, end, 125):
-        part = SUMMARY.read(first, min(125, end - first), 0.0, 5.0)
+        part = SUMMARY.read(first, min(125, end - first), 0.0)
         assert isinstance(part, list)
         whole += part
     assert got == whole[address : address + count]
@@ -157,8 +166,8 @@ def test_a_drive_never_read_is_present_and_nothing_else() -> None:
 def test_values_saturate_and_unknown_reads_zero(value: float, word: int) -> None:
     drives = _drives()
     drive = drives[1]
-    drive.snapshot = replace(drive.snapshot, monitor_at=0.0, output_frequency_hz=value)
-    record = Summary(drives).read(SUMMARY_RECORD, SUMMARY_RECORD, 1.0, 5.0)
+    _serve(drive, replace(drive.snapshot, monitor_at=0.0, output_frequency_hz=value))
+    record = Summary(drives).read(SUMMARY_RECORD, SUMMARY_RECORD, 1.0)
     assert isinstance(record, list)
     assert SummaryBits.MONITOR in SummaryBits(record[SummaryField.BITS])
     assert record[SummaryField.OUTPUT_FREQUENCY] == word
@@ -191,40 +200,44 @@ def test_a_record_says_what_the_drive_s_own_unit_says(
     direction: Direction,
     leased: bool,
 ) -> None:
-    """Fresh or stale on either side of stale_after_s, every value and bit of drive 2's
-    record is what its unit's registers say (0x0B there: the bit clear and 0 here)."""
-    now, stale_after_s = 100.0, 5.0
+    """Fresh or stale on either side of its served deadline, every value and bit of drive
+    2's record is what its unit's registers say (0x0B there: the bit clear and 0 here), and
+    both are what the drive as served says."""
+    now = 100.0
     line = LineConfig("l", "sim://", "sj300", (1, 2), unit_offset=0)
     drive, other = (GatewayDrive(line, node, SJ300, Lease(5.0)) for node in (2, 1))
     if leased:
         drive.lease.holder, drive.lease.expires_at = "client", now + 1
-    drive.snapshot = replace(
-        drive.snapshot,
-        online=True,
-        last_ok=now - min(status_age, 80.0),
-        status_at=now - status_age,
-        running=running,
-        tripped=tripped,
-        monitor_at=now - monitor_age,
-        output_frequency_hz=frequency,
-        output_current_a=current,
-        output_voltage_v=voltage,
-        direction=direction,
-        direction_at=now - direction_age,
-        set_frequency_hz=set_frequency,
-        set_frequency_at=now - set_age,
-        trip=Trip("E07", 7, None, "over-voltage") if tripped else None,
+    served = _serve(
+        drive,
+        replace(
+            drive.snapshot,
+            online=True,
+            last_ok=now - min(status_age, 80.0),
+            status_at=now - status_age,
+            running=running,
+            tripped=tripped,
+            monitor_at=now - monitor_age,
+            output_frequency_hz=frequency,
+            output_current_a=current,
+            output_voltage_v=voltage,
+            direction=direction,
+            direction_at=now - direction_age,
+            set_frequency_hz=set_frequency,
+            set_frequency_at=now - set_age,
+            trip=Trip("E07", 7, None, "over-voltage") if tripped else None,
+        ),
     )
-    record = Summary({1: other, 2: drive}).read(2 * SUMMARY_RECORD, SUMMARY_RECORD, now, 5.0)
+    record = Summary({1: other, 2: drive}).read(2 * SUMMARY_RECORD, SUMMARY_RECORD, now)
     assert isinstance(record, list)
     bits = SummaryBits(record[SummaryField.BITS])
 
     def unit(address: int, count: int) -> list[int] | None:
-        words = UNIT_MAP.read(drive, address, count, now, stale_after_s)
+        words = UNIT_MAP.read(served, address, count, now)
         return words if isinstance(words, list) else None
 
     status = unit(200, 2)
-    assert (SummaryBits.STATUS in bits) == (status is not None)
+    assert (SummaryBits.STATUS in bits) == (status is not None) == served.fresh("status", now)
     if status is not None:
         assert status == [int(SummaryBits.RUNNING in bits), int(SummaryBits.TRIPPED in bits)]
         assert record[SummaryField.TRIP] == (7 if tripped else 0)
@@ -232,17 +245,24 @@ def test_a_record_says_what_the_drive_s_own_unit_says(
         assert not bits & (SummaryBits.RUNNING | SummaryBits.TRIPPED)
         assert record[SummaryField.TRIP] == 0
     monitor = unit(100, 3)
-    assert (SummaryBits.MONITOR in bits) == (monitor is not None)
+    assert (SummaryBits.MONITOR in bits) == (monitor is not None) == served.fresh("monitor", now)
     first, last = SummaryField.OUTPUT_FREQUENCY, SummaryField.OUTPUT_VOLTAGE
     assert record[first : last + 1] == (monitor or [0, 0, 0])
     turning = unit(103, 1)
-    assert (SummaryBits.DIRECTION in bits) == (turning is not None)
+    assert (
+        (SummaryBits.DIRECTION in bits) == (turning is not None) == served.fresh("direction", now)
+    )
     assert record[SummaryField.DIRECTION] == (turning or [0])[0]
     setpoint = unit(1003, 1)
-    assert (SummaryBits.SET_FREQUENCY in bits) == (setpoint is not None)
+    assert (
+        (SummaryBits.SET_FREQUENCY in bits)
+        == (setpoint is not None)
+        == served.fresh("set_frequency", now)
+    )
     assert record[SummaryField.SET_FREQUENCY] == (setpoint or [0])[0]
     assert [record[SummaryField.AGE_S]] == unit(1, 1)
     assert [int(SummaryBits.LEASED in bits)] == unit(1000, 1)
+    assert (SummaryBits.LEASED in bits) == (served.lease_holder(now) is not None) == leased
 
 
 def test_a_unit_id_the_summary_could_not_hold_is_refused() -> None:

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 
 import pytest
 
@@ -20,8 +21,8 @@ from sj300_async.gateway import (
     WriteResult,
 )
 from sj300_async.gateway.modbus import REFUSAL_CODES, Exc, Field, RegisterMap, parameter_address
-from sj300_async.gateway.modbus._registers import MAX_CACHED_READS, ReadCache
-from sj300_async.profiles import get_profile
+from sj300_async.gateway.modbus._registers import MAX_CACHED_READS, ReadCache, _group_of
+from sj300_async.profiles import DriveSnapshot, RegisterField, Trip, TripLog, get_profile, read_time
 from sj300_async.wire import Direction
 
 SJ300, FR700 = get_profile("sj300"), get_profile("fr700")
@@ -37,7 +38,7 @@ def refusal(decoded: WriteRequest | WriteResult) -> Refusal | None:
 
 def _state(protocol: str = "sj300") -> GatewayDrive:
     line = LineConfig("l", "sim://", protocol, (1,), unit_offset=0)
-    return GatewayDrive(line, 1, get_profile(protocol), Lease(5.0))
+    return GatewayDrive(line, 1, get_profile(protocol), Lease(5.0), stale_after_s=5.0)
 
 
 @pytest.mark.parametrize(
@@ -57,7 +58,7 @@ def test_values_are_encoded_high_word_first_and_saturate(
     value: int, width: int, signed: bool, words: list[int]
 ) -> None:
     field = Field(0, "x", "1", lambda s, now: value, width=width, signed=signed)
-    assert field.words(_state(), 0.0) == words
+    assert field.words(_state().served, 0.0) == words
 
 
 def test_parameter_addresses_follow_the_group_bases() -> None:
@@ -78,24 +79,24 @@ def test_a_read_is_whole_or_refused() -> None:
     regs = RegisterMap(SJ300, ["A004"])
     state = _state()
     now = 100.0
-    assert regs.read(state, 12008, 2, now, 5.0) == Exc.TARGET_FAILED  # never read
+    assert regs.read(state.served, 12008, 2, now) == Exc.TARGET_FAILED  # never read
     state.readings.set_parameter("A004", 500, 99.0)
     state.rebuild(99.0)
-    assert regs.read(state, 12008, 2, now, 5.0) == [0, 500]
-    assert regs.read(state, 12009, 1, now, 5.0) == [500]  # half of it may be read
-    assert regs.read(state, 12008, 3, now, 5.0) == Exc.ILLEGAL_ADDRESS
-    assert regs.read(state, 12008, 2, 103.9, 5.0) == [0, 500]
-    assert regs.read(state, 12008, 2, 104.1, 5.0) == Exc.TARGET_FAILED  # stale
+    assert regs.read(state.served, 12008, 2, now) == [0, 500]
+    assert regs.read(state.served, 12009, 1, now) == [500]  # half of it may be read
+    assert regs.read(state.served, 12008, 3, now) == Exc.ILLEGAL_ADDRESS
+    assert regs.read(state.served, 12008, 2, 103.9) == [0, 500]
+    assert regs.read(state.served, 12008, 2, 104.1) == Exc.TARGET_FAILED  # stale
     # The identity block is never stale.
-    assert regs.read(state, 0, 4, 1e9, 5.0) == [0, 65535, 1, 1]
+    assert regs.read(state.served, 0, 4, 1e9) == [0, 65535, 1, 1]
 
 
 def test_fr700_units_have_no_sj300_registers() -> None:
     regs = RegisterMap(FR700, ["Pr.7"])
     state = _state("fr700")
-    assert regs.read(state, 104, 1, 0.0, 5.0) == Exc.ILLEGAL_ADDRESS
-    assert regs.read(state, 300, 2, 0.0, 5.0) == Exc.ILLEGAL_ADDRESS
-    assert regs.read(state, 0, 4, 0.0, 5.0) == [0, 65535, 2, 1]
+    assert regs.read(state.served, 104, 1, 0.0) == Exc.ILLEGAL_ADDRESS
+    assert regs.read(state.served, 300, 2, 0.0) == Exc.ILLEGAL_ADDRESS
+    assert regs.read(state.served, 0, 4, 0.0) == [0, 65535, 2, 1]
 
 
 def test_what_a_write_asks_for() -> None:
@@ -125,8 +126,8 @@ def test_the_lease_registers_show_the_lease() -> None:
     regs = RegisterMap(SJ300)
     state = _state()
     state.lease.holder, state.lease.expires_at = "10.0.0.9", 12.5
-    assert regs.read(state, 1000, 2, 10.0, 5.0) == [1, 25]
-    assert regs.read(state, 1000, 2, 13.0, 5.0) == [0, 0]
+    assert regs.read(state.served, 1000, 2, 10.0) == [1, 25]
+    assert regs.read(state.served, 1000, 2, 13.0) == [0, 0]
     assert math.isinf(_state().lease.expires_at)
 
 
@@ -136,15 +137,15 @@ def test_a_read_of_the_same_snapshot_is_answered_from_the_cache_while_fresh() ->
     cache: ReadCache = {}
     state.readings.set_parameter("A004", 500, 99.0)
     state.rebuild(99.0)
-    assert regs.read(state, 12008, 2, 100.0, 5.0, cache) == [0, 500]
-    assert cache[12008, 2][0] is state.snapshot  # kept with the snapshot it came from
-    assert regs.read(state, 12008, 2, 101.0, 5.0, cache) == [0, 500]
-    # Aged past stale_after_s: refused, not the kept answer.
-    assert regs.read(state, 12008, 2, 104.1, 5.0, cache) == Exc.TARGET_FAILED
+    assert regs.read(state.served, 12008, 2, 100.0, cache) == [0, 500]
+    assert cache[12008, 2][0] is state.served  # kept with the served view it came from
+    assert regs.read(state.served, 12008, 2, 101.0, cache) == [0, 500]
+    # Past its served deadline: refused, not the kept answer.
+    assert regs.read(state.served, 12008, 2, 104.1, cache) == Exc.TARGET_FAILED
     # A new snapshot: its values, not the kept ones.
     state.readings.set_parameter("A004", 600, 104.0)
     state.rebuild(104.0)
-    assert regs.read(state, 12008, 2, 104.1, 5.0, cache) == [0, 600]
+    assert regs.read(state.served, 12008, 2, 104.1, cache) == [0, 600]
 
 
 def test_a_read_with_a_live_register_is_never_kept() -> None:
@@ -152,9 +153,9 @@ def test_a_read_with_a_live_register_is_never_kept() -> None:
     state = _state()
     cache: ReadCache = {}
     state.lease.holder, state.lease.expires_at = "10.0.0.9", 12.5
-    assert regs.read(state, 1000, 2, 10.0, 5.0, cache) == [1, 25]
-    assert regs.read(state, 1000, 2, 11.0, 5.0, cache) == [1, 15]  # same snapshot, lease aged
-    assert regs.read(state, 0, 4, 10.0, 5.0, cache) == [0, 65535, 1, 1]  # the sample's age
+    assert regs.read(state.served, 1000, 2, 10.0, cache) == [1, 25]
+    assert regs.read(state.served, 1000, 2, 11.0, cache) == [1, 15]  # same snapshot, lease aged
+    assert regs.read(state.served, 0, 4, 10.0, cache) == [0, 65535, 1, 1]  # the sample's age
     assert cache == {}
 
 
@@ -169,13 +170,60 @@ def test_a_units_cache_keeps_a_bounded_number_of_reads() -> None:
     for code in codes:  # a client reading every parameter on its own
         address = parameter_address(SJ300, code)
         assert address is not None
-        assert regs.read(state, address, 2, 100.0, 5.0, cache) == [0, 500]
+        assert regs.read(state.served, address, 2, 100.0, cache) == [0, 500]
     assert len(cache) == MAX_CACHED_READS
     # The reads kept longest made room: a client that scanned the map once leaves the
     # SCADA's own blocks room to be kept.
     last = parameter_address(SJ300, codes[-1])
     assert (last, 2) in cache
     assert (12002, 2) not in cache  # A001, the first read
-    assert regs.read(state, 12002, 2, 100.0, 5.0, cache) == [0, 500]
+    assert regs.read(state.served, 12002, 2, 100.0, cache) == [0, 500]
     assert (12002, 2) in cache
     assert len(cache) == MAX_CACHED_READS
+
+
+def test_a_trip_history_is_served_until_the_served_view_s_deadline() -> None:
+    """The trip registers are fresh until the served view says (its read interval past
+    stale_after_s): a history read on plan is never refused as stale between two reads."""
+    regs = RegisterMap(FR700)
+    line = LineConfig("l", "sim://", "fr700", (1,), unit_offset=0, trips_interval_s=30.0)
+    state = GatewayDrive(line, 1, FR700, Lease(5.0), stale_after_s=5.0)
+    state.readings.trip_log = TripLog(1, (Trip("E.OC1", 0x10, None, None),))
+    state.readings.trips_at = 0.0
+    state.rebuild(0.0)
+    served = state.served
+    assert served.trips_until == 35.0
+    assert regs.read(served, 301, 2, 20.0) == [1, 0x10]  # past stale_after_s, on plan
+    assert regs.read(served, 301, 2, 35.0) == [1, 0x10]
+    assert regs.read(served, 301, 2, 35.1) == Exc.TARGET_FAILED
+
+
+def test_a_refused_parameter_is_refused_and_a_read_follows_the_served_view() -> None:
+    regs = RegisterMap(SJ300, ["A004"])
+    state = _state()
+    state.readings.set_parameter("A004", 500, 99.0)
+    state.rebuild(99.0)
+    assert state.served.parameter_until("A004") == 104.0
+    assert regs.read(state.served, 12008, 2, 104.0) == [0, 500]
+    state.readings.parameters.pop("A004")
+    state.readings.parameters_at.pop("A004")
+    state.readings.unavailable.add("A004")
+    state.rebuild(100.0)
+    assert state.served.parameter_until("A004") == -math.inf
+    assert regs.read(state.served, 12008, 2, 100.0) == Exc.TARGET_FAILED
+
+
+def test_a_profile_register_is_fresh_as_its_read_group() -> None:
+    def field(stamp: Callable[[DriveSnapshot], float]) -> RegisterField:
+        return RegisterField(500, "x", "1", lambda s: 0, stamp)
+
+    assert _group_of(field(read_time("trips"))) == "trips"
+    assert _group_of(field(read_time("status"))) == "status"
+    # A stamp that is no one group's read time cannot be judged by the served view.
+    for stamp in (
+        lambda s: min(s.status_at, s.monitor_at),
+        lambda s: max(s.direction_at, s.trips_at),
+        lambda s: s.taken_at,
+    ):
+        with pytest.raises(ValueError, match="no read group's read time"):
+            _group_of(field(stamp))

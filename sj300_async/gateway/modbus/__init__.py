@@ -14,10 +14,12 @@ own listeners, each with its own unit ids::
 when every line has one). Unit ids are unique within a listener, not
 across them (:class:`UnitScope`). Unit 255 of every listener is its
 summary (:mod:`._summary`): a record of each of its drives side by side,
-for a SCADA that reads a whole plant. Reads are served from each drive's latest
-snapshot (no read reaches a line); writes go through the gateway's write
-path, and a refusal is answered with the Modbus exception its meaning is
-closest to (:data:`REFUSAL_CODES`). The register map is docs/GATEWAY.md's
+for a SCADA that reads a whole plant. Reads are served from each drive as
+served (its latest snapshot, with the gateway's judgement of what is fresh
+and who holds the lease: :class:`~sj300_async.gateway.ServedDrive`; no read
+reaches a line); writes go through the gateway's write path, and a refusal
+is answered with the Modbus exception its meaning is closest to
+(:data:`REFUSAL_CODES`). The register map is docs/GATEWAY.md's
 (:func:`describe` generates its tables). The server is our own (a sans-IO
 framer, :mod:`._framing`, under an asyncio protocol, :mod:`._server`): it
 needs no library of the ``gateway`` extra.

@@ -94,7 +94,7 @@ class ModbusNorthbound:
         return "\n".join(lines)
 
     def publish(self, served: ServedDrive) -> None:
-        """Nothing to do: reads are served from each drive's latest snapshot."""
+        """Nothing to do: a read is served from its drive's latest view (``drive.served``)."""
 
     def metrics(self) -> Iterator[Metric]:
         yield from client_families(self.clients)

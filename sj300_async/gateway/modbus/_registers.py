@@ -1,11 +1,11 @@
 """The Modbus register map: what each holding register of a drive's unit holds.
 
 Sans-IO: :class:`RegisterMap` turns a read of ``count`` registers at
-``address`` into register values from a drive's latest snapshot (or a
-Modbus exception code), and a write into a neutral
-:data:`~sj300_async.gateway.WriteRequest` for the gateway to judge and
-carry out. docs/GATEWAY.md prints the map; :func:`describe` generates it,
-so the two cannot drift.
+``address`` into register values from a drive as served (its latest
+snapshot and the gateway's judgement of it), or a Modbus exception code,
+and a write into a neutral :data:`~sj300_async.gateway.WriteRequest` for
+the gateway to judge and carry out. docs/GATEWAY.md prints the map;
+:func:`describe` generates it, so the two cannot drift.
 
 The map is one common block (identity, state, output, the lease and
 commands), the drive's protocol's own block and parameter bases (its
@@ -21,9 +21,13 @@ Decisions:
   "ABCD"); signed values are two's complement; a value too large for its
   registers saturates (never wraps into a plausible wrong number).
 - A read succeeds whole or not at all: any register of it unknown (0x02),
-  any data in it older than the staleness limit or never read (0x0B,
-  "gateway target device failed to respond"). The identity block
-  (online, sample age) is always served, so a SCADA can see why.
+  any data in it the drive as served does not hold fresh, or never read
+  (0x0B, "gateway target device failed to respond"). Freshness is the
+  gateway's judgement, not the map's: each field names its deadline on the
+  :class:`~sj300_async.gateway.ServedDrive` (its group's ``*_until``, a
+  parameter's :meth:`~sj300_async.gateway.ServedDrive.parameter_until`), the
+  one every northbound serves by. The identity block (online, sample age)
+  is always served, so a SCADA can see why.
 - A parameter is served at ``base(group) + 2 * number`` (A004 at 12008,
   Pr.7 at 30014) when the line polls it; it is counted in its own setting
   increment (F002 = 30.00 s reads 3000), 32-bit. A parameter is written
@@ -38,19 +42,19 @@ from __future__ import annotations
 
 import math
 import operator
-from collections.abc import Callable, Iterable, Iterator
-from dataclasses import dataclass
+from collections.abc import Callable, Iterable, Iterator, Mapping
+from dataclasses import dataclass, replace
 from math import isfinite
-from typing import Final
+from typing import Any, Final, get_args
 
-from ...profiles import NEVER, DriveSnapshot, Profile, RegisterField, read_time
+from ...profiles import DriveSnapshot, Profile, ReadGroup, RegisterField
 from ...wire import Direction
 from .. import (
-    GatewayDrive,
     Heartbeat,
     ParameterWrite,
     Refusal,
     RunCommand,
+    ServedDrive,
     SetFrequency,
     WriteRequest,
     WriteResult,
@@ -98,10 +102,16 @@ def parameter_address(profile: Profile, code: str) -> int | None:
 
 # -- the fields -------------------------------------------------------------------
 
-#: A field's value in counts from a drive at a loop time (None: not known).
-Getter = Callable[[GatewayDrive, float], "int | None"]
-#: When a field's data was read (None: live, never stale).
-Stamp = Callable[[DriveSnapshot], float]
+#: A field's value in counts from a drive as served at a loop time (None: not known).
+Getter = Callable[[ServedDrive, float], "int | None"]
+#: The loop time until which a field's data is fresh, by the drive as served.
+Until = Callable[[ServedDrive], float]
+
+#: Each read group's deadline (``ServedDrive.status_until``...): one object per group,
+#: so a read's fields of one group are judged once (:attr:`_Plan.deadlines`).
+_UNTIL: Final[Mapping[ReadGroup, Until]] = {
+    group: operator.attrgetter(f"{group}_until") for group in get_args(ReadGroup)
+}
 
 
 @dataclass(frozen=True, slots=True)
@@ -113,15 +123,16 @@ class Field:
     #: The step one count stands for, for the documentation ("0.01 Hz", "bit field").
     unit: str
     value: Getter
-    stamp: Stamp | None = None
+    #: When its data turns stale (None: live, never stale).
+    until: Until | None = None
     width: int = 1
     signed: bool = False
     #: True for the registers a write may target (the gateway judges the writes).
     writable: bool = False
 
-    def words(self, drive: GatewayDrive, now: float) -> list[int] | None:
+    def words(self, served: ServedDrive, now: float) -> list[int] | None:
         """The field's registers, or None when its value is unknown."""
-        value = self.value(drive, now)
+        value = self.value(served, now)
         if value is None:
             return None
         if self.width == 1 and not self.signed:  # most fields: one unsigned register
@@ -140,8 +151,8 @@ def _snapshot(name: str, per_unit: float = 1) -> Getter:
     a SCADA's reads run these at every request)."""
     get: Callable[[DriveSnapshot], float | None] = operator.attrgetter(name)
 
-    def read(drive: GatewayDrive, now: float) -> int | None:
-        value = get(drive.snapshot)
+    def read(served: ServedDrive, now: float) -> int | None:
+        value = get(served.snapshot)
         if value is None or not isfinite(value):
             return None
         return round(value * per_unit)
@@ -150,61 +161,59 @@ def _snapshot(name: str, per_unit: float = 1) -> Getter:
 
 
 def _flag(get: Callable[[DriveSnapshot], bool | None]) -> Getter:
-    def read(drive: GatewayDrive, now: float) -> int | None:
-        value = get(drive.snapshot)
+    def read(served: ServedDrive, now: float) -> int | None:
+        value = get(served.snapshot)
         return None if value is None else int(value)
 
     return read
 
 
-def _direction(drive: GatewayDrive, now: float) -> int | None:
-    direction = drive.snapshot.direction
+def _direction(served: ServedDrive, now: float) -> int | None:
+    direction = served.snapshot.direction
     return None if direction is None else int(direction)
 
 
-def _age(drive: GatewayDrive, now: float) -> int:
-    age = drive.snapshot.sample_age_s(now)
+def _age(served: ServedDrive, now: float) -> int:
+    age = served.snapshot.sample_age_s(now)
     return 65535 if age is None else math.floor(age)
 
 
-_status_at = read_time("status")
-_monitor_at = read_time("monitor")
-_direction_at = read_time("direction")
+def _leased(served: ServedDrive, now: float) -> int:
+    return int(served.lease_holder(now) is not None)
+
+
+def _lease_left(served: ServedDrive, now: float) -> int:
+    return round(served.lease_seconds_left(now) * 10)
 
 
 def _common(protocol_id: int) -> list[Field]:
-    m = _monitor_at
+    m, s, d = _UNTIL["monitor"], _UNTIL["status"], _UNTIL["direction"]
     return [
-        Field(0, "drive online (poller's verdict)", "0/1", lambda d, now: int(d.snapshot.online)),
+        Field(0, "drive online (poller's verdict)", "0/1", lambda x, now: int(x.snapshot.online)),
         Field(1, "seconds since the last good sample (65535: never)", "1 s", _age),
-        Field(2, "protocol (1 SJ300, 2 FR-700)", "code", lambda d, now: protocol_id),
-        Field(3, "node (FR-700: station)", "address", lambda d, now: d.node),
-        Field(200, "running", "0/1", _flag(lambda s: s.running), _status_at),
-        Field(201, "tripped", "0/1", _flag(lambda s: s.tripped), _status_at),
+        Field(2, "protocol (1 SJ300, 2 FR-700)", "code", lambda x, now: protocol_id),
+        Field(3, "node (FR-700: station)", "address", lambda x, now: x.snapshot.node),
+        Field(200, "running", "0/1", _flag(lambda x: x.running), s),
+        Field(201, "tripped", "0/1", _flag(lambda x: x.tripped), s),
         Field(100, "output frequency", "0.01 Hz", _snapshot("output_frequency_hz", 100),
               m),
         Field(101, "output current", "0.1 A", _snapshot("output_current_a", 10), m),
         Field(102, "output voltage", "0.1 V", _snapshot("output_voltage_v", 10), m),
-        Field(103, "direction (0 stop, 1 forward, 2 reverse)", "code", _direction, _direction_at),
+        Field(103, "direction (0 stop, 1 forward, 2 reverse)", "code", _direction, d),
         Field(
             HEARTBEAT,
             "control lease: write any value to take or renew it; reads 1 while held",
             "0/1",
-            lambda d, now: int(d.lease.held(now)),
+            _leased,
             writable=True,
         ),
-        Field(
-            LEASE_LEFT,
-            "control lease: time left",
-            "0.1 s",
-            lambda d, now: round(d.lease.seconds_left(now) * 10),
-        ),
+        Field(LEASE_LEFT, "control lease: time left", "0.1 s", _lease_left),
         Field(
             COMMAND,
             "run command: write 0 stop, 1 forward, 2 reverse; reads the direction",
             "code",
             _direction,
-            _direction_at,
+            d,
             writable=True,
         ),
         Field(
@@ -212,48 +221,76 @@ def _common(protocol_id: int) -> list[Field]:
             "set frequency (as last read back)",
             "0.01 Hz",
             _snapshot("set_frequency_hz", 100),
-            read_time("set_frequency"),
+            _UNTIL["set_frequency"],
             writable=True,
         ),
     ]  # fmt: skip
 
 
+#: A snapshot every read group's time can be set on, to tell a profile's stamp's group.
+_PROBE: Final = DriveSnapshot("", 0, "", None, 0.0, 0.0, True)
+
+
+def _group_of(field: RegisterField) -> ReadGroup:
+    """The read group whose read time *field*'s stamp gives (``read_time(group)``).
+
+    A profile says when its register's value was read; the served view judges
+    freshness by group. The stamp is asked on two snapshots whose groups were
+    read at distinct times, in opposite orders: a stamp that gives one group's
+    time in both is that group's (a minimum or maximum of several is not).
+
+    Raises:
+        ValueError: the stamp gives no one group's read time.
+    """
+    assert field.stamp is not None
+    groups: tuple[ReadGroup, ...] = get_args(ReadGroup)
+    found: list[ReadGroup | None] = []
+    for order in (groups, groups[::-1]):
+        times = {group: float(i + 1) for i, group in enumerate(order)}
+        changes: dict[str, Any] = {f"{group}_at": t for group, t in times.items()}
+        at = field.stamp(replace(_PROBE, **changes))
+        found.append(next((g for g, t in times.items() if t == at), None))
+    if found[0] is None or found[0] != found[1]:
+        raise ValueError(
+            f"register {field.address} ({field.name}): its stamp is no read group's "
+            "read time (read_time(group))"
+        )
+    return found[0]
+
+
 def _protocol_field(field: RegisterField) -> Field:
-    """A profile's own register, read from the drive's snapshot."""
+    """A profile's own register, read from the drive's snapshot, fresh as its group is."""
     get = field.value
 
-    def read(drive: GatewayDrive, now: float) -> int | None:
-        return get(drive.snapshot)
+    def read(served: ServedDrive, now: float) -> int | None:
+        return get(served.snapshot)
 
-    return Field(
-        field.address, field.name, field.step, read, field.stamp, field.width, field.signed
-    )
+    until = None if field.stamp is None else _UNTIL[_group_of(field)]
+    return Field(field.address, field.name, field.step, read, until, field.width, field.signed)
 
 
 def _parameter_field(code: str, address: int) -> Field:
-    def read(drive: GatewayDrive, now: float) -> int | None:
-        reading = drive.snapshot.parameters.get(code)
+    def read(served: ServedDrive, now: float) -> int | None:
+        reading = served.snapshot.parameters.get(code)
         return None if reading is None else reading.raw
 
-    def stamp(snapshot: DriveSnapshot) -> float:
-        reading = snapshot.parameters.get(code)
-        return NEVER if reading is None else reading.at
-
+    # A methodcaller, not a closure around the method: one Python call per check.
+    until: Until = operator.methodcaller("parameter_until", code)
     return Field(
         address,
         f"parameter {code}",
         "its setting increment",
         read,
-        stamp,
+        until,
         width=2,
         signed=True,
         writable=True,
     )
 
 
-#: A unit's answered reads: (address, count) -> the snapshot it was read from, the
-#: oldest read time of its values, and the registers (see RegisterMap.read).
-ReadCache = dict[tuple[int, int], tuple[DriveSnapshot, float, "list[int]"]]
+#: A unit's answered reads: (address, count) -> the drive as served it was read from,
+#: the soonest deadline of its values, and the registers (see RegisterMap.read).
+ReadCache = dict[tuple[int, int], tuple[ServedDrive, float, "list[int]"]]
 #: Reads whose plan a map keeps (a SCADA reads the same few blocks over and over; what a
 #: client could ask is 65,536 x 125 reads, so past this many a plan is made every time).
 MAX_PLANS: Final = 1024
@@ -270,9 +307,9 @@ class _Plan:
     segments: tuple[tuple[Field, int, int], ...]
     #: A field of it is computed at every read (the lease, the sample's age): not cached.
     live: bool
-    #: The distinct read times of its fields (a block's fields mostly share one: it is
+    #: The distinct deadlines of its fields (a block's fields mostly share one: it is
     #: asked once per read, not once per field).
-    stamps: tuple[Stamp, ...]
+    deadlines: tuple[Until, ...]
 
 
 class RegisterMap:
@@ -304,21 +341,22 @@ class RegisterMap:
 
     def read(
         self,
-        drive: GatewayDrive,
+        served: ServedDrive,
         address: int,
         count: int,
         now: float,
-        stale_after_s: float,
         cache: ReadCache | None = None,
     ) -> list[int] | Exc:
-        """*count* registers from *address*, or the exception that refuses the whole read.
+        """*count* registers from *address* of the drive *served* (its latest served view),
+        or the exception that refuses the whole read.
 
         *cache*, kept per drive by the caller, holds each read's answer with
-        the snapshot it came from: a SCADA may read far more often than the
-        line polls, and the same read of the same snapshot is answered again
-        while its oldest value is fresh. One entry per read, not per field:
-        an entry per field, replaced at every sample, was two objects per
-        register for the cyclic collector to scan (70,000 at plant scale).
+        the served view it came from: a SCADA may read far more often than
+        the line polls, and the same read of the same snapshot is answered
+        again until the soonest of its values' deadlines. One entry per read,
+        not per field: an entry per field, replaced at every sample, was two
+        objects per register for the cyclic collector to scan (70,000 at plant
+        scale).
         The list returned may be the cache's: the caller must not change it.
         """
         key = (address, count)
@@ -329,33 +367,32 @@ class RegisterMap:
                 self._plans[key] = plan
         if isinstance(plan, Exc):
             return plan
-        snapshot = drive.snapshot
         cached = None if cache is None or plan.live else cache.get(key)
-        if cached is not None and cached[0] is snapshot and now - cached[1] <= stale_after_s:
+        if cached is not None and cached[0] is served and now <= cached[1]:
             return cached[2]
-        oldest = math.inf
-        for stamp in plan.stamps:
-            read_at = stamp(snapshot)
-            if now - read_at > stale_after_s:
+        soonest = math.inf
+        for until in plan.deadlines:
+            deadline = until(served)
+            if now > deadline:  # stale, or never read: the served view's judgement
                 return Exc.TARGET_FAILED
-            if read_at < oldest:
-                oldest = read_at
+            if deadline < soonest:
+                soonest = deadline
         out: list[int] = []
         for f, first, stop in plan.segments:
             if f.width == 1 and not f.signed:  # most fields: one unsigned register, inline
-                value = f.value(drive, now)
+                value = f.value(served, now)
                 if value is None:
                     return Exc.TARGET_FAILED
                 out.append(0 if value < 0 else 0xFFFF if value > 0xFFFF else value)
                 continue
-            words = f.words(drive, now)
+            words = f.words(served, now)
             if words is None:
                 return Exc.TARGET_FAILED
             out += words if stop - first == f.width else words[first:stop]
         if cache is not None and not plan.live:
             if key not in cache and len(cache) >= MAX_CACHED_READS:
                 del cache[next(iter(cache))]  # the one kept longest (see MAX_CACHED_READS)
-            cache[key] = (snapshot, oldest, out)
+            cache[key] = (served, soonest, out)
         return out
 
     def _plan(self, address: int, count: int) -> _Plan | Exc:
@@ -371,11 +408,11 @@ class RegisterMap:
             stop = min(f.width, word + end - at)
             segments.append((f, word, stop))
             at += stop - word
-        stamps = dict.fromkeys(f.stamp for f, _, _ in segments if f.stamp is not None)
+        deadlines = dict.fromkeys(f.until for f, _, _ in segments if f.until is not None)
         return _Plan(
             tuple(segments),
-            live=any(f.stamp is None for f, _, _ in segments),
-            stamps=tuple(stamps),
+            live=any(f.until is None for f, _, _ in segments),
+            deadlines=tuple(deadlines),
         )
 
     def decode_write(self, address: int, values: list[int]) -> WriteRequest | WriteResult:

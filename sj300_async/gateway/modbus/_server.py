@@ -1,7 +1,8 @@
 """Modbus TCP: an asyncio.Protocol per connection over the sans-IO framer (:mod:`._framing`).
 
 Reads are answered from the drive's :class:`~._registers.RegisterMap`
-over its latest snapshot (the gateway's cache: no read reaches a line),
+over its latest served view (``drive.served``: the gateway's cache and its
+judgement of it, freshness included; no read reaches a line),
 at once, in the callback that received them. Writes go through the
 gateway's write path (``gateway.write``, which does reach the line,
 through its arbiter), and a refusal is answered with
@@ -116,7 +117,6 @@ class ModbusServer:
         #: Unit 255: every drive's record side by side (see :mod:`._summary`).
         self.summary = Summary({unit_id: unit.drive for unit_id, unit in units.items()})
         self.gateway = gateway
-        self.stale_after_s = gateway.config.stale_after_s
         self.idle_timeout_s = limits.idle_timeout_s
         self.counters = counters
         #: Shared by every listener of the northbound: max_connections is for them all.
@@ -302,10 +302,10 @@ class _Connection(asyncio.Protocol):
         if type(event) is ReadRegisters:
             now = self._loop.time()
             if unit is None:  # the summary (unit 255)
-                result = server.summary.read(event.address, event.count, now, server.stale_after_s)
+                result = server.summary.read(event.address, event.count, now)
             else:
                 result = unit.registers.read(
-                    unit.drive, event.address, event.count, now, server.stale_after_s, unit.cache
+                    unit.drive.served, event.address, event.count, now, unit.cache
                 )
             if type(result) is list:
                 return encode_registers(event.transaction_id, event.unit_id, event.function, result)

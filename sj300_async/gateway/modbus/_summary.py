@@ -22,11 +22,15 @@ Decisions:
   answer 0x0B for stale data; here one stale drive would hide fifteen).
   Each record's first register says which of its values are current, a
   bit per group (:class:`SummaryBits`); a value not current reads 0 with its
-  bit clear. A value the drive's protocol does not give reads 0 with its
-  group's bit set (the drive's own unit answers 0x0B for it; the SJ300 and
-  FR-700 give every one). A unit id with no drive has an all-zero record.
+  bit clear. Current is the gateway's judgement, not the summary's: a
+  group's deadline on the drive as served (``served.status_until``...,
+  :class:`~sj300_async.gateway.ServedDrive`), the one the drive's own unit
+  answers 0x0B by; the lease holder is the served view's too. A value the
+  drive's protocol does not give reads 0 with its group's bit set (the
+  drive's own unit answers 0x0B for it; the SJ300 and FR-700 give every
+  one). A unit id with no drive has an all-zero record.
 - **Not cached.** Every read computes its records from the drives' latest
-  snapshots (about 0.3 us a register here): a read covers fifteen drives,
+  served views (about 0.3 us a register here): a read covers fifteen drives,
   each with a sample of its own, so an answer would rarely be served twice.
 """
 
@@ -38,7 +42,7 @@ from collections.abc import Mapping
 from typing import Final
 
 from ...profiles import DriveSnapshot
-from .. import GatewayDrive
+from .. import GatewayDrive, ServedDrive
 from ._framing import Exc
 
 __all__ = [
@@ -114,14 +118,18 @@ def _word(value: float | None, per_unit: float) -> int:
     return 0 if counts < 0 else 0xFFFF if counts > 0xFFFF else counts
 
 
-def record(drive: GatewayDrive, now: float, stale_after_s: float) -> list[int]:
-    """Drive *drive*'s record at loop time *now* (see the module docstring)."""
-    s: DriveSnapshot = drive.snapshot
+def record(served: ServedDrive, now: float) -> list[int]:
+    """The record of the drive *served* (its latest served view) at loop time *now*.
+
+    Each group's bit is a compare of *now* with its served deadline (see the
+    module docstring): a plant's read of 247 records makes no call per group.
+    """
+    s: DriveSnapshot = served.snapshot
     bits = _PRESENT
     if s.available:
         bits |= _ONLINE
     tripped = False
-    if now - s.status_at <= stale_after_s:
+    if now <= served.status_until:
         bits |= _STATUS
         tripped = bool(s.tripped)
         if s.running:
@@ -129,20 +137,20 @@ def record(drive: GatewayDrive, now: float, stale_after_s: float) -> list[int]:
         if tripped:
             bits |= _TRIPPED
     frequency = current = voltage = 0
-    if now - s.monitor_at <= stale_after_s:
+    if now <= served.monitor_until:
         bits |= _MONITOR
         frequency = _word(s.output_frequency_hz, 100)
         current = _word(s.output_current_a, 10)
         voltage = _word(s.output_voltage_v, 10)
     direction = 0
-    if s.direction is not None and now - s.direction_at <= stale_after_s:
+    if s.direction is not None and now <= served.direction_until:
         bits |= _DIRECTION
         direction = int(s.direction)
     set_frequency = 0
-    if now - s.set_frequency_at <= stale_after_s:
+    if now <= served.set_frequency_until:
         bits |= _SET_FREQUENCY
         set_frequency = _word(s.set_frequency_hz, 100)
-    if drive.lease.held(now):
+    if served.lease_holder(now) is not None:
         bits |= _LEASED
     age = s.sample_age_s(now)
     trip = s.trip.number if tripped and s.trip is not None else 0
@@ -172,7 +180,7 @@ class Summary:
             raise ValueError(f"unit ids outside 1..{SUMMARY_SLOTS - 1}: {wrong}")
         self.drives = dict(drives)
 
-    def read(self, address: int, count: int, now: float, stale_after_s: float) -> list[int] | Exc:
+    def read(self, address: int, count: int, now: float) -> list[int] | Exc:
         """*count* registers from *address*, or 0x02 when any is past the last record."""
         end = address + count
         if end > SUMMARY_RECORD * SUMMARY_SLOTS:
@@ -184,10 +192,10 @@ class Summary:
                 words += self._header()
                 continue
             drive = self.drives.get(slot)
-            words += _EMPTY if drive is None else record(drive, now, stale_after_s)
+            words += _EMPTY if drive is None else record(drive.served, now)
         offset = address - first * SUMMARY_RECORD
         return words[offset : offset + count]
 
     def _header(self) -> list[int]:
-        online = sum(drive.snapshot.available for drive in self.drives.values())
+        online = sum(drive.served.snapshot.available for drive in self.drives.values())
         return [len(self.drives), online, 0, 0, 0, 0, 0, 0]
