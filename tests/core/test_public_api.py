@@ -173,8 +173,9 @@ GATEWAY_MQTT_NAMES = (
     "SparkplugConfig", "frequency_request", "parameter_request",
     # a stop waits behind no command (issue 30's review)
     "DROPPED_BY_STOP",
-    # each sample's state built once for every MQTT client (issue 30)
-    "drive_state", "new_client",
+    # a connection for each MQTT client (issue 30; drive_state went with issue 42:
+    # state_message takes the drive as served)
+    "new_client",
 )  # fmt: skip
 GATEWAY_SPARKPLUG_NAMES = (
     "BAD_INPUTS", "CLIENT", "DATA_TYPES", "DIRECTION_WORDS", "LAST_REFUSAL", "NAMESPACE",

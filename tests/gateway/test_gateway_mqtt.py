@@ -39,6 +39,7 @@ from sj300_async.gateway import (
     ParameterWrite,
     Refusal,
     RunCommand,
+    ServedDrive,
     SetFrequency,
     WriteResult,
     excerpt,
@@ -52,7 +53,7 @@ from sj300_async.gateway.mqtt import (
     state_message,
 )
 from sj300_async.gateway.mqtt._bridge import MqttBridge
-from sj300_async.profiles import DriveSnapshot, get_profile
+from sj300_async.profiles import get_profile
 from sj300_async.simulator.fr700 import Fr700SimulatedBus
 from sj300_async.sj300 import InverterStatus, MonitorData, StatusA, StatusB, StatusC
 from sj300_async.wire import Direction
@@ -743,10 +744,12 @@ async def leased(gateway: Gateway, broker: Broker) -> tuple[MqttBridge, asyncio.
 # -- the messages, without a broker ---------------------------------------------------------------
 
 
-def _snapshot() -> DriveSnapshot:
+def _served(*, lapse_pending: bool = False) -> ServedDrive:
+    """Drive 2 as served at 10.0, its values allowed 1 s: the monitor read at 8.0."""
     profile = get_profile("sj300")
     line = LineConfig("hall", "sim://", "sj300", (2,))
-    drive = GatewayDrive(line, 2, profile, Lease(5.0))
+    drive = GatewayDrive(line, 2, profile, Lease(5.0), stale_after_s=1.0)
+    drive.lapse_pending = lapse_pending
     readings = drive.readings
     readings.online, readings.last_ok = True, 10.0
     readings.set_status(
@@ -755,12 +758,13 @@ def _snapshot() -> DriveSnapshot:
     monitor = MonitorData(12.5, 3.2, 1, 0, 0, 0, 12.5, 40, 200.0, 1.5, 7, 9)  # type: ignore[arg-type]
     readings.set_monitor(monitor, 8.0, profile)
     readings.set_parameter("A004", 500, 10.0)
-    return drive.rebuild(10.0, wall=1e9)
+    drive.rebuild(10.0, wall=1e9)
+    return drive.served
 
 
 def test_a_state_message_leaves_stale_values_null() -> None:
-    snapshot = _snapshot()
-    message = state_message("gw1", snapshot, now=10.0, stale_after_s=1.0)
+    served = _served()
+    message = state_message("gw1", served)  # a push: as served at the sample
 
     assert message.time == 1e9
     assert (message.online, message.tripped, message.running) == (True, True, False)
@@ -769,9 +773,23 @@ def test_a_state_message_leaves_stale_values_null() -> None:
     assert message.output_frequency_hz is None  # read at 8.0: 2 s old, 1 s allowed
     assert message.parameters == {"A004": 50.0}
     assert message.trip is None  # tripped, but no history read after the trip was seen
-    fresh = state_message("gw1", snapshot, now=8.5, stale_after_s=1.0)
+    assert message.lapse_pending is False
+    fresh = state_message("gw1", served, now=8.5)
     assert (fresh.output_frequency_hz, fresh.power_kw, fresh.direction) == (12.5, 1.5, "forward")
     assert json.loads(fresh.to_json())["output_torque_percent"] == 40
+
+
+def test_a_state_message_is_the_served_view_byte_for_byte() -> None:
+    """Nothing judged by the message: its payload is the served values, worded (pinned)."""
+    served = _served(lapse_pending=True)
+    assert state_message("gw1", served).to_json() == (
+        b'{"direction":null,"gateway":"gw1","lapse_pending":true,"line":"hall","node":2,'
+        b'"online":true,"output_current_a":null,"output_frequency_hz":null,'
+        b'"output_torque_percent":null,"output_voltage_v":null,"parameters":{"A004":50.0},'
+        b'"power_kw":null,"protocol":"sj300","running":false,"set_frequency_hz":null,'
+        b'"state":"tripped","status":{"a":"RUNNING","b":"TRIPPED","c":"STOP"},'
+        b'"time":1000000000.0,"trip":null,"trip_meaning":null,"tripped":true}'
+    )
 
 
 async def test_an_fr700_trip_is_named_from_its_fault_history(broker: Broker) -> None:

@@ -6,7 +6,6 @@ firmware without it answers), while the gateway polls it.
 
 from __future__ import annotations
 
-import asyncio
 import json
 
 from pymodbus.pdu import ModbusPDU
@@ -48,8 +47,7 @@ async def test_a_refused_parameter_answers_0x0b_and_the_drive_stays_online(
             (line,) = gateway.lines
             assert line.poller.health(line.bus, 2).failures == 0
 
-            loop = asyncio.get_running_loop()
-            state = state_message("gw", drive.snapshot, now=loop.time(), stale_after_s=5.0)
+            state = state_message("gw", drive.served)
             parameters = json.loads(state.to_json())["parameters"]
             assert parameters == {"F001": 0.0, "A004": 50.0, "F002": None}
 

@@ -41,7 +41,7 @@ from ._fleet import (
     is_fleet_url,
     parse_fleet_url,
 )
-from ._messages import drive_state, state_message
+from ._messages import state_message
 from ._session import (
     BrokerUnreachable,
     SessionStats,
@@ -89,7 +89,6 @@ __all__ = [
     "backoff",
     "cancel_and_wait",
     "discovery",
-    "drive_state",
     "error_text",
     "follow",
     "frequency_request",

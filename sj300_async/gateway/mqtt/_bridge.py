@@ -10,8 +10,9 @@ contract, shared with the fleet subscriber) lays out:
   broker's own check interval); a clean stop says
   ``offline`` itself before disconnecting: the drives are no longer served.
 - ``…/<line>/<node>/state``: one retained :class:`~._topics.StateMessage`
-  per drive snapshot (every poll, and every write's read-back)
-  (:mod:`._messages`).
+  per drive snapshot (every poll, and every write's read-back): the drive
+  as the gateway serves it, what is fresh and what is null decided there,
+  not here (:mod:`._messages`).
 - ``…/<line>/<node>/availability``: ``online`` while the poller hears the
   drive (and it has answered at least once), published when that changes.
 - Home Assistant discovery (``discovery = true``, :mod:`._discovery`).
@@ -91,14 +92,13 @@ from collections.abc import Callable, Iterator
 from dataclasses import dataclass
 from typing import TYPE_CHECKING, Final
 
-from ...profiles import DriveSnapshot
 from .. import GATHER_S, GatewayDrive, GatewayView, Refusal, ServedDrive, WriteResult, excerpt
 from ._births import Rediscovery
 from ._commands import DROPPED_BY_STOP, MAX_PAYLOAD_BYTES, error_text, oversized, parse_command
 from ._config import MqttConfig
 from ._discovery import discovery
 from ._intake import CommandIntake
-from ._messages import drive_state
+from ._messages import state_message
 from ._session import cancel_and_wait, keep_connected, new_client, reader
 from ._stats import BridgeStats, mqtt_families
 from ._subscriptions import Subscriptions
@@ -149,7 +149,6 @@ class MqttBridge:
         self._subscriptions = Subscriptions(self.stats, _log, "MQTT")
         self._intake = CommandIntake(_log)
         self.topics = Topics("", config.prefix)  # the gateway's id is known at start
-        self.stale_after_s = math.inf
         self._gateway: GatewayView | None = None
         self._birth = f"{config.discovery_prefix}/status"
         #: Home Assistant's births, coalesced: anyone may publish them (see _births).
@@ -187,7 +186,6 @@ class MqttBridge:
         """Connect (and keep reconnecting) in the background."""
         self._gateway = gateway
         self.topics = Topics(gateway.config.gateway_id, self.config.prefix)
-        self.stale_after_s = gateway.config.stale_after_s
         if self._task is None:
             self._task = asyncio.get_running_loop().create_task(self._run(), name="mqtt bridge")
 
@@ -199,17 +197,17 @@ class MqttBridge:
 
         Never blocks: the message waits in the outbox (see the module docstring).
         """
-        snapshot = served.snapshot
-        self.publish_state(snapshot, self.state_of(snapshot))
+        self.publish_state(served, self.state_of(served))
 
-    def state_of(self, snapshot: DriveSnapshot) -> StateMessage:
-        """*snapshot* as a state message now (the Sparkplug node builds the same one)."""
-        return drive_state(self._gateway, self.topics.gateway, snapshot, self.stale_after_s)
+    def state_of(self, served: ServedDrive) -> StateMessage:
+        """*served* as a state message, at its sample (the Sparkplug node builds the same one)."""
+        return state_message(self.topics.gateway, served)
 
-    def publish_state(self, snapshot: DriveSnapshot, message: StateMessage) -> None:
+    def publish_state(self, served: ServedDrive, message: StateMessage) -> None:
         """:meth:`publish` with the state message built already (once for every MQTT client)."""
         if self._closing:
             return
+        snapshot = served.snapshot
         key = (snapshot.line, snapshot.node)
         self.stats.samples[key] += 1
         out = _Out(self.topics.state(*key), message.to_json(), retain=True, drive=key)

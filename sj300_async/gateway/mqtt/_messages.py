@@ -1,100 +1,62 @@
-"""A drive's state as published on MQTT: a snapshot -> :class:`~._topics.StateMessage`.
+"""A drive's state as published on MQTT: a drive as served -> :class:`~._topics.StateMessage`.
 
-Sans-IO but for :func:`drive_state`, which reads the loop's clock. A value
-is published only when younger than ``stale_after_s`` at the moment of
-publishing (the rule of the Modbus reads), else it is null; the message's
-``time`` is the sample's, in Unix time. A polled parameter that is stale, or
-that the drive refused to read (unavailable), is null; one never read yet is
-left out (the gateway polls it before it knows). The trip is the snapshot's
-present trip (known only from a trip history read after the trip was seen),
-shown only while the drive's status is fresh.
+Sans-IO, and no judgement of its own: what is shown and what is null is
+the gateway's served view (:class:`~sj300_async.gateway.ServedDrive`,
+decided once per snapshot for every northbound); this module only words
+it as the state message's fields. A push (every sample, every write's
+read-back) sends the values as served at the sample, the ones every
+northbound shares (:meth:`ServedDrive.values()
+<sj300_async.gateway.ServedDrive.values>`). So a stale or unavailable value
+is null, a polled parameter never read yet is left out, the trip shows
+only while the status that says tripped is fresh, and ``lapse_pending`` is
+the served drive's. The message's ``time`` is the sample's, in Unix time.
 """
 
 from __future__ import annotations
 
-import asyncio
-from typing import TYPE_CHECKING, Final
+from typing import TYPE_CHECKING
 
-from ...profiles import DriveSnapshot, is_fresh
-from ...wire import Direction
 from ._topics import StateMessage
 
 if TYPE_CHECKING:
-    from .. import GatewayView
+    from .. import ServedDrive
 
-__all__ = ["drive_state", "state_message"]
-
-_DIRECTIONS: Final = {
-    Direction.STOP: "stop",
-    Direction.FORWARD: "forward",
-    Direction.REVERSE: "reverse",
-}
+__all__ = ["state_message"]
 
 
-def state_message(
-    gateway: str,
-    snapshot: DriveSnapshot,
-    *,
-    now: float,
-    stale_after_s: float,
-    lapse_pending: bool = False,
-) -> StateMessage:
-    """*snapshot* as published at loop time *now* (see the module docstring).
+def state_message(gateway: str, served: ServedDrive, *, now: float | None = None) -> StateMessage:
+    """*served* as published by gateway *gateway* (see the module docstring).
 
-    *lapse_pending*: the gateway's word that a lapsed lease's stop is not
-    confirmed yet (not part of the snapshot: it is the gateway's, not the drive's).
+    *now*: the loop time its values are served at; None (a push): at the
+    sample, the values built once for every northbound.
     """
-    status = is_fresh(snapshot.status_at, now, stale_after_s)
-    monitor = is_fresh(snapshot.monitor_at, now, stale_after_s)
-    direction = snapshot.direction
-    trip = snapshot.trip if status and snapshot.tripped else None
-    parameters: dict[str, float | None] = {
-        code: reading.value if is_fresh(reading.at, now, stale_after_s) else None
-        for code, reading in snapshot.parameters.items()
-    }
-    for code in snapshot.unavailable_parameters:
-        parameters[code] = None
-    set_hz = snapshot.set_frequency_hz
+    values = served.values(now)
+    snapshot = served.snapshot
+    trip = values.trip
     return StateMessage(
         gateway=gateway,
         line=snapshot.line,
         node=snapshot.node,
         protocol=snapshot.protocol,
         time=snapshot.time,
-        online=snapshot.available,
-        output_frequency_hz=snapshot.output_frequency_hz if monitor else None,
-        output_current_a=snapshot.output_current_a if monitor else None,
-        output_voltage_v=snapshot.output_voltage_v if monitor else None,
-        direction=(
-            _DIRECTIONS.get(direction)
-            if direction is not None and is_fresh(snapshot.direction_at, now, stale_after_s)
-            else None
-        ),
-        running=snapshot.running if status else None,
-        tripped=snapshot.tripped if status else None,
+        online=values.online,
+        output_frequency_hz=values.output_frequency_hz,
+        output_current_a=values.output_current_a,
+        output_voltage_v=values.output_voltage_v,
+        direction=values.direction,
+        running=values.running,
+        tripped=values.tripped,
         trip=None if trip is None else trip.code,
-        set_frequency_hz=set_hz
-        if is_fresh(snapshot.set_frequency_at, now, stale_after_s)
-        else None,
-        output_torque_percent=snapshot.output_torque_percent if monitor else None,
-        power_kw=snapshot.power_kw if monitor else None,
-        status=None if not status or snapshot.status_fields is None else snapshot.status_fields,
-        parameters=parameters,
-        state=snapshot.state if status else None,
+        set_frequency_hz=values.set_frequency_hz,
+        output_torque_percent=values.output_torque_percent,
+        power_kw=values.power_kw,
+        status=values.status_fields,
+        # The served readings carry their read times; the message, their values.
+        parameters={
+            code: None if reading is None else reading.value
+            for code, reading in values.parameters.items()
+        },
+        state=values.state,
         trip_meaning=None if trip is None else trip.meaning,
-        lapse_pending=lapse_pending,
-    )
-
-
-def drive_state(
-    gateway: GatewayView | None, gateway_id: str, snapshot: DriveSnapshot, stale_after_s: float
-) -> StateMessage:
-    """*snapshot*'s state message now, with the gateway's word on its lapse (in the loop)."""
-    drive = None if gateway is None else gateway.drive(snapshot.line, snapshot.node)
-    return state_message(
-        gateway_id,
-        snapshot,
-        now=asyncio.get_running_loop().time(),
-        stale_after_s=stale_after_s,
-        lapse_pending=drive is not None and drive.lapse_pending,
+        lapse_pending=served.lapse_pending,
     )

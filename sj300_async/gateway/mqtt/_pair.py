@@ -6,7 +6,8 @@ node's NDEATH); to the gateway they are one northbound, ``[mqtt]``. They
 start in order and a failed start closes what started; every call goes to
 each, and a ``publish`` that raises in one still reaches the other. A
 sample's state message is built once, by the first client, for them all
-(:class:`StatePublisher`): both read the same fields of the same sample.
+(:class:`StatePublisher`): both read the same fields of the same drive as
+served.
 """
 
 from __future__ import annotations
@@ -15,7 +16,6 @@ import logging
 from collections.abc import Iterator, Sequence
 from typing import TYPE_CHECKING, Protocol
 
-from ...profiles import DriveSnapshot
 from .. import GatewayView, Northbound, ServedDrive
 from ._topics import StateMessage
 
@@ -30,9 +30,9 @@ _log = logging.getLogger("sj300_async.gateway.mqtt")
 class StatePublisher(Northbound, Protocol):
     """An MQTT client that publishes a sample from its state message."""
 
-    def state_of(self, snapshot: DriveSnapshot) -> StateMessage: ...
+    def state_of(self, served: ServedDrive) -> StateMessage: ...
 
-    def publish_state(self, snapshot: DriveSnapshot, message: StateMessage) -> None: ...
+    def publish_state(self, served: ServedDrive, message: StateMessage) -> None: ...
 
     def problems(self) -> list[str]: ...
 
@@ -59,12 +59,11 @@ class Clients:
         return "\n".join(lines) if lines else None
 
     def publish(self, served: ServedDrive) -> None:
-        snapshot = served.snapshot
         failure: Exception | None = None
-        message = self.parts[0].state_of(snapshot)
+        message = self.parts[0].state_of(served)
         for part in self.parts:
             try:
-                part.publish_state(snapshot, message)
+                part.publish_state(served, message)
             except Exception as exc:  # the gateway counts it; the other part still gets it
                 failure = failure or exc
         if failure is not None:

@@ -23,9 +23,17 @@ import math
 from typing import Final
 
 from ...wire import Direction
-from .. import Heartbeat, Refusal, RunCommand, WriteRequest, WriteResult, excerpt
+from .. import (
+    DIRECTION_WORDS,
+    Heartbeat,
+    Refusal,
+    RunCommand,
+    WriteRequest,
+    WriteResult,
+    excerpt,
+)
 from ..mqtt import frequency_request, parameter_request
-from ._device import DIRECTION_WORDS, Device, DeviceMetric, Writes
+from ._device import Device, DeviceMetric, Writes
 from ._payload import BOOLEAN, DOUBLE, STRING, ReceivedMetric
 
 __all__ = ["Judged", "judge"]
@@ -36,9 +44,8 @@ _MEMBERS: Final = {
     BOOLEAN: frozenset({"boolean_value"}),
     STRING: frozenset({"string_value"}),
 }
-_DIRECTIONS: Final = dict(
-    zip(DIRECTION_WORDS, (Direction.STOP, Direction.FORWARD, Direction.REVERSE), strict=True)
-)
+#: Direction's words as written: the gateway's, the ones it is read in.
+_DIRECTIONS: Final = {word: direction for direction, word in DIRECTION_WORDS.items()}
 
 #: What became of one metric of a DCMD: the device's metric it names (None: none), the
 #: write it asks for or why not, and the bad-input reason to count (None: not bad input).

@@ -25,11 +25,12 @@ Info/Protocol, Info/Line    String
 Info/Node                   UInt32
 ==========================  ========  =====  =========================================
 
-A value the gateway does not know now (stale, never read, not given by
-the drive) is null. Aliases are unique across the edge node: device *k*
-(1-based, the gateway's drive order) numbers its metrics from ``k << 16``;
-the node's own metrics are below 65536. The order of metrics and their
-aliases are fixed for a configuration, so they are the same at every birth.
+A value the gateway does not serve (stale, never read, not given by the
+drive: the gateway's served view decides) is null. Aliases are unique
+across the edge node: device *k* (1-based, the gateway's drive order)
+numbers its metrics from ``k << 16``; the node's own metrics are below
+65536. The order of metrics and their aliases are fixed for a
+configuration, so they are the same at every birth.
 """
 
 from __future__ import annotations
@@ -40,6 +41,7 @@ from dataclasses import dataclass
 from typing import Final
 
 from ...profiles import ParameterSpec
+from .. import DIRECTION_WORDS as SERVED_DIRECTION_WORDS
 from .. import GatewayDrive
 from ..mqtt import StateMessage
 from ._payload import BOOLEAN, DOUBLE, STRING, UINT32, UINT64, MetricDef, Property
@@ -53,8 +55,8 @@ __all__ = [
     "device_id",
 ]
 
-#: Direction's words, as read and as written.
-DIRECTION_WORDS: Final = ("stop", "forward", "reverse")
+#: Direction's words, as read and as written: the gateway's own (stop, forward, reverse).
+DIRECTION_WORDS: Final = tuple(SERVED_DIRECTION_WORDS.values())
 LAST_REFUSAL: Final = "Control/Last Refusal"
 
 #: Reads a metric's value from a sample's state (and whether the Sparkplug

@@ -30,7 +30,11 @@ The session (Sparkplug 3.0, sections 5.4 to 5.7):
 - A drive's sample is a DDATA of the metrics whose value changed since the
   device's last message (report by exception: a sample that changed
   nothing sends nothing); DDEATH when the poller takes the drive offline,
-  and a new DBIRTH with every value when it comes back.
+  and a new DBIRTH with every value when it comes back. The values are the
+  drive as the gateway serves it at the sample (what is fresh and what is
+  null is decided there, once for every northbound), read from the same
+  state message as the JSON topics'; ``Control/Lease`` is the served lease
+  when the message goes out.
 - ``seq`` counts every message after NBIRTH, 0..255 and wrapping; a
   payload's timestamp is the sample's time (the birth of the edge node's
   own metrics: now), and so is each metric's.
@@ -65,7 +69,6 @@ import time
 from collections.abc import Callable, Iterator
 from typing import TYPE_CHECKING, Final
 
-from ...profiles import DriveSnapshot
 from ...wire import Direction
 from .. import (
     GATHER_S,
@@ -86,11 +89,11 @@ from ..mqtt import (
     StateMessage,
     Subscriptions,
     cancel_and_wait,
-    drive_state,
     error_text,
     keep_connected,
     new_client,
     reader,
+    state_message,
 )
 from ..mqtt.client import Client, MqttError, Will
 from ._commands import judge
@@ -175,13 +178,13 @@ class EdgeNode:
         self.stats = SparkplugStats()
         self._subscriptions = Subscriptions(self.stats, _log, "Sparkplug")
         self.edge_node = ""
-        self.stale_after_s = 0.0
         self._gateway: GatewayView | None = None
         self._devices: dict[Key, Device] = {}
         self._by_id: dict[str, Device] = {}
         self._node_defs: list[MetricDef] = []
-        #: The latest sample of each drive: its state, and whether the poller hears it.
-        self._latest: dict[Key, tuple[StateMessage, bool]] = {}
+        #: The latest sample of each drive: its state message, and the drive as served
+        #: with it (who holds the lease, when the message goes out).
+        self._latest: dict[Key, tuple[StateMessage, ServedDrive]] = {}
         #: Drives with a sample not yet turned into a message, in arrival order.
         self._dirty: dict[Key, None] = {}
         #: What the host was last told of each live device (its values, in metric order).
@@ -235,7 +238,6 @@ class EdgeNode:
     async def start(self, gateway: GatewayView) -> None:
         self._gateway = gateway
         self.edge_node = gateway.config.gateway_id
-        self.stale_after_s = gateway.config.stale_after_s
         for ordinal, drive in enumerate(gateway.drives, start=1):
             device = Device(drive, ordinal)
             self._devices[drive.key] = device
@@ -258,29 +260,29 @@ class EdgeNode:
 
     def publish(self, served: ServedDrive) -> None:
         """A drive's new sample: kept, and marked for the edge node's task (never blocks)."""
-        snapshot = served.snapshot
-        self.publish_state(snapshot, self.state_of(snapshot))
+        self.publish_state(served, self.state_of(served))
 
-    def state_of(self, snapshot: DriveSnapshot) -> StateMessage:
-        """*snapshot* as a state message now (the JSON bridge builds the same one)."""
-        return drive_state(self._gateway, self.edge_node, snapshot, self.stale_after_s)
+    def state_of(self, served: ServedDrive) -> StateMessage:
+        """*served* as a state message, at its sample (the JSON bridge builds the same one)."""
+        return state_message(self.edge_node, served)
 
-    def publish_state(self, snapshot: DriveSnapshot, message: StateMessage) -> None:
+    def publish_state(self, served: ServedDrive, message: StateMessage) -> None:
         """:meth:`publish` with the state message built already (once for every MQTT client)."""
         if self._closing:
             return
+        snapshot = served.snapshot
         key = (snapshot.line, snapshot.node)
         if key not in self._devices:
             return
         self.stats.samples += 1
-        self._mark(key, message, snapshot.available)
+        self._mark(key, message, served)
 
     def _mark(
-        self, key: Key, message: StateMessage, available: bool, *, sample: bool = True
+        self, key: Key, message: StateMessage, served: ServedDrive, *, sample: bool = True
     ) -> None:
         if key in self._dirty and sample:
             self.stats.replaced += 1
-        self._latest[key] = (message, available)
+        self._latest[key] = (message, served)
         self._dirty[key] = None
         self._wake.set()
 
@@ -310,8 +312,11 @@ class EdgeNode:
             values.extend(_line_values(line))
         return values
 
-    def _device_values(self, device: Device, state: StateMessage) -> list[object]:
-        lease = device.drive.lease.held_by(CLIENT, asyncio.get_running_loop().time())
+    def _device_values(
+        self, device: Device, state: StateMessage, served: ServedDrive
+    ) -> list[object]:
+        """The device's metrics: the state message's values, the served lease as it is now."""
+        lease = served.lease_holder(asyncio.get_running_loop().time()) == CLIENT
         return device.values(state, lease, self._refusals.get(device.drive.key))
 
     # -- turning samples into messages (the edge node's task) -----------------------------
@@ -336,12 +341,12 @@ class EdgeNode:
                 return  # asked again meanwhile: the next turn starts over
             self._dirty.pop(key, None)
             latest = self._latest.get(key)
-            if latest is not None and latest[1]:
-                yield self._dbirth(key, latest[0])
+            if latest is not None and latest[0].online:
+                yield self._dbirth(key, *latest)
 
-    def _dbirth(self, key: Key, state: StateMessage) -> tuple[str, bytes]:
+    def _dbirth(self, key: Key, state: StateMessage, served: ServedDrive) -> tuple[str, bytes]:
         device = self._devices[key]
-        values = self._device_values(device, state)
+        values = self._device_values(device, state, served)
         self._alive[key] = values
         self.stats.published["DBIRTH"] += 1
         return self.topic("DBIRTH", device.id), encode_payload(
@@ -353,19 +358,19 @@ class EdgeNode:
 
     def _device_message(self, key: Key) -> tuple[str, bytes] | None:
         """What the latest sample of *key* changes for the host: a message or nothing."""
-        state, available = self._latest[key]
+        state, served = self._latest[key]
         device = self._devices[key]
         last = self._alive.get(key)
         if last is None:
-            return self._dbirth(key, state) if available else None
+            return self._dbirth(key, state, served) if state.online else None
         stamp = int(state.time * 1000)
-        if not available:
+        if not state.online:
             del self._alive[key]
             self.stats.published["DDEATH"] += 1
             return self.topic("DDEATH", device.id), encode_payload(
                 stamp, self._next_seq(), (), birth=False
             )
-        values = self._device_values(device, state)
+        values = self._device_values(device, state, served)
         defs = device.definitions
         changed = [(defs[i], v) for i, v in enumerate(values) if v != last[i]]
         if not changed:
