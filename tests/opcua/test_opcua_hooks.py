@@ -26,10 +26,11 @@ from asyncua.server.monitored_item_service import MonitoredItemData, MonitoredIt
 from asyncua.ua.uaerrors import UaError, UaStatusCodeError
 from waiting import wait_for
 
-from sj300_async.gateway import ServedDrive
+from sj300_async.gateway import Quality, ServedDrive
 from sj300_async.gateway.opcua import _hooks
 from sj300_async.gateway.opcua._config import DEFAULT_LOGIN_BURST
 from sj300_async.gateway.opcua._server import OpcuaServer
+from sj300_async.profiles import DriveSnapshot
 
 from .conftest import (
     CLIENT_URI,
@@ -430,18 +431,28 @@ async def test_a_group_watched_again_takes_the_next_sample(tmp_path: Path) -> No
         server._watch(frequency.node, +1)  # a SCADA keeps watching the drive's frequency
         server._watch(trips.node, +1)
         online = drive.snapshot
+        assert server._loop is not None
+        now = server._loop.time()
         server.publish(drive.served)
-        assert trips.online
+        assert trips.quality(now) is Quality.GOOD
+
+        def served(snapshot: DriveSnapshot) -> ServedDrive:
+            return ServedDrive(
+                snapshot,
+                stale_after_s=drive.stale_after_s,
+                trips_interval_s=drive.line.trips_interval_s,
+            )
+
         server._watch(trips.node, -1)
-        offline = dataclasses.replace(online, online=False, taken_at=online.taken_at + 1)
+        offline = served(dataclasses.replace(online, online=False, taken_at=online.taken_at + 1))
         # Its trips not read again: the same stamp.
-        server.publish(ServedDrive(offline, stale_after_s=drive.stale_after_s))
+        server.publish(offline)
         server._watch(trips.node, +1)
         trips.take(offline)  # asyncua's first read of a new monitored item
-        assert not trips.online
-        server.publish(dataclasses.replace(online, taken_at=online.taken_at + 2))
-        assert trips.online
-        assert trips.status(server._loop.time(), server.stale_after_s) == 0  # Good
+        assert trips.quality(now) is Quality.OFFLINE
+        server.publish(served(dataclasses.replace(online, taken_at=online.taken_at + 2)))
+        assert trips.quality(now) is Quality.GOOD
+        assert trips.status(now) == ua.StatusCodes.Good
 
 
 class _Queue:

@@ -16,7 +16,17 @@ import pytest
 from asyncua import Client, ua
 from waiting import wait_for
 
-from sj300_async.gateway import GatewayDrive
+from sj300_async.gateway import GatewayDrive, Quality, ServedDrive
+from sj300_async.gateway.opcua._model import (
+    _ONLINE,
+    _SETPOINT,
+    _TRIP_COUNT,
+    Binding,
+    Source,
+    _parameter,
+)
+from sj300_async.gateway.opcua._quality import QUALITY_STATUS
+from sj300_async.profiles import DriveSnapshot, ParameterReading, TripLog
 from sj300_async.simulator.sj300 import SimulatedBus
 
 from .conftest import (
@@ -396,6 +406,64 @@ async def test_the_trip_history_is_not_stale_within_its_own_read_interval(tmp_pa
         assert count.StatusCode.is_good()
         assert count.Value.Value == drive.snapshot.trips.total_count  # type: ignore[union-attr]
         assert drive.snapshot.trips_at == read_at  # not read again meanwhile
+
+
+def test_each_served_quality_is_worded_as_one_status_code() -> None:
+    assert {q.name: ua.StatusCode(code).name for q, code in QUALITY_STATUS.items()} == {
+        "GOOD": "Good",
+        "STALE": "UncertainLastUsableValue",
+        "OFFLINE": "BadNoCommunication",
+        "NEVER": "BadWaitingForInitialData",
+        "UNAVAILABLE": "BadDataUnavailable",
+    }
+
+
+def _binding(source: Source, served: ServedDrive, parameter: str | None = None) -> Binding:
+    read, _, read_group = source
+    binding = Binding(
+        ua.NodeId(1, 2), ua.VariantType.Double, read, served, read_group=read_group,
+        parameter=parameter,
+    )  # fmt: skip
+    binding.take(served)
+    return binding
+
+
+def test_a_value_s_deadline_is_its_group_s_as_served() -> None:
+    """The served view's deadlines, not the northbound's: the trip history's has the
+    line's trips_interval_s; the set frequency's has no setpoint_interval_s any more (it
+    is read twice per stale_after_s: issue 42); the Online verdict's own rule ages with
+    its sample."""
+    snapshot = DriveSnapshot(
+        line="hall", node=1, protocol="sj300", unit=1, taken_at=100.0, time=1e9,
+        online=True, last_ok=100.0, set_frequency_at=90.0, set_frequency_hz=3.0,
+        trips_at=50.0, trips=TripLog(total_count=0),
+        parameters={"A004": ParameterReading("A004", 6000, 60.0, "Hz", 97.0)},
+    )  # fmt: skip
+    served = ServedDrive(snapshot, stale_after_s=5.0, trips_interval_s=60.0)
+    setpoint = _binding(_SETPOINT, served)
+    trips = _binding(_TRIP_COUNT, served)
+    online = _binding(_ONLINE, served)
+    parameter = _binding(_parameter("A004"), served, "A004")
+    assert (setpoint.until, trips.until, online.until, parameter.until) == (95, 115, 105, 102)
+    assert setpoint.quality(95.0) is Quality.GOOD
+    assert setpoint.quality(100.0) is Quality.STALE
+    assert setpoint.status(100.0) == ua.StatusCodes.UncertainLastUsableValue
+    assert trips.quality(115.0) is Quality.GOOD
+    assert trips.quality(115.5) is Quality.STALE
+    assert parameter.quality(102.5) is Quality.STALE
+    assert online.quality(105.5) is Quality.STALE
+    # Offline: every value of a group Bad, the verdict itself not.
+    gone = ServedDrive(
+        DriveSnapshot(
+            line="hall", node=1, protocol="sj300", unit=1, taken_at=101.0, time=1e9,
+            online=False, last_ok=100.0, set_frequency_at=90.0, set_frequency_hz=3.0,
+        ),
+        stale_after_s=5.0,
+    )  # fmt: skip
+    setpoint.take(gone)
+    online.take(gone)
+    assert setpoint.status(101.0) == ua.StatusCodes.BadNoCommunication
+    assert (online.value, online.quality(101.0)) == (False, Quality.GOOD)
 
 
 async def test_before_the_first_sample_values_wait_rather_than_say_offline(tmp_path: Path) -> None:

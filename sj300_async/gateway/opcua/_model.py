@@ -36,6 +36,18 @@ where ours differs. Each variable is a :class:`Binding`: how to read its
 value and read time from a snapshot, and what it last showed; the server
 (:mod:`._server`) serves reads from it and pushes changes to
 subscriptions.
+
+A variable's quality is not judged here: a value of one of the snapshot's
+read groups (status, monitor, direction, set frequency, trips) is judged
+by the drive as served (:meth:`ServedDrive.quality
+<sj300_async.gateway.ServedDrive.quality>`, with its group's deadline), a
+polled parameter likewise (:meth:`~sj300_async.gateway.ServedDrive.parameter_quality`),
+and :data:`~._quality.QUALITY_STATUS` words it. One variable is no value
+of a read group and keeps a simple rule of its own: ``Online``, the
+poller's verdict itself, is never offline; it waits for the first sample
+and is Uncertain when the last verdict is older than the gateway's
+window for any value (a stalled poller), else Good. The lines' counters
+(:mod:`._server`) are Good whenever the line has a value for them.
 """
 
 from __future__ import annotations
@@ -47,9 +59,9 @@ from typing import Final
 
 from asyncua import ua
 
-from ...profiles import DriveSnapshot, ParameterSpec, Trip
-from .. import GatewayDrive, GatewayLine
-from ._quality import quality
+from ...profiles import DriveSnapshot, ParameterSpec, ReadGroup, Trip
+from .. import GatewayDrive, GatewayLine, Quality, ServedDrive
+from ._quality import QUALITY_STATUS
 from ._space import Argument, SpaceBuilder
 
 __all__ = [
@@ -75,8 +87,9 @@ DIRECTION_STATES: Final = ("stopped", "forward", "reverse")
 Reader = Callable[[DriveSnapshot], tuple[object, float]]
 #: What changes when a group's values were read again (a read time, or a pair of them).
 Stamp = Callable[[DriveSnapshot], object]
-#: How a variable is read: its reader, and its group's stamp.
-Source = tuple[Reader, Stamp]
+#: How a variable is read: its reader, its group's stamp, and the read group whose
+#: served quality is its own (None: a parameter's, or the verdict's own rule).
+Source = tuple[Reader, Stamp, ReadGroup | None]
 
 
 def _status_at(s: DriveSnapshot) -> object:
@@ -100,47 +113,101 @@ def _sample_at(s: DriveSnapshot) -> object:
     return s.taken_at
 
 
+def _judge(
+    served: ServedDrive,
+    read_group: ReadGroup | None,
+    parameter: str | None,
+    now: float,
+    present: bool,
+) -> Quality:
+    """The quality of a value of *read_group* (or polled *parameter*) at loop time *now*.
+
+    The served view's; neither given: the Online verdict's own rule (see the module
+    docstring).
+    """
+    if read_group is not None:
+        return served.quality(read_group, now, present=present)
+    if parameter is not None:
+        return served.parameter_quality(parameter, now)
+    # The verdict is never offline: Good while verdicts keep coming, a stalled
+    # poller's last one ages.
+    if served.snapshot.taken_at == -math.inf:
+        return Quality.NEVER
+    return Quality.GOOD if now <= _verdict_until(served) else Quality.STALE
+
+
+def _until(served: ServedDrive, read_group: ReadGroup | None, parameter: str | None) -> float:
+    """Loop time until which time alone changes nothing of :func:`_judge`'s verdict."""
+    if read_group is not None:
+        return served.fresh_until(read_group)
+    if parameter is not None:
+        return served.parameter_until(parameter)
+    return _verdict_until(served)
+
+
+def _verdict_until(served: ServedDrive) -> float:
+    """Until when the Online verdict is Good: the served view has no deadline for the
+    sample itself, so its own, as long as any value's."""
+    return served.snapshot.taken_at + served.stale_after_s
+
+
 @dataclass(slots=True, eq=False)
 class Binding:
-    """One variable of a drive: where its value comes from and what it showed last."""
+    """One variable of a drive: where its value comes from and what it showed last.
+
+    Its quality is the drive as served's (see the module docstring): it keeps the
+    :class:`~sj300_async.gateway.ServedDrive` its value was taken from.
+    """
 
     node: ua.NodeId
     vtype: ua.VariantType
     read: Reader
+    #: The drive as served its value was taken from (its judge).
+    served: ServedDrive
     #: Its path below the drive object (``Monitoring/State``): the audit log's name.
     name: str = ""
-    #: The Online variable: the verdict itself, not judged by it (never offline).
-    verdict: bool = False
+    #: The read group its value is one of: the served view judges it by that group.
+    read_group: ReadGroup | None = None
+    #: The polled parameter it is: the served view judges it as that parameter.
+    #: (Neither: the Online verdict's own rule, see the module docstring.)
+    parameter: str | None = None
     #: Its value is a list (an array of vtype), not a scalar.
     array: bool = False
-    #: Seconds its group may wait between reads by plan, beyond stale_after_s: the trip
-    #: history is read every trips_interval_s, the set frequency every
-    #: setpoint_interval_s; a value read on time is not stale.
-    allowance: float = 0.0
     value: object = None
     #: Loop time the value was read (-inf: never).
     at: float = -math.inf
     #: The same instant as Unix time.
     wall: float = 0.0
-    online: bool = True
+    #: The served deadline of its value (loop time): until then time alone changes
+    #: nothing of its status; past it a Good one is stale (the tick's test).
+    until: float = -math.inf
     #: (value, status) last pushed to subscriptions (None: nobody watched it since).
     pushed: tuple[object, int] | None = None
     #: Monitored items on its value (0: nobody watches it, so nothing is taken, built
-    #: or pushed for it at a sample: a read takes the drive's latest snapshot itself).
+    #: or pushed for it at a sample: a read takes the drive's latest served view itself).
     watched: int = 0
 
-    def take(self, snapshot: DriveSnapshot) -> None:
-        """Take the value and its read time from *snapshot*."""
+    def take(self, served: ServedDrive, until: float | None = None) -> None:
+        """Take the value and its read time from the drive as *served*.
+
+        *until*: its served deadline, when the caller has it already (its group's).
+        """
+        snapshot = served.snapshot
         value, at = self.read(snapshot)
         self.value = value
         self.at = at
         self.wall = snapshot.time - (snapshot.taken_at - at) if at > -math.inf else snapshot.time
-        # Before the first sample there is no verdict yet: waiting, not offline.
-        self.online = self.verdict or snapshot.taken_at == -math.inf or snapshot.online
+        self.served = served
+        self.until = _until(served, self.read_group, self.parameter) if until is None else until
 
-    def status(self, now: float, stale_after_s: float) -> int:
-        # The verdict is Good while verdicts keep coming; a stalled poller's last one ages.
-        return quality(self.online, self.at, self.value, now, stale_after_s + self.allowance)
+    def quality(self, now: float) -> Quality:
+        """Its quality at loop time *now* (see the module docstring)."""
+        present = self.value is not None
+        return _judge(self.served, self.read_group, self.parameter, now, present)
+
+    def status(self, now: float) -> int:
+        """Its status code at loop time *now*."""
+        return QUALITY_STATUS[self.quality(now)]
 
 
 @dataclass(frozen=True, slots=True)
@@ -155,14 +222,29 @@ class MethodNodes:
 
 @dataclass(slots=True, eq=False)
 class Group:
-    """Variables read together: taken again only when their stamp or the verdict changed."""
+    """Variables read together: taken again only when their stamp or the verdict changed.
+
+    They are judged together too (one read group, one parameter, or the verdict): a
+    sample asks the served view once per group, not once per variable.
+    """
 
     stamp: Stamp
+    #: What its values are judged as (see :class:`Binding`).
+    read_group: ReadGroup | None = None
+    parameter: str | None = None
     bindings: list[Binding] = field(default_factory=list)
     #: (stamp, online) when last taken.
     seen: object = None
     #: Its bindings some monitored item watches (see DriveNodes.follow).
     watched: list[Binding] = field(default_factory=list)
+
+    def until(self, served: ServedDrive) -> float:
+        """Its values' served deadline in *served* (see :attr:`Binding.until`)."""
+        return _until(served, self.read_group, self.parameter)
+
+    def status(self, served: ServedDrive, now: float) -> int:
+        """The status code at *now* of each of its values *served* has (not None)."""
+        return QUALITY_STATUS[_judge(served, self.read_group, self.parameter, now, True)]
 
 
 @dataclass(slots=True, eq=False)
@@ -232,11 +314,11 @@ LINE_COUNTERS: Final[tuple[tuple[str, ua.VariantType, str, str], ...]] = (
 
 
 def _status(get: Callable[[DriveSnapshot], object]) -> Source:
-    return (lambda s: (get(s), s.status_at)), _status_at
+    return (lambda s: (get(s), s.status_at)), _status_at, "status"
 
 
 def _monitor(get: Callable[[DriveSnapshot], object]) -> Source:
-    return (lambda s: (get(s), s.monitor_at)), _monitor_at
+    return (lambda s: (get(s), s.monitor_at)), _monitor_at, "monitor"
 
 
 def _trip_field(get: Callable[[Trip], object]) -> Source:
@@ -247,7 +329,7 @@ def _trip_field(get: Callable[[Trip], object]) -> Source:
             return None, s.trips_at
         return [get(record) for record in s.trips.records], s.trips_at
 
-    return read, _trips_at
+    return read, _trips_at, "trips"
 
 
 def _parameter(code: str) -> Source:
@@ -259,7 +341,8 @@ def _parameter(code: str) -> Source:
             return None, s.taken_at
         return None, -math.inf
 
-    return read, lambda s: read(s)[1]
+    # Its group is the parameter itself (the binding says which).
+    return read, lambda s: read(s)[1], None
 
 
 def _read_direction(s: DriveSnapshot) -> tuple[object, float]:
@@ -288,17 +371,24 @@ _TRIP_FIELDS: Final[
     ("TripOutputVoltages", ua.VariantType.Double, lambda t: t.output_voltage_v, "V",
      "the output voltage at each trip, newest first (NaN: not recorded)"),
 )  # fmt: skip
-_DIRECTION: Final[Source] = (_read_direction, lambda s: s.direction_at)
-_ACTIVE_TRIP: Final[Source] = (_read_active_trip, _status_or_trips_at)
-_STATE: Final[Source] = ((lambda s: (s.state_text(), s.status_at)), _status_or_trips_at)
-_ONLINE: Final[Source] = ((lambda s: (s.online, s.taken_at)), _sample_at)
+_DIRECTION: Final[Source] = (_read_direction, lambda s: s.direction_at, "direction")
+# The state in words and the active trip: read with the status, judged by it.
+_ACTIVE_TRIP: Final[Source] = (_read_active_trip, _status_or_trips_at, "status")
+_STATE: Final[Source] = (
+    (lambda s: (s.state_text(), s.status_at)),
+    _status_or_trips_at,
+    "status",
+)
+_ONLINE: Final[Source] = ((lambda s: (s.online, s.taken_at)), _sample_at, None)
 _SETPOINT: Final[Source] = (
     (lambda s: (s.set_frequency_hz, s.set_frequency_at)),
     lambda s: s.set_frequency_at,
+    "set_frequency",
 )
 _TRIP_COUNT: Final[Source] = (
     (lambda s: (s.trips.total_count if s.trips else None, s.trips_at)),
     _trips_at,
+    "trips",
 )
 
 
@@ -319,8 +409,7 @@ class _DriveBuilder:
         vtype: ua.VariantType,
         source: Source,
         *,
-        verdict: bool = False,
-        allowance: float = 0.0,
+        parameter: str | None = None,
         description: str = "",
         unit: str = "",
         value_range: tuple[float, float] | None = None,
@@ -332,16 +421,25 @@ class _DriveBuilder:
             parent, f"{path}/{name}", name, vtype, description=description, unit=unit,
             value_range=value_range, states=states, writable=writable, array=array,
         )  # fmt: skip
-        read, stamp = source
+        read, stamp, read_group = source
         relative = f"{path}/{name}".removeprefix(f"{self.path}/")
         binding = Binding(
-            node, vtype, read, relative, verdict=verdict, allowance=allowance, array=array
+            node,
+            vtype,
+            read,
+            self.nodes.drive.served,
+            relative,
+            read_group=read_group,
+            parameter=parameter,
+            array=array,
         )
         self.nodes.bindings.append(binding)
         group = self._groups.get(id(stamp))
         if group is None:
-            group = self._groups[id(stamp)] = Group(stamp)
+            group = self._groups[id(stamp)] = Group(stamp, read_group, parameter)
             self.nodes.groups.append(group)
+        # Read together, judged together.
+        assert (group.read_group, group.parameter) == (read_group, parameter), relative
         group.bindings.append(binding)
         return node
 
@@ -364,7 +462,7 @@ def build_drive(
     space.property(node, f"{path}/Protocol", "Protocol", drive.line.protocol, ua.VariantType.String)
     space.property(node, f"{path}/UnitId", "UnitId", drive.unit, ua.VariantType.Int32)
     b.var(node, path, "Online", ua.VariantType.Boolean, _ONLINE,
-          verdict=True, description="the poller hears the drive")  # fmt: skip
+          description="the poller hears the drive")  # fmt: skip
 
     hz_range = (0.0, float(profile.max_frequency_hz))
     monitoring = f"{path}/Monitoring"
@@ -375,7 +473,6 @@ def build_drive(
           description="output frequency")  # fmt: skip
     b.var(folder, monitoring, "FrequencyCommandValue", double,
           _SETPOINT, unit="Hz", value_range=hz_range,
-          allowance=drive.line.setpoint_interval_s,
           description="the set frequency, as read back from the drive")  # fmt: skip
     b.var(folder, monitoring, "ConverterOutputCurrent", double,
           _monitor(lambda s: s.output_current_a), unit="A",
@@ -404,12 +501,11 @@ def build_drive(
     folder = space.object(node, logbook, "Logbook", "the trip history", folder=True, component=True)
     b.var(folder, logbook, "ActiveTrip", ua.VariantType.String, _ACTIVE_TRIP,
           description="the trip the drive is in, code and meaning (empty: none)")  # fmt: skip
-    trips = drive.line.trips_interval_s
-    b.var(folder, logbook, "TripCount", ua.VariantType.UInt32, _TRIP_COUNT, allowance=trips,
+    b.var(folder, logbook, "TripCount", ua.VariantType.UInt32, _TRIP_COUNT,
           description="trips since the counter was cleared")  # fmt: skip
     for field_name, vtype, get, unit, description in _TRIP_FIELDS:
         b.var(folder, logbook, field_name, vtype, _trip_field(get), unit=unit,
-              allowance=trips, description=description, array=True)  # fmt: skip
+              description=description, array=True)  # fmt: skip
 
     granted = drive.line.writable_parameters(drive.node)
     codes = list(dict.fromkeys((*drive.line.parameters, *sorted(granted))))
@@ -420,7 +516,8 @@ def build_drive(
             spec: ParameterSpec = profile.parameters.spec(code)
             writable = code in granted
             variable = b.var(
-                folder, parameters, code, double, _parameter(code), unit=spec.unit,
+                folder, parameters, code, double, _parameter(code), parameter=code,
+                unit=spec.unit,
                 value_range=(float(spec.minimum), float(spec.maximum)),
                 description=spec.name, writable=writable,
             )  # fmt: skip

@@ -1,14 +1,20 @@
 """A value's OPC UA quality and timestamps, and a refused write's status code.
 
-Quality (docs/OPCUA.md, "Time and quality"), in this order:
+A drive value's quality is the core's, not ours: the served view
+(:class:`~sj300_async.gateway.ServedDrive`) judges each value's
+:class:`~sj300_async.gateway.Quality` once for every northbound, and
+:data:`QUALITY_STATUS` only words it as OPC UA's status code
+(docs/OPCUA.md, "Time and quality"):
 
-1. the drive is offline (the poller's verdict): ``BadNoCommunication``;
-2. the value was never read: ``BadWaitingForInitialData``;
-3. its read succeeded but the drive does not give it (a trip slot left
-   empty, a parameter the drive refused): ``BadDataUnavailable``;
-4. it was read longer than ``stale_after_s`` ago: ``UncertainLastUsableValue``
-   with the last value;
-5. otherwise ``Good``.
+=====================  ==============================
+the served quality     the status code
+=====================  ==============================
+``GOOD``               ``Good``
+``STALE``              ``UncertainLastUsableValue`` (with the last value)
+``OFFLINE``            ``BadNoCommunication``
+``NEVER``              ``BadWaitingForInitialData``
+``UNAVAILABLE``        ``BadDataUnavailable``
+=====================  ==============================
 
 A Bad value carries no value (OPC UA Part 4, 7.7.1). The SourceTimestamp
 is the wall-clock time the value was read from the drive (the snapshot's
@@ -18,22 +24,22 @@ ServerTimestamp is when it is served.
 
 from __future__ import annotations
 
-import math
+from collections.abc import Mapping
 from datetime import UTC, datetime
 from typing import Final
 
 from asyncua import ua
 
-from .. import Refusal
+from .. import Quality, Refusal
 
 __all__ = [
     "BAD_DATA_UNAVAILABLE",
     "BAD_NO_COMMUNICATION",
     "BAD_WAITING",
     "GOOD",
+    "QUALITY_STATUS",
     "REFUSAL_STATUS",
     "UNCERTAIN_LAST_USABLE",
-    "quality",
     "refusal_status",
     "utc",
 ]
@@ -44,18 +50,14 @@ BAD_WAITING: Final[int] = ua.StatusCodes.BadWaitingForInitialData
 BAD_DATA_UNAVAILABLE: Final[int] = ua.StatusCodes.BadDataUnavailable
 UNCERTAIN_LAST_USABLE: Final[int] = ua.StatusCodes.UncertainLastUsableValue
 
-
-def quality(online: bool, at: float, value: object, now: float, stale_after_s: float) -> int:
-    """The status code of a value read at loop time *at* (see the module docstring)."""
-    if not online:
-        return BAD_NO_COMMUNICATION
-    if at == -math.inf:
-        return BAD_WAITING
-    if value is None:
-        return BAD_DATA_UNAVAILABLE
-    if now - at > stale_after_s:
-        return UNCERTAIN_LAST_USABLE
-    return GOOD
+#: The served quality as OPC UA's status code: the one place it is worded.
+QUALITY_STATUS: Final[Mapping[Quality, int]] = {
+    Quality.GOOD: GOOD,
+    Quality.STALE: UNCERTAIN_LAST_USABLE,
+    Quality.OFFLINE: BAD_NO_COMMUNICATION,
+    Quality.NEVER: BAD_WAITING,
+    Quality.UNAVAILABLE: BAD_DATA_UNAVAILABLE,
+}
 
 
 def utc(unix: float) -> datetime:

@@ -2,18 +2,25 @@
 
 Decisions:
 
+- **Quality is the core's.** A drive value's quality is the drive as
+  served's (:class:`~sj300_async.gateway.ServedDrive`, built once per
+  snapshot): its group's deadline and the order of the verdicts are the
+  gateway's, the same for every northbound; :mod:`._quality` only words it
+  as a status code (:mod:`._model` says which variables keep a rule of
+  their own).
 - **Reads never wait for a push.** Each drive variable is served by a
-  read callback from its :class:`~._model.Binding`, which computes the
-  quality at the moment of the read (a value goes Uncertain when it ages
-  past ``stale_after_s`` whether or not a sample arrived). Subscriptions
+  read callback from its :class:`~._model.Binding`, which takes the drive's
+  latest served view and asks it the quality at the moment of the read (a
+  value goes Uncertain past its group's served deadline whether or not a
+  sample arrived). Subscriptions
   are fed by pushing a value to asyncua only when its value or its status
   changed: a sample that changes nothing costs no notification, and
   OPC UA's default trigger (status and value) would drop a
   timestamp-only change anyway.
 - **publish never blocks.** It compares and leaves the changed values in
   an outbox (the latest per node); one task pushes them. A ticker (once a
-  second) pushes the quality changes time alone makes (stale,
-  Uncertain) and the lines' counters.
+  second) pushes the quality changes time alone makes (Good past its
+  served deadline: Uncertain) and the lines' counters.
 - **Writes** are :mod:`._calls`'s; asyncua's own write path is kept for
   nothing of ours (:mod:`._hooks`).
 - **Security**: :mod:`._security`; the certificate: :mod:`._certificate`; what a
@@ -143,7 +150,6 @@ class OpcuaServer:
         self.url = config.url
         self.certificate: ServerCertificate | None = None
         self.namespace = 0
-        self.stale_after_s = math.inf
         self.startup_s = 0.0
         #: Values pushed to asyncua for its subscriptions.
         self.pushed = 0
@@ -184,7 +190,6 @@ class OpcuaServer:
         began = time.perf_counter()
         self._gateway = gateway
         self._loop = asyncio.get_running_loop()
-        self.stale_after_s = gateway.config.stale_after_s
         self._calls = Calls(gateway)
         config = self.config
         try:
@@ -305,7 +310,7 @@ class OpcuaServer:
     def _bind(self, server: Server, nodes: DriveNodes) -> None:
         drive = nodes.drive
         for binding in nodes.bindings:
-            binding.take(drive.snapshot)
+            binding.take(drive.served)
             server.set_attribute_value_callback(binding.node, self._reader(binding, drive))
             server.set_attribute_value_setter(binding.node, _keep)
         calls = self._calls
@@ -353,7 +358,7 @@ class OpcuaServer:
         snapshot = served.snapshot
         nodes = self._drives.get((snapshot.line, snapshot.node))
         if nodes is None or not nodes.watched or self._server is None:
-            return  # unwatched: a read takes the latest snapshot itself
+            return  # unwatched: a read takes the drive's latest served view itself
         now = asyncio.get_running_loop().time()
         changed = False
         online = snapshot.online
@@ -362,9 +367,13 @@ class OpcuaServer:
             if seen == group.seen:
                 continue
             group.seen = seen
+            # Judged once per group: its values share their read and their deadline.
+            until = group.until(served)
+            status = group.status(served, now)
             for binding in group.watched:
-                binding.take(snapshot)
-                changed |= self._stage(binding, now)
+                binding.take(served, until)
+                value_status = status if binding.value is not None else binding.status(now)
+                changed |= self._stage(binding, value_status)
         if changed:
             self._wake.set()
 
@@ -453,10 +462,8 @@ class OpcuaServer:
         def read(node: ua.NodeId, attribute: ua.AttributeIds) -> ua.DataValue:
             assert self._loop is not None
             try:
-                binding.take(drive.snapshot)  # the latest, watched or not
-                return self._datavalue(
-                    binding, binding.status(self._loop.time(), self.stale_after_s)
-                )
+                binding.take(drive.served)  # the latest, watched or not
+                return self._datavalue(binding, binding.status(self._loop.time()))
             except Exception:  # a bug of ours: this node fails, not the client's whole read
                 self.push_errors += 1
                 _log.exception("opcua: cannot serve %s", node)
@@ -464,12 +471,11 @@ class OpcuaServer:
 
         return read
 
-    def _stage(self, binding: Binding, now: float) -> bool:
-        """Leave *binding*'s value in the outbox when it or its status changed.
+    def _stage(self, binding: Binding, status: int) -> bool:
+        """Leave *binding*'s value in the outbox when it or its *status* changed.
 
         Only for a value some monitored item watches (the callers check).
         """
-        status = binding.status(now, self.stale_after_s)
         shown = (binding.value, status)
         if shown == binding.pushed:
             return False
@@ -513,17 +519,14 @@ class OpcuaServer:
         assert self._loop is not None
         now = self._loop.time()
         changed = False
-        stale_after_s = self.stale_after_s
         for _, binding in self._watched.values():
             pushed = binding.pushed
             # Between samples only time changes a pushed value's status, and time only
-            # ages a Good one: the rest are left as they are (a tick visits every watched
-            # value, 2,048 a second at plant scale).
-            if pushed is not None and (
-                pushed[1] != GOOD or now - binding.at <= stale_after_s + binding.allowance
-            ):
+            # ages a Good one, past its group's served deadline: the rest are left as they
+            # are (a tick visits every watched value, 2,048 a second at plant scale).
+            if pushed is not None and (pushed[1] != GOOD or now <= binding.until):
                 continue
-            changed |= self._stage(binding, now)
+            changed |= self._stage(binding, binding.status(now))
         for line in self._lines:
             changed |= self._tick_line(line, now)
         if changed:
