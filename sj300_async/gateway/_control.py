@@ -533,8 +533,8 @@ class Controller:
 
 def _offline(drive: GatewayDrive) -> WriteResult | None:
     """Refused unsent while the poller holds *drive* offline (None: it is not)."""
-    snapshot = drive.snapshot
-    if snapshot.online or snapshot.taken_at == -math.inf:  # no verdict yet: try it
+    readings = drive.readings
+    if readings.online or not readings.polled:  # no verdict before the first poll: try it
         return None
     return WriteResult(Refusal.NO_ANSWER, "the drive is offline: nothing was sent")
 

@@ -111,6 +111,7 @@ class GatewayDrive:
             lease=self.lease,
             lapse_pending=self.lapse_pending,
             trips_interval_s=self.line.trips_interval_s,
+            verdict=self.readings.polled,
         )
 
     def _build(self, now: float, wall: float) -> DriveSnapshot:

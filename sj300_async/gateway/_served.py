@@ -118,6 +118,7 @@ class ServedDrive:
     __slots__ = (
         "_at_sample",
         "_lease",
+        "_online",
         "_parameter_window_s",
         "direction_until",
         "lapse_pending",
@@ -137,8 +138,12 @@ class ServedDrive:
         lease: Lease | None = None,
         lapse_pending: bool = False,
         trips_interval_s: float = 0.0,
+        verdict: bool = True,
     ) -> None:
+        """*verdict*: the snapshot's ``online`` is the poller's verdict (False before the
+        drive's first poll: then no value is offline, only not read yet)."""
         s = snapshot
+        self._online = s.online or not verdict or s.taken_at == -math.inf
         self.snapshot = s
         self.stale_after_s = stale_after_s
         self._parameter_window_s = stale_after_s
@@ -171,7 +176,7 @@ class ServedDrive:
         """
         s = self.snapshot
         return _quality(
-            _verdict(s), getattr(s, f"{group}_at"), self.fresh_until(group), present, now
+            self._online, getattr(s, f"{group}_at"), self.fresh_until(group), present, now
         )
 
     def parameter_until(self, code: str) -> float:
@@ -189,8 +194,9 @@ class ServedDrive:
         reading = s.parameters.get(code)
         if reading is None:
             refused = code in s.unavailable_parameters
-            return _quality(_verdict(s), 0.0 if refused else -math.inf, math.inf, False, now)
-        return _quality(_verdict(s), reading.at, reading.at + self._parameter_window_s, True, now)
+            return _quality(self._online, 0.0 if refused else -math.inf, math.inf, False, now)
+        online = self._online
+        return _quality(online, reading.at, reading.at + self._parameter_window_s, True, now)
 
     # -- values ------------------------------------------------------------------------
 
@@ -247,11 +253,6 @@ class ServedDrive:
         """Seconds until the lease lapses at *now* (0 when nobody holds it)."""
         lease = self._lease
         return 0.0 if lease is None or not lease.held(now) else lease.seconds_left(now)
-
-
-def _verdict(s: DriveSnapshot) -> bool:
-    """The poller's verdict; before the first sample there is none yet: not offline."""
-    return s.online or s.taken_at == -math.inf
 
 
 def _quality(online: bool, at: float, until: float, present: bool, now: float) -> Quality:

@@ -78,6 +78,9 @@ class DriveReadings:
 
     #: The poller's verdict after the latest poll.
     online: bool = False
+    #: A poll's result was taken: ``online`` is the poller's verdict (before, it is
+    #: no verdict at all, whatever it says).
+    polled: bool = False
     #: Loop time of the latest poll in which every read succeeded (None: never).
     last_ok: float | None = None
     status: Any = None
@@ -104,6 +107,7 @@ class DriveReadings:
         """Take a poll's results (see the module docstring)."""
         now, began = poll.timestamp, poll.started
         self.online = poll.online
+        self.polled = True
         if poll.error is None:
             self.last_ok = now
         if poll.status is not None and self.status_at <= began:

@@ -162,3 +162,12 @@ def test_a_gateway_drive_serves_each_snapshot_it_builds() -> None:
     assert drive.served.stale_after_s == 2.0
     assert drive.served.lapse_pending
     assert drive.served.fresh_until("trips") == -math.inf  # never read
+
+
+def test_a_snapshot_rebuilt_before_the_first_poll_is_not_offline() -> None:
+    # A write's read-back can rebuild a drive's snapshot before the poller's first verdict.
+    drive = GatewayDrive(_line(), 1, get_profile("sj300"), Lease(5.0))
+    drive.rebuild(NOW, wall=1.7e9)
+    assert not drive.snapshot.online  # the readings' default: no verdict, not "offline"
+    assert drive.served.quality("status", NOW) is Quality.NEVER
+    assert drive.served.parameter_quality("A004", NOW) is Quality.NEVER
