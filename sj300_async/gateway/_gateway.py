@@ -388,6 +388,12 @@ class Gateway:
                     else:
                         _log.debug("the %s northbound failed to take a snapshot (%d so far)",
                                    section, count, exc_info=True)  # fmt: skip
+            flush = getattr(northbound, "flush", None)
+            if flush is not None:  # the batch is whole: it sends it now (._northbound)
+                try:
+                    flush()
+                except Exception:  # its own failure: the others go on
+                    _log.exception("the %s northbound failed to flush", section)
 
     async def _background_reads(self, line: GatewayLine) -> None:
         """What is read beside the poll: each drive's trip history and set frequency, each

@@ -68,13 +68,8 @@ __all__ = [
 ]
 
 
-#: How long a northbound that sends samples on (MQTT, Sparkplug B, OPC UA's
-#: subscriptions) waits, once woken by one, for the samples that follow before it
-#: sends them together. Samples arrive one at a time (2,048 drives at 1 Hz: one every
-#: 0.5 ms); woken for each, a sender paid a task step, a socket write and its
-#: protocol's per-batch work per sample. The delay it adds is far inside the poll
-#: interval every client must follow. The workbench's event streams gather longer
-#: (``http._events.GATHER_S``): a page redraws at most once a frame.
+#: How long OPC UA's subscriptions still wait, once woken by a sample, for the samples
+#: that follow (to go when OPC UA takes the batch's flush, as MQTT and Sparkplug do).
 GATHER_S: Final = 0.02
 
 
@@ -153,6 +148,11 @@ class Northbound(Protocol):
     # Optional: ``problems() -> list[str]``, why it does not serve fully now, one line
     # each (MQTT: a subscription the broker refused); the gateway adds them to its own
     # for /healthz. Read through getattr, so a northbound written before it needs no change.
+    #
+    # Optional: ``flush() -> None``, called once the batch just published is whole
+    # (after every ``publish`` of it): a northbound that sends samples on sends what it
+    # gathered now, with no timer of its own (the gateway's batch did the gathering).
+    # Must not block. Read through getattr, as ``problems``.
 
 
 @dataclass(frozen=True, slots=True)

@@ -99,8 +99,12 @@ class JsonlNorthbound:
         if self._file is None:
             return
         self._file.write(json.dumps(snapshot_json(self._gateway, snapshot)) + "\n")
-        self._file.flush()
         self.lines += 1
+
+    def flush(self) -> None:
+        """The gateway's batch is whole: to the file with it (one write for the batch)."""
+        if self._file is not None:
+            self._file.flush()
 
     def metrics(self) -> Iterator[Metric]:
         from prometheus_client.core import CounterMetricFamily

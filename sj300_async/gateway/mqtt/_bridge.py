@@ -92,7 +92,7 @@ from collections.abc import Callable, Iterator
 from dataclasses import dataclass
 from typing import TYPE_CHECKING, Final
 
-from .. import GATHER_S, GatewayDrive, GatewayView, Refusal, ServedDrive, WriteResult, excerpt
+from .. import GatewayDrive, GatewayView, Refusal, ServedDrive, WriteResult, excerpt
 from ._births import Rediscovery
 from ._commands import DROPPED_BY_STOP, MAX_PAYLOAD_BYTES, error_text, oversized, parse_command
 from ._config import MqttConfig
@@ -212,11 +212,16 @@ class MqttBridge:
         self.stats.samples[key] += 1
         out = _Out(self.topics.state(*key), message.to_json(), retain=True, drive=key)
         self._latest[key] = out
-        self._put(out)
+        self._put(out, wake=False)  # sent at the batch's flush
         available = snapshot.available
         if self._availability.get(key) != available:
             self._availability[key] = available
-            self._put(self._availability_out(key))
+            self._put(self._availability_out(key), wake=False)
+
+    def flush(self) -> None:
+        """The gateway's batch is whole: send what it left in the outbox."""
+        if self._pending:
+            self._wake.set()
 
     def metrics(self) -> Iterator[Metric]:
         return mqtt_families(self.stats)
@@ -231,13 +236,14 @@ class MqttBridge:
 
     # -- the outbox ----------------------------------------------------------------------
 
-    def _put(self, out: _Out) -> None:
+    def _put(self, out: _Out, *, wake: bool = True) -> None:
         old = self._pending.pop(out.topic, None)
         if old is not None and old is not out and old.drive is not None:
             self.stats.replaced[old.drive] += 1
             _log.debug("%s: replaced by a newer state before it was sent", out.topic)
         self._pending[out.topic] = out
-        self._wake.set()
+        if wake:
+            self._wake.set()
 
     def _put_error(self, out: _Out) -> None:
         if len(self._errors) >= MAX_ERRORS:
@@ -291,8 +297,7 @@ class MqttBridge:
 
     async def _publisher(self, client: Client) -> None:
         while True:
-            await self._wake.wait()
-            await asyncio.sleep(GATHER_S)  # the samples that follow go in the same batch
+            await self._wake.wait()  # the gateway's batch did the gathering: no timer here
             self._wake.clear()
             await self._send(client)
 

@@ -36,6 +36,8 @@ class StatePublisher(Northbound, Protocol):
 
     def problems(self) -> list[str]: ...
 
+    def flush(self) -> None: ...
+
 
 class Clients:
     """Several MQTT clients as one northbound (see the module docstring)."""
@@ -68,6 +70,10 @@ class Clients:
                 failure = failure or exc
         if failure is not None:
             raise failure
+
+    def flush(self) -> None:
+        for part in self.parts:
+            part.flush()
 
     def metrics(self) -> Iterator[Metric]:
         for part in self.parts:

@@ -71,7 +71,6 @@ from typing import TYPE_CHECKING, Final
 
 from ...wire import Direction
 from .. import (
-    GATHER_S,
     GatewayLine,
     GatewayView,
     Heartbeat,
@@ -284,7 +283,13 @@ class EdgeNode:
             self.stats.replaced += 1
         self._latest[key] = (message, served)
         self._dirty[key] = None
-        self._wake.set()
+        if not sample:  # a sample goes out at the batch's flush
+            self._wake.set()
+
+    def flush(self) -> None:
+        """The gateway's batch is whole: send the devices it changed."""
+        if self._dirty:
+            self._wake.set()
 
     def metrics(self) -> Iterator[Metric]:
         return sparkplug_families(self.stats, born=self._born, host_online=self.host_online)
@@ -415,8 +420,7 @@ class EdgeNode:
 
     async def _publisher(self, client: Client) -> None:
         while True:
-            await self._wake.wait()
-            await asyncio.sleep(GATHER_S)  # the samples that follow go out together
+            await self._wake.wait()  # the gateway's batch did the gathering: no timer here
             self._wake.clear()
             wait = self._births_after - asyncio.get_running_loop().time()
             if not self._born and wait > 0:
