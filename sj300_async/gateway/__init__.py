@@ -58,7 +58,6 @@ from ._model import (
     parse_endpoint,
 )
 from ._northbound import (
-    GATHER_S,
     Flag,
     GatewayView,
     Northbound,
@@ -97,7 +96,6 @@ __all__ = [
     "DEFAULT_LEASE_S",
     "DEFAULT_STALE_AFTER_S",
     "DIRECTION_WORDS",
-    "GATHER_S",
     "LAPSE_ACTIONS",
     "LIMIT_KEYS",
     "POLL_READS",

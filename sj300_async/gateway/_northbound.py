@@ -51,7 +51,6 @@ if TYPE_CHECKING:
     from ._gateway import GatewayLine
 
 __all__ = [
-    "GATHER_S",
     "Flag",
     "GatewayView",
     "Northbound",
@@ -66,11 +65,6 @@ __all__ = [
     "unit_scopes",
     "unregister_northbound",
 ]
-
-
-#: How long OPC UA's subscriptions still wait, once woken by a sample, for the samples
-#: that follow (to go when OPC UA takes the batch's flush, as MQTT and Sparkplug do).
-GATHER_S: Final = 0.02
 
 
 class GatewayView(Protocol):

@@ -144,9 +144,8 @@ GATEWAY_NAMES = (
     # who may write, shared by the HTTP and OPC UA northbounds (issue 29)
     "User", "hash_password", "named_entries", "parse_password_hash", "parse_users",
     "verify_password",
-    # how long a northbound gathers samples before it sends them, and the JSON it
-    # encodes them with (issue 30)
-    "GATHER_S", "compact_json",
+    # the JSON a northbound encodes its samples with (issue 30)
+    "compact_json",
     # a northbound's own section checks and extra (issue 29)
     "unknown_choice", "northbound_extra",
     # where unit ids are held: a Modbus listener each (issue 30)

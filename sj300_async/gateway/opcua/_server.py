@@ -49,7 +49,6 @@ from asyncua.server.address_space import NodeData
 from cryptography import x509
 
 from .. import (
-    GATHER_S,
     GatewayDrive,
     GatewayLine,
     GatewayStartError,
@@ -360,7 +359,6 @@ class OpcuaServer:
         if nodes is None or not nodes.watched or self._server is None:
             return  # unwatched: a read takes the drive's latest served view itself
         now = asyncio.get_running_loop().time()
-        changed = False
         online = snapshot.online
         for group in nodes.watched_groups:  # only those read again (the tick ages the rest)
             seen = (group.stamp(snapshot), online)
@@ -373,8 +371,11 @@ class OpcuaServer:
             for binding in group.watched:
                 binding.take(served, until)
                 value_status = status if binding.value is not None else binding.status(now)
-                changed |= self._stage(binding, value_status)
-        if changed:
+                self._stage(binding, value_status)  # pushed at the batch's flush
+
+    def flush(self) -> None:
+        """The gateway's batch is whole: push what it changed to the subscriptions."""
+        if self._outbox:
             self._wake.set()
 
     def metrics(self) -> Iterable[Metric]:
@@ -492,8 +493,7 @@ class OpcuaServer:
         server = self._server
         assert server is not None
         while True:
-            await self._wake.wait()
-            await asyncio.sleep(GATHER_S)  # the samples that follow are pushed together
+            await self._wake.wait()  # the gateway's batch did the gathering: no timer here
             self._wake.clear()
             outbox, self._outbox = self._outbox, {}
             for node, value in outbox.items():
