@@ -1,4 +1,7 @@
-"""push_frozen and encode_frozen_values (gateway/opcua/_hooks.py) against asyncua's own.
+"""The speed patches (gateway/opcua/_speedups.py) against asyncua's own.
+
+share_frozen_values' data-change callback must queue the notifications
+asyncua's queues, on the same items and values.
 
 push_frozen writes a value and queues its notifications without asyncua's
 coroutines: two variables watched by one subscription, one pushed by it and
@@ -14,14 +17,21 @@ from __future__ import annotations
 import asyncio
 from collections.abc import AsyncIterator
 from datetime import UTC, datetime
-from typing import Any
+from typing import Any, cast
 
 import pytest
 from asyncua import Node, Server, ua
+from asyncua.server.monitored_item_service import MonitoredItemData, MonitoredItemService
 from asyncua.ua import ua_binary
 from waiting import wait_for
 
-from sj300_async.gateway.opcua import _hooks, _wire
+from sj300_async.gateway.opcua import _speedups, _wire
+
+# Nothing to compare where they are off (SJ300_OPCUA_SPEEDUPS=0, an untested asyncua):
+# test_opcua_speedups.py checks that nothing of asyncua is replaced then.
+pytestmark = pytest.mark.skipif(
+    not _speedups.ENABLED, reason=f"speed patches off: {_speedups.OFF_BECAUSE}"
+)
 
 
 class _Handler:
@@ -36,7 +46,7 @@ class _Handler:
 @pytest.fixture
 async def space() -> AsyncIterator[tuple[Server, Node, Node]]:
     """A server (not listening: its own subscriptions only), with two Double variables."""
-    _hooks.share_frozen_values()
+    _speedups.share_frozen_values()
     server = Server()
     await server.init()
     ns = await server.register_namespace("urn:test:fast-paths")
@@ -48,14 +58,14 @@ async def space() -> AsyncIterator[tuple[Server, Node, Node]]:
         await subscription.stop()
 
 
-def _frozen(value: float | None, status: int = 0) -> _hooks.FrozenDataValue:
+def _frozen(value: float | None, status: int = 0) -> _speedups.FrozenDataValue:
     now = datetime.now(UTC)
     variant = (
         ua.Variant(None, ua.VariantType.Null)
         if value is None
         else ua.Variant(value, ua.VariantType.Double)
     )
-    return _hooks.FrozenDataValue(
+    return _speedups.FrozenDataValue(
         Value=variant, StatusCode=ua.StatusCode(status), SourceTimestamp=now, ServerTimestamp=now
     )
 
@@ -74,7 +84,7 @@ async def test_a_pushed_value_notifies_as_asyncua_s_write_does(
         _frozen(None, ua.StatusCodes.BadWaitingForInitialData), _frozen(3.0),
     ]  # fmt: skip
     for value in values:  # both in the same loop turn: one publish carries both
-        assert _hooks.push_frozen(server, ours.nodeid, value)
+        assert _speedups.push_frozen(server, ours.nodeid, value)
         await server.write_attribute_value(theirs.nodeid, value)
         await wait_for(
             lambda: (
@@ -104,7 +114,7 @@ async def test_values_queued_within_one_publish_interval_are_kept_as_asyncua_kee
         await wait_for(lambda: len(handler.seen) == 2, "the initial values")  # noqa: B023
         for step in range(1, 5):
             value = _frozen(100.0 * size + step)
-            assert _hooks.push_frozen(server, ours.nodeid, value)
+            assert _speedups.push_frozen(server, ours.nodeid, value)
             await server.write_attribute_value(theirs.nodeid, value)
         last = (100.0 * size + 4, 0)
         await wait_for(
@@ -133,7 +143,7 @@ async def test_a_failing_item_leaves_the_others_notified_as_asyncua_does(
         _frozen(None, ua.StatusCodes.BadWaitingForInitialData),
         _frozen(2.0),
     ):
-        assert _hooks.push_frozen(server, ours.nodeid, value)
+        assert _speedups.push_frozen(server, ours.nodeid, value)
         await server.write_attribute_value(theirs.nodeid, value)
         await asyncio.sleep(0.05)  # a publish interval or two between values
     await wait_for(lambda: len(plain.seen["ours"]) == 4, "every value, unfiltered")
@@ -149,32 +159,32 @@ async def test_what_push_frozen_leaves_to_asyncua_is_left_untouched(
     # A subscription with no publishing interval publishes as an item's first value comes.
     at_once = await server.create_subscription(0, _Handler())
     await at_once.subscribe_data_change(ours)
-    assert not _hooks.push_frozen(server, ours.nodeid, _frozen(7.0))
+    assert not _speedups.push_frozen(server, ours.nodeid, _frozen(7.0))
     assert (await ours.read_data_value()).Value == before.Value
     # A data-change callback that is not a monitored item's.
     space_ = server.iserver.aspace
     space_.add_datachange_callback(theirs.nodeid, ua.AttributeIds.Value, lambda *a: None)
-    assert not _hooks.push_frozen(server, theirs.nodeid, _frozen(7.0))
+    assert not _speedups.push_frozen(server, theirs.nodeid, _frozen(7.0))
     # A Bad value that carries a value (asyncua would store Null), a value of another type
     # (asyncua refuses it), a node that is not there.
     fresh = await server.nodes.objects.add_variable(ua.NodeId("fresh", 9), "fresh", 0.0)
-    assert not _hooks.push_frozen(
+    assert not _speedups.push_frozen(
         server, fresh.nodeid, _frozen(7.0, ua.StatusCodes.BadWaitingForInitialData)
     )
     wrong = _frozen(7.0)
     wrong.Value = ua.Variant(7, ua.VariantType.Int32)
-    assert not _hooks.push_frozen(server, fresh.nodeid, wrong)
-    assert not _hooks.push_frozen(server, ua.NodeId("absent", 9), _frozen(7.0))
-    assert _hooks.push_frozen(server, fresh.nodeid, _frozen(7.0))  # and a plain one is done
+    assert not _speedups.push_frozen(server, fresh.nodeid, wrong)
+    assert not _speedups.push_frozen(server, ua.NodeId("absent", 9), _frozen(7.0))
+    assert _speedups.push_frozen(server, fresh.nodeid, _frozen(7.0))  # and a plain one is done
     assert (await fresh.read_value()) == 7.0
 
 
 def test_asyncua_encodes_a_frozen_value_with_the_fast_encoder(
     monkeypatch: pytest.MonkeyPatch,
 ) -> None:
-    _hooks.encode_frozen_values()
-    assert _hooks._serializers is not None
-    generic = _hooks._serializers(ua.DataValue)
+    _speedups.encode_frozen_values()
+    assert _speedups._serializers is not None
+    generic = _speedups._serializers(ua.DataValue)
     calls: list[object] = []
     fast = _wire.datavalue_binary
 
@@ -182,7 +192,7 @@ def test_asyncua_encodes_a_frozen_value_with_the_fast_encoder(
         calls.append(value)
         return fast(value)
 
-    monkeypatch.setattr(_hooks, "datavalue_binary", counted)
+    monkeypatch.setattr(_speedups, "datavalue_binary", counted)
     value = _frozen(12.5)
     item = ua.MonitoredItemNotification(ClientHandle=3, Value=value)
     notification = ua.DataChangeNotification(MonitoredItems=[item])
@@ -197,3 +207,74 @@ def test_asyncua_encodes_a_frozen_value_with_the_fast_encoder(
             ))]
         )
     )  # fmt: skip
+
+
+class _Queue:
+    """What a monitored-item service hands its subscription: each notification queued."""
+
+    def __init__(self) -> None:
+        self.data = ua.CreateSubscriptionResult(SubscriptionId=1)
+        self.queued: list[tuple[int, int, Any, int]] = []
+
+    async def enqueue_datachange_event(
+        self, mid: int, event: ua.MonitoredItemNotification, maxsize: int
+    ) -> None:
+        self.queued.append((mid, event.ClientHandle, event.Value, maxsize))
+
+
+def _item(mode: ua.MonitoringMode, item_filter: object) -> tuple[MonitoredItemService, _Queue]:
+    queue = _Queue()
+    service = MonitoredItemService(cast(Any, queue), cast(Any, None))
+    item = MonitoredItemData()
+    item.client_handle, item.mode, item.filter, item.queue_size = 7, mode, item_filter, 3
+    service._monitored_items[111] = item
+    service._monitored_datachange[5] = 111
+    return service, queue
+
+
+def _frozen_double(value: float, status: int = 0) -> _speedups.FrozenDataValue:
+    return _speedups.FrozenDataValue(
+        Value=ua.Variant(value, ua.VariantType.Double), StatusCode=ua.StatusCode(status)
+    )
+
+
+@pytest.mark.parametrize(
+    ("mode", "trigger", "deadband"),
+    [
+        (ua.MonitoringMode.Reporting, None, None),
+        (ua.MonitoringMode.Disabled, None, None),
+        (ua.MonitoringMode.Reporting, ua.DataChangeTrigger.StatusValue, 1.0),
+        (ua.MonitoringMode.Reporting, ua.DataChangeTrigger.Status, 0.0),
+        (ua.MonitoringMode.Sampling, ua.DataChangeTrigger.StatusValueTimestamp, 0.0),
+    ],
+)
+async def test_a_frozen_value_is_notified_as_asyncua_notifies_it(
+    mode: ua.MonitoringMode, trigger: ua.DataChangeTrigger | None, deadband: float | None
+) -> None:
+    """share_frozen_values' data-change callback, for the gateway's values, against
+    asyncua's own (kept aside when it was replaced), on the same items and values:
+    the same notifications, queued the same way (mode, trigger, deadband honoured)."""
+    _speedups.share_frozen_values()
+    assert _speedups._notifying is not None
+    item_filter = (
+        None
+        if trigger is None
+        else ua.DataChangeFilter(
+            Trigger=trigger,
+            DeadbandType=ua.DeadbandType.Absolute if deadband else ua.DeadbandType.None_,
+            DeadbandValue=deadband or 0.0,
+        )
+    )
+    values = [
+        _frozen_double(10.0), _frozen_double(10.0), _frozen_double(10.5), _frozen_double(12.0),
+        _frozen_double(12.0, ua.StatusCodes.UncertainLastUsableValue), _frozen_double(13.5),
+    ]  # fmt: skip
+    ours, ours_queue = _item(mode, item_filter)
+    theirs, their_queue = _item(mode, item_filter)
+    for value in values:
+        await ours.datachange_callback(5, value)
+        await _speedups._notifying(theirs, 5, value)
+    assert ours_queue.queued == their_queue.queued
+    assert all(any(queued[2] is v for v in values) for queued in ours_queue.queued)  # as is
+    if mode != ua.MonitoringMode.Disabled:
+        assert ours_queue.queued  # something was notified: the comparison compared something

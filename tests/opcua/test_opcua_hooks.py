@@ -17,17 +17,15 @@ import math
 import shutil
 import socket
 from pathlib import Path
-from typing import Any, cast
+from typing import Any
 
 import pytest
 from asyncua import Client, ua
 from asyncua.client.ua_client import UaClient
-from asyncua.server.monitored_item_service import MonitoredItemData, MonitoredItemService
 from asyncua.ua.uaerrors import UaError, UaStatusCodeError
 from waiting import wait_for
 
 from sj300_async.gateway import Quality, ServedDrive
-from sj300_async.gateway.opcua import _hooks
 from sj300_async.gateway.opcua._config import DEFAULT_LOGIN_BURST
 from sj300_async.gateway.opcua._server import OpcuaServer
 from sj300_async.profiles import DriveSnapshot
@@ -453,74 +451,3 @@ async def test_a_group_watched_again_takes_the_next_sample(tmp_path: Path) -> No
         server.publish(served(dataclasses.replace(online, taken_at=online.taken_at + 2)))
         assert trips.quality(now) is Quality.GOOD
         assert trips.status(now) == ua.StatusCodes.Good
-
-
-class _Queue:
-    """What a monitored-item service hands its subscription: each notification queued."""
-
-    def __init__(self) -> None:
-        self.data = ua.CreateSubscriptionResult(SubscriptionId=1)
-        self.queued: list[tuple[int, int, Any, int]] = []
-
-    async def enqueue_datachange_event(
-        self, mid: int, event: ua.MonitoredItemNotification, maxsize: int
-    ) -> None:
-        self.queued.append((mid, event.ClientHandle, event.Value, maxsize))
-
-
-def _item(mode: ua.MonitoringMode, item_filter: object) -> tuple[MonitoredItemService, _Queue]:
-    queue = _Queue()
-    service = MonitoredItemService(cast(Any, queue), cast(Any, None))
-    item = MonitoredItemData()
-    item.client_handle, item.mode, item.filter, item.queue_size = 7, mode, item_filter, 3
-    service._monitored_items[111] = item
-    service._monitored_datachange[5] = 111
-    return service, queue
-
-
-def _frozen(value: float, status: int = 0) -> _hooks.FrozenDataValue:
-    return _hooks.FrozenDataValue(
-        Value=ua.Variant(value, ua.VariantType.Double), StatusCode=ua.StatusCode(status)
-    )
-
-
-@pytest.mark.parametrize(
-    ("mode", "trigger", "deadband"),
-    [
-        (ua.MonitoringMode.Reporting, None, None),
-        (ua.MonitoringMode.Disabled, None, None),
-        (ua.MonitoringMode.Reporting, ua.DataChangeTrigger.StatusValue, 1.0),
-        (ua.MonitoringMode.Reporting, ua.DataChangeTrigger.Status, 0.0),
-        (ua.MonitoringMode.Sampling, ua.DataChangeTrigger.StatusValueTimestamp, 0.0),
-    ],
-)
-async def test_a_frozen_value_is_notified_as_asyncua_notifies_it(
-    mode: ua.MonitoringMode, trigger: ua.DataChangeTrigger | None, deadband: float | None
-) -> None:
-    """share_frozen_values' data-change callback, for the gateway's values, against
-    asyncua's own (kept aside when it was replaced), on the same items and values:
-    the same notifications, queued the same way (mode, trigger, deadband honoured)."""
-    _hooks.share_frozen_values()
-    assert _hooks._notifying is not None
-    item_filter = (
-        None
-        if trigger is None
-        else ua.DataChangeFilter(
-            Trigger=trigger,
-            DeadbandType=ua.DeadbandType.Absolute if deadband else ua.DeadbandType.None_,
-            DeadbandValue=deadband or 0.0,
-        )
-    )
-    values = [
-        _frozen(10.0), _frozen(10.0), _frozen(10.5), _frozen(12.0),
-        _frozen(12.0, ua.StatusCodes.UncertainLastUsableValue), _frozen(13.5),
-    ]  # fmt: skip
-    ours, ours_queue = _item(mode, item_filter)
-    theirs, their_queue = _item(mode, item_filter)
-    for value in values:
-        await ours.datachange_callback(5, value)
-        await _hooks._notifying(theirs, 5, value)
-    assert ours_queue.queued == their_queue.queued
-    assert all(any(queued[2] is v for v in values) for queued in ours_queue.queued)  # as is
-    if mode != ua.MonitoringMode.Disabled:
-        assert ours_queue.queued  # something was notified: the comparison compared something

@@ -15,10 +15,10 @@ from asyncua.ua import ua_binary
 from hypothesis import given
 from hypothesis import strategies as st
 
-from sj300_async.gateway.opcua import _hooks
+from sj300_async.gateway.opcua import _speedups
 from sj300_async.gateway.opcua._wire import datavalue_binary
 
-_generic = (_hooks._serializers or ua_binary.create_dataclass_serializer)(ua.DataValue)
+_generic = (_speedups._serializers or ua_binary.create_dataclass_serializer)(ua.DataValue)
 
 _RANGES: dict[ua.VariantType, st.SearchStrategy[Any]] = {
     ua.VariantType.Boolean: st.booleans(),
@@ -49,7 +49,7 @@ def _scalar(draw: st.DrawFn) -> ua.Variant:
 
 
 def _frozen(variant: ua.Variant, status: int, source: datetime, server: datetime) -> Any:
-    return _hooks.FrozenDataValue(
+    return _speedups.FrozenDataValue(
         Value=variant,
         StatusCode=ua.StatusCode(status),
         SourceTimestamp=source,
@@ -93,7 +93,7 @@ def test_picoseconds_a_missing_timestamp_and_an_unpackable_value_are_left_to_asy
     with_picoseconds = _frozen(double, 0, now, now)
     with_picoseconds.SourcePicoseconds = 10
     assert datavalue_binary(with_picoseconds) is None
-    assert datavalue_binary(_hooks.FrozenDataValue(Value=double, SourceTimestamp=now)) is None
+    assert datavalue_binary(_speedups.FrozenDataValue(Value=double, SourceTimestamp=now)) is None
     too_large = _frozen(ua.Variant(2**40, ua.VariantType.Int32), 0, now, now)
     assert datavalue_binary(too_large) is None
     assert datavalue_binary(_frozen(double, 0, now, now + timedelta(seconds=1))) == _generic(

@@ -1,10 +1,13 @@
-"""Every place the OPC UA northbound reaches past asyncua's public API, in one module.
+"""Every place the OPC UA northbound's hardening reaches past asyncua's public API.
 
 asyncua's server has no public way to do what the gateway needs below,
 and in places its defaults are unsafe for a server that spins motors, so
-it is done here, each on the one server instance, and checked by
+it is done here, always, each on the one server instance, and checked by
 ``tests/opcua/test_opcua_hooks.py`` against the installed asyncua (the
-``opcua`` extra pins the major version):
+``opcua`` extra pins the minor version). The other reaches are the speed
+patches, :mod:`._speedups` (applied only on the asyncua releases they were
+tested with, and never needed), and the subscription bounds,
+:mod:`._subscriptions`:
 
 - **Channels** (:func:`guard_channels`). The server gives every
   endpoint's policy factory the same permission ruleset; the handlers need
@@ -25,6 +28,7 @@ it is done here, each on the one server instance, and checked by
   refuse) and activation: :mod:`._admission` rations the unactivated and
   closes them in time (:func:`close_session`; asyncua would keep them as
   long as their connection), and a lease's connection is the session.
+  :func:`session_count` counts the open ones (asyncua has no public count).
 - **Requests** (:func:`guard_requests`, issue 41): asyncua's connection
   and request processing, for the servers handed to it, through the
   northbound's :class:`._defences.Door`: connections admitted by address;
@@ -49,38 +53,25 @@ it is done here, each on the one server instance, and checked by
   then lists; the gateway is no discovery server.
 - **Who watches a value** (:func:`follow_watchers`): asyncua says nowhere
   in its API whether a variable has monitored items. Reads are served from
-  the gateway's bindings (a value callback), so a value only subscriptions
-  would see is built and written into asyncua for nothing: at 2,048
-  drives that was most of the northbound's CPU with no client at all. The
-  gateway hears each data-change callback asyncua adds to or deletes from
-  a Value attribute (its monitored items), and builds and pushes a value
-  only while some monitored item watches it.
-- **Values not copied** (:func:`share_frozen_values`): asyncua deep-copies
-  every value written, once per monitored item on it, in case its writer
-  changes it afterwards (43-54 µs each: more than half the northbound's
-  CPU, measured). The gateway's values are :class:`FrozenDataValue`, made
-  new for each change and never changed after: asyncua keeps them as
-  they are, and its monitored items' notifications carry them as they are
-  (asyncua made each one empty first). Values of every other kind are
-  copied and notified as before.
-- **Values encoded faster** (:func:`encode_frozen_values`): asyncua's
-  encoder of a DataValue is generic, field by field; a
-  :class:`FrozenDataValue` of a shape the gateway serves is packed by
-  :mod:`._wire` in one ``struct`` call, the same bytes.
+  the gateway's bindings (a value callback), and the northbound pushes a
+  value to asyncua only while some monitored item watches it (pushing
+  every value for nobody was most of its CPU at 2,048 drives). So this is
+  kept, always on, with the hardening: without it no subscription would
+  hear a change. The gateway hears each data-change callback asyncua adds
+  to or deletes from a Value attribute (its monitored items), on this
+  server's address space only.
 """
 
 from __future__ import annotations
 
 import asyncio
 import contextvars
-import functools
 import importlib.metadata
 import inspect
 import logging
 import secrets
 import weakref
 from collections.abc import Awaitable, Callable
-from dataclasses import dataclass
 from typing import TYPE_CHECKING, Any, Final
 
 from asyncua import Server, ua
@@ -88,29 +79,23 @@ from asyncua.common.utils import ServiceError
 from asyncua.crypto.permission_rules import PermissionRuleset
 from asyncua.crypto.security_policies import SecurityPolicyNone
 from asyncua.server.binary_server_asyncio import OPCUAProtocol
-from asyncua.server.monitored_item_service import MonitoredItemService, MonitoredItemValues
 from asyncua.server.uaprocessor import UaProcessor
 from asyncua.ua import ua_binary
-
-from ._wire import datavalue_binary
 
 if TYPE_CHECKING:
     from ._defences import Door
 
 __all__ = [
     "TESTED_ASYNCUA",
-    "FrozenDataValue",
     "close_session",
-    "encode_frozen_values",
     "follow_watchers",
     "guard_channels",
     "guard_requests",
     "guard_sessions",
     "on_session_closed",
-    "push_frozen",
     "refuse_registration",
     "route_writes",
-    "share_frozen_values",
+    "session_count",
 ]
 
 _log = logging.getLogger("sj300_async.gateway.opcua")
@@ -218,6 +203,11 @@ def guard_sessions(
         return session
 
     iserver.create_session = create_session
+
+
+def session_count(server: Server) -> int:
+    """The external sessions open on *server* (created, activated or not, not yet closed)."""
+    return len(server.iserver._external_sessions)
 
 
 def close_session(session: Any) -> None:
@@ -485,191 +475,3 @@ def follow_watchers(server: Server, changed: Callable[[ua.NodeId, int], None]) -
 
     space.add_datachange_callback = added
     space.delete_datachange_callback = deleted
-
-
-@dataclass
-class FrozenDataValue(ua.DataValue):  # type: ignore[misc]
-    """A value the gateway never changes once made (see :func:`share_frozen_values`)."""
-
-
-_copying: Callable[[Any, Any], None] | None = None
-#: asyncua's own data-change callback, as it was before share_frozen_values (the tests
-#: compare the two).
-_notifying: Callable[..., Awaitable[None]] | None = None
-#: share_frozen_values' data-change callback (push_frozen knows its monitored items by it).
-_sharing: Callable[..., Awaitable[None]] | None = None
-
-
-def share_frozen_values() -> None:
-    """Let asyncua keep a :class:`FrozenDataValue` as it is (once per process).
-
-    And notify its monitored items with it as it is: asyncua's data-change
-    callback makes each notification empty first, a DataValue holding a
-    Variant whose type it guesses (about 5 µs, once per value per monitored
-    item), then puts the value in. For a FrozenDataValue the notification is
-    made with it; the rest (the item's mode, its filter and deadband, the
-    queue) is asyncua's own, called as asyncua calls it.
-    """
-    global _copying, _notifying, _sharing
-    if _copying is not None:
-        return
-    copying = _copying = MonitoredItemValues.set_current_datavalue
-    notifying = _notifying = MonitoredItemService.datachange_callback
-
-    def set_current_datavalue(self: Any, value: Any) -> None:
-        if type(value) is FrozenDataValue:
-            self.old_dvalue = self.current_dvalue
-            self.current_dvalue = value
-        else:
-            copying(self, value)
-
-    async def datachange_callback(
-        self: Any, handle: int, value: Any, error: ua.StatusCode | None = None
-    ) -> None:
-        if error or type(value) is not FrozenDataValue:
-            await notifying(self, handle, value, error)
-            return
-        notified = _notification(self, handle, value)
-        if notified is not None:
-            await self.isub.enqueue_datachange_event(*notified)
-
-    MonitoredItemValues.set_current_datavalue = set_current_datavalue
-    MonitoredItemService.datachange_callback = datachange_callback
-    _sharing = datachange_callback
-
-
-def _notification(
-    service: Any, handle: int, value: FrozenDataValue
-) -> tuple[int, ua.MonitoredItemNotification, int] | None:
-    """What asyncua's data-change callback queues for *value* on the item of *handle*:
-    (item id, notification, queue size), or None when the item reports nothing."""
-    mid = service._monitored_datachange[handle]
-    item = service._monitored_items[mid]
-    if item.mode == ua.MonitoringMode.Disabled:
-        return None
-    item.mvalue.set_current_datavalue(value)
-    if item.filter:
-        changed = service._is_data_changed(
-            item.mvalue, item.filter.Trigger
-        ) and service._is_deadband_exceeded(item.mvalue, item.filter)
-    else:
-        changed = service._is_data_changed(item.mvalue, ua.DataChangeTrigger.StatusValue)
-    if not changed:
-        return None
-    return (
-        mid,
-        ua.MonitoredItemNotification(ClientHandle=item.client_handle, Value=value),
-        (item.queue_size),
-    )
-
-
-def push_frozen(server: Server, node: ua.NodeId, value: FrozenDataValue) -> bool:
-    """Write *value* to *node*'s Value and queue it for its monitored items, as asyncua's
-    ``write_attribute_value`` does, without its coroutines; False (nothing done) where
-    that would not be the same, and the caller awaits asyncua's own.
-
-    asyncua's write is a coroutine calling each monitored item's callback, a
-    coroutine calling its subscription's queue, a coroutine: at plant scale six
-    coroutines a value, most of the push's time. Only one thing in it can
-    wait: a subscription with no publishing interval publishes as soon as an
-    item's first notification is queued. So: the node and its Value exist,
-    every callback on it is :func:`share_frozen_values`' (a
-    monitored item of a subscription that publishes on its own time), and the
-    value is one asyncua would store as it is (a Bad status carries a Null
-    value, any other has the node's type). A monitored item whose
-    notification fails is logged and the others are notified, as asyncua
-    does (its deadband filter fails on a value that goes to or from Null).
-    """
-    space = server.iserver.aspace
-    record = space._nodes.get(node)
-    attribute = None if record is None else record.attributes.get(ua.AttributeIds.Value)
-    if attribute is None:
-        return False
-    if value.StatusCode.is_bad():
-        if value.Value.VariantType != ua.VariantType.Null:
-            return False
-    elif not space._is_expected_variant_type(value, attribute, record):
-        return False  # asyncua answers BadTypeMismatch and stores nothing
-    callbacks = attribute.datachange_callbacks
-    for callback in callbacks.values():
-        if getattr(callback, "__func__", None) is not _sharing:
-            return False
-        subscription = callback.__self__.isub
-        if not subscription._task and subscription.data.RevisedPublishingInterval <= 0.0:
-            return False
-    if attribute.value_setter is not None:  # the gateway's: its binding holds the value
-        attribute.value_setter(record, ua.AttributeIds.Value, value)
-    else:
-        attribute.value = value
-        attribute.value_callback = None
-    for handle, callback in callbacks.items():
-        try:
-            _enqueue(callback.__self__, handle, value)
-        except Exception:
-            _log.exception("opcua: notifying monitored item %s of %s failed", handle, node)
-    return True
-
-
-def _enqueue(service: Any, handle: int, value: FrozenDataValue) -> None:
-    """Queue *value* for the item of *handle* as its subscription's queue does."""
-    notified = _notification(service, handle, value)
-    if notified is None:
-        return
-    mid, notification, size = notified
-    queue = service.isub._triggered_datachanges
-    queued = queue.get(mid)
-    if queued is None:
-        queue[mid] = [notification]
-        return
-    if size != 0 and len(queued) >= size:
-        queued.pop(0)
-    queued.append(notification)
-
-
-#: asyncua's own dataclass-serializer factory, as it was before encode_frozen_values.
-_serializers: Callable[[type], Callable[[Any], bytes]] | None = None
-
-
-def encode_frozen_values() -> None:
-    """asyncua encodes a :class:`FrozenDataValue` with :func:`._wire.datavalue_binary`
-    (once per process; a shape that leaves to asyncua is encoded by asyncua).
-
-    asyncua builds an encoder per structure type once, from its factory, and
-    keeps it (``functools.cache``); a structure's encoder holds its fields'
-    encoders. The factory is wrapped so that DataValue's is ours, and the
-    caches are emptied, so that every encoder built before (a publish
-    response's, holding a monitored item's, holding a DataValue's) is built
-    again around it.
-    """
-    global _serializers
-    if _serializers is not None:
-        return
-    original = _serializers = ua_binary.create_dataclass_serializer
-    generic = original(ua.DataValue)
-
-    def datavalue(value: Any) -> bytes:
-        if type(value) is FrozenDataValue:
-            wire = datavalue_binary(value)
-            if wire is not None:
-                return wire
-        encoded: bytes = generic(value)
-        return encoded
-
-    @functools.cache
-    def create_dataclass_serializer(dataclazz: type) -> Callable[[Any], bytes]:
-        # A DataValue field's encoder is its type's; a value in a variant (a read's, a
-        # notification's) is encoded by its own class's.
-        if dataclazz is ua.DataValue or dataclazz is FrozenDataValue:
-            return datavalue
-        serializer: Callable[[Any], bytes] = original(dataclazz)
-        return serializer
-
-    ua_binary.create_dataclass_serializer = create_dataclass_serializer
-    for cached in (
-        original,
-        ua_binary.create_type_serializer,
-        ua_binary.create_list_serializer,
-        ua_binary.create_uatype_serializer,
-        ua_binary.create_uatype_array_serializer,
-    ):
-        cached.cache_clear()

@@ -23,6 +23,8 @@ Decisions:
   served deadline: Uncertain) and the lines' counters.
 - **Writes** are :mod:`._calls`'s; asyncua's own write path is kept for
   nothing of ours (:mod:`._hooks`).
+- **Speed patches** (:mod:`._speedups`) only where tested: elsewhere values
+  are plain DataValues, each pushed by asyncua's ``write_attribute_value``.
 - **Security**: :mod:`._security`; the certificate: :mod:`._certificate`; what a
   client that proved nothing may cost: :mod:`._defences`.
 
@@ -61,14 +63,11 @@ from ._certificate import ServerCertificate, load_or_generate
 from ._config import OpcuaConfig
 from ._defences import Defences
 from ._hooks import (
-    FrozenDataValue,
-    encode_frozen_values,
     follow_watchers,
     guard_channels,
-    push_frozen,
     refuse_registration,
     route_writes,
-    share_frozen_values,
+    session_count,
 )
 from ._model import (
     LINE_COUNTERS,
@@ -81,6 +80,8 @@ from ._model import (
 from ._quality import BAD_WAITING, GOOD, utc
 from ._security import ChannelRules, Principal, Users
 from ._space import SpaceBuilder
+from ._speedups import ServedDataValue, push_frozen
+from ._speedups import install as install_speedups
 from ._subscriptions import bound_subscriptions
 
 if TYPE_CHECKING:
@@ -290,8 +291,7 @@ class OpcuaServer:
                 self._bound[binding.node] = (nodes, binding)
         follow_watchers(server, self._watch)
         route_writes(server, self.namespace, self._write)
-        share_frozen_values()
-        encode_frozen_values()
+        install_speedups()  # where asyncua is a release they were tested with (logged if not)
         self._defences.install(
             server,
             created=self._session_created,
@@ -425,7 +425,7 @@ class OpcuaServer:
         server = self._server
         if server is None:
             return 0
-        return len(server.iserver._external_sessions)
+        return session_count(server)
 
     @property
     def node_count(self) -> int:
@@ -452,7 +452,7 @@ class OpcuaServer:
             else:
                 value = convert(binding.value)
             variant = ua.Variant(value, binding.vtype)
-        return FrozenDataValue(
+        return ServedDataValue(
             Value=variant,
             StatusCode=ua.StatusCode(status),
             SourceTimestamp=utc(binding.wall),
@@ -544,13 +544,13 @@ class OpcuaServer:
         vtype = _LINE_TYPES[name]
         stamp = utc(time.time())
         if value is None:
-            return FrozenDataValue(
+            return ServedDataValue(
                 Value=ua.Variant(None, ua.VariantType.Null),
                 StatusCode=ua.StatusCode(BAD_WAITING),
                 SourceTimestamp=stamp,
                 ServerTimestamp=stamp,
             )
-        return FrozenDataValue(
+        return ServedDataValue(
             Value=ua.Variant(_CONVERT[vtype](value), vtype),
             StatusCode=ua.StatusCode(GOOD),
             SourceTimestamp=stamp,
