@@ -16,6 +16,7 @@ import contextlib
 import itertools
 import json
 import logging
+import math
 import re
 import signal
 import sys
@@ -844,12 +845,16 @@ def test_fr700_discovery_has_its_own_sensors_and_the_trip() -> None:
         ("command", b" run_reverse\n", RunCommand(Direction.REVERSE)),
         ("command", b"stop", RunCommand(Direction.STOP)),
         ("frequency_hz", b"12.34", SetFrequency(12.34)),
-        ("frequency_hz", b"nan", Refusal.MALFORMED),
-        ("frequency_hz", b"12.345", Refusal.INVALID_VALUE),
+        # NaN, infinities and values off the 0.01 Hz step: the gateway refuses them
+        # (invalid_value, after the grants), as from every door (issue 42).
+        ("frequency_hz", b"inf", SetFrequency(math.inf)),
+        ("frequency_hz", b"12.345", SetFrequency(12.345)),
         ("frequency_hz", b"1e308", SetFrequency(1e308)),  # the gateway refuses its range
         ("frequency_hz", b"\xff", Refusal.MALFORMED),
         ("a004", b"60", ParameterWrite("A004", 600)),
-        ("A004", b"1e400", Refusal.MALFORMED),
+        ("A004", b"1e400", Refusal.INVALID_VALUE),  # a number, outside the range
+        ("A004", b"nan", Refusal.INVALID_VALUE),
+        ("A004", b"slow", Refusal.MALFORMED),
         ("A004", b"60.01", Refusal.INVALID_VALUE),
         ("Pr.7", b"5", Refusal.UNKNOWN_TARGET),  # an FR-700 code on an SJ300 line
     ],

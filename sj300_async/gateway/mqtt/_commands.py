@@ -16,7 +16,6 @@ short escaped excerpt (:func:`~sj300_async.gateway.excerpt`), never whole.
 
 from __future__ import annotations
 
-import math
 from typing import Final
 
 from ...profiles import Profile, raw_value
@@ -61,12 +60,12 @@ DROPPED_BY_STOP: Final = WriteResult(Refusal.BUSY, "dropped: a stop came after i
 
 
 def _number(text: str) -> float | None:
-    """A finite number, else None."""
+    """A number (NaN and infinities too: the gateway refuses them as invalid values), else
+    None."""
     try:
-        value = float(text)
+        return float(text)
     except ValueError:
         return None
-    return value if math.isfinite(value) else None
 
 
 def oversized(length: int) -> WriteResult | None:
@@ -122,19 +121,18 @@ def parse_command(profile: Profile, what: str, payload: bytes) -> WriteRequest |
 
 
 def frequency_request(hz: float, text: str) -> SetFrequency | WriteResult:
-    """A set frequency of *hz* (finite; *text* as the client sent it), unless finer than 0.01 Hz."""
-    # The set frequency's step, every protocol. Past 1e6 Hz no drive's range holds
-    # it (the gateway refuses it naming the maximum), and 1e308 * 100 is inf,
-    # which round() cannot take: it once killed the drive's command worker.
-    if abs(hz) <= 1e6 and abs(round(hz * 100) - hz * 100) > 1e-6:
-        return WriteResult(Refusal.INVALID_VALUE, f"{excerpt(text)} Hz is finer than 0.01 Hz")
+    """A set frequency of *hz* (*text* as the client sent it).
+
+    The gateway judges it (a number, within the drive's range, on the 0.01 Hz
+    step), after the grants and before the lease, as from any door (issue 42).
+    """
     return SetFrequency(hz)
 
 
 def parameter_request(
     profile: Profile, code: str, value: float, text: str
 ) -> ParameterWrite | WriteResult:
-    """Parameter *code* (normalised) set to *value* in its unit (finite; *text* as sent).
+    """Parameter *code* (normalised) set to *value* in its unit (*text* as sent).
 
     Refused when outside the parameter's range or finer than its setting
     increment: a number is never rounded to what the drive can hold.
