@@ -104,10 +104,10 @@ def _request(device: Device, metric: DeviceMetric, value: object) -> WriteReques
     if metric.write in (Writes.FREQUENCY, Writes.PARAMETER):
         assert isinstance(value, int | float)
         number = float(value)
+        if metric.write == Writes.FREQUENCY:  # judged by the gateway, as from every door
+            return frequency_request(number, repr(value))
         if not math.isfinite(number):
             return WriteResult(Refusal.INVALID_VALUE, f"{name}: {number} is no value")
-        if metric.write == Writes.FREQUENCY:
-            return frequency_request(number, repr(value))
         assert metric.code is not None
         return parameter_request(device.drive.profile, metric.code, number, repr(value))
     if metric.write == Writes.DIRECTION:

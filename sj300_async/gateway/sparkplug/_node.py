@@ -73,7 +73,6 @@ from ...wire import Direction
 from .. import (
     GatewayLine,
     GatewayView,
-    Heartbeat,
     Refusal,
     RunCommand,
     ServedDrive,
@@ -737,23 +736,27 @@ class EdgeNode:
         )  # audited there
         if result.refusal is None:
             self.stats.writes += 1
-        else:
-            self._refuse(device, name, value, result, audited=True)
+            return
+        stop = request == RunCommand(Direction.STOP)  # tried, dead or alive
+        if result.refusal == Refusal.NO_ANSWER and device.drive.key not in self._alive and not stop:
+            self._bad("offline", f"DCMD {name} to {device.id}")
+        self._refuse(device, name, value, result, audited=True)
 
     def _not_now(self, device: Device, request: WriteRequest) -> str | None:
         """Why *request* is not carried out now, or None: a stop is always tried.
 
         Nothing else is while no Sparkplug session stands (not born: the primary
         host is offline, or the births are not out yet): nobody the edge node
-        answers to can have sent it. A lease harms nothing on a drive that is
-        dead; a motion waits for a live one.
+        answers to can have sent it. A drive the poller holds offline is the
+        gateway's to refuse (no answer, counted ``offline`` here), after the
+        value, as from every door.
         """
         if request == RunCommand(Direction.STOP):
             return None
         if not self._born:
             return "the edge node is not born (no Sparkplug session): nothing was sent"
-        if device.drive.key not in self._alive and not isinstance(request, Heartbeat):
-            return "the drive is offline: nothing was sent"
+        # A drive the poller holds offline is the gateway's to refuse (after the value,
+        # as from every door: issue 42).
         return None
 
     def _refuse(
