@@ -14,7 +14,8 @@ the gateway need not see, in this order:
 - arguments of the wrong number (``BadArgumentsMissing``,
   ``BadTooManyArguments``) or type (``BadTypeMismatch``), a direction
   other than ``forward`` or ``reverse`` (``BadInvalidArgument``), a
-  number that is NaN, infinite or out of range (``BadOutOfRange``),
+  parameter's value that is NaN, infinite or out of its range
+  (``BadOutOfRange``; a set frequency's value is the gateway's to judge),
   an array where one value is expected (``BadTypeMismatch``), a value
   written with a status code other than Good (``BadWriteNotSupported``),
   nothing of it sent.
@@ -283,14 +284,6 @@ def _run(values: list[object]) -> WriteRequest:
 
 
 def _frequency(values: list[object]) -> WriteRequest:
-    hz = float(values[0])  # type: ignore[arg-type]
-    if not math.isfinite(hz):
-        raise _Refused(
-            ua.StatusCodes.BadOutOfRange, Refusal.INVALID_VALUE, f"{hz} Hz is no frequency"
-        )
-    # The set frequency's step, every protocol (the MQTT command's rule).
-    if abs(hz) <= 1e6 and abs(round(hz * 100) - hz * 100) > 1e-6:
-        raise _Refused(
-            ua.StatusCodes.BadOutOfRange, Refusal.INVALID_VALUE, f"{hz} Hz is finer than 0.01 Hz"
-        )
-    return SetFrequency(hz)
+    # NaN, infinities, the range and the 0.01 Hz step are the gateway's to judge (after
+    # the grants, before the lease), as from every door (issue 42): BadOutOfRange.
+    return SetFrequency(float(values[0]))  # type: ignore[arg-type]
