@@ -38,7 +38,6 @@ Decisions:
 
 from __future__ import annotations
 
-import math
 import re
 from collections.abc import Awaitable, Callable
 from typing import Any, Final
@@ -235,7 +234,9 @@ class WriteRoutes:
     async def _frequency(self, request: web.Request) -> web.Response:
         def command(body: dict[str, Any]) -> WriteRequest:
             hz = body.get("hz")
-            if isinstance(hz, bool) or not isinstance(hz, int | float) or not math.isfinite(hz):
+            # NaN and infinities are numbers the gateway refuses (invalid_value, after the
+            # grants), as from every door (issue 42); Python's JSON reads NaN and Infinity.
+            if isinstance(hz, bool) or not isinstance(hz, int | float):
                 raise _BadBody("hz: expected a number of hertz")
             return SetFrequency(float(hz))
 
