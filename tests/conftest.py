@@ -17,6 +17,7 @@ import json
 import os
 import platform
 import resource
+import signal
 import subprocess
 import sys
 import time
@@ -64,6 +65,13 @@ def pytest_addoption(parser: pytest.Parser) -> None:
 def pytest_configure(config: pytest.Config) -> None:
     config.stash[_FIGURES] = {}
     config.stash[_WORKER_RSS] = []
+    # The tests that press Ctrl-C (SIGINT to a child: the CLI, the examples) need
+    # their children to hear it. A suite started in the background by a script
+    # (`make test &`, nohup) has SIGINT ignored, and an ignored signal stays ignored
+    # across exec: every such child then ran to its end and exited 0 (two clean
+    # runs failed 14 tests so). Python's own handler here resets it for them.
+    if signal.getsignal(signal.SIGINT) is signal.SIG_IGN:
+        signal.signal(signal.SIGINT, signal.default_int_handler)
 
 
 def pytest_collection_modifyitems(config: pytest.Config, items: list[pytest.Item]) -> None:
