@@ -65,6 +65,9 @@ class ScriptedPeer:
     bad: list[object] = field(default_factory=list)
     handles: list[asyncio.TimerHandle] = field(default_factory=list)
     closed: bool = False
+    #: Every frame sent, with how late its timer fired (seconds past when the
+    #: script said): a host pause shows here (see test_duplicates_and_late_replies).
+    sent: list[tuple[bytes, float]] = field(default_factory=list)
     #: Seconds a character takes on the line (0: instant). A frame never goes
     #: out sooner than the request and itself take to cross the line, as with a
     #: real drive: the bus refuses an answer faster than that (BusTiming.answer_floor).
@@ -85,10 +88,12 @@ class ScriptedPeer:
                 continue
             for delay, frame in self.respond(event):
                 wire = (len(event.frame) + len(frame)) * self.char_s
-                self.handles.append(loop.call_later(max(delay, wire), self._send, frame))
+                due = loop.time() + max(delay, wire)
+                self.handles.append(loop.call_at(due, self._send, frame, due))
 
-    def _send(self, frame: bytes) -> None:
+    def _send(self, frame: bytes, due: float) -> None:
         if not self.closed:
+            self.sent.append((frame, asyncio.get_running_loop().time() - due))
             self.send(frame)
 
     def close(self) -> None:

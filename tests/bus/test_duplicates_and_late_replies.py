@@ -5,6 +5,14 @@ line: replies duplicated in their own segment 1..5 ms after the original,
 or sent 2.2..5 time-outs late, in order. Every reply is tagged: parameter
 code *i* of node *n* reads as ``1000 * n + i``, so a reply taken for the
 wrong request shows as a wrong value. The figures are printed (``pytest -s``).
+
+The peer runs on the host's own loop, so a host pause (the process not
+scheduled while the other test worker holds the cores) delays the copy as
+well: one that reaches the host later than the floor after the next request
+was written is, on the wire, a plausible answer, and no host can tell it
+apart (docs/RELIABILITY.md). The duplicates run therefore excuses a wrong
+value only when the peer's own record shows that copy's timer fired at least
+the floor less the largest copy gap late; any other wrong value fails it.
 """
 
 from __future__ import annotations
@@ -13,6 +21,7 @@ import asyncio
 import contextlib
 import logging
 import random
+from collections import Counter
 from collections.abc import Callable
 from dataclasses import dataclass, field
 
@@ -22,6 +31,7 @@ from host_pauses import no_collector_pauses
 import sj300_async as sj
 from sj300_async import sj300 as sj3
 from sj300_async.bus._arbiter import Arbiter
+from sj300_async.sj300._commands import shortest_reply_frame_length
 from sj300_async.wire._line import INSTANT_LINE
 
 from .scripted import Frames, MakeRig, Responder, Rig, ack_value, answer_all, nak, reply
@@ -42,12 +52,25 @@ def _code(request: sj3.Request) -> str:
     return request.frame[5:9].decode()
 
 
+@dataclass(frozen=True)
+class WrongValue:
+    """A read that returned another request's answer."""
+
+    node: int
+    code: str
+    value: int
+
+    def __str__(self) -> str:
+        expected = tag(self.node, self.code)
+        return f"node {self.node:02d} {self.code}: {self.value} (expected {expected})"
+
+
 @dataclass
 class Tally:
     """What a run's callers saw."""
 
     calls: int = 0
-    wrong: list[str] = field(default_factory=list)
+    wrong: list[WrongValue] = field(default_factory=list)
     errors: dict[str, int] = field(default_factory=dict)
 
     def error(self, exc: sj.SJ300Error) -> None:
@@ -66,7 +89,7 @@ async def _read_many(rig: Rig, calls: int, rng: random.Random, tally: Tally) -> 
             tally.error(exc)
             continue
         if value != tag(node, code):
-            tally.wrong.append(f"node {node:02d} {code}: {value} (expected {tag(node, code)})")
+            tally.wrong.append(WrongValue(node, code, value))
 
 
 def _totals(rigs: list[Rig], name: str) -> int:
@@ -87,6 +110,8 @@ class DuplicatingLine:
     rng: random.Random
     share: float = 0.30
     duplicates: int = 0
+    #: The copy's delay after the original, seconds.
+    gap_s: tuple[float, float] = (0.001, 0.005)
 
     def __call__(self, request: sj3.Request) -> Frames:
         if request.command is sj3.Command.READ_PARAMETER:
@@ -98,7 +123,7 @@ class DuplicatingLine:
         frames = [(at, frame)]
         if self.rng.random() < self.share:
             self.duplicates += 1
-            frames.append((at + self.rng.uniform(0.001, 0.005), frame))
+            frames.append((at + self.rng.uniform(*self.gap_s), frame))
         return frames
 
 
@@ -138,13 +163,47 @@ async def test_duplicated_replies_give_no_wrong_value(scripted: MakeRig) -> None
     )
     for wrong in tally.wrong:
         print("  wrong:", wrong)
+    unexplained = _not_host_pauses(tally.wrong, rigs, sj.BusTiming(margin_s=0.05))
     assert tally.calls == 1500
-    assert tally.wrong == []
+    assert unexplained == []
     assert not tally.errors  # a copy costs nothing: the real answer follows in time
     assert early > 0
     # Every copy is accounted for: early for the next request, or between transactions
-    # (the last copy of a line may come after its bus has closed).
-    assert duplicates - len(rigs) <= early + unsolicited + stray <= duplicates
+    # (the last copy of a line may come after its bus has closed), or taken for an
+    # answer after a host pause (excused above).
+    counted = early + unsolicited + stray
+    assert duplicates - len(rigs) - len(tally.wrong) <= counted <= duplicates
+
+
+def _not_host_pauses(wrong: list[WrongValue], rigs: list[Rig], timing: sj.BusTiming) -> list[str]:
+    """The wrong values no host pause explains (see the module's docstring).
+
+    A copy leaves the peer at most ``gap_s[1]`` after the original, and the
+    host writes its next request no sooner than it read the original; so a
+    copy can reach the host at the floor or later only if its timer fired at
+    least ``floor - gap_s[1]`` late.
+    """
+    requests = [r for rig in rigs for peer in rig.peers for r in peer.requests]
+    floor = min(
+        timing.answer_floor(r, LINE, shortest_reply_frame_length(r.command)) for r in requests
+    )
+    late_enough = floor - DuplicatingLine.gap_s[1]
+    paused = Counter(
+        frame
+        for rig in rigs
+        for peer in rig.peers
+        for frame, lateness in peer.sent
+        if lateness >= late_enough
+    )
+    print(f"  copies fired {late_enough * 1e3:.1f} ms late or more: {sum(paused.values())}")
+    unexplained = []
+    for item in wrong:
+        frame = ack_value(item.node, item.value)
+        if paused[frame] > 0:
+            paused[frame] -= 1
+        else:
+            unexplained.append(str(item))
+    return unexplained
 
 
 async def test_without_the_floor_the_same_line_gives_wrong_values(scripted: MakeRig) -> None:
