@@ -11,7 +11,8 @@ async stack in :mod:`sj300_async.bus`, the transports in
 from __future__ import annotations
 
 from ._open import open_bus
-from ._poller import BusPollStats, DriveHealth, Poller, Sample
+from ._poll_results import BusPollStats, DriveHealth, Sample
+from ._poller import Poller
 from .bus import Bus, BusStats, BusTiming, ReconnectPolicy
 from .fr700 import Fr700Drive, Fr700Monitor, Fr700Status
 from .sj300 import (

@@ -184,7 +184,7 @@ SIMULATOR_IO: Final = (
     "simulator._tcp",
 )
 #: The root: the user's API (open_bus, the poller), ``python -m`` and the version.
-ROOT_MODULES: Final = ("", "__main__", "_open", "_poller", "version")
+ROOT_MODULES: Final = ("", "__main__", "_open", "_poller", "_poll_results", "version")
 #: Whole packages that are I/O by nature, not scanned module by module. The
 #: gateway is a process (servers, pollers, leases); its register map does no
 #: I/O itself but works on the drives' payload types, which come with the

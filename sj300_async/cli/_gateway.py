@@ -4,8 +4,8 @@
 grants, leases; docs/GATEWAY.md); the flags cover the simple case, one
 read-only line: ``--url URL --nodes LIST [--protocol NAME] --id NAME`` and
 one flag per registered northbound that has one (``--modbus HOST:PORT``,
-``--http HOST:PORT``, ``--mqtt mqtt://HOST:PORT``: each northbound
-declares its own, :class:`~sj300_async.gateway.Flag`). A bad configuration
+``--http HOST:PORT``, ``--mqtt mqtt://HOST:PORT``, ``--opcua HOST:PORT``:
+each northbound declares its own, :class:`~sj300_async.gateway.Flag`). A bad configuration
 starts nothing (exit 2, one line naming the file, line and key).
 
 stdout carries one line per northbound, as it announces itself (``modbus
@@ -55,10 +55,12 @@ def add_parser(subparsers: Any) -> None:
     """Add ``gateway`` to the ``sj300`` subcommands."""
     p = subparsers.add_parser(
         "gateway",
-        help="own the lines and serve the drives over Modbus TCP, MQTT and HTTP",
+        help="own the lines and serve the drives over Modbus TCP, OPC UA, MQTT and HTTP",
         description="Own one or more RS-485 lines, poll their drives and serve them: "
-        "Modbus TCP for SCADA (a unit id per drive), MQTT, /metrics and /healthz over HTTP. "
-        "Read-only unless the --config file grants writes. Needs the gateway extra.",
+        "Modbus TCP for SCADA (a unit id per drive), OPC UA (the opcua extra), MQTT with "
+        "Home Assistant discovery and Sparkplug B, and over HTTP the workbench, its API, "
+        "/metrics and /healthz. Read-only unless the --config file grants writes. "
+        "Needs the gateway extra.",
     )
     p.add_argument("--config", metavar="FILE", help="the gateway's TOML configuration")
     # Its own --url and --protocol: the bus options of other commands (--timeout,
