@@ -9,7 +9,6 @@ in its own directory.
 
 from __future__ import annotations
 
-import asyncio
 import contextlib
 import shutil
 import textwrap
@@ -19,7 +18,6 @@ from pathlib import Path
 
 import pytest
 from asyncua import Client, ua
-from asyncua.client.ua_client import UaClient, UaClientState
 from asyncua.crypto import cert_gen
 from cryptography import x509
 from cryptography.hazmat.primitives import serialization
@@ -31,11 +29,16 @@ from sj300_async.gateway.opcua._server import OpcuaServer
 from sj300_async.simulator import serve_tcp
 from sj300_async.simulator.sj300 import SimulatedBus
 
-#: The user every secure test logs in as, and the password.
-USER = "operator"
+# Defined beside the attacks, which run as a script where this module is not importable;
+# here for the tests that import them from conftest.
+from .opcua_attacker import CLIENT_URI as CLIENT_URI
+from .opcua_attacker import USER as USER
+from .opcua_attacker import from_address as from_address
+from .opcua_attacker import unsecured_channel as unsecured_channel
+
+#: The password of :data:`USER`, the user every secure test logs in as.
 PASSWORD = "s3cret-pass"
 NAMESPACE = "urn:sj300-async:gw1"
-CLIENT_URI = "urn:sj300-async:test-client"
 _HASH = hash_password(PASSWORD)
 
 
@@ -182,37 +185,3 @@ async def tcp_line() -> AsyncIterator[tuple[SimulatedBus, str]]:
     server = await serve_tcp(sim)
     async with server:
         yield sim, f"tcp://127.0.0.1:{server.port}"
-
-
-def from_address(uaclient: UaClient, source: str) -> None:
-    """Make *uaclient* connect from the loopback address *source* (asyncua binds none)."""
-
-    async def connect_socket(host: str, port: int) -> None:
-        loop = asyncio.get_running_loop()
-        await loop.create_connection(uaclient._make_protocol, host, port, local_addr=(source, 0))
-        uaclient._set_state(UaClientState.SOCKET_OPEN)
-
-    uaclient.connect_socket = connect_socket
-
-
-@contextlib.asynccontextmanager
-async def unsecured_channel(url: str, source: str | None = None) -> AsyncIterator[UaClient]:
-    """asyncua's raw client on a SecurityPolicy None channel with no certificate at all,
-    connecting from the loopback address *source* when given."""
-    client = UaClient(timeout=10)
-    if source is not None:
-        from_address(client, source)
-    await client.connect_socket("127.0.0.1", int(url.rsplit(":", 1)[1]))
-    try:
-        await client.send_hello(url)
-        params = ua.OpenSecureChannelParameters(
-            RequestType=ua.SecurityTokenRequestType.Issue,
-            SecurityMode=ua.MessageSecurityMode.None_,
-            ClientNonce=b"",
-            RequestedLifetime=3_600_000,
-        )
-        await client.open_secure_channel(params)
-        yield client
-    finally:
-        with contextlib.suppress(Exception):
-            client.disconnect_socket()
