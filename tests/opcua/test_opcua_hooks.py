@@ -361,7 +361,7 @@ async def test_close_stops_the_server_even_after_a_tick_failed(tmp_path: Path) -
         def boom(*args: Any) -> bool:
             raise ZeroDivisionError("injected")
 
-        server._tick_line = boom  # type: ignore[assignment]
+        server._counters.tick = boom  # type: ignore[method-assign,assignment]
         await wait_for(lambda: server.push_errors > errors, "a failed tick", timeout=5)
         await wait_for(lambda: server.push_errors > errors + 1, "the ticks go on", timeout=5)
     with socket.socket() as probe:

@@ -59,6 +59,7 @@ _CHILD = textwrap.dedent(
 
     from sj300_async.gateway import Gateway, parse_config
     from sj300_async.gateway.opcua import _speedups
+    from sj300_async.gateway.opcua._values import drive_datavalue
 
     assert not _speedups.ENABLED, _speedups.OFF_BECAUSE
     directory = Path(sys.argv[1])
@@ -103,7 +104,7 @@ _CHILD = textwrap.dedent(
                     await asyncio.sleep(0.05)
                 assert seen.values, "no notification"
                 (binding, *_) = server._drives["hall", 1].bindings
-                assert type(server._datavalue(binding, 0)) is ua.DataValue
+                assert type(drive_datavalue(binding, 0)) is ua.DataValue
                 assert server.session_count == 1
 
     asyncio.run(main())

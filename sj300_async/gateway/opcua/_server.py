@@ -37,12 +37,11 @@ import asyncio
 import contextlib
 import itertools
 import logging
-import math
 import socket
 import time
-from collections.abc import Iterable, Iterator
+from collections.abc import Iterable
 from pathlib import Path
-from typing import TYPE_CHECKING, Any, Final, cast
+from typing import TYPE_CHECKING, Any, Final
 
 from asyncua import Server, ua
 from asyncua.common.connection import TransportLimits
@@ -52,11 +51,9 @@ from cryptography import x509
 
 from .. import (
     GatewayDrive,
-    GatewayLine,
     GatewayStartError,
     GatewayView,
     ServedDrive,
-    busy_seconds,
 )
 from ._calls import Calls
 from ._certificate import ServerCertificate, load_or_generate
@@ -70,19 +67,19 @@ from ._hooks import (
     session_count,
 )
 from ._model import (
-    LINE_COUNTERS,
     Binding,
     DriveNodes,
     LineNodes,
     build_drive,
     build_line,
 )
-from ._quality import BAD_WAITING, GOOD, utc
+from ._quality import GOOD
 from ._security import ChannelRules, Principal, Users
 from ._space import SpaceBuilder
-from ._speedups import ServedDataValue, push_frozen
 from ._speedups import install as install_speedups
+from ._speedups import push_frozen
 from ._subscriptions import bound_subscriptions
+from ._values import LineCounters, drive_datavalue
 
 if TYPE_CHECKING:
     from prometheus_client.core import Metric
@@ -101,16 +98,6 @@ _POLICIES: Final = {
     "Basic256Sha256_SignAndEncrypt": ua.SecurityPolicyType.Basic256Sha256_SignAndEncrypt,
     "Basic256Sha256_Sign": ua.SecurityPolicyType.Basic256Sha256_Sign,
     "None": ua.SecurityPolicyType.NoSecurity,
-}
-_LINE_TYPES: Final = {name: vtype for name, vtype, _, _ in LINE_COUNTERS}
-_CONVERT: Final = {
-    ua.VariantType.Double: float,
-    ua.VariantType.Boolean: bool,
-    ua.VariantType.String: str,
-    ua.VariantType.UInt16: int,
-    ua.VariantType.UInt32: int,
-    ua.VariantType.UInt64: int,
-    ua.VariantType.Int32: int,
 }
 
 
@@ -171,17 +158,13 @@ class OpcuaServer:
         self._writable: dict[ua.NodeId, tuple[DriveNodes, str]] = {}
         #: Every drive variable: node -> (its drive, its name for the audit log).
         self._owners: dict[ua.NodeId, tuple[DriveNodes, str]] = {}
-        #: Every drive variable's binding, by node; those watched by a monitored item;
-        #: the monitored items on each line counter.
+        #: Every drive variable's binding, by node; those watched by a monitored item.
         self._bound: dict[ua.NodeId, tuple[DriveNodes, Binding]] = {}
         self._watched: dict[ua.NodeId, tuple[DriveNodes, Binding]] = {}
-        self._counters_watched: dict[ua.NodeId, int] = {}
         self._outbox: dict[ua.NodeId, ua.DataValue] = {}
         self._wake = asyncio.Event()
         self._tasks: list[asyncio.Task[None]] = []
-        self._marks: dict[str, tuple[float, float]] = {}
-        #: Each line's share of busy time over the last tick.
-        self._utilisation: dict[str, float] = {}
+        self._counters = LineCounters()
         self._loop: asyncio.AbstractEventLoop | None = None
 
     # -- the northbound --------------------------------------------------------------
@@ -280,7 +263,9 @@ class OpcuaServer:
         await space.commit(server.nodes.objects.session)
         for line_nodes in self._lines:
             for name, counter in line_nodes.counters.items():
-                server.set_attribute_value_callback(counter, self._line_reader(line_nodes, name))
+                server.set_attribute_value_callback(
+                    counter, self._counters.reader(line_nodes, name)
+                )
                 server.set_attribute_value_setter(counter, _keep)
         for nodes in self._drives.values():
             self._bind(server, nodes)
@@ -440,31 +425,12 @@ class OpcuaServer:
 
     # -- values ----------------------------------------------------------------------
 
-    def _datavalue(self, binding: Binding, status: int) -> ua.DataValue:
-        if status & 0x80000000:  # Bad: no value (Part 4, 7.7.1)
-            variant = ua.Variant(None, ua.VariantType.Null)
-        else:
-            convert = _CONVERT[binding.vtype]
-            if binding.array:  # a missing element: a null string, a NaN number
-                empty = math.nan if binding.vtype == ua.VariantType.Double else None
-                items = cast("list[object]", binding.value)
-                value: object = [empty if v is None else convert(v) for v in items]
-            else:
-                value = convert(binding.value)
-            variant = ua.Variant(value, binding.vtype)
-        return ServedDataValue(
-            Value=variant,
-            StatusCode=ua.StatusCode(status),
-            SourceTimestamp=utc(binding.wall),
-            ServerTimestamp=utc(time.time()),
-        )
-
     def _reader(self, binding: Binding, drive: GatewayDrive) -> Any:
         def read(node: ua.NodeId, attribute: ua.AttributeIds) -> ua.DataValue:
             assert self._loop is not None
             try:
                 binding.take(drive.served)  # the latest, watched or not
-                return self._datavalue(binding, binding.status(self._loop.time()))
+                return drive_datavalue(binding, binding.status(self._loop.time()))
             except Exception:  # a bug of ours: this node fails, not the client's whole read
                 self.push_errors += 1
                 _log.exception("opcua: cannot serve %s", node)
@@ -481,7 +447,7 @@ class OpcuaServer:
         if shown == binding.pushed:
             return False
         try:
-            self._outbox[binding.node] = self._datavalue(binding, status)
+            self._outbox[binding.node] = drive_datavalue(binding, status)
         except Exception:  # a bug of ours: logged; the value is tried again next time
             self.push_errors += 1
             _log.exception("opcua: cannot push %s", binding.node)
@@ -528,59 +494,9 @@ class OpcuaServer:
                 continue
             changed |= self._stage(binding, binding.status(now))
         for line in self._lines:
-            changed |= self._tick_line(line, now)
+            changed |= self._counters.tick(line, now, self._outbox)
         if changed:
             self._wake.set()
-
-    def _line_values(self, nodes: LineNodes) -> dict[str, object]:
-        """A line's counters now, its utilisation over the last tick."""
-        values = dict(_line_values(nodes.line))
-        mark = self._utilisation.get(nodes.line.config.name)
-        if mark is not None:
-            values["Utilisation"] = mark
-        return values
-
-    def _line_datavalue(self, name: str, value: object) -> ua.DataValue:
-        vtype = _LINE_TYPES[name]
-        stamp = utc(time.time())
-        if value is None:
-            return ServedDataValue(
-                Value=ua.Variant(None, ua.VariantType.Null),
-                StatusCode=ua.StatusCode(BAD_WAITING),
-                SourceTimestamp=stamp,
-                ServerTimestamp=stamp,
-            )
-        return ServedDataValue(
-            Value=ua.Variant(_CONVERT[vtype](value), vtype),
-            StatusCode=ua.StatusCode(GOOD),
-            SourceTimestamp=stamp,
-            ServerTimestamp=stamp,
-        )
-
-    def _line_reader(self, nodes: LineNodes, name: str) -> Any:
-        def read(node: ua.NodeId, attribute: ua.AttributeIds) -> ua.DataValue:
-            return self._line_datavalue(name, self._line_values(nodes).get(name))
-
-        return read
-
-    def _tick_line(self, nodes: LineNodes, now: float) -> bool:
-        name = nodes.line.config.name
-        busy = busy_seconds(nodes.line.bus)
-        mark = self._marks.get(name)
-        if mark is not None and now > mark[0]:
-            self._utilisation[name] = min(1.0, (busy - mark[1]) / (now - mark[0]))
-        self._marks[name] = (now, busy)
-        changed = False
-        for key, value in self._line_values(nodes).items():
-            if not self._counters_watched.get(nodes.counters[key]):  # reads ask the line
-                nodes.shown.pop(key, None)
-                continue
-            if value is None or nodes.shown.get(key) == value:
-                continue
-            nodes.shown[key] = value
-            self._outbox[nodes.counters[key]] = self._line_datavalue(key, value)
-            changed = True
-        return changed
 
     # -- writes and sessions ---------------------------------------------------------
 
@@ -624,7 +540,7 @@ class OpcuaServer:
         """A monitored item added to (+1) or deleted from (-1) *node*'s value."""
         bound = self._bound.get(node)
         if bound is None:  # a line counter, or a node not ours
-            self._counters_watched[node] = self._counters_watched.get(node, 0) + change
+            self._counters.watch(node, change)
             return
         nodes, binding = bound
         binding.watched += change
@@ -647,25 +563,3 @@ class OpcuaServer:
 
 def _keep(node: NodeData, attribute: ua.AttributeIds, value: ua.DataValue) -> None:
     """The value setter of a drive's variable: its binding holds the value, not asyncua."""
-
-
-def _line_values(line: GatewayLine) -> Iterator[tuple[str, object]]:
-    bus = line.bus
-    stats = bus.stats
-    transactions = stats.transactions
-    yield "Connected", bus.connected
-    yield "DrivesOnline", sum(1 for drive in line.drives.values() if drive.snapshot.available)
-    yield "Requests", transactions.requests
-    yield "Replies", transactions.replies
-    yield "Timeouts", transactions.timeouts
-    yield "Retries", transactions.retries
-    yield "Naks", sum(transactions.naks.values())
-    yield "TransportErrors", transactions.transport_errors
-    yield "ProtocolErrors", transactions.protocol_errors
-    yield "BadFrames", stats.bad_frames
-    yield "EarlyFrames", stats.early_frames
-    yield "StrayFrames", stats.stray_frames
-    yield "DiscardedBytes", stats.discarded_bytes
-    yield "Connects", stats.connects
-    yield "Disconnects", stats.disconnects
-    yield "LatencyMean", transactions.latency_mean_s

@@ -1,0 +1,149 @@
+"""The DataValues the OPC UA server serves: a drive variable's, and each line's counters.
+
+A drive variable's value and status come from its :class:`~._model.Binding`
+(the drive as served); this module only makes the DataValue. A line's
+counters are read from the line when a client reads them, and pushed by the
+server's tick only while a monitored item watches them; the utilisation is
+the line's share of busy time over the last tick.
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from collections.abc import Iterator
+from typing import Any, Final, cast
+
+from asyncua import ua
+
+from .. import GatewayLine, busy_seconds
+from ._model import LINE_COUNTERS, Binding, LineNodes
+from ._quality import BAD_WAITING, GOOD, utc
+from ._speedups import ServedDataValue
+
+__all__ = ["LineCounters", "drive_datavalue"]
+
+_LINE_TYPES: Final = {name: vtype for name, vtype, _, _ in LINE_COUNTERS}
+_CONVERT: Final = {
+    ua.VariantType.Double: float,
+    ua.VariantType.Boolean: bool,
+    ua.VariantType.String: str,
+    ua.VariantType.UInt16: int,
+    ua.VariantType.UInt32: int,
+    ua.VariantType.UInt64: int,
+    ua.VariantType.Int32: int,
+}
+
+
+def drive_datavalue(binding: Binding, status: int) -> ua.DataValue:
+    """*binding*'s value with *status*, stamped with its sample's wall time."""
+    if status & 0x80000000:  # Bad: no value (Part 4, 7.7.1)
+        variant = ua.Variant(None, ua.VariantType.Null)
+    else:
+        convert = _CONVERT[binding.vtype]
+        if binding.array:  # a missing element: a null string, a NaN number
+            empty = math.nan if binding.vtype == ua.VariantType.Double else None
+            items = cast("list[object]", binding.value)
+            value: object = [empty if v is None else convert(v) for v in items]
+        else:
+            value = convert(binding.value)
+        variant = ua.Variant(value, binding.vtype)
+    return ServedDataValue(
+        Value=variant,
+        StatusCode=ua.StatusCode(status),
+        SourceTimestamp=utc(binding.wall),
+        ServerTimestamp=utc(time.time()),
+    )
+
+
+class LineCounters:
+    """The lines' counters: read on demand, pushed by the tick while watched."""
+
+    def __init__(self) -> None:
+        #: Each line's (tick time, busy seconds) at the last tick.
+        self._marks: dict[str, tuple[float, float]] = {}
+        #: Each line's share of busy time over the last tick.
+        self._utilisation: dict[str, float] = {}
+        #: The monitored items on each counter's node.
+        self._watched: dict[ua.NodeId, int] = {}
+
+    def watch(self, node: ua.NodeId, change: int) -> None:
+        """A monitored item added to (+1) or deleted from (-1) a counter's node."""
+        self._watched[node] = self._watched.get(node, 0) + change
+
+    def reader(self, nodes: LineNodes, name: str) -> Any:
+        """The read callback of the line's counter *name*."""
+
+        def read(node: ua.NodeId, attribute: ua.AttributeIds) -> ua.DataValue:
+            return _datavalue(name, self._values(nodes).get(name))
+
+        return read
+
+    def tick(self, nodes: LineNodes, now: float, outbox: dict[ua.NodeId, ua.DataValue]) -> bool:
+        """The utilisation since the last tick; the watched counters that changed, into
+        *outbox*. True when one did."""
+        name = nodes.line.config.name
+        busy = busy_seconds(nodes.line.bus)
+        mark = self._marks.get(name)
+        if mark is not None and now > mark[0]:
+            self._utilisation[name] = min(1.0, (busy - mark[1]) / (now - mark[0]))
+        self._marks[name] = (now, busy)
+        changed = False
+        for key, value in self._values(nodes).items():
+            if not self._watched.get(nodes.counters[key]):  # reads ask the line
+                nodes.shown.pop(key, None)
+                continue
+            if value is None or nodes.shown.get(key) == value:
+                continue
+            nodes.shown[key] = value
+            outbox[nodes.counters[key]] = _datavalue(key, value)
+            changed = True
+        return changed
+
+    def _values(self, nodes: LineNodes) -> dict[str, object]:
+        """A line's counters now, its utilisation over the last tick."""
+        values = dict(_line_values(nodes.line))
+        mark = self._utilisation.get(nodes.line.config.name)
+        if mark is not None:
+            values["Utilisation"] = mark
+        return values
+
+
+def _datavalue(name: str, value: object) -> ua.DataValue:
+    vtype = _LINE_TYPES[name]
+    stamp = utc(time.time())
+    if value is None:
+        return ServedDataValue(
+            Value=ua.Variant(None, ua.VariantType.Null),
+            StatusCode=ua.StatusCode(BAD_WAITING),
+            SourceTimestamp=stamp,
+            ServerTimestamp=stamp,
+        )
+    return ServedDataValue(
+        Value=ua.Variant(_CONVERT[vtype](value), vtype),
+        StatusCode=ua.StatusCode(GOOD),
+        SourceTimestamp=stamp,
+        ServerTimestamp=stamp,
+    )
+
+
+def _line_values(line: GatewayLine) -> Iterator[tuple[str, object]]:
+    bus = line.bus
+    stats = bus.stats
+    transactions = stats.transactions
+    yield "Connected", bus.connected
+    yield "DrivesOnline", sum(1 for drive in line.drives.values() if drive.snapshot.available)
+    yield "Requests", transactions.requests
+    yield "Replies", transactions.replies
+    yield "Timeouts", transactions.timeouts
+    yield "Retries", transactions.retries
+    yield "Naks", sum(transactions.naks.values())
+    yield "TransportErrors", transactions.transport_errors
+    yield "ProtocolErrors", transactions.protocol_errors
+    yield "BadFrames", stats.bad_frames
+    yield "EarlyFrames", stats.early_frames
+    yield "StrayFrames", stats.stray_frames
+    yield "DiscardedBytes", stats.discarded_bytes
+    yield "Connects", stats.connects
+    yield "Disconnects", stats.disconnects
+    yield "LatencyMean", transactions.latency_mean_s
