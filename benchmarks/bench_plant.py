@@ -580,7 +580,7 @@ class _Watch:
         await follow(fleet, on_state, on_link=on_link)
 
     async def host(self, connected: asyncio.Event) -> None:
-        from sj300_async.gateway.mqtt.client import Client
+        from sj300_async.gateway.mqttlink.client import Client
         from sj300_async.gateway.sparkplug import decode_payload
 
         async with Client("127.0.0.1", self.broker, identifier="bench-plant-host") as client:

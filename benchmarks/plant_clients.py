@@ -232,7 +232,7 @@ async def _guarded(
 
 
 def _mqtt_client(port: int, name: str) -> Any:
-    from sj300_async.gateway.mqtt.client import Client
+    from sj300_async.gateway.mqttlink.client import Client
 
     # Read only, one reader each: the broker's queue limit is off (bench_mqtt._mosquitto).
     return Client("127.0.0.1", port, identifier=f"plant-clients-{os.getpid()}-{name}")

@@ -70,6 +70,7 @@ from ._northbound import (
     register_northbound,
     unregister_northbound,
 )
+from ._parameter_values import parameter_request
 from ._passwords import (
     PasswordChecks,
     User,
@@ -82,6 +83,7 @@ from ._passwords import (
 from ._served import DIRECTION_WORDS, Quality, ServedDrive, ServedValues
 from ._toml import COMMAND_LINE, ConfigContext, ConfigTable, GatewayConfigError, unknown_choice
 from ._writes import (
+    DROPPED_BY_STOP,
     Heartbeat,
     ParameterWrite,
     Refusal,
@@ -96,6 +98,7 @@ __all__ = [
     "DEFAULT_LEASE_S",
     "DEFAULT_STALE_AFTER_S",
     "DIRECTION_WORDS",
+    "DROPPED_BY_STOP",
     "LAPSE_ACTIONS",
     "LIMIT_KEYS",
     "POLL_READS",
@@ -158,6 +161,7 @@ __all__ = [
     "named_entries",
     "northbound_extra",
     "northbound_names",
+    "parameter_request",
     "parse_config",
     "parse_endpoint",
     "parse_password_hash",

@@ -71,11 +71,14 @@ from ._model import (
 )
 from ._northbound import (
     RESERVED_SECTIONS,
+    NorthboundSpec,
     SectionContext,
     UnitScope,
     get_northbound,
     northbound_names,
+    parse_borrowed,
     section_aliases,
+    section_borrows,
     unit_scopes,
 )
 from ._toml import (
@@ -224,18 +227,34 @@ def _build(ctx: ConfigContext, data: object, *, base_dir: Path) -> GatewayConfig
     listening: dict[Endpoint, str] = {}
     for section in sections:
         given = [name for name in (section, *aliases[section]) if root.has(name)]
-        if not given or section in RESERVED_SECTIONS:
+        if section in RESERVED_SECTIONS:
             continue
+        spec = get_northbound(section)
+        borrowed = _borrowed(ctx, root, spec, context)
+        if given and borrowed is not None:
+            raise root.error(
+                given[0],
+                f"[{given[0]}] and the [{section_borrows(spec)}] keys that configure it too "
+                f"are one northbound: keep [{given[0]}]",
+            )
         if len(given) > 1:
             raise root.error(given[1], f"[{given[0]}] and [{given[1]}] are one section: keep one")
-        spec = get_northbound(section)
-        table = ConfigTable(ctx, given[0], root.data[given[0]], spec.keys)
-        northbounds[section] = config = spec.parse(table, context)
+        if given:
+            table = ConfigTable(ctx, given[0], root.data[given[0]], spec.keys)
+            config = spec.parse(table, context)
+        else:
+            config = borrowed
+        # None: the section is given for another northbound only (``[mqtt]`` that holds
+        # only Sparkplug's deprecated keys): nothing of this one runs.
+        if config is None:
+            continue
+        northbounds[section] = config
         for key, endpoint in spec.endpoints(config):
             for other, where in listening.items():
                 if _same_socket(endpoint, other):
                     # A key may be a path within the section (listeners[0].listen).
-                    raise ctx.error(f"{given[0]}.{key}", f"{where} already listens on {other}")
+                    named = given[0] if given else section
+                    raise ctx.error(f"{named}.{key}", f"{where} already listens on {other}")
             listening[endpoint] = ctx.display(f"{section}.{key}")
     # Unit ids matter only to a northbound that addresses drives by them (Modbus), within
     # each of its scopes (a listener): a plant without one is not held to them.
@@ -253,6 +272,18 @@ def _build(ctx: ConfigContext, data: object, *, base_dir: Path) -> GatewayConfig
         source=ctx.source,
         gateway_id=gateway_id,
     )
+
+
+def _borrowed(
+    ctx: ConfigContext, root: ConfigTable, spec: NorthboundSpec, context: SectionContext
+) -> object | None:
+    """*spec*'s configuration from another section's keys (its ``borrows``), or None."""
+    section = section_borrows(spec)
+    if section is None or not root.has(section):
+        return None
+    data = root.data[section]
+    keys = tuple(data) if isinstance(data, dict) else ()  # the owner checks its own keys
+    return parse_borrowed(spec, ConfigTable(ctx, section, data, keys), context)
 
 
 def _audit_log(gateway: ConfigTable, base_dir: Path) -> Path | None:

@@ -60,8 +60,10 @@ __all__ = [
     "get_northbound",
     "northbound_extra",
     "northbound_names",
+    "parse_borrowed",
     "register_northbound",
     "section_aliases",
+    "section_borrows",
     "unit_scopes",
     "unregister_northbound",
 ]
@@ -206,6 +208,12 @@ class NorthboundSpec(Protocol):
     # Optional: ``aliases``, a sequence of older section names the spec still takes
     # (the HTTP northbound's ``[metrics]``); read through :func:`section_aliases`, so a
     # spec written before it existed needs no change.
+    # Optional: ``borrows``, another northbound's section some of whose keys configure
+    # this one too (Sparkplug's deprecated ``[mqtt] sparkplug = true``), with
+    # ``parse_borrowed(table, context) -> object | None``: given that section's table
+    # (its keys are its owner's to check), this spec's configuration, or None when the
+    # keys configure nothing of it. Its own section and the borrowed keys at once are an
+    # error. Read through :func:`section_borrows`; the owner need not know the borrower.
 
     def endpoints(self, config: object) -> Sequence[tuple[str, Endpoint]]:
         """The sockets it listens on, with the key that names each (two may not collide)."""
@@ -240,11 +248,24 @@ def section_aliases(spec: NorthboundSpec) -> tuple[str, ...]:
     return tuple(getattr(spec, "aliases", ()))
 
 
+def section_borrows(spec: NorthboundSpec) -> str | None:
+    """The other section whose keys may configure *spec* too (optional ``borrows``)."""
+    borrows = getattr(spec, "borrows", None)
+    return None if borrows is None else str(borrows)
+
+
+def parse_borrowed(spec: NorthboundSpec, table: ConfigTable, context: SectionContext) -> object:
+    """*spec*'s configuration from its ``borrows`` section's *table*, None: nothing of it."""
+    parse = getattr(spec, "parse_borrowed", None)
+    return None if parse is None else parse(table, context)
+
+
 #: The library's northbounds, in the order they start (and announce themselves).
 _BUILT_IN: Final = {
     "modbus": "sj300_async.gateway.modbus:NORTHBOUND",
     "http": "sj300_async.gateway.http:NORTHBOUND",
     "mqtt": "sj300_async.gateway.mqtt:NORTHBOUND",
+    "sparkplug": "sj300_async.gateway.sparkplug:NORTHBOUND",
     "opcua": "sj300_async.gateway.opcua:NORTHBOUND",
 }
 _NAME: Final = re.compile(r"[a-z][a-z0-9_]*\Z")

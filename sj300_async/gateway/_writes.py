@@ -15,10 +15,12 @@ from __future__ import annotations
 
 import enum
 from dataclasses import dataclass
+from typing import Final
 
 from ..wire import Direction
 
 __all__ = [
+    "DROPPED_BY_STOP",
     "Heartbeat",
     "ParameterWrite",
     "Refusal",
@@ -104,3 +106,8 @@ class WriteResult:
 
 #: The one result of a write that was done.
 DONE = WriteResult()
+
+#: A command still waiting for its drive when a stop for it came: never carried out
+#: (a stop waits behind no command). Every door that queues commands per drive
+#: (the MQTT JSON topics, Sparkplug) answers the dropped one with it.
+DROPPED_BY_STOP: Final = WriteResult(Refusal.BUSY, "dropped: a stop came after it")

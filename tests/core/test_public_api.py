@@ -128,6 +128,8 @@ GATEWAY_NAMES = (
     "KeyedBudget", "PasswordChecks", "Slot",
     # a drive as served, decided once for every northbound (issue 42)
     "DIRECTION_WORDS", "Quality", "ServedDrive", "ServedValues",
+    # the doors' shared write checks, the core's since Sparkplug rides no other door (issue 42)
+    "DROPPED_BY_STOP", "parameter_request",
     # a northbound that cannot start (its port in use...)
     "GatewayStartError",
     "LAPSE_ACTIONS", "POLL_READS", "LapseAction", "Lease", "LineConfig", "LineView", "Northbound",
@@ -162,25 +164,26 @@ GATEWAY_MODBUS_NAMES = (
 GATEWAY_MQTT_NAMES = (
     "AVAILABLE", "BridgeStats", "BrokerUnreachable", "COMMANDS", "COMMAND_DIRECTIONS",
     "DEFAULT_PREFIX", "DISCOVERY_PREFIX", "FLEET_SCHEMES", "Fleet", "FleetUrl", "Malformed",
-    "MqttConfig", "NORTHBOUND", "SessionStats", "StateMessage", "SubscriptionRefused",
-    "Subscriptions", "Topics",
-    "UNAVAILABLE", "backoff", "cancel_and_wait", "discovery", "error_text", "follow", "reader",
-    "refused_subscriptions",
-    "is_fleet_url", "keep_connected", "mqtt_families", "node_id", "parse_command",
+    "MqttConfig", "NORTHBOUND", "StateMessage", "SubscriptionRefused", "Topics",
+    "UNAVAILABLE", "discovery", "error_text", "follow",
+    "is_fleet_url", "mqtt_families", "node_id", "parse_command",
     "parse_fleet_url", "parse_state_topic", "state_message",
-    # Sparkplug B's settings, and the command checks it shares with the JSON topics (issue 30)
-    "SparkplugConfig", "frequency_request", "parameter_request",
-    # a stop waits behind no command (issue 30's review)
-    "DROPPED_BY_STOP",
-    # a connection for each MQTT client (issue 30; drive_state went with issue 42:
-    # state_message takes the drive as served)
-    "new_client",
+    # Sparkplug B's deprecated keys, which [mqtt] takes for one release (issue 42)
+    "SPARKPLUG_ALIAS_KEYS",
+)  # fmt: skip
+#: The MQTT transport both MQTT northbounds ride (issue 42): it knows neither.
+GATEWAY_MQTTLINK_NAMES = (
+    "BACKOFF_FIRST_S", "BROKER_KEYS", "REFUSED", "BrokerConfig", "BrokerUnreachable",
+    "SessionStats", "Subscriptions", "backoff", "broker_fields", "cancel_and_wait",
+    "keep_connected", "new_client", "parse_broker", "reader", "refused_subscriptions",
 )  # fmt: skip
 GATEWAY_SPARKPLUG_NAMES = (
     "BAD_INPUTS", "CLIENT", "DATA_TYPES", "DIRECTION_WORDS", "LAST_REFUSAL", "NAMESPACE",
     "NODE_METRICS", "Decoded", "Device", "DeviceMetric", "EdgeNode", "MalformedPayload",
     "MetricDef", "Property", "ReceivedMetric", "SparkplugStats", "decode_payload", "device_id",
     "encode_payload",
+    # its own section (issue 42): the spec, its keys and settings; the flags a metric reads
+    "NORTHBOUND", "SPARKPLUG_KEYS", "SparkplugConfig", "DeviceFlags",
 )  # fmt: skip
 GATEWAY_HTTP_NAMES = (
     "DEFAULT_LIMITS", "DEFAULT_TREND_S", "HttpConfig", "NORTHBOUND",
@@ -208,6 +211,7 @@ PINNED = {
     "sj300_async.gateway.modbus": GATEWAY_MODBUS_NAMES,
     "sj300_async.gateway.mqtt": GATEWAY_MQTT_NAMES,
     "sj300_async.gateway.sparkplug": GATEWAY_SPARKPLUG_NAMES,
+    "sj300_async.gateway.mqttlink": GATEWAY_MQTTLINK_NAMES,
     "sj300_async.gateway.http": GATEWAY_HTTP_NAMES,
     "sj300_async.gateway.opcua": GATEWAY_OPCUA_NAMES,
 }

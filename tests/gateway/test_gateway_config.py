@@ -868,7 +868,7 @@ def test_a_key_inside_an_inline_table_points_at_its_first_line() -> None:
 
     assert refusal(text) == (
         "gateway.toml:1: x: unknown key 'x' "
-        "(use gateway, modbus, http, metrics, mqtt, opcua, lines)"
+        "(use gateway, modbus, http, metrics, mqtt, sparkplug, opcua, lines)"
     )
     assert refusal(text[6:]) == (
         "gateway.toml:1: lines[0].nodes: bad node list '40': nodes are 1..32, got '40'"

@@ -66,7 +66,6 @@ from sj300_async.gateway.http._write_api import REFUSAL_STATUS as HTTP_STATUS
 from sj300_async.gateway.modbus._registers import REFUSAL_CODES
 from sj300_async.gateway.mqtt._bridge import MqttBridge
 from sj300_async.gateway.mqtt._intake import Budget, CommandIntake
-from sj300_async.gateway.mqtt._pair import Clients
 from sj300_async.gateway.opcua._quality import REFUSAL_STATUS as OPCUA_STATUS
 from sj300_async.simulator.sj300 import SimulatedBus
 from sj300_async.wire import Direction
@@ -289,7 +288,8 @@ def _toml(directory: Path, broker: Broker) -> str:
         [mqtt]
         url = "{broker.url}"
         keepalive_s = 30
-        sparkplug = true
+        [sparkplug]
+        url = "{broker.url}"
         group_id = "plant"
         [http]
         listen = "127.0.0.1:0"
@@ -339,9 +339,8 @@ async def _plant(directory: Path) -> AsyncIterator[Plant]:
     ):
         sim = gateway.lines[0].bus.simulator
         assert isinstance(sim, SimulatedBus)
-        mqtt = gateway.northbounds["mqtt"]
-        assert isinstance(mqtt, Clients)
-        bridge = next(p for p in mqtt.parts if isinstance(p, MqttBridge))
+        bridge = gateway.northbounds["mqtt"]
+        assert isinstance(bridge, MqttBridge)
         # The table sends more commands a second to a drive than a person would: lift the
         # intake's budget (it guards a flood, which this is not).
         endless = Budget(burst=10**6, per_s=10**6, all_burst=10**6, all_per_s=10**6)

@@ -20,7 +20,6 @@ from waiting import wait_for
 from sj300_async.gateway import Gateway
 from sj300_async.gateway.mqtt import Topics
 from sj300_async.gateway.mqtt._bridge import MqttBridge
-from sj300_async.gateway.mqtt._pair import Clients
 from sj300_async.gateway.sparkplug import EdgeNode
 
 from .conftest import SimLine, gateway_toml, metrics_port, running_gateway
@@ -42,8 +41,6 @@ def toml(url: str, broker: MisbehavingBroker, *, keepalive_s: int = 30, mqtt: st
 
 def bridge(gateway: Gateway) -> MqttBridge:
     northbound = gateway.northbounds["mqtt"]
-    if isinstance(northbound, Clients):
-        northbound = northbound.parts[0]
     assert isinstance(northbound, MqttBridge)
     return northbound
 
@@ -96,7 +93,7 @@ async def test_a_broker_that_never_acknowledges_loses_the_connection_within_the_
 async def test_a_refused_subscription_is_said_counted_and_on_healthz_until_granted(
     sim_line: SimLine, caplog: pytest.LogCaptureFixture
 ) -> None:
-    """The JSON bridge's commands and the Sparkplug node's DCMD, both of one northbound."""
+    """The JSON bridge's commands and the Sparkplug node's DCMD, two northbounds on one broker."""
     caplog.set_level(logging.DEBUG, logger="sj300_async.gateway")
     refused = {TOPICS.command_filter, DCMD}
     spb = 'sparkplug = true\ngroup_id = "plant"\n'
@@ -105,9 +102,7 @@ async def test_a_refused_subscription_is_said_counted_and_on_healthz_until_grant
         running_gateway(toml(sim_line.url, broker, mqtt=spb)) as gateway,
     ):
         mqtt = bridge(gateway)
-        northbound = gateway.northbounds["mqtt"]
-        assert isinstance(northbound, Clients)
-        node = northbound.parts[1]
+        node = gateway.northbounds["sparkplug"]
         assert isinstance(node, EdgeNode)
         await wait_for(lambda: mqtt.connected and node.born, "both connected")
         mqtt_problem = (

@@ -14,7 +14,7 @@ import sys
 
 import pytest
 
-from sj300_async.gateway.mqtt import cancel_and_wait
+from sj300_async.gateway.mqttlink import cancel_and_wait
 
 
 async def _loses_one_cancellation(ended: list[str]) -> None:

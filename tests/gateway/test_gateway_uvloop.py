@@ -20,7 +20,7 @@ import uvloop
 from mqtt_broker import running_broker
 
 from sj300_async.gateway.mqtt import StateMessage, Topics
-from sj300_async.gateway.mqtt.client import Client
+from sj300_async.gateway.mqttlink.client import Client
 
 from .conftest import metrics_port, modbus_port, polled, running_gateway
 

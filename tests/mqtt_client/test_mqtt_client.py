@@ -24,7 +24,7 @@ from mqtt_misbehaving import misbehaving_broker
 from transports.bridges import wait_for_port
 from waiting import wait_for
 
-from sj300_async.gateway.mqtt.client import (
+from sj300_async.gateway.mqttlink.client import (
     Client,
     Message,
     MqttError,
@@ -32,8 +32,8 @@ from sj300_async.gateway.mqtt.client import (
     SubscribeUnacknowledged,
     Will,
 )
-from sj300_async.gateway.mqtt.client._acks import PubackWatch
-from sj300_async.gateway.mqtt.client._packets import PacketParser, encode_publish
+from sj300_async.gateway.mqttlink.client._acks import PubackWatch
+from sj300_async.gateway.mqttlink.client._packets import PacketParser, encode_publish
 
 
 @pytest.fixture
@@ -338,7 +338,7 @@ async def test_a_broker_breaking_the_protocol_ends_the_connection() -> None:
 async def test_an_oversized_payload_is_skipped_and_delivered_with_its_length(
     broker: Broker, caplog: pytest.LogCaptureFixture
 ) -> None:
-    caplog.set_level("DEBUG", "sj300_async.gateway.mqtt.client")
+    caplog.set_level("DEBUG", "sj300_async.gateway.mqttlink.client")
     async with Client("127.0.0.1", broker.port, identifier="c", max_publish_bytes=1000) as c:
         await c.subscribe("big/#", qos=1)
         await broker.publish("big/one", b"y" * 5000)

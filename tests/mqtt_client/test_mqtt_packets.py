@@ -10,8 +10,8 @@ import pytest
 from hypothesis import given
 from hypothesis import strategies as st
 
-from sj300_async.gateway.mqtt.client import MalformedPacket, PacketParser
-from sj300_async.gateway.mqtt.client._packets import (
+from sj300_async.gateway.mqttlink.client import MalformedPacket, PacketParser
+from sj300_async.gateway.mqttlink.client._packets import (
     ConnAck,
     Oversized,
     PingResp,

@@ -78,10 +78,8 @@ def spb_toml(
             [gateway]
             id = "gw1"
             stale_after_s = 2
-            [mqtt]
+            [sparkplug]
             url = "{broker.url}"
-            state_topics = false
-            sparkplug = true
             group_id = "plant"
             {mqtt_extra}
             [[lines]]
@@ -103,7 +101,7 @@ async def running_gateway(text: str) -> AsyncIterator[Gateway]:
 
 
 def edge(gateway: Gateway) -> EdgeNode:
-    node = gateway.northbounds["mqtt"]
+    node = gateway.northbounds["sparkplug"]
     assert isinstance(node, EdgeNode)
     return node
 

@@ -7,6 +7,8 @@ and each command form a host sends must decode here to the value it meant.
 
 from __future__ import annotations
 
+import logging
+
 import pytest
 
 from sj300_async.gateway import GatewayConfigError, parse_config
@@ -16,6 +18,7 @@ from sj300_async.gateway.sparkplug import (
     MalformedPayload,
     MetricDef,
     Property,
+    SparkplugConfig,
     decode_payload,
     encode_payload,
 )
@@ -87,19 +90,80 @@ def test_bytes_that_are_no_payload_are_refused(data: bytes) -> None:
         decode_payload(data)
 
 
-def _mqtt(section: str) -> MqttConfig:
-    text = f'[mqtt]\nurl = "mqtt://127.0.0.1"\n{section}\n[[lines]]\nurl = "sim://"\nnodes = "1"\n'
-    config = parse_config(text, "gw.toml").northbounds["mqtt"]
-    assert isinstance(config, MqttConfig)
+def _northbounds(text: str) -> dict[str, object]:
+    head = '[gateway]\nid = "gw1"\n'
+    tail = '[[lines]]\nurl = "sim://"\nnodes = "1"\n'
+    return dict(parse_config(head + text + tail, "gw.toml").northbounds)
+
+
+def _alias(section: str) -> SparkplugConfig | None:
+    """Sparkplug B as ``[mqtt] sparkplug = true`` configures it (deprecated), or None."""
+    config = _northbounds(f'[mqtt]\nurl = "mqtt://127.0.0.1"\n{section}\n').get("sparkplug")
+    assert config is None or isinstance(config, SparkplugConfig)
     return config
 
 
-def test_the_section_takes_sparkplug_with_its_group_and_host() -> None:
-    config = _mqtt('sparkplug = true\ngroup_id = "Plant 1"\nprimary_host_id = "scada"')
-    assert config.sparkplug is not None
-    assert (config.sparkplug.group_id, config.sparkplug.primary_host_id) == ("Plant 1", "scada")
-    assert config.state_topics
-    assert _mqtt("").sparkplug is None
+def _section(section: str) -> SparkplugConfig:
+    config = _northbounds(f'[sparkplug]\nurl = "mqtt://127.0.0.1"\n{section}\n')["sparkplug"]
+    assert isinstance(config, SparkplugConfig)
+    return config
+
+
+def test_the_section_takes_the_broker_the_group_and_the_host() -> None:
+    config = _section('group_id = "Plant 1"\nprimary_host_id = "scada"\nkeepalive_s = 5')
+    assert config == SparkplugConfig(
+        host="127.0.0.1",
+        port=1883,
+        client_id="sj300-gw1-spb",
+        keepalive_s=5,
+        group_id="Plant 1",
+        primary_host_id="scada",
+    )
+    assert _section('group_id = "g"\nclient_id = "edge"').client_id == "edge"
+
+
+def test_the_deprecated_alias_configures_the_same_northbound_with_one_warning(
+    caplog: pytest.LogCaptureFixture,
+) -> None:
+    caplog.set_level(logging.WARNING, "sj300_async.gateway.sparkplug")
+    config = _alias('sparkplug = true\ngroup_id = "Plant 1"\nprimary_host_id = "scada"')
+    assert config == SparkplugConfig(
+        host="127.0.0.1",
+        port=1883,
+        client_id="sj300-gw1-spb",  # [mqtt]'s client id, with -spb: two connections
+        group_id="Plant 1",
+        primary_host_id="scada",
+    )
+    warnings = [r.getMessage() for r in caplog.records if r.levelno >= logging.WARNING]
+    assert len(warnings) == 1
+    assert "[mqtt] sparkplug = true is deprecated" in warnings[0]
+    assert "[sparkplug]" in warnings[0]
+    assert _alias("") is None
+    given = _alias('client_id = "gw-7"\nsparkplug = true\ngroup_id = "g"')
+    assert given is not None
+    assert given.client_id == "gw-7-spb"
+
+
+def test_the_alias_keeps_state_topics_false_meaning_sparkplug_only() -> None:
+    both = _northbounds('[mqtt]\nurl = "mqtt://b"\nsparkplug = true\ngroup_id = "g"\n')
+    assert isinstance(both["mqtt"], MqttConfig)
+    assert isinstance(both["sparkplug"], SparkplugConfig)
+    only = _northbounds(
+        '[mqtt]\nurl = "mqtt://b"\nstate_topics = false\nsparkplug = true\ngroup_id = "g"\n'
+    )
+    assert "mqtt" not in only
+    assert isinstance(only["sparkplug"], SparkplugConfig)
+
+
+def test_the_section_and_the_alias_at_once_are_an_error() -> None:
+    with pytest.raises(GatewayConfigError) as raised:
+        _northbounds(
+            '[mqtt]\nurl = "mqtt://b"\nsparkplug = true\ngroup_id = "g"\n'
+            '[sparkplug]\nurl = "mqtt://b"\ngroup_id = "g"\n'
+        )
+    assert "[sparkplug] and the [mqtt] keys that configure it too are one northbound" in str(
+        raised.value
+    )
 
 
 @pytest.mark.parametrize(
@@ -113,12 +177,29 @@ def test_the_section_takes_sparkplug_with_its_group_and_host() -> None:
          "mqtt.primary_host_id: expected a Sparkplug id"),
         ('group_id = "g"', "mqtt.group_id: needs sparkplug = true"),
         ('primary_host_id = "h"', "mqtt.primary_host_id: needs sparkplug = true"),
-        ("state_topics = false", "mqtt.state_topics: with state_topics = false, set sparkplug"),
+        ("state_topics = false", "mqtt.state_topics: with state_topics = false, [mqtt] publishes"),
         ('sparkplug = "yes"', "mqtt.sparkplug: expected"),
     ],
 )  # fmt: skip
 def test_a_bad_sparkplug_setting_is_one_line_naming_its_key(section: str, error: str) -> None:
     with pytest.raises(GatewayConfigError) as raised:
-        _mqtt(section)
+        _alias(section)
+    assert error in str(raised.value)
+    assert "\n" not in str(raised.value)
+
+
+@pytest.mark.parametrize(
+    ("section", "error"),
+    [
+        ("", "sparkplug.group_id: missing required key 'group_id'"),
+        ('group_id = "a/b"', "sparkplug.group_id: expected a Sparkplug id"),
+        ('group_id = "g"\nsparkplug = true', "sparkplug.sparkplug: unknown key"),
+        ('group_id = "g"\ntls_key = "/etc/hostname"', "sparkplug.tls_key: tls_key needs tls_cert"),
+        ('group_id = "g"\ntls_cert = "nowhere.pem"', "sparkplug.tls_cert: no such file"),
+    ],
+)
+def test_a_bad_sparkplug_section_is_one_line_naming_its_key(section: str, error: str) -> None:
+    with pytest.raises(GatewayConfigError) as raised:
+        _section(section)
     assert error in str(raised.value)
     assert "\n" not in str(raised.value)

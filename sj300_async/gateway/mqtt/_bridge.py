@@ -54,7 +54,7 @@ Decisions:
   (counted in ``BridgeStats.replaced``), so a broker that is down or slow
   costs memory bounded by the number of drives, and the state that reaches
   it is always the latest. The bridge's task drains the outbox.
-- **Reconnecting** (:mod:`._session`): back off 0.5 s doubling to 30 s,
+- **Reconnecting** (:mod:`sj300_async.gateway.mqttlink`): back off 0.5 s doubling to 30 s,
   then republish availability, discovery and every drive's latest state
   (the broker may have restarted without its retained messages). The
   Modbus side does not depend on the broker.
@@ -67,12 +67,12 @@ Decisions:
   acknowledgements (at most ``MAX_IN_FLIGHT`` at once) before the next: a
   slow broker makes the outbox coalesce, never grow. A broker that never
   acknowledges loses the connection after ``keepalive_s`` (:mod:`.client`,
-  counted by :mod:`._session`): its will then says ``offline``.
+  counted by the transport, :mod:`sj300_async.gateway.mqttlink`): its will then says ``offline``.
 - **Home Assistant's births coalesce** (:mod:`._births`): anyone may publish
   one; a storm of them costs one re-discovery per 10 s, never one each.
 - A subscription the broker refuses (an ACL: the commands, Home
   Assistant's status) is said, counted and one of :meth:`MqttBridge.problems`
-  (/healthz) until granted (:mod:`._subscriptions`); the bridge goes on
+  (/healthz) until granted (the transport's ``Subscriptions``); the bridge goes on
   publishing.
 
 Nothing is dropped silently: every replaced, lost or discarded message and
@@ -92,18 +92,25 @@ from collections.abc import Callable, Iterator
 from dataclasses import dataclass
 from typing import TYPE_CHECKING, Final
 
-from .. import GatewayDrive, GatewayView, Refusal, ServedDrive, WriteResult, excerpt
+from .. import (
+    DROPPED_BY_STOP,
+    GatewayDrive,
+    GatewayView,
+    Refusal,
+    ServedDrive,
+    WriteResult,
+    excerpt,
+)
+from ..mqttlink import Subscriptions, cancel_and_wait, keep_connected, new_client, reader
+from ..mqttlink.client import Client, MqttError, Will
 from ._births import Rediscovery
-from ._commands import DROPPED_BY_STOP, MAX_PAYLOAD_BYTES, error_text, oversized, parse_command
+from ._commands import MAX_PAYLOAD_BYTES, error_text, oversized, parse_command
 from ._config import MqttConfig
 from ._discovery import discovery
 from ._intake import CommandIntake
 from ._messages import state_message
-from ._session import cancel_and_wait, keep_connected, new_client, reader
 from ._stats import BridgeStats, mqtt_families
-from ._subscriptions import Subscriptions
-from ._topics import AVAILABLE, UNAVAILABLE, StateMessage, Topics
-from .client import Client, MqttError, Will
+from ._topics import AVAILABLE, UNAVAILABLE, Topics
 
 if TYPE_CHECKING:
     from prometheus_client.core import Metric
@@ -197,16 +204,9 @@ class MqttBridge:
 
         Never blocks: the message waits in the outbox (see the module docstring).
         """
-        self.publish_state(served, self.state_of(served))
-
-    def state_of(self, served: ServedDrive) -> StateMessage:
-        """*served* as a state message, at its sample (the Sparkplug node builds the same one)."""
-        return state_message(self.topics.gateway, served)
-
-    def publish_state(self, served: ServedDrive, message: StateMessage) -> None:
-        """:meth:`publish` with the state message built already (once for every MQTT client)."""
         if self._closing:
             return
+        message = state_message(self.topics.gateway, served)
         snapshot = served.snapshot
         key = (snapshot.line, snapshot.node)
         self.stats.samples[key] += 1

@@ -18,27 +18,24 @@ from __future__ import annotations
 
 from typing import Final
 
-from ...profiles import Profile, raw_value
+from ...profiles import Profile
 from ...wire import Direction
 from .. import (
     Heartbeat,
-    ParameterWrite,
     Refusal,
     RunCommand,
     SetFrequency,
     WriteRequest,
     WriteResult,
     excerpt,
+    parameter_request,
 )
 
 __all__ = [
     "COMMAND_DIRECTIONS",
-    "DROPPED_BY_STOP",
     "MAX_PAYLOAD_BYTES",
     "error_text",
-    "frequency_request",
     "oversized",
-    "parameter_request",
     "parse_command",
 ]
 
@@ -52,11 +49,6 @@ COMMAND_DIRECTIONS: Final = {
     "run_forward": Direction.FORWARD,
     "run_reverse": Direction.REVERSE,
 }
-
-
-#: A command still waiting for its drive when a stop for it came: never carried out
-#: (a stop waits behind no command; the JSON topics and Sparkplug alike).
-DROPPED_BY_STOP: Final = WriteResult(Refusal.BUSY, "dropped: a stop came after it")
 
 
 def _number(text: str) -> float | None:
@@ -104,7 +96,9 @@ def parse_command(profile: Profile, what: str, payload: bytes) -> WriteRequest |
         hz = _number(text)
         if hz is None:
             return WriteResult(Refusal.MALFORMED, f"expected a number of Hz, got {_quoted(text)}")
-        return frequency_request(hz, text)
+        # The gateway judges it (a number, within the drive's range, on the 0.01 Hz
+        # step), after the grants and before the lease, as from any door (issue 42).
+        return SetFrequency(hz)
     code = profile.parameters.code(what)
     if code is None:
         return WriteResult(
@@ -118,41 +112,6 @@ def parse_command(profile: Profile, what: str, payload: bytes) -> WriteRequest |
             Refusal.MALFORMED, f"expected a number in {code}'s unit, got {_quoted(text)}"
         )
     return parameter_request(profile, code, value, text)
-
-
-def frequency_request(hz: float, text: str) -> SetFrequency | WriteResult:
-    """A set frequency of *hz* (*text* as the client sent it).
-
-    The gateway judges it (a number, within the drive's range, on the 0.01 Hz
-    step), after the grants and before the lease, as from any door (issue 42).
-    """
-    return SetFrequency(hz)
-
-
-def parameter_request(
-    profile: Profile, code: str, value: float, text: str
-) -> ParameterWrite | WriteResult:
-    """Parameter *code* (normalised) set to *value* in its unit (*text* as sent).
-
-    Refused when outside the parameter's range or finer than its setting
-    increment: a number is never rounded to what the drive can hold.
-    """
-    spec = profile.parameters.spec(code)
-    try:
-        raw = raw_value(spec, value)
-    except (OverflowError, ValueError):
-        unit = f" {spec.unit}" if spec.unit else ""
-        return WriteResult(
-            Refusal.INVALID_VALUE,
-            f"{excerpt(text)} is outside {code}'s range, {spec.minimum:g}..{spec.maximum:g}{unit}",
-        )
-    # raw_value rounds what its step cannot hold (Modbus cannot send it anyway);
-    # a number on MQTT can be finer, and is refused rather than rounded.
-    if abs(spec.from_raw(raw) - value) > 1e-9 * max(1.0, abs(value)):
-        return WriteResult(
-            Refusal.INVALID_VALUE, f"{excerpt(text)} is finer than {code}'s setting increment"
-        )
-    return ParameterWrite(code, raw)
 
 
 #: What a client on MQTT can do about a refusal, where the neutral sentence does not say.

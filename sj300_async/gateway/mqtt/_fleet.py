@@ -3,7 +3,7 @@
 :class:`Fleet` is the model (sans-IO): it takes ``<prefix>/+/availability``
 and ``<prefix>/+/+/+/state`` messages in (:meth:`Fleet.receive`) and keeps
 the latest state of each (gateway, line, node). :func:`follow` is the
-subscriber: it keeps a read-only connection (:mod:`._session`) and feeds
+subscriber: it keeps a read-only connection (the transport's ``keep_connected``) and feeds
 the model. ``sj300 monitor --url mqtt://…`` renders it; anything else may.
 
 The URL: ``mqtt://[USER[:PASSWORD]@]HOST[:PORT][/PREFIX]``, ``mqtts://`` for
@@ -50,7 +50,7 @@ Decisions:
   gateway's availability does, is not waited for (as the bus monitor does
   not wait for a node set aside as offline), and a drive first heard of
   during a cycle is in it.
-- Unreachable at the start: :class:`~._session.BrokerUnreachable` (a
+- Unreachable at the start: :class:`~sj300_async.gateway.mqttlink.BrokerUnreachable` (a
   command line fails at once). Lost later: reconnect with a back-off of
   0.5 s doubling to 10 s (a viewer wants to see the fleet back soon); the
   broker then hands over the retained states again.
@@ -72,9 +72,9 @@ from typing import Any, Final
 
 from ...wire import LocalProtocolError
 from .. import excerpt, valid_name
-from ._session import keep_connected
+from ..mqttlink import keep_connected
+from ..mqttlink.client import Client, MqttError
 from ._topics import AVAILABLE, DEFAULT_PREFIX, UNAVAILABLE, StateMessage, parse_state_topic
-from .client import Client, MqttError
 
 __all__ = [
     "FLEET_SCHEMES",

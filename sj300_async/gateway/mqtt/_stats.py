@@ -7,12 +7,12 @@ from collections.abc import Iterator
 from dataclasses import dataclass, field
 from typing import TYPE_CHECKING, Final
 
-from ._session import SessionStats
+from ..mqttlink import SessionStats, refused_subscriptions
 
 if TYPE_CHECKING:
     from prometheus_client.core import Metric
 
-__all__ = ["BridgeStats", "mqtt_families", "refused_subscriptions"]
+__all__ = ["BridgeStats", "mqtt_families"]
 
 Key = tuple[str, int]
 
@@ -128,17 +128,3 @@ def mqtt_families(stats: BridgeStats) -> Iterator[Metric]:
     replaced.add_metric([], sum(stats.replaced.values()))
     yield replaced
     yield refused_subscriptions("sj300_mqtt_subscriptions_refused", stats)
-
-
-def refused_subscriptions(name: str, stats: SessionStats) -> Metric:
-    """*stats*' refused subscriptions as the counter family *name*, by topic filter."""
-    from prometheus_client.core import CounterMetricFamily
-
-    family = CounterMetricFamily(
-        name,
-        "Subscriptions the broker refused (SUBACK 0x80: an ACL), by topic filter.",
-        labels=["filter"],
-    )
-    for topic_filter, count in stats.subscriptions_refused.items():
-        family.add_metric([topic_filter], count)
-    return family

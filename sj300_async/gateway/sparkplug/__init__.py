@@ -1,8 +1,12 @@
 """Sparkplug B 3.0: the gateway as an edge node, each drive a device (docs/GATEWAY.md).
 
-Configured in ``[mqtt]`` (``sparkplug = true``, ``group_id``, optional
-``primary_host_id``) and created by the MQTT northbound beside its JSON
-topics; it connects to the same broker on a connection of its own.
+A northbound of its own, ``[sparkplug]`` (:mod:`._config`: the broker's
+keys, ``group_id``, an optional ``primary_host_id``), riding the MQTT
+transport (:mod:`sj300_async.gateway.mqttlink`) on a connection of its
+own: an MQTT connection has one last will, and the edge node's must be its
+NDEATH (docs/GATEWAY.md, "One connection each"). It imports no other
+northbound. ``[mqtt] sparkplug = true`` is its deprecated alias for one
+release, read here through the registry's ``borrows`` hook.
 
 - :mod:`._schema`: the specification's protobuf schema, built at import;
   :mod:`._payload`: payloads encoded and decoded, typed.
@@ -11,25 +15,34 @@ topics; it connects to the same broker on a connection of its own.
 - :mod:`._node`: the edge node's session (births, data by exception,
   deaths, the primary host, commands); :mod:`._stats`: its counters.
 
-The protobuf runtime is imported with this package, which the MQTT
-northbound imports only when Sparkplug is configured.
+The protobuf runtime is imported with the edge node, when Sparkplug is
+configured and starts: this face stays light, for the command line loads
+every spec to build its flags.
 """
 
 from __future__ import annotations
 
-from ._device import DIRECTION_WORDS, LAST_REFUSAL, Device, DeviceMetric, device_id
-from ._node import CLIENT, NAMESPACE, NODE_METRICS, EdgeNode
-from ._payload import (
-    Decoded,
-    MalformedPayload,
-    MetricDef,
-    Property,
-    ReceivedMetric,
-    decode_payload,
-    encode_payload,
-)
-from ._schema import DATA_TYPES
+import importlib
+from collections.abc import Sequence
+from typing import TYPE_CHECKING, Final
+
+from .. import ConfigTable, Endpoint, Northbound, SectionContext
+from ._config import SPARKPLUG_KEYS, SparkplugConfig, parse_mqtt_alias, parse_sparkplug_section
 from ._stats import BAD_INPUTS, SparkplugStats
+
+if TYPE_CHECKING:
+    from ._device import DIRECTION_WORDS, LAST_REFUSAL, Device, DeviceFlags, DeviceMetric, device_id
+    from ._node import CLIENT, NAMESPACE, NODE_METRICS, EdgeNode
+    from ._payload import (
+        Decoded,
+        MalformedPayload,
+        MetricDef,
+        Property,
+        ReceivedMetric,
+        decode_payload,
+        encode_payload,
+    )
+    from ._schema import DATA_TYPES
 
 __all__ = [
     "BAD_INPUTS",
@@ -39,16 +52,71 @@ __all__ = [
     "LAST_REFUSAL",
     "NAMESPACE",
     "NODE_METRICS",
+    "NORTHBOUND",
+    "SPARKPLUG_KEYS",
     "Decoded",
     "Device",
+    "DeviceFlags",
     "DeviceMetric",
     "EdgeNode",
     "MalformedPayload",
     "MetricDef",
     "Property",
     "ReceivedMetric",
+    "SparkplugConfig",
     "SparkplugStats",
     "decode_payload",
     "device_id",
     "encode_payload",
 ]
+
+#: The names that need protobuf, by the module that holds them: imported on first use.
+_LAZY: Final = {
+    **dict.fromkeys(
+        ("DIRECTION_WORDS", "LAST_REFUSAL", "Device", "DeviceFlags", "DeviceMetric", "device_id"),
+        "_device",
+    ),
+    **dict.fromkeys(("CLIENT", "NAMESPACE", "NODE_METRICS", "EdgeNode"), "_node"),
+    **dict.fromkeys(
+        ("Decoded", "MalformedPayload", "MetricDef", "Property", "ReceivedMetric"), "_payload"
+    ),
+    **dict.fromkeys(("decode_payload", "encode_payload"), "_payload"),
+    "DATA_TYPES": "_schema",
+}
+
+
+def __getattr__(name: str) -> object:
+    module = _LAZY.get(name)
+    if module is None:
+        raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
+    value = getattr(importlib.import_module(f".{module}", __name__), name)
+    globals()[name] = value  # once
+    return value
+
+
+class _Spec:
+    section = "sparkplug"
+    keys = SPARKPLUG_KEYS
+    flag = None  # a URL alone is not enough: it needs its group_id
+    requires = ("google.protobuf",)
+    #: ``[mqtt] sparkplug = true`` (deprecated: goes in the next release).
+    borrows = "mqtt"
+
+    def parse(self, table: ConfigTable, context: SectionContext) -> SparkplugConfig:
+        return parse_sparkplug_section(table, context)
+
+    def parse_borrowed(self, table: ConfigTable, context: SectionContext) -> SparkplugConfig | None:
+        return parse_mqtt_alias(table, context)
+
+    def endpoints(self, config: object) -> Sequence[tuple[str, Endpoint]]:
+        return ()  # a client: it listens on nothing
+
+    def create(self, config: object) -> Northbound:
+        from ._node import EdgeNode
+
+        assert isinstance(config, SparkplugConfig)
+        return EdgeNode(config)
+
+
+#: The registry's entry (``sj300_async.gateway.sparkplug:NORTHBOUND``).
+NORTHBOUND: Final = _Spec()

@@ -28,11 +28,12 @@ from .. import (
     Heartbeat,
     Refusal,
     RunCommand,
+    SetFrequency,
     WriteRequest,
     WriteResult,
     excerpt,
+    parameter_request,
 )
-from ..mqtt import frequency_request, parameter_request
 from ._device import Device, DeviceMetric, Writes
 from ._payload import BOOLEAN, DOUBLE, STRING, ReceivedMetric
 
@@ -105,7 +106,7 @@ def _request(device: Device, metric: DeviceMetric, value: object) -> WriteReques
         assert isinstance(value, int | float)
         number = float(value)
         if metric.write == Writes.FREQUENCY:  # judged by the gateway, as from every door
-            return frequency_request(number, repr(value))
+            return SetFrequency(number)  # judged by the gateway, as from every door
         if not math.isfinite(number):
             return WriteResult(Refusal.INVALID_VALUE, f"{name}: {number} is no value")
         assert metric.code is not None

@@ -26,7 +26,9 @@ Info/Node                   UInt32
 ==========================  ========  =====  =========================================
 
 A value the gateway does not serve (stale, never read, not given by the
-drive: the gateway's served view decides) is null. Aliases are unique
+drive: the gateway's served view decides) is null. The values are read
+from the drive as served (:class:`~sj300_async.gateway.ServedValues`, built
+once per sample for every northbound), not from another door's wire format. Aliases are unique
 across the edge node: device *k* (1-based, the gateway's drive order)
 numbers its metrics from ``k << 16``; the node's own metrics are below
 65536. The order of metrics and their aliases are fixed for a
@@ -42,14 +44,14 @@ from typing import Final
 
 from ...profiles import ParameterSpec
 from .. import DIRECTION_WORDS as SERVED_DIRECTION_WORDS
-from .. import GatewayDrive
-from ..mqtt import StateMessage
+from .. import GatewayDrive, ServedValues
 from ._payload import BOOLEAN, DOUBLE, STRING, UINT32, UINT64, MetricDef, Property
 
 __all__ = [
     "DIRECTION_WORDS",
     "LAST_REFUSAL",
     "Device",
+    "DeviceFlags",
     "DeviceMetric",
     "Writes",
     "device_id",
@@ -59,9 +61,20 @@ __all__ = [
 DIRECTION_WORDS: Final = tuple(SERVED_DIRECTION_WORDS.values())
 LAST_REFUSAL: Final = "Control/Last Refusal"
 
-#: Reads a metric's value from a sample's state (and whether the Sparkplug
-#: client holds the lease), None when unknown.
-Reader = Callable[[StateMessage, bool], object]
+
+@dataclass(frozen=True, slots=True)
+class DeviceFlags:
+    """What a device's metrics read beside the served values, when its message goes out."""
+
+    #: The Sparkplug client holds the drive's lease.
+    lease: bool = False
+    #: A lapsed lease's stop is not confirmed yet (the drive as served says so).
+    lapse_pending: bool = False
+
+
+#: Reads a metric's value from a sample's served values (and the device's flags),
+#: None when unknown.
+Reader = Callable[[ServedValues, DeviceFlags], object]
 
 
 class Writes:
@@ -101,8 +114,8 @@ class _Field:
 
     name: str
 
-    def __call__(self, state: StateMessage, lease: bool) -> object:
-        return getattr(state, self.name)
+    def __call__(self, values: ServedValues, flags: DeviceFlags) -> object:
+        return getattr(values, self.name)
 
 
 @dataclass(frozen=True, slots=True)
@@ -111,7 +124,7 @@ class _Constant:
 
     value: object
 
-    def __call__(self, state: StateMessage, lease: bool) -> object:
+    def __call__(self, values: ServedValues, flags: DeviceFlags) -> object:
         return self.value
 
 
@@ -120,8 +133,9 @@ def _field(name: str) -> Reader:
 
 
 def _parameter(code: str) -> Reader:
-    def read(state: StateMessage, lease: bool) -> object:
-        return state.parameters.get(code)
+    def read(values: ServedValues, flags: DeviceFlags) -> object:
+        reading = values.parameters.get(code)
+        return None if reading is None else reading.value
 
     return read
 
@@ -130,11 +144,23 @@ def _constant(value: object) -> Reader:
     return _Constant(value)
 
 
-def _lease(state: StateMessage, lease: bool) -> object:
-    return lease
+def _lease(values: ServedValues, flags: DeviceFlags) -> object:
+    return flags.lease
 
 
-def _never(state: StateMessage, lease: bool) -> object:
+def _lapse_pending(values: ServedValues, flags: DeviceFlags) -> object:
+    return flags.lapse_pending
+
+
+def _trip_code(values: ServedValues, flags: DeviceFlags) -> object:
+    return None if values.trip is None else values.trip.code
+
+
+def _trip_meaning(values: ServedValues, flags: DeviceFlags) -> object:
+    return None if values.trip is None else values.trip.meaning
+
+
+def _never(values: ServedValues, flags: DeviceFlags) -> object:
     return False
 
 
@@ -188,9 +214,9 @@ class Device:
             ("Running", BOOLEAN, (), _field("running"), None, None),
             ("Tripped", BOOLEAN, (), _field("tripped"), None, None),
             ("State", STRING, (), _field("state"), None, None),
-            ("Trip", STRING, (), _field("trip"), None, None),
-            ("Trip Meaning", STRING, (), _field("trip_meaning"), None, None),
-            ("Lapse Pending", BOOLEAN, (), _field("lapse_pending"), None, None),
+            ("Trip", STRING, (), _trip_code, None, None),
+            ("Trip Meaning", STRING, (), _trip_meaning, None, None),
+            ("Lapse Pending", BOOLEAN, (), _lapse_pending, None, None),
         ]
         for code in dict.fromkeys((*line.parameters, *sorted(granted))):
             spec = profile.parameters.spec(code)
@@ -223,12 +249,12 @@ class Device:
             for i, (name, datatype, properties, read, write, code) in enumerate(rows)
         )
         self.definitions: Sequence[MetricDef] = tuple(m.definition for m in self.metrics)
-        # values() runs at every sample: the state's fields are read in one call (the
+        # values() runs at every sample: the served fields are read in one call (the
         # attrgetter of their names, each value kept with its metric's index), the
         # constants are a template, and only the rest is called one by one.
         fields = [(i, m.read) for i, m in enumerate(self.metrics) if isinstance(m.read, _Field)]
         self._field_index = tuple(i for i, _ in fields)
-        self._pick = operator.attrgetter(*(f.name for _, f in fields), "node")  # 2 at least
+        self._pick = operator.attrgetter(*(f.name for _, f in fields), "online")  # 2 at least
         self._template: list[object] = [
             m.read.value if isinstance(m.read, _Constant) else None for m in self.metrics
         ]
@@ -244,18 +270,18 @@ class Device:
         )
 
     def values(
-        self, state: StateMessage, lease: bool, refusal: tuple[str, int] | None
+        self, values: ServedValues, flags: DeviceFlags, refusal: tuple[str, int] | None
     ) -> list[object]:
-        """Every metric's value in *state*, in the metrics' order.
+        """Every metric's value in the served *values*, in the metrics' order.
 
-        *lease*: the Sparkplug client holds the drive's lease; *refusal*: the
-        latest refusal in words and the count so far (None: none yet).
+        *flags*: the lease and a pending lapse; *refusal*: the latest refusal in
+        words and the count so far (None: none yet).
         """
         out = self._template.copy()
-        for i, value in zip(self._field_index, self._pick(state), strict=False):  # not node
+        for i, value in zip(self._field_index, self._pick(values), strict=False):  # not online
             out[i] = value
         for i, read in self._called:
-            out[i] = read(state, lease)
+            out[i] = read(values, flags)
         if self._refusal_index is not None and refusal is not None:
             out[self._refusal_index], out[self._refusal_index + 1] = refusal
         return out

@@ -71,6 +71,7 @@ from typing import TYPE_CHECKING, Final
 
 from ...wire import Direction
 from .. import (
+    DROPPED_BY_STOP,
     GatewayLine,
     GatewayView,
     Refusal,
@@ -80,22 +81,11 @@ from .. import (
     WriteResult,
     excerpt,
 )
-from ..mqtt import (
-    DROPPED_BY_STOP,
-    MqttConfig,
-    SparkplugConfig,
-    StateMessage,
-    Subscriptions,
-    cancel_and_wait,
-    error_text,
-    keep_connected,
-    new_client,
-    reader,
-    state_message,
-)
-from ..mqtt.client import Client, MqttError, Will
+from ..mqttlink import Subscriptions, cancel_and_wait, keep_connected, new_client, reader
+from ..mqttlink.client import Client, MqttError, Will
 from ._commands import judge
-from ._device import Device
+from ._config import SparkplugConfig
+from ._device import Device, DeviceFlags
 from ._payload import (
     BOOLEAN,
     INT64,
@@ -169,10 +159,8 @@ class _HostOffline(MqttError):
 class EdgeNode:
     """The gateway's Sparkplug edge node (see the module docstring); a northbound."""
 
-    def __init__(self, config: MqttConfig) -> None:
-        assert config.sparkplug is not None
+    def __init__(self, config: SparkplugConfig) -> None:
         self.config = config
-        self.sparkplug: SparkplugConfig = config.sparkplug
         self.stats = SparkplugStats()
         self._subscriptions = Subscriptions(self.stats, _log, "Sparkplug")
         self.edge_node = ""
@@ -180,9 +168,9 @@ class EdgeNode:
         self._devices: dict[Key, Device] = {}
         self._by_id: dict[str, Device] = {}
         self._node_defs: list[MetricDef] = []
-        #: The latest sample of each drive: its state message, and the drive as served
-        #: with it (who holds the lease, when the message goes out).
-        self._latest: dict[Key, tuple[StateMessage, ServedDrive]] = {}
+        #: The latest sample of each drive, as served (its values at the sample; who
+        #: holds the lease, when the message goes out).
+        self._latest: dict[Key, ServedDrive] = {}
         #: Drives with a sample not yet turned into a message, in arrival order.
         self._dirty: dict[Key, None] = {}
         #: What the host was last told of each live device (its values, in metric order).
@@ -214,12 +202,12 @@ class EdgeNode:
     # -- topics ------------------------------------------------------------------------
 
     def topic(self, kind: str, device: str | None = None) -> str:
-        base = f"{NAMESPACE}/{self.sparkplug.group_id}/{kind}/{self.edge_node}"
+        base = f"{NAMESPACE}/{self.config.group_id}/{kind}/{self.edge_node}"
         return base if device is None else f"{base}/{device}"
 
     @property
     def _state_topic(self) -> str | None:
-        host = self.sparkplug.primary_host_id
+        host = self.config.primary_host_id
         return None if host is None else f"{NAMESPACE}/STATE/{host}"
 
     @property
@@ -252,20 +240,12 @@ class EdgeNode:
             self._task = asyncio.get_running_loop().create_task(self._run(), name="sparkplug")
 
     def announce(self) -> str | None:
-        host = self.sparkplug.primary_host_id
+        host = self.config.primary_host_id
         waits = f", primary host {host}" if host is not None else ""
         return f"sparkplug to {self.config.url} as {self.topic('NBIRTH')}{waits}"
 
     def publish(self, served: ServedDrive) -> None:
         """A drive's new sample: kept, and marked for the edge node's task (never blocks)."""
-        self.publish_state(served, self.state_of(served))
-
-    def state_of(self, served: ServedDrive) -> StateMessage:
-        """*served* as a state message, at its sample (the JSON bridge builds the same one)."""
-        return state_message(self.edge_node, served)
-
-    def publish_state(self, served: ServedDrive, message: StateMessage) -> None:
-        """:meth:`publish` with the state message built already (once for every MQTT client)."""
         if self._closing:
             return
         snapshot = served.snapshot
@@ -273,14 +253,12 @@ class EdgeNode:
         if key not in self._devices:
             return
         self.stats.samples += 1
-        self._mark(key, message, served)
+        self._mark(key, served)
 
-    def _mark(
-        self, key: Key, message: StateMessage, served: ServedDrive, *, sample: bool = True
-    ) -> None:
+    def _mark(self, key: Key, served: ServedDrive, *, sample: bool = True) -> None:
         if key in self._dirty and sample:
             self.stats.replaced += 1
-        self._latest[key] = (message, served)
+        self._latest[key] = served
         self._dirty[key] = None
         if not sample:  # a sample goes out at the batch's flush
             self._wake.set()
@@ -316,12 +294,11 @@ class EdgeNode:
             values.extend(_line_values(line))
         return values
 
-    def _device_values(
-        self, device: Device, state: StateMessage, served: ServedDrive
-    ) -> list[object]:
-        """The device's metrics: the state message's values, the served lease as it is now."""
+    def _device_values(self, device: Device, served: ServedDrive) -> list[object]:
+        """The device's metrics: the values served at the sample, the lease as it is now."""
         lease = served.lease_holder(asyncio.get_running_loop().time()) == CLIENT
-        return device.values(state, lease, self._refusals.get(device.drive.key))
+        flags = DeviceFlags(lease=lease, lapse_pending=served.lapse_pending)
+        return device.values(served.values(), flags, self._refusals.get(device.drive.key))
 
     # -- turning samples into messages (the edge node's task) -----------------------------
 
@@ -345,16 +322,16 @@ class EdgeNode:
                 return  # asked again meanwhile: the next turn starts over
             self._dirty.pop(key, None)
             latest = self._latest.get(key)
-            if latest is not None and latest[0].online:
-                yield self._dbirth(key, *latest)
+            if latest is not None and latest.values().online:
+                yield self._dbirth(key, latest)
 
-    def _dbirth(self, key: Key, state: StateMessage, served: ServedDrive) -> tuple[str, bytes]:
+    def _dbirth(self, key: Key, served: ServedDrive) -> tuple[str, bytes]:
         device = self._devices[key]
-        values = self._device_values(device, state, served)
+        values = self._device_values(device, served)
         self._alive[key] = values
         self.stats.published["DBIRTH"] += 1
         return self.topic("DBIRTH", device.id), encode_payload(
-            int(state.time * 1000),
+            int(served.snapshot.time * 1000),
             self._next_seq(),
             zip(device.definitions, values, strict=True),
             birth=True,
@@ -362,19 +339,20 @@ class EdgeNode:
 
     def _device_message(self, key: Key) -> tuple[str, bytes] | None:
         """What the latest sample of *key* changes for the host: a message or nothing."""
-        state, served = self._latest[key]
+        served = self._latest[key]
+        online = served.values().online
         device = self._devices[key]
         last = self._alive.get(key)
         if last is None:
-            return self._dbirth(key, state, served) if state.online else None
-        stamp = int(state.time * 1000)
-        if not state.online:
+            return self._dbirth(key, served) if online else None
+        stamp = int(served.snapshot.time * 1000)
+        if not online:
             del self._alive[key]
             self.stats.published["DDEATH"] += 1
             return self.topic("DDEATH", device.id), encode_payload(
                 stamp, self._next_seq(), (), birth=False
             )
-        values = self._device_values(device, state, served)
+        values = self._device_values(device, served)
         defs = device.definitions
         changed = [(defs[i], v) for i, v in enumerate(values) if v != last[i]]
         if not changed:
@@ -404,7 +382,7 @@ class EdgeNode:
         """Connected, and the primary host (if any) is online: messages may go out."""
         if self._client is None:
             return False
-        return self.sparkplug.primary_host_id is None or self.host_online is True
+        return self.config.primary_host_id is None or self.host_online is True
 
     def _outgoing(self) -> Iterator[tuple[str, bytes]]:
         """Everything due now, in order (each with its seq already taken)."""
@@ -456,7 +434,7 @@ class EdgeNode:
         self._next_bdseq = (self._bdseq + 1) % 256
         return new_client(
             self.config,
-            identifier=f"{self.config.client_id}-spb",
+            identifier=self.config.client_id,
             will=Will(self.topic("NDEATH"), self._ndeath(), qos=1, retain=False),
             max_payload=MAX_COMMAND_BYTES,
         )
@@ -469,7 +447,7 @@ class EdgeNode:
             log=_log,
             ceiling_s=BACKOFF_MAX_S,
             stats=self.stats,
-            who=f" as Sparkplug edge node {self.sparkplug.group_id}/{self.edge_node}",
+            who=f" as Sparkplug edge node {self.config.group_id}/{self.edge_node}",
         )
 
     async def _connection(self, client: Client, connected: Callable[[], None]) -> None:
@@ -557,11 +535,11 @@ class EdgeNode:
                     self.stats.host_offline += 1
                     _log.warning(
                         "Sparkplug: primary host %s went offline: NDEATH, reconnecting",
-                        self.sparkplug.primary_host_id,
+                        self.config.primary_host_id,
                     )
                     await self._say_dead(client)
                     self._births_after = self._nbirth_at + self.host_rebirth_s
-                    raise _HostOffline(f"primary host {self.sparkplug.primary_host_id} offline")
+                    raise _HostOffline(f"primary host {self.config.primary_host_id} offline")
                 continue
             self.stats.commands += 1
             if topic == self.topic("NCMD"):
@@ -599,7 +577,7 @@ class EdgeNode:
         was, self.host_online = self.host_online, online
         if online:
             if was is not True:
-                _log.info("Sparkplug: primary host %s is online", self.sparkplug.primary_host_id)
+                _log.info("Sparkplug: primary host %s is online", self.config.primary_host_id)
             self._wake.set()
             return False
         self._end_session()  # the host's leases lapse with it
@@ -770,7 +748,7 @@ class EdgeNode:
     ) -> None:
         self.stats.refused += 1
         shown = None if value is None else excerpt(repr(value))
-        text = error_text(result)
+        text = str(result)
         _log.debug("Sparkplug: DCMD %s %s to %s refused: %s", excerpt(what), shown, device.id, text)
         if not audited and self._gateway is not None:
             self._gateway.refused(CLIENT, device.drive, f"sparkplug {excerpt(what)}", shown, result)
@@ -779,7 +757,7 @@ class EdgeNode:
         self._refusals[key] = (f"{excerpt(what)}: {text}", count)
         latest = self._latest.get(key)
         if latest is not None and device.writable:
-            self._mark(key, *latest, sample=False)  # the next DDATA tells it
+            self._mark(key, latest, sample=False)  # the next DDATA tells it
 
     # -- stopping ------------------------------------------------------------------------
 

@@ -7,7 +7,7 @@ from collections.abc import Iterator
 from dataclasses import dataclass, field
 from typing import TYPE_CHECKING, Final
 
-from ..mqtt import SessionStats, refused_subscriptions
+from ..mqttlink import SessionStats, refused_subscriptions
 
 if TYPE_CHECKING:
     from prometheus_client.core import Metric

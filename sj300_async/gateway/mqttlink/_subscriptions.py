@@ -5,7 +5,8 @@ EMQX and HiveMQ answer a denied filter) and accept the connection and every
 publish: the client then runs deaf to what that filter carries (the drives'
 commands, Home Assistant's birth, a Sparkplug host's STATE, NCMD and DCMD),
 and nothing showed it. Every subscription of the JSON bridge and of the
-Sparkplug edge node goes through :class:`Subscriptions`.
+Sparkplug edge node goes through :class:`Subscriptions`; each northbound
+exports the counts under its own name (:func:`refused_subscriptions`).
 
 Decisions:
 
@@ -31,12 +32,15 @@ Decisions:
 from __future__ import annotations
 
 import logging
-from typing import Final
+from typing import TYPE_CHECKING, Final
 
 from ._session import SessionStats
 from .client import Client, MqttError
 
-__all__ = ["REFUSED", "Subscriptions"]
+if TYPE_CHECKING:
+    from prometheus_client.core import Metric
+
+__all__ = ["REFUSED", "Subscriptions", "refused_subscriptions"]
 
 #: The first SUBACK return code that refuses (MQTT 3.1.1 sends 0x80 only).
 REFUSED: Final = 0x80
@@ -93,3 +97,17 @@ class Subscriptions:
             f"(SUBACK {code:#04x}): {unheard} not received"
             for topic_filter, (code, unheard) in self._refused.items()
         ]
+
+
+def refused_subscriptions(name: str, stats: SessionStats) -> Metric:
+    """*stats*' refused subscriptions as the counter family *name*, by topic filter."""
+    from prometheus_client.core import CounterMetricFamily
+
+    family = CounterMetricFamily(
+        name,
+        "Subscriptions the broker refused (SUBACK 0x80: an ACL), by topic filter.",
+        labels=["filter"],
+    )
+    for topic_filter, count in stats.subscriptions_refused.items():
+        family.add_metric([topic_filter], count)
+    return family

@@ -1,8 +1,9 @@
 """One MQTT connection kept up: connect, run, and after a loss reconnect with a back-off.
 
-Both the gateway's bridge (:mod:`._bridge`) and the fleet subscriber
-(:mod:`._fleet`) keep their connection through :func:`keep_connected`: one
-reconnect loop, one back-off, one way of reporting outages.
+The JSON bridge and the fleet subscriber (``gateway.mqtt``) and the
+Sparkplug edge node (``gateway.sparkplug``) keep their connection through
+:func:`keep_connected`: one reconnect loop, one back-off, one way of
+reporting outages.
 
 Decisions:
 
@@ -62,7 +63,7 @@ from typing import TYPE_CHECKING, Any, Final
 from .client import Client, MqttError, PublishUnacknowledged, SubscribeUnacknowledged, Will
 
 if TYPE_CHECKING:
-    from ._config import MqttConfig
+    from ._broker import BrokerConfig
 
 __all__ = [
     "BACKOFF_FIRST_S",
@@ -108,7 +109,7 @@ class SessionStats:
 
 
 def new_client(
-    config: MqttConfig,
+    config: BrokerConfig,
     *,
     identifier: str,
     will: Will,
@@ -117,7 +118,8 @@ def new_client(
 ) -> Client:
     """A client for one connection attempt to *config*'s broker (not entered yet).
 
-    Its URL, credentials, TLS and keepalive are the section's; the session is
+    Its URL, credentials, TLS (with the client's certificate, when the
+    section gives one) and keepalive are the section's; the session is
     clean (nothing the broker kept for us: no stale command). *max_in_flight*
     caps the QoS 1 publishes awaiting their acknowledgement. A broker that
     stops reading makes publishes wait, and its keepalive ends the
@@ -130,6 +132,10 @@ def new_client(
         tls = ssl.create_default_context(
             cafile=None if config.tls_ca is None else str(config.tls_ca)
         )
+        if config.tls_cert is not None:
+            # Read at each attempt, as the CA is: a renewed certificate needs no restart.
+            key = None if config.tls_key is None else str(config.tls_key)
+            tls.load_cert_chain(str(config.tls_cert), key)
     return Client(
         config.host,
         config.port,

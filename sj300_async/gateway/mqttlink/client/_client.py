@@ -89,7 +89,7 @@ from ._types import Message, MqttError, PublishUnacknowledged, Will
 
 __all__ = ["MAX_IN_FLIGHT", "Client", "Message", "Will"]
 
-_log = logging.getLogger("sj300_async.gateway.mqtt.client")
+_log = logging.getLogger("sj300_async.gateway.mqttlink.client")
 
 #: How long a clean disconnect waits for the socket to take its last bytes.
 CLOSE_TIMEOUT_S: Final = 2.0
