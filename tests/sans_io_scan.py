@@ -140,7 +140,10 @@ SIMULATOR_SJ300: Final = (
 #: The simulated FR-700 drives and line.
 SIMULATOR_FR700: Final = (
     "simulator.fr700",
-    *(f"simulator.fr700.{m}" for m in ("_bus", "_command_line", "_drive", "_parameters")),
+    *(
+        f"simulator.fr700.{m}"
+        for m in ("_bus", "_command_line", "_drive", "_parameters", "_readings")
+    ),
 )
 
 #: Not sans-IO, by design. The package ``__init__`` modules re-export the async classes.

@@ -17,8 +17,9 @@ from __future__ import annotations
 from ...fr700.codec import BadRequest, HostAnswer, HostRequest, RequestParser
 from ._bus import Fr700SimulatedBus, Fr700SimulatorStats, corrupt, simulate
 from ._command_line import COMMAND_LINE
-from ._drive import DEFAULT_PROCESSING_S, FaultCode, Fr700SimulatedDrive
+from ._drive import DEFAULT_PROCESSING_S, Fr700SimulatedDrive
 from ._parameters import PARAMETERS, ParameterSpec
+from ._readings import FaultCode
 
 __all__ = [
     "COMMAND_LINE",

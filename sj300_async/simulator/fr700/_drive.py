@@ -16,8 +16,7 @@ What it models, from the FR-700 reference:
 - Status H7A / H79: RUN, forward, reverse, SU (at the set frequency), FU
   (output at or above Pr.42), ABC1 and the fault bit while tripped; OL and
   IPF never.
-- Monitors H6F / H70 / H71 from the same plausible electrical model as
-  the SJ300 simulator (rated current Pr.9, 200 V class, base frequency Pr.3).
+- Monitors H6F / H70 / H71 (:mod:`._readings`).
 - Operation mode H7B / HFB; parameters through the link-parameter
   extension H7F / HFF (bank 0..9: Pr.0..Pr.999); the second-parameter
   switch H6C / HEC, which selects the frequency (H00) or the analog value
@@ -74,7 +73,6 @@ from ...fr700.codec import (
     HostRequest,
 )
 from ...wire import Direction, LocalProtocolError
-from .._electrical import MotorRating, electrical
 from .._motion import Output, Ramp, RunState, advance, classify
 from ._parameters import (
     BIAS_GAIN_ANALOG,
@@ -85,8 +83,9 @@ from ._parameters import (
     WRITE_SELECTION,
     factory_values,
 )
+from ._readings import FaultCode, monitor, status_bits
 
-__all__ = ["DEFAULT_PROCESSING_S", "FaultCode", "Fr700SimulatedDrive"]
+__all__ = ["DEFAULT_PROCESSING_S", "Fr700SimulatedDrive"]
 
 _log = logging.getLogger("sj300_async.simulator.fr700")
 
@@ -99,21 +98,8 @@ I = Fr700Instruction  # noqa: E741
 _NETWORK: Final = Fr700OperationMode.NETWORK
 _CLEAR_CODES: Final = frozenset({0x9696, 0x9966, 0x5A5A, 0x55AA})
 _SPECIAL_MONITORS: Final = frozenset({1, 2, 3, 5})
-_RATED_VOLTAGE_V: Final = 200.0
-_RATED_POWER_KW: Final = 2.2
 _FORWARD_BIT: Final = 0x02
 _REVERSE_BIT: Final = 0x04
-
-
-class FaultCode:
-    """Fault codes a simulated drive records (the FR-A700 list's codes)."""
-
-    OC1: Final = 0x10  #: E.OC1 over-current during acceleration
-    OC2: Final = 0x11  #: E.OC2 over-current during constant speed
-    OC3: Final = 0x12  #: E.OC3 over-current during deceleration or stop
-    OV1: Final = 0x20  #: E.OV1 regenerative over-voltage during acceleration
-    THT: Final = 0x30  #: E.THT inverter overload (0x90 is E.OHT, the external thermal relay)
-    PUE: Final = 0xB1  #: E.PUE PU disconnection
 
 
 Result = Fr700Reply | Fr700NakCode | None
@@ -577,38 +563,10 @@ class Fr700SimulatedDrive:
         )
 
     def _status_bits(self) -> Fr700StatusBits:
-        state = self._state()
-        bits = Fr700StatusBits(0)
-        if state.outputting:
-            bits |= Fr700StatusBits.RUN
-            if self._output.direction is Direction.FORWARD:
-                bits |= Fr700StatusBits.FORWARD
-            elif self._output.direction is Direction.REVERSE:
-                bits |= Fr700StatusBits.REVERSE
-            if state is RunState.CONSTANT_SPEED:
-                bits |= Fr700StatusBits.SU
-            if self._output.hz * 100 >= self._parameters[42]:
-                bits |= Fr700StatusBits.FU
-        if self._tripped:
-            bits |= Fr700StatusBits.ABC1 | Fr700StatusBits.FAULT
-        return bits
+        return status_bits(self._state(), self._output, self._parameters[42], self._tripped)
 
     def _monitor(self, selection: int) -> int:
-        """A monitor value in link units: 1 frequency, 2 current, 3 voltage, 5 set frequency."""
-        if selection == 5:
-            return self._freq_ram
-        if selection == 1:
-            return round(self._output.hz * 100)
-        rating = MotorRating(
-            voltage_v=_RATED_VOLTAGE_V,
-            current_a=self._parameters[9] / 100,
-            power_kw=_RATED_POWER_KW,
-            base_hz=self._parameters[3] / 100 or 60.0,
-        )
-        values = electrical(self._state(), self._output.hz, rating)
-        if selection == 2:
-            return round(values.current_a * 100)
-        return round(values.voltage_v * 10)
+        return monitor(selection, self._state(), self._output, self._freq_ram, self._parameters)
 
 
 _HANDLERS: Final[dict[int, Handler]] = {
