@@ -11,12 +11,18 @@ wait for to know it is subscribed.
 Each test module declares its own two-line ``broker`` fixture around
 :func:`running_broker` (importing a fixture by name would shadow it in
 every test's signature, which linters flag).
+
+A broker given a :class:`TlsListener` also listens with TLS on a port of
+its own (:attr:`Broker.tls_url`), and with ``require_certificate`` there
+takes only clients whose certificate its CA signed; the plain listener
+stays, for the tests' own publishers and subscribers.
 """
 
 from __future__ import annotations
 
 import asyncio
 import contextlib
+import getpass
 import os
 import shutil
 import socket
@@ -31,6 +37,7 @@ __all__ = [
     "READY",
     "TIMEOUT_S",
     "Broker",
+    "TlsListener",
     "free_port",
     "publish",
     "running_broker",
@@ -66,6 +73,27 @@ def free_port() -> int:
     return port
 
 
+@dataclass(frozen=True)
+class TlsListener:
+    """A TLS listener's files (PEM) and whether it requires a client certificate."""
+
+    ca: Path
+    cert: Path
+    key: Path
+    require_certificate: bool = True
+
+    def conf(self, port: int) -> str:
+        """Its lines of mosquitto.conf (they apply to the listener they follow)."""
+        required = "true" if self.require_certificate else "false"
+        # Started as root, mosquitto drops to user "mosquitto" before it reads the files,
+        # which pytest's private tmp directory keeps from it: it stays the test's user.
+        return (
+            f"user {getpass.getuser()}\n"
+            f"listener {port} 127.0.0.1\ncafile {self.ca}\ncertfile {self.cert}\n"
+            f"keyfile {self.key}\nrequire_certificate {required}\n"
+        )
+
+
 @dataclass
 class Broker:
     """A mosquitto of this test's own: stopped and started again on the same port at will."""
@@ -74,16 +102,24 @@ class Broker:
     port: int = 0
     proc: asyncio.subprocess.Process | None = None
     starts: int = 0
+    tls: TlsListener | None = None
+    tls_port: int = 0
 
     @property
     def url(self) -> str:
         return f"mqtt://127.0.0.1:{self.port}"
+
+    @property
+    def tls_url(self) -> str:
+        """The TLS listener's URL (given a :class:`TlsListener`)."""
+        return f"mqtts://127.0.0.1:{self.tls_port}"
 
     async def start(self) -> None:
         """Start it; return once the log says it runs and its port accepts connections."""
         for _ in range(5):  # another process may take a free port before mosquitto binds it
             if self.starts == 0 or self.port == 0:
                 self.port = free_port()
+                self.tls_port = free_port() if self.tls is not None else 0
             if await self._start_once():
                 await self.publish(READY, "1", retain=True)
                 return
@@ -96,7 +132,7 @@ class Broker:
         conf.write_text(
             f"listener {self.port} 127.0.0.1\nallow_anonymous true\npersistence false\n"
             "log_dest stderr\nlog_type error\nlog_type warning\nlog_type notice\n"
-            "log_type information\n",
+            "log_type information\n" + ("" if self.tls is None else self.tls.conf(self.tls_port)),
             encoding="utf-8",
         )
         log = self._log()
@@ -117,6 +153,8 @@ class Broker:
             self.proc = None
             return False  # the port was taken: the log says so
         await wait_for_port(self.port)
+        if self.tls is not None:
+            await wait_for_port(self.tls_port)
         self.starts += 1
         return True
 
@@ -184,9 +222,11 @@ async def publish(
 
 
 @contextlib.asynccontextmanager
-async def running_broker(directory: Path) -> AsyncIterator[Broker]:
+async def running_broker(
+    directory: Path, *, tls: TlsListener | None = None
+) -> AsyncIterator[Broker]:
     """A started broker whose files live in *directory*; stopped and reaped on the way out."""
-    broker = Broker(directory)
+    broker = Broker(directory, tls=tls)
     await broker.start()
     try:
         yield broker
