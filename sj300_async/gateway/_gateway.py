@@ -42,7 +42,7 @@ import functools
 import logging
 import time
 from collections.abc import Awaitable, Callable, Iterable, Iterator, Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from types import TracebackType
 from typing import TYPE_CHECKING, Any, TypeVar
 
@@ -57,6 +57,7 @@ from ._control import Controller
 from ._drive import GatewayDrive, Lease
 from ._errors import GatewayStartError
 from ._heap import collector_paused, freeze_long_lived, thaw, young_collections_raised
+from ._line_health import LineHealth, UtilisationMeter, line_health
 from ._logflood import FloodLimit
 from ._looplag import LoopMonitor
 from ._metrics import LineView, drive_view, gateway_metrics, line_problems
@@ -84,6 +85,17 @@ class GatewayLine:
     poller: Poller
     controller: Controller
     drives: dict[int, GatewayDrive]
+    #: The line's utilisation, measured when a door asks for its health.
+    meter: UtilisationMeter = field(default_factory=UtilisationMeter)
+
+    def health(self, now: float | None = None) -> LineHealth:
+        """The line's link, counters and utilisation at *now* (loop time; default: now).
+
+        What a northbound shows of a line: never the bus itself (issue 42).
+        """
+        if now is None:
+            now = asyncio.get_running_loop().time()
+        return line_health(self.bus, self.drives.values(), self.meter, now)
 
 
 class Gateway:

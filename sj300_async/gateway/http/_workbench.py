@@ -16,9 +16,10 @@ Decisions:
   and shared with the other northbounds), a GET and a new stream's first
   frames the values as of the request; the lease holder and its seconds left
   are the served drive's, at the moment the JSON is written.
-- Line utilisation is the fraction of the last tick the line carried bytes
-  (:func:`~sj300_async.gateway.busy_seconds` over the tick's length), the
-  same figure ``rate(sj300_line_busy_seconds_total[1s])`` would give.
+- A line's link, counters and utilisation are the core's health of the
+  line (``GatewayLine.health``), the same figures OPC UA serves; the
+  utilisation is the share of the last second or so the line carried bytes,
+  the figure ``rate(sj300_line_busy_seconds_total[1s])`` would give.
 """
 
 from __future__ import annotations
@@ -30,7 +31,7 @@ from typing import Any, Final
 
 from ...profiles import NEVER
 from ...version import __version__
-from .. import GatewayLine, GatewayView, ServedDrive, busy_seconds
+from .. import GatewayLine, GatewayView, ServedDrive
 from ._events import EventHub, sse_frame
 from ._json import Json, drive_json, monitor_time
 from ._linetrace import LineTrace
@@ -70,9 +71,6 @@ class Workbench:
         #: Each drive's latest monitor read: its loop time, and its Unix time in the trend.
         self._monitor_at: dict[tuple[str, int], float] = {}
         self._monitor_time: dict[tuple[str, int], float] = {}
-        #: Each line's (loop time, busy seconds) at the last tick, and its utilisation then.
-        self._marks: dict[str, tuple[float, float]] = {}
-        self._utilisation: dict[str, float | None] = {}
 
     def now(self) -> float:
         return self._clock()
@@ -123,50 +121,46 @@ class Workbench:
     # -- lines -----------------------------------------------------------------------------
 
     def line_json(self, line: GatewayLine) -> Json:
-        """A line's link and counters, and its utilisation over the last tick."""
-        bus = line.bus
-        stats = bus.stats
-        transactions = stats.transactions
-        drives = line.drives.values()
+        """A line's link and counters, and its utilisation (the core's health of the line)."""
+        health = line.health(self.now())
         return {
             "name": line.config.name,
             "protocol": line.config.protocol,
             "url": line.config.url,
             "interval_s": line.config.interval_s,
-            "connected": bus.connected,
-            "drives": len(line.drives),
-            "drives_online": sum(1 for drive in drives if drive.snapshot.available),
-            "utilisation": self._utilisation.get(line.config.name),
-            "requests": transactions.requests,
-            "replies": transactions.replies,
-            "timeouts": transactions.timeouts,
-            "retries": transactions.retries,
-            "naks": sum(transactions.naks.values()),
-            "transport_errors": transactions.transport_errors,
-            "protocol_errors": transactions.protocol_errors,
-            "bad_frames": stats.bad_frames,
-            "early_frames": stats.early_frames,
-            "stray_frames": stats.stray_frames,
-            "unsolicited_frames": stats.unsolicited_frames,
-            "discarded_bytes": stats.discarded_bytes,
-            "connects": stats.connects,
-            "disconnects": stats.disconnects,
-            "latency_mean_s": transactions.latency_mean_s,
-            "latency_max_s": transactions.latency_max_s if transactions.replies else None,
+            "connected": health.connected,
+            "drives": health.drives,
+            "drives_online": health.drives_online,
+            "utilisation": health.utilisation,
+            "requests": health.requests,
+            "replies": health.replies,
+            "timeouts": health.timeouts,
+            "retries": health.retries,
+            "naks": health.naks,
+            "transport_errors": health.transport_errors,
+            "protocol_errors": health.protocol_errors,
+            "bad_frames": health.bad_frames,
+            "early_frames": health.early_frames,
+            "stray_frames": health.stray_frames,
+            "unsolicited_frames": health.unsolicited_frames,
+            "discarded_bytes": health.discarded_bytes,
+            "connects": health.connects,
+            "disconnects": health.disconnects,
+            "latency_mean_s": health.latency_mean_s,
+            "latency_max_s": health.latency_max_s,
         }
 
     def tick_lines(self) -> None:
-        """Measure each line's utilisation since the last tick and send its counters."""
+        """Send each line's counters to the pages that follow it (its health moves the
+        utilisation's mark on, whoever asks)."""
         now = self.now()
         for line in self.gateway.lines:
-            name = line.config.name
-            busy = busy_seconds(line.bus)
-            mark = self._marks.get(name)
-            if mark is not None and now > mark[0]:
-                self._utilisation[name] = min(1.0, (busy - mark[1]) / (now - mark[0]))
-            self._marks[name] = (now, busy)
             if len(self.hub):
-                self.hub.publish(f"line/{name}", sse_frame("line", self.line_json(line)))
+                self.hub.publish(
+                    f"line/{line.config.name}", sse_frame("line", self.line_json(line))
+                )
+            else:
+                line.health(now)  # the utilisation is measured even with no page open
 
     def close(self) -> None:
         """Stop recording the lines, end the event streams."""

@@ -2,21 +2,20 @@
 
 A drive variable's value and status come from its :class:`~._model.Binding`
 (the drive as served); this module only makes the DataValue. A line's
-counters are read from the line when a client reads them, and pushed by the
-server's tick only while a monitored item watches them; the utilisation is
-the line's share of busy time over the last tick.
+counters are the core's health of the line (``GatewayLine.health``), read
+when a client reads them, and pushed by the server's tick only while a
+monitored item watches them.
 """
 
 from __future__ import annotations
 
 import math
 import time
-from collections.abc import Iterator
 from typing import Any, Final, cast
 
 from asyncua import ua
 
-from .. import GatewayLine, busy_seconds
+from .. import GatewayLine
 from ._model import LINE_COUNTERS, Binding, LineNodes
 from ._quality import BAD_WAITING, GOOD, utc
 from ._speedups import ServedDataValue
@@ -60,10 +59,6 @@ class LineCounters:
     """The lines' counters: read on demand, pushed by the tick while watched."""
 
     def __init__(self) -> None:
-        #: Each line's (tick time, busy seconds) at the last tick.
-        self._marks: dict[str, tuple[float, float]] = {}
-        #: Each line's share of busy time over the last tick.
-        self._utilisation: dict[str, float] = {}
         #: The monitored items on each counter's node.
         self._watched: dict[ua.NodeId, int] = {}
 
@@ -75,21 +70,15 @@ class LineCounters:
         """The read callback of the line's counter *name*."""
 
         def read(node: ua.NodeId, attribute: ua.AttributeIds) -> ua.DataValue:
-            return _datavalue(name, self._values(nodes).get(name))
+            return _datavalue(name, _values(nodes.line).get(name))
 
         return read
 
     def tick(self, nodes: LineNodes, now: float, outbox: dict[ua.NodeId, ua.DataValue]) -> bool:
-        """The utilisation since the last tick; the watched counters that changed, into
-        *outbox*. True when one did."""
-        name = nodes.line.config.name
-        busy = busy_seconds(nodes.line.bus)
-        mark = self._marks.get(name)
-        if mark is not None and now > mark[0]:
-            self._utilisation[name] = min(1.0, (busy - mark[1]) / (now - mark[0]))
-        self._marks[name] = (now, busy)
+        """The watched counters that changed since the last tick, into *outbox*. True when
+        one did."""
         changed = False
-        for key, value in self._values(nodes).items():
+        for key, value in _values(nodes.line, now).items():
             if not self._watched.get(nodes.counters[key]):  # reads ask the line
                 nodes.shown.pop(key, None)
                 continue
@@ -99,14 +88,6 @@ class LineCounters:
             outbox[nodes.counters[key]] = _datavalue(key, value)
             changed = True
         return changed
-
-    def _values(self, nodes: LineNodes) -> dict[str, object]:
-        """A line's counters now, its utilisation over the last tick."""
-        values = dict(_line_values(nodes.line))
-        mark = self._utilisation.get(nodes.line.config.name)
-        if mark is not None:
-            values["Utilisation"] = mark
-        return values
 
 
 def _datavalue(name: str, value: object) -> ua.DataValue:
@@ -127,23 +108,25 @@ def _datavalue(name: str, value: object) -> ua.DataValue:
     )
 
 
-def _line_values(line: GatewayLine) -> Iterator[tuple[str, object]]:
-    bus = line.bus
-    stats = bus.stats
-    transactions = stats.transactions
-    yield "Connected", bus.connected
-    yield "DrivesOnline", sum(1 for drive in line.drives.values() if drive.snapshot.available)
-    yield "Requests", transactions.requests
-    yield "Replies", transactions.replies
-    yield "Timeouts", transactions.timeouts
-    yield "Retries", transactions.retries
-    yield "Naks", sum(transactions.naks.values())
-    yield "TransportErrors", transactions.transport_errors
-    yield "ProtocolErrors", transactions.protocol_errors
-    yield "BadFrames", stats.bad_frames
-    yield "EarlyFrames", stats.early_frames
-    yield "StrayFrames", stats.stray_frames
-    yield "DiscardedBytes", stats.discarded_bytes
-    yield "Connects", stats.connects
-    yield "Disconnects", stats.disconnects
-    yield "LatencyMean", transactions.latency_mean_s
+def _values(line: GatewayLine, now: float | None = None) -> dict[str, object]:
+    """A line's counters as the OPC UA model names them (the core's health of the line)."""
+    health = line.health(now)
+    return {
+        "Connected": health.connected,
+        "DrivesOnline": health.drives_online,
+        "Utilisation": health.utilisation,
+        "Requests": health.requests,
+        "Replies": health.replies,
+        "Timeouts": health.timeouts,
+        "Retries": health.retries,
+        "Naks": health.naks,
+        "TransportErrors": health.transport_errors,
+        "ProtocolErrors": health.protocol_errors,
+        "BadFrames": health.bad_frames,
+        "EarlyFrames": health.early_frames,
+        "StrayFrames": health.stray_frames,
+        "DiscardedBytes": health.discarded_bytes,
+        "Connects": health.connects,
+        "Disconnects": health.disconnects,
+        "LatencyMean": health.latency_mean_s,
+    }
