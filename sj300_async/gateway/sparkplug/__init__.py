@@ -13,7 +13,10 @@ release, read here through the registry's ``borrows`` hook.
 - :mod:`._device`: a drive's metrics and aliases; :mod:`._commands`: DCMD
   metrics judged into the gateway's writes.
 - :mod:`._node`: the edge node's session (births, data by exception,
-  deaths, the primary host, commands); :mod:`._stats`: its counters.
+  deaths); :mod:`._node_metrics`: its own metrics (each line's health);
+  :mod:`._host`: the primary host's STATE; :mod:`._workers`: each drive's
+  commands carried out in order, refusals told; :mod:`._stats`: its
+  counters; :mod:`._config`: its section.
 
 The protobuf runtime is imported with the edge node, when Sparkplug is
 configured and starts: this face stays light, for the command line loads
@@ -32,7 +35,8 @@ from ._stats import BAD_INPUTS, SparkplugStats
 
 if TYPE_CHECKING:
     from ._device import DIRECTION_WORDS, LAST_REFUSAL, Device, DeviceFlags, DeviceMetric, device_id
-    from ._node import CLIENT, NAMESPACE, NODE_METRICS, EdgeNode
+    from ._node import NAMESPACE, EdgeNode
+    from ._node_metrics import NODE_METRICS
     from ._payload import (
         Decoded,
         MalformedPayload,
@@ -43,6 +47,7 @@ if TYPE_CHECKING:
         encode_payload,
     )
     from ._schema import DATA_TYPES
+    from ._workers import CLIENT
 
 __all__ = [
     "BAD_INPUTS",
@@ -76,7 +81,9 @@ _LAZY: Final = {
         ("DIRECTION_WORDS", "LAST_REFUSAL", "Device", "DeviceFlags", "DeviceMetric", "device_id"),
         "_device",
     ),
-    **dict.fromkeys(("CLIENT", "NAMESPACE", "NODE_METRICS", "EdgeNode"), "_node"),
+    **dict.fromkeys(("NAMESPACE", "EdgeNode"), "_node"),
+    "NODE_METRICS": "_node_metrics",
+    "CLIENT": "_workers",
     **dict.fromkeys(
         ("Decoded", "MalformedPayload", "MetricDef", "Property", "ReceivedMetric"), "_payload"
     ),

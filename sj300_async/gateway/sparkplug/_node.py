@@ -1,7 +1,7 @@
 """The gateway as a Sparkplug B 3.0 edge node: births, data by exception, deaths, commands.
 
-:class:`EdgeNode` is a northbound, created by the MQTT northbound when
-``[mqtt] sparkplug = true``. Its edge node id is the gateway's id; each
+:class:`EdgeNode` is the ``[sparkplug]`` northbound (:mod:`._config`; the
+deprecated ``[mqtt] sparkplug = true`` too). Its edge node id is the gateway's id; each
 drive is a device (:mod:`._device`). Topics are
 ``spBv1.0/<group_id>/<TYPE>/<gateway id>[/<device id>]``.
 
@@ -14,7 +14,7 @@ The session (Sparkplug 3.0, sections 5.4 to 5.7):
 - It subscribes to its NCMD and DCMD topics (QoS 1), and with a
   ``primary_host_id`` to ``spBv1.0/STATE/<host>`` first. One the broker
   refuses (an ACL) is said, counted and shown on /healthz, and the session
-  goes on (the MQTT package's ``Subscriptions``: a refused STATE leaves the
+  goes on (the MQTT transport's ``Subscriptions``: a refused STATE leaves the
   node unborn, waiting, which /healthz then explains). With a primary
   host, nothing is born until the host's retained STATE says
   ``online: true``; a STATE with ``online: false`` newer than the last one
@@ -24,7 +24,7 @@ The session (Sparkplug 3.0, sections 5.4 to 5.7):
   ``lease_scope = "connection"`` line lapses when the host goes offline or
   the connection is lost.
 - NBIRTH (``seq`` 0): ``bdSeq``, ``Node Control/Rebirth`` (false; no
-  alias) and the gateway's metrics (:data:`NODE_METRICS` per line), then a
+  alias) and the gateway's metrics (:mod:`._node_metrics`), then a
   DBIRTH for each drive the poller hears. NDATA carries the gateway's
   metrics that changed, checked once a second.
 - A drive's sample is a DDATA of the metrics whose value changed since the
@@ -48,77 +48,56 @@ messages in order. A sample replaced before its turn is counted
 (``samples_replaced``); its changes go out with the newer one, since a
 DDATA is the difference from what the host last got.
 
-Commands (DCMD): see :mod:`._commands` for how a metric is judged. Writes
-go through the gateway like every other door's (client ``sparkplug``: one
-identity, as on MQTT; the lease, the grants, the read-back, the audit
-log). A drive's commands run in order, each drive on its own. What is
-refused is audited, counted, and told on the device's ``Control/Last
-Refusal`` and ``Control/Refusals`` metrics in the next DDATA (Sparkplug
-has no error reply; a host sees the write did not take, and why). Input
-that changes nothing is counted by reason (:data:`~._stats.BAD_INPUTS`)
-and logged at DEBUG with an escaped excerpt.
+Commands (DCMD): :mod:`._commands` judges a metric, :mod:`._workers`
+carries the writes out, each drive's in order, and tells what is refused;
+the primary host's STATE is read by :mod:`._host`. Input that changes
+nothing is counted by reason (:data:`~._stats.BAD_INPUTS`) and logged at
+DEBUG with an escaped excerpt.
 """
 
 from __future__ import annotations
 
 import asyncio
-import json
 import logging
 import math
 import time
 from collections.abc import Callable, Iterator
 from typing import TYPE_CHECKING, Final
 
-from ...wire import Direction
 from .. import (
-    DROPPED_BY_STOP,
-    GatewayLine,
     GatewayView,
-    Refusal,
-    RunCommand,
     ServedDrive,
-    WriteRequest,
-    WriteResult,
     excerpt,
 )
 from ..mqttlink import Subscriptions, cancel_and_wait, keep_connected, new_client, reader
 from ..mqttlink.client import Client, MqttError, Will
-from ._commands import judge
 from ._config import SparkplugConfig
 from ._device import Device, DeviceFlags
+from ._host import PrimaryHost, Unread
+from ._node_metrics import (
+    REBIRTH,
+    SESSION_METRICS,
+    node_definitions,
+    node_values,
+)
 from ._payload import (
-    BOOLEAN,
-    INT64,
-    UINT32,
-    UINT64,
     MalformedPayload,
     MetricDef,
-    ReceivedMetric,
     decode_payload,
     encode_payload,
 )
 from ._stats import SparkplugStats, sparkplug_families
+from ._workers import CLIENT, MAX_COMMAND_BYTES, DeviceCommands
 
 if TYPE_CHECKING:
     from prometheus_client.core import Metric
 
-__all__ = ["CLIENT", "NAMESPACE", "NODE_METRICS", "EdgeNode"]
+__all__ = ["NAMESPACE", "EdgeNode"]
 
 _log = logging.getLogger("sj300_async.gateway.sparkplug")
 
 NAMESPACE: Final = "spBv1.0"
-#: The client every Sparkplug command comes from.
-CLIENT: Final = "sparkplug"
-REBIRTH: Final = "Node Control/Rebirth"
 BACKOFF_MAX_S: Final = 30.0
-#: The longest command read; a longer one is refused unread.
-MAX_COMMAND_BYTES: Final = 65536
-#: The longest STATE read (a real one is some 50 bytes of JSON).
-MAX_STATE_BYTES: Final = 1024
-#: Metrics one DCMD may carry; the rest are refused (each would be a write and an audit line).
-MAX_METRICS: Final = 64
-#: Commands waiting for one drive, at most (more are refused: busy).
-MAX_COMMANDS: Final = 16
 #: How often the gateway's own metrics are checked for an NDATA.
 NODE_TICK_S: Final = 1.0
 CLOSE_TIMEOUT_S: Final = 3.0
@@ -130,26 +109,7 @@ YIELD_EVERY: Final = 64
 #: anyone may publish a STATE, and a flapping one was a death and a rebirth each.
 HOST_REBIRTH_MIN_S: Final = 10.0
 
-#: Each line's metrics in the NBIRTH: (name under ``Lines/<line>/``, datatype).
-NODE_METRICS: Final = (
-    ("Connected", BOOLEAN),
-    ("Drives Online", UINT32),
-    ("Timeouts", UINT64),
-    ("Transport Errors", UINT64),
-)
-
 Key = tuple[str, int]
-#: A judged DCMD metric waiting: its session, device, name as shown, value, write.
-_Command = tuple[int, Device, str, object, WriteRequest]
-
-
-def _line_values(line: GatewayLine) -> Iterator[object]:
-    """A line's :data:`NODE_METRICS` values now."""
-    transactions = line.bus.stats.transactions
-    yield line.bus.connected
-    yield sum(1 for drive in line.drives.values() if drive.snapshot.available)
-    yield transactions.timeouts
-    yield transactions.transport_errors
 
 
 class _HostOffline(MqttError):
@@ -176,8 +136,6 @@ class EdgeNode:
         #: What the host was last told of each live device (its values, in metric order).
         self._alive: dict[Key, list[object]] = {}
         self._node_values: list[object] = []
-        #: Per drive: the latest refusal in words, and how many so far.
-        self._refusals: dict[Key, tuple[str, int]] = {}
         self._wake = asyncio.Event()
         self._bdseq = -1  # the current connection's (its will's)
         self._next_bdseq = 0
@@ -188,14 +146,13 @@ class EdgeNode:
         self._nbirth_at = -math.inf
         self._births_after = -math.inf
         self.host_rebirth_s = HOST_REBIRTH_MIN_S
-        #: The primary host's latest STATE: online, and its timestamp (None: none seen).
-        self.host_online: bool | None = None
-        self._host_stamp: int | None = None
+        host = config.primary_host_id
+        #: The primary host, whose STATE the edge node waits for (None: no host).
+        self._host = None if host is None else PrimaryHost(host, NAMESPACE)
         self._client: Client | None = None
         self._epoch = 0
         self._session_name: str | None = None
-        self._commands: dict[Key, asyncio.Queue[_Command]] = {}
-        self._workers: dict[Key, asyncio.Task[None]] = {}
+        self._commands = DeviceCommands(self, self.stats, self._by_id)
         self._task: asyncio.Task[None] | None = None
         self._closing = False
 
@@ -206,13 +163,40 @@ class EdgeNode:
         return base if device is None else f"{base}/{device}"
 
     @property
-    def _state_topic(self) -> str | None:
-        host = self.config.primary_host_id
-        return None if host is None else f"{NAMESPACE}/STATE/{host}"
+    def host_online(self) -> bool | None:
+        """The primary host's latest word on this connection (None: none, or no host)."""
+        return None if self._host is None else self._host.online
 
     @property
     def born(self) -> bool:
         return self._born
+
+    # -- what the command workers see (._workers.CommandSession) -------------------------
+
+    @property
+    def gateway(self) -> GatewayView | None:
+        return self._gateway
+
+    @property
+    def epoch(self) -> int:
+        return self._epoch
+
+    @property
+    def session_name(self) -> str | None:
+        return self._session_name
+
+    def alive(self, key: Key) -> bool:
+        return key in self._alive
+
+    def refusal_changed(self, device: Device) -> None:
+        key = device.drive.key
+        latest = self._latest.get(key)
+        if latest is not None and device.writable:
+            self._mark(key, latest, sample=False)  # the next DDATA tells it
+
+    def bad(self, reason: str, text: str) -> None:
+        self.stats.bad_input[reason] += 1
+        _log.debug("Sparkplug: %s: %s", reason, text)
 
     @property
     def bdseq(self) -> int:
@@ -228,14 +212,7 @@ class EdgeNode:
             device = Device(drive, ordinal)
             self._devices[drive.key] = device
             self._by_id[device.id] = device
-        self._node_defs = [MetricDef("bdSeq", None, INT64), MetricDef(REBIRTH, None, BOOLEAN)]
-        alias = 0
-        for line in gateway.lines:
-            for name, datatype in NODE_METRICS:
-                alias += 1
-                self._node_defs.append(
-                    MetricDef(f"Lines/{line.config.name}/{name}", alias, datatype)
-                )
+        self._node_defs = node_definitions(gateway.lines)
         if self._task is None:
             self._task = asyncio.get_running_loop().create_task(self._run(), name="sparkplug")
 
@@ -289,16 +266,14 @@ class EdgeNode:
 
     def _node_now(self) -> list[object]:
         assert self._gateway is not None
-        values: list[object] = [self._bdseq, False]
-        for line in self._gateway.lines:
-            values.extend(_line_values(line))
-        return values
+        return node_values(self._bdseq, self._gateway.lines)
 
     def _device_values(self, device: Device, served: ServedDrive) -> list[object]:
         """The device's metrics: the values served at the sample, the lease as it is now."""
         lease = served.lease_holder(asyncio.get_running_loop().time()) == CLIENT
         flags = DeviceFlags(lease=lease, lapse_pending=served.lapse_pending)
-        return device.values(served.values(), flags, self._refusals.get(device.drive.key))
+        refusal = self._commands.refusals.get(device.drive.key)
+        return device.values(served.values(), flags, refusal)
 
     # -- turning samples into messages (the edge node's task) -----------------------------
 
@@ -368,7 +343,7 @@ class EdgeNode:
         changed = [
             (self._node_defs[i], v)
             for i, v in enumerate(values)
-            if i >= 2 and v != self._node_values[i]
+            if i >= SESSION_METRICS and v != self._node_values[i]
         ]
         if not changed:
             return None
@@ -382,7 +357,7 @@ class EdgeNode:
         """Connected, and the primary host (if any) is online: messages may go out."""
         if self._client is None:
             return False
-        return self.config.primary_host_id is None or self.host_online is True
+        return self._host is None or self._host.online is True
 
     def _outgoing(self) -> Iterator[tuple[str, bytes]]:
         """Everything due now, in order (each with its seq already taken)."""
@@ -451,20 +426,20 @@ class EdgeNode:
         )
 
     async def _connection(self, client: Client, connected: Callable[[], None]) -> None:
-        state = self._state_topic
+        host = self._host
         self._born = False
-        if state is not None:
+        if host is not None:
             # The host's word counts on the connection it came on: a broker that
             # restarted empty may hold no STATE at all (the stamp stays, to order).
-            self.host_online = None
+            host.forget()
         self._epoch += 1
         self._session_name = f"sparkplug session {self._epoch}"
         # Read while subscribing: a flood on NCMD ahead of DCMD's SUBACK hung it (reader).
         receiver = reader(self._receiver(client), "sparkplug receiver")
         try:
             subscribe = self._subscriptions.subscribe  # a refusal: said, counted, a problem
-            if state is not None:
-                await subscribe(client, state, qos=1, unheard="the primary host's STATE")
+            if host is not None:
+                await subscribe(client, host.topic, qos=1, unheard="the primary host's STATE")
             await subscribe(client, self.topic("NCMD"), qos=1, unheard="node commands (NCMD)")
             await subscribe(
                 client, self.topic("DCMD", "+"), qos=1, unheard="device commands (DCMD)"
@@ -530,7 +505,7 @@ class EdgeNode:
     async def _receiver(self, client: Client) -> None:
         async for message in client.messages:
             topic, payload, length = message.topic, message.payload, message.length
-            if topic == self._state_topic:
+            if self._host is not None and topic == self._host.topic:
                 if self._host_state(payload, length):
                     self.stats.host_offline += 1
                     _log.warning(
@@ -545,39 +520,20 @@ class EdgeNode:
             if topic == self.topic("NCMD"):
                 self._node_command(payload, length, retained=message.retain)
             else:
-                self._device_command(topic, payload, length, retained=message.retain)
-
-    def _bad(self, reason: str, text: str) -> None:
-        self.stats.bad_input[reason] += 1
-        _log.debug("Sparkplug: %s: %s", reason, text)
+                self._commands.receive(topic, payload, length, retained=message.retain)
 
     # -- the primary host ----------------------------------------------------------------
 
     def _host_state(self, payload: bytes, length: int) -> bool:
         """Take a STATE message; True when it means: die now (the host went offline)."""
-        if length > MAX_STATE_BYTES:
-            self._bad("oversized", f"STATE: {length} bytes, not read")
+        assert self._host is not None
+        word = self._host.read(payload, length)
+        if isinstance(word, Unread):
+            self.bad(word.reason, word.text)
             return False
-        try:
-            body = json.loads(payload)
-            online, stamp = body["online"], body["timestamp"]
-            if (
-                not isinstance(online, bool)
-                or not isinstance(stamp, int)
-                or isinstance(stamp, bool)
-            ):
-                raise TypeError
-        except (ValueError, TypeError, KeyError, RecursionError):  # '[' * 3000 recurses
-            self._bad("malformed", f"STATE {excerpt(payload)!r}")
-            return False
-        if self._host_stamp is not None and stamp < self._host_stamp:
-            self._bad("stale_state", f"STATE of {stamp} after one of {self._host_stamp}")
-            return False
-        self._host_stamp = stamp
-        was, self.host_online = self.host_online, online
-        if online:
-            if was is not True:
-                _log.info("Sparkplug: primary host %s is online", self.config.primary_host_id)
+        if word.online:
+            if not word.again:
+                _log.info("Sparkplug: primary host %s is online", self._host.id)
             self._wake.set()
             return False
         self._end_session()  # the host's leases lapse with it
@@ -588,176 +544,24 @@ class EdgeNode:
 
     # -- commands ------------------------------------------------------------------------
 
-    def _unread(self, what: str, length: int, *, retained: bool) -> WriteResult | None:
-        """Why a command is not read at all (too long, or retained), or None."""
-        if length > MAX_COMMAND_BYTES:
-            self._bad("oversized", f"{what}: {length} bytes, not read")
-            return WriteResult(
-                Refusal.MALFORMED, f"a command is at most {MAX_COMMAND_BYTES} bytes: not read"
-            )
-        if retained:
-            # Stored by the broker, not sent now: carrying it out would replay it.
-            self._bad("retained", f"{what}: a retained command is never carried out")
-            return WriteResult(
-                Refusal.NOT_ALLOWED,
-                "a retained command is never carried out (publish commands without retain)",
-            )
-        return None
-
     def _node_command(self, payload: bytes, length: int, *, retained: bool) -> None:
-        if self._unread("NCMD", length, retained=retained) is not None:
+        if self._commands.unread("NCMD", length, retained=retained) is not None:
             return
         try:
             decoded = decode_payload(payload)
         except MalformedPayload as exc:
-            self._bad("malformed", f"NCMD {excerpt(payload)!r}: {exc}")
+            self.bad("malformed", f"NCMD {excerpt(payload)!r}: {exc}")
             return
         for metric in decoded.metrics:
             if metric.name != REBIRTH:
-                self._bad("unknown_metric", f"NCMD {excerpt(metric.label)}")
+                self.bad("unknown_metric", f"NCMD {excerpt(metric.label)}")
             elif metric.member != "boolean_value" or metric.is_null:
-                self._bad("wrong_type", f"NCMD {REBIRTH} takes a Boolean")
+                self.bad("wrong_type", f"NCMD {REBIRTH} takes a Boolean")
             elif metric.value is True:
                 self.stats.rebirths += 1
                 _log.info("Sparkplug: rebirth requested")
                 self._rebirth = True
                 self._wake.set()
-
-    def _device_command(self, topic: str, payload: bytes, length: int, *, retained: bool) -> None:
-        device = self._by_id.get(topic.rsplit("/", 1)[-1])
-        if device is None:
-            self._bad("unknown_device", excerpt(topic))
-            return
-        unread = self._unread(f"DCMD to {device.id}", length, retained=retained)
-        if unread is not None:
-            self._refuse(device, "DCMD", excerpt(payload, size=length), unread)
-            return
-        try:
-            decoded = decode_payload(payload)
-        except MalformedPayload as exc:
-            self._bad("malformed", f"DCMD to {device.id} {excerpt(payload)!r}: {exc}")
-            self._refuse(
-                device,
-                "DCMD",
-                excerpt(payload),
-                WriteResult(Refusal.MALFORMED, "not a Sparkplug B payload"),
-            )
-            return
-        for index, metric in enumerate(decoded.metrics):
-            if index >= MAX_METRICS:
-                extra = len(decoded.metrics) - MAX_METRICS
-                self.stats.bad_input["too_many"] += extra
-                self.stats.refused += extra - 1  # and one in _refuse: one audit line for all
-                too_many = f"at most {MAX_METRICS} metrics per DCMD: {extra} refused"
-                self._refuse(device, "DCMD", f"{extra} more", WriteResult(Refusal.BUSY, too_many))
-                break
-            self._judge(device, metric)
-
-    def _judge(self, device: Device, received: ReceivedMetric) -> None:
-        """Judge one metric of a DCMD now; queue the write it asks for, or refuse it."""
-        target, request, bad = judge(device, received)
-        name = received.label if target is None else target.definition.name
-        if bad is not None:
-            self._bad(bad, f"DCMD {excerpt(name)} to {device.id}")
-        if isinstance(request, WriteResult):
-            self._refuse(device, name, received.value, request)
-            return
-        key = device.drive.key
-        queue = self._commands.get(key)
-        if queue is None:
-            queue = self._commands[key] = asyncio.Queue(MAX_COMMANDS)
-            self._workers[key] = asyncio.create_task(
-                self._worker(queue), name=f"sparkplug commands {key[0]} {key[1]}"
-            )
-        if request == RunCommand(Direction.STOP):
-            # A stop waits behind no command: what waits is dropped (refused, audited),
-            # and the stop follows the write under way, if any, at once.
-            while not queue.empty():
-                _, _, old_name, old_value, _ = queue.get_nowait()
-                self._refuse(device, old_name, old_value, DROPPED_BY_STOP)
-        try:
-            queue.put_nowait((self._epoch, device, name, received.value, request))
-        except asyncio.QueueFull:
-            self._refuse(
-                device,
-                name,
-                received.value,
-                WriteResult(Refusal.BUSY, f"{MAX_COMMANDS} commands already wait for this drive"),
-            )
-
-    async def _worker(self, queue: asyncio.Queue[_Command]) -> None:
-        while not self._closing:
-            epoch, device, name, value, request = await queue.get()
-            stop = request == RunCommand(Direction.STOP)
-            if epoch != self._epoch and not stop:  # a stop is always tried
-                self._refuse(device, name, value, WriteResult(
-                    Refusal.NO_ANSWER, "received in a Sparkplug session that is over"))  # fmt: skip
-                continue
-            try:
-                await self._carry_out(device, name, value, request)
-            except Exception:  # a bug: the worker, and the drive's next stop, go on
-                _log.exception("Sparkplug: DCMD %s to %s failed", name, device.id)
-                self._refuse(device, name, value, WriteResult(
-                    Refusal.NO_ANSWER, "the gateway failed to carry it out"))  # fmt: skip
-
-    async def _carry_out(
-        self, device: Device, name: str, value: object, request: WriteRequest
-    ) -> None:
-        why = self._not_now(device, request)
-        if why is not None:
-            self._bad("offline", f"DCMD {name} to {device.id}")
-            self._refuse(device, name, value, WriteResult(Refusal.NO_ANSWER, why))
-            return
-        assert self._gateway is not None
-        result = await self._gateway.write(
-            CLIENT, device.drive, request, connection=self._session_name
-        )  # audited there
-        if result.refusal is None:
-            self.stats.writes += 1
-            return
-        stop = request == RunCommand(Direction.STOP)  # tried, dead or alive
-        if result.refusal == Refusal.NO_ANSWER and device.drive.key not in self._alive and not stop:
-            self._bad("offline", f"DCMD {name} to {device.id}")
-        self._refuse(device, name, value, result, audited=True)
-
-    def _not_now(self, device: Device, request: WriteRequest) -> str | None:
-        """Why *request* is not carried out now, or None: a stop is always tried.
-
-        Nothing else is while no Sparkplug session stands (not born: the primary
-        host is offline, or the births are not out yet): nobody the edge node
-        answers to can have sent it. A drive the poller holds offline is the
-        gateway's to refuse (no answer, counted ``offline`` here), after the
-        value, as from every door.
-        """
-        if request == RunCommand(Direction.STOP):
-            return None
-        if not self._born:
-            return "the edge node is not born (no Sparkplug session): nothing was sent"
-        # A drive the poller holds offline is the gateway's to refuse (after the value,
-        # as from every door: issue 42).
-        return None
-
-    def _refuse(
-        self,
-        device: Device,
-        what: str,
-        value: object,
-        result: WriteResult,
-        *,
-        audited: bool = False,
-    ) -> None:
-        self.stats.refused += 1
-        shown = None if value is None else excerpt(repr(value))
-        text = str(result)
-        _log.debug("Sparkplug: DCMD %s %s to %s refused: %s", excerpt(what), shown, device.id, text)
-        if not audited and self._gateway is not None:
-            self._gateway.refused(CLIENT, device.drive, f"sparkplug {excerpt(what)}", shown, result)
-        key = device.drive.key
-        count = self._refusals.get(key, ("", 0))[1] + 1
-        self._refusals[key] = (f"{excerpt(what)}: {text}", count)
-        latest = self._latest.get(key)
-        if latest is not None and device.writable:
-            self._mark(key, latest, sample=False)  # the next DDATA tells it
 
     # -- stopping ------------------------------------------------------------------------
 
@@ -767,9 +571,7 @@ class EdgeNode:
             return
         self._closing = True
         self._epoch += 1
-        for task in self._workers.values():
-            task.cancel()
-        await asyncio.gather(*self._workers.values(), return_exceptions=True)
+        await self._commands.close()
         task, self._task = self._task, None
         # Its NDEATH and disconnect take up to CLOSE_TIMEOUT_S and the client's close.
         await cancel_and_wait({task}, patience_s=2 * CLOSE_TIMEOUT_S)
