@@ -123,11 +123,13 @@ class ServedDrive:
         "direction_until",
         "lapse_pending",
         "monitor_until",
+        "sample_until",
         "set_frequency_until",
         "snapshot",
         "stale_after_s",
         "status_until",
         "trips_until",
+        "verdict",
     )
 
     def __init__(
@@ -153,6 +155,10 @@ class ServedDrive:
         self.direction_until = s.direction_at + stale_after_s
         self.set_frequency_until = s.set_frequency_at + stale_after_s
         self.trips_until = s.trips_at + stale_after_s + trips_interval_s
+        #: Loop time until which the sample itself, the poller's verdict, is fresh.
+        self.sample_until = s.taken_at + stale_after_s
+        #: The snapshot's ``online`` is the poller's verdict (False before its first poll).
+        self.verdict = verdict
         self.lapse_pending = lapse_pending
         self._lease = lease
         self._at_sample: ServedValues | None = None
@@ -178,6 +184,17 @@ class ServedDrive:
         return _quality(
             self._online, getattr(s, f"{group}_at"), self.fresh_until(group), present, now
         )
+
+    def verdict_quality(self, now: float) -> Quality:
+        """The quality of the poller's verdict itself (the drive online or not) at *now*.
+
+        Never offline (it is the verdict): never read before the first sample,
+        good while samples keep coming, stale once the last is older than
+        ``stale_after_s`` (a stalled poller's last verdict ages).
+        """
+        if self.snapshot.taken_at == -math.inf:
+            return Quality.NEVER
+        return Quality.GOOD if now <= self.sample_until else Quality.STALE
 
     def parameter_until(self, code: str) -> float:
         """Loop time until which polled parameter *code* is fresh (-inf: never read, or refused).

@@ -171,3 +171,16 @@ def test_a_snapshot_rebuilt_before_the_first_poll_is_not_offline() -> None:
     assert not drive.snapshot.online  # the readings' default: no verdict, not "offline"
     assert drive.served.quality("status", NOW) is Quality.NEVER
     assert drive.served.parameter_quality("A004", NOW) is Quality.NEVER
+
+
+def test_the_verdict_itself_is_never_offline_and_ages_with_the_sample() -> None:
+    # An offline drive's verdict is a good verdict: "offline" is its value, not its quality.
+    offline = ServedDrive(_snapshot(online=False), stale_after_s=STALE_S)
+    assert offline.verdict_quality(NOW) is Quality.GOOD
+    assert offline.sample_until == NOW + STALE_S
+    assert offline.verdict_quality(NOW + STALE_S) is Quality.GOOD
+    assert offline.verdict_quality(NOW + STALE_S + 0.001) is Quality.STALE  # a stalled poller
+    first = GatewayDrive(_line(), 1, get_profile("sj300"), Lease(5.0)).served
+    assert first.verdict_quality(0.0) is Quality.NEVER
+    assert first.verdict is False  # its online is not the poller's verdict yet
+    assert offline.verdict is True

@@ -42,12 +42,11 @@ read groups (status, monitor, direction, set frequency, trips) is judged
 by the drive as served (:meth:`ServedDrive.quality
 <sj300_async.gateway.ServedDrive.quality>`, with its group's deadline), a
 polled parameter likewise (:meth:`~sj300_async.gateway.ServedDrive.parameter_quality`),
-and :data:`~._quality.QUALITY_STATUS` words it. One variable is no value
-of a read group and keeps a simple rule of its own: ``Online``, the
-poller's verdict itself, is never offline; it waits for the first sample
-and is Uncertain when the last verdict is older than the gateway's
-window for any value (a stalled poller), else Good. The lines' counters
-(:mod:`._server`) are Good whenever the line has a value for them.
+and :data:`~._quality.QUALITY_STATUS` words it. ``Online``, the poller's
+verdict itself, is judged by the served view too
+(:meth:`~sj300_async.gateway.ServedDrive.verdict_quality`: never offline,
+stale once the last sample is older than the gateway's window). The lines'
+counters (:mod:`._values`) are Good whenever the line has a value for them.
 """
 
 from __future__ import annotations
@@ -129,11 +128,7 @@ def _judge(
         return served.quality(read_group, now, present=present)
     if parameter is not None:
         return served.parameter_quality(parameter, now)
-    # The verdict is never offline: Good while verdicts keep coming, a stalled
-    # poller's last one ages.
-    if served.snapshot.taken_at == -math.inf:
-        return Quality.NEVER
-    return Quality.GOOD if now <= _verdict_until(served) else Quality.STALE
+    return served.verdict_quality(now)
 
 
 def _until(served: ServedDrive, read_group: ReadGroup | None, parameter: str | None) -> float:
@@ -142,13 +137,7 @@ def _until(served: ServedDrive, read_group: ReadGroup | None, parameter: str | N
         return served.fresh_until(read_group)
     if parameter is not None:
         return served.parameter_until(parameter)
-    return _verdict_until(served)
-
-
-def _verdict_until(served: ServedDrive) -> float:
-    """Until when the Online verdict is Good: the served view has no deadline for the
-    sample itself, so its own, as long as any value's."""
-    return served.snapshot.taken_at + served.stale_after_s
+    return served.sample_until
 
 
 @dataclass(slots=True, eq=False)
