@@ -15,8 +15,10 @@ each has the machine's two cores to itself and its RSS is its own:
 - ``bare``: the lines alone, no northbound;
 - ``mqtt``: ``[mqtt]`` with the JSON topics and Home Assistant discovery
   (QoS 1, the default), on a mosquitto of its own on loopback;
-- ``sparkplug``: ``[mqtt] sparkplug = true``, ``state_topics = false``;
-- ``mqtt+sparkplug``: both, each sample's state message built once for both;
+- ``sparkplug``: ``[sparkplug]`` alone (issue 42: before, ``[mqtt]
+  sparkplug = true`` with ``state_topics = false``);
+- ``mqtt+sparkplug``: both, each reading the drive as served (the state
+  message was built once for both before issue 42);
 - ``opcua``: ``[opcua]`` without security, no client;
 - ``http``: ``[http]`` (the workbench, /metrics), no client;
 - ``modbus``: ten ``[[modbus.listeners]]``, nine of seven lines and one of
@@ -194,12 +196,10 @@ def _toml(
     """The configuration of *which*: lines ``l<first_line>`` on, *lines* of them."""
     parts = EVERY if which in WITH_CLIENTS else set(which.split("+")) - {"bare"}
     text = f'[gateway]\nid = "{gateway_id}"\n'
-    if parts & {"mqtt", "sparkplug"}:
+    if "mqtt" in parts:
         text += f'[mqtt]\nurl = "mqtt://127.0.0.1:{broker}"\n'
-        if "sparkplug" in parts:
-            text += f'sparkplug = true\ngroup_id = "{GROUP}"\n'
-        if "mqtt" not in parts:
-            text += "state_topics = false\n"
+    if "sparkplug" in parts:
+        text += f'[sparkplug]\nurl = "mqtt://127.0.0.1:{broker}"\ngroup_id = "{GROUP}"\n'
     indices = range(first_line, first_line + lines)
     if "modbus" in parts:
         text += "[modbus]\n"
@@ -252,10 +252,8 @@ async def _child(args: argparse.Namespace) -> dict[str, Any]:
             line.poller.on_sample(on_sample)
         await _start_drives(gateway)  # the OPC UA benchmark's ramp: 50 Hz over 300 s
         drives = len(gateway.drives)
-        mqtt: Any = gateway.northbounds.get("mqtt")
-        parts = getattr(mqtt, "parts", (mqtt,) if mqtt is not None else ())
-        bridge = next((p for p in parts if type(p).__name__ == "MqttBridge"), None)
-        edge = next((p for p in parts if type(p).__name__ == "EdgeNode"), None)
+        bridge: Any = gateway.northbounds.get("mqtt")
+        edge: Any = gateway.northbounds.get("sparkplug")
         # Started now that every server listens; read beside the warm-up.
         clients = (
             await _Clients.start(gateway, args.broker, summary=args.which == "all")
