@@ -60,13 +60,13 @@ from ..profiles import (
     DriveSnapshot,
     MonitorView,
     ParameterSpec,
+    ReadGroup,
     RegisterField,
     RegisterLayout,
     StatusView,
     Trip,
     TripLog,
     frame_text,
-    read_time,
     words,
 )
 from ..wire import Direction
@@ -187,7 +187,7 @@ def _instruction(code: int) -> str:
 
 def _trip_fields() -> tuple[RegisterField, ...]:
     """301 the trips recorded, 302.. each one's fault code, newest first (0: empty)."""
-    t = read_time("trips")
+    t: ReadGroup = "trips"
 
     def recorded(snapshot: DriveSnapshot) -> int | None:
         return None if snapshot.trips is None else len(snapshot.trips.records)
@@ -261,9 +261,7 @@ class Fr700Profile:
         self.registers = RegisterLayout(
             protocol_id=2,
             fields=(
-                RegisterField(
-                    202, "status bits (H7A/H79)", "bit field", _status_bits, read_time("status")
-                ),
+                RegisterField(202, "status bits (H7A/H79)", "bit field", _status_bits, "status"),
                 *_trip_fields(),
             ),
             parameter_bases={"Pr.": 30000},

@@ -38,7 +38,7 @@ from dataclasses import dataclass, field
 from types import MappingProxyType
 from typing import Any, Protocol
 
-from ._snapshot import DriveSnapshot, MonitorView, StatusView, Trip, TripLog
+from ._snapshot import DriveSnapshot, MonitorView, ReadGroup, StatusView, Trip, TripLog
 
 __all__ = [
     "Capabilities",
@@ -155,8 +155,9 @@ class RegisterField:
     step: str
     #: The value in counts from a snapshot, None when unknown.
     value: Callable[[DriveSnapshot], int | None]
-    #: When the value was read (its staleness), None for a live value.
-    stamp: Callable[[DriveSnapshot], float] | None = None
+    #: The read group the value comes with (its freshness is the group's, judged by the
+    #: served view), None for a live value.
+    group: ReadGroup | None = None
     width: int = 1
     signed: bool = False
 

@@ -32,6 +32,7 @@ from ..profiles import (
     DriveSnapshot,
     MonitorView,
     ParameterSpec,
+    ReadGroup,
     RegisterField,
     RegisterLayout,
     StatusView,
@@ -39,7 +40,6 @@ from ..profiles import (
     TripLog,
     frame_text,
     in_counts,
-    read_time,
     words,
 )
 from ..wire import BadFrame, LocalProtocolError
@@ -212,7 +212,9 @@ def _trip_count(snapshot: DriveSnapshot) -> int | None:
 
 
 def _register_fields() -> tuple[RegisterField, ...]:
-    m, s, t = read_time("monitor"), read_time("status"), read_time("trips")
+    m: ReadGroup = "monitor"
+    s: ReadGroup = "status"
+    t: ReadGroup = "trips"
     fields = [
         RegisterField(104, "output torque", "1 %", _monitor(lambda x: x.output_torque_percent),
                       m, signed=True),

@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import math
-from collections.abc import Callable
 
 import pytest
 
@@ -21,8 +20,13 @@ from sj300_async.gateway import (
     WriteResult,
 )
 from sj300_async.gateway.modbus import REFUSAL_CODES, Exc, Field, RegisterMap, parameter_address
-from sj300_async.gateway.modbus._registers import MAX_CACHED_READS, ReadCache, _group_of
-from sj300_async.profiles import DriveSnapshot, RegisterField, Trip, TripLog, get_profile, read_time
+from sj300_async.gateway.modbus._registers import (
+    _UNTIL,
+    MAX_CACHED_READS,
+    ReadCache,
+    _protocol_field,
+)
+from sj300_async.profiles import RegisterField, Trip, TripLog, get_profile
 from sj300_async.wire import Direction
 
 SJ300, FR700 = get_profile("sj300"), get_profile("fr700")
@@ -214,16 +218,12 @@ def test_a_refused_parameter_is_refused_and_a_read_follows_the_served_view() -> 
 
 
 def test_a_profile_register_is_fresh_as_its_read_group() -> None:
-    def field(stamp: Callable[[DriveSnapshot], float]) -> RegisterField:
-        return RegisterField(500, "x", "1", lambda s: 0, stamp)
-
-    assert _group_of(field(read_time("trips"))) == "trips"
-    assert _group_of(field(read_time("status"))) == "status"
-    # A stamp that is no one group's read time cannot be judged by the served view.
-    for stamp in (
-        lambda s: min(s.status_at, s.monitor_at),
-        lambda s: max(s.direction_at, s.trips_at),
-        lambda s: s.taken_at,
-    ):
-        with pytest.raises(ValueError, match="no read group's read time"):
-            _group_of(field(stamp))
+    # A profile names each register's read group; the served view judges it as that group.
+    for group in ("trips", "status"):
+        field = _protocol_field(RegisterField(500, "x", "1", lambda s: 0, group))
+        assert field.until is _UNTIL[group]
+    live = _protocol_field(RegisterField(500, "x", "1", lambda s: 0))
+    assert live.until is None  # a live value: never stale
+    fields = [f for name in ("sj300", "fr700") for f in get_profile(name).registers.fields]
+    assert fields
+    assert all(f.group is not None for f in fields)  # every built-in value is read

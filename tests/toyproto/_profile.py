@@ -25,7 +25,6 @@ from sj300_async.profiles import (
     StatusView,
     Trip,
     TripLog,
-    read_time,
 )
 from sj300_async.wire import LocalProtocolError
 
@@ -105,7 +104,7 @@ class ToyProfile:
         self.parameters = _Catalogue()
         self.registers = RegisterLayout(
             protocol_id=99,
-            fields=(RegisterField(500, "raw status", "1", _raw_status, read_time("status")),),
+            fields=(RegisterField(500, "raw status", "1", _raw_status, "status"),),
         )
 
     def status_view(self, status: int) -> StatusView:

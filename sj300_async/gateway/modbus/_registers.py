@@ -43,9 +43,9 @@ from __future__ import annotations
 import math
 import operator
 from collections.abc import Callable, Iterable, Iterator, Mapping
-from dataclasses import dataclass, replace
+from dataclasses import dataclass
 from math import isfinite
-from typing import Any, Final, get_args
+from typing import Final, get_args
 
 from ...profiles import DriveSnapshot, Profile, ReadGroup, RegisterField
 from ...wire import Direction
@@ -228,36 +228,6 @@ def _common(protocol_id: int) -> list[Field]:
 
 
 #: A snapshot every read group's time can be set on, to tell a profile's stamp's group.
-_PROBE: Final = DriveSnapshot("", 0, "", None, 0.0, 0.0, True)
-
-
-def _group_of(field: RegisterField) -> ReadGroup:
-    """The read group whose read time *field*'s stamp gives (``read_time(group)``).
-
-    A profile says when its register's value was read; the served view judges
-    freshness by group. The stamp is asked on two snapshots whose groups were
-    read at distinct times, in opposite orders: a stamp that gives one group's
-    time in both is that group's (a minimum or maximum of several is not).
-
-    Raises:
-        ValueError: the stamp gives no one group's read time.
-    """
-    assert field.stamp is not None
-    groups: tuple[ReadGroup, ...] = get_args(ReadGroup)
-    found: list[ReadGroup | None] = []
-    for order in (groups, groups[::-1]):
-        times = {group: float(i + 1) for i, group in enumerate(order)}
-        changes: dict[str, Any] = {f"{group}_at": t for group, t in times.items()}
-        at = field.stamp(replace(_PROBE, **changes))
-        found.append(next((g for g, t in times.items() if t == at), None))
-    if found[0] is None or found[0] != found[1]:
-        raise ValueError(
-            f"register {field.address} ({field.name}): its stamp is no read group's "
-            "read time (read_time(group))"
-        )
-    return found[0]
-
-
 def _protocol_field(field: RegisterField) -> Field:
     """A profile's own register, read from the drive's snapshot, fresh as its group is."""
     get = field.value
@@ -265,7 +235,7 @@ def _protocol_field(field: RegisterField) -> Field:
     def read(served: ServedDrive, now: float) -> int | None:
         return get(served.snapshot)
 
-    until = None if field.stamp is None else _UNTIL[_group_of(field)]
+    until = None if field.group is None else _UNTIL[field.group]
     return Field(field.address, field.name, field.step, read, until, field.width, field.signed)
 
 
