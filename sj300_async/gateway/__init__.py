@@ -24,6 +24,7 @@ from ._drive import GatewayDrive, Lease
 from ._errors import GatewayStartError
 from ._fastjson import compact_json
 from ._gateway import Gateway, GatewayLine
+from ._line_health import LineHealth
 from ._listeners import (
     LIMIT_KEYS,
     ConnectionLimit,
@@ -123,6 +124,7 @@ __all__ = [
     "LapseAction",
     "Lease",
     "LineConfig",
+    "LineHealth",
     "LineView",
     "Listener",
     "ListenerLimits",

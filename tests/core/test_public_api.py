@@ -132,7 +132,8 @@ GATEWAY_NAMES = (
     "DROPPED_BY_STOP", "parameter_request",
     # a northbound that cannot start (its port in use...)
     "GatewayStartError",
-    "LAPSE_ACTIONS", "POLL_READS", "LapseAction", "Lease", "LineConfig", "LineView", "Northbound",
+    "LAPSE_ACTIONS", "POLL_READS", "LapseAction", "Lease", "LineConfig", "LineHealth", "LineView",
+    "Northbound",
     "NorthboundSpec", "ParameterWrite", "PollRead", "Refusal", "RunCommand", "SectionContext",
     "SetFrequency",
     # the listeners' limits (Modbus and HTTP): issue 26
