@@ -399,6 +399,18 @@ class Controller:
         self._changed(drive)
         return raw == request.raw
 
+    # -- reads beside the poll -----------------------------------------------------
+
+    async def read_parameter_raw(self, drive: GatewayDrive, code: str) -> int:
+        """Parameter *code* of *drive* as the drive holds it (a northbound's read beside the
+        poll, such as the workbench's parameter backup).
+
+        Through the line like every other request of a northbound: it waits while a
+        pending stop holds the line, and raises the bus's errors (a NAK, a time-out).
+        """
+        await self.gate.wait_open()  # a pending stop has the line first
+        return int(await self.bus.drive(drive.node).read_parameter_raw(code))
+
     # -- the lease ---------------------------------------------------------------
 
     def disconnected(self, connection: str) -> None:

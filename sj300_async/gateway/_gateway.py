@@ -158,6 +158,10 @@ class Gateway:
             client, drive, request, connection=connection
         )
 
+    async def read_parameter_raw(self, drive: GatewayDrive, code: str) -> int:
+        """Parameter *code* of *drive* read now, through its line's controller."""
+        return await self._line_of(drive).controller.read_parameter_raw(drive, code)
+
     def disconnected(self, connection: str) -> None:
         """*connection* closed: the connection-scoped leases it holds lapse now."""
         for line in self.lines:

@@ -106,6 +106,10 @@ class GatewayView(Protocol):
         when that connection closes (:meth:`disconnected`).
         """
 
+    async def read_parameter_raw(self, drive: GatewayDrive, code: str) -> int:
+        """Parameter *code* of *drive* read now, beside the poll, through its line's
+        controller (raises the bus's errors: a NAK, a time-out)."""
+
     def disconnected(self, connection: str) -> None:
         """*connection* closed: the connection-scoped leases it holds lapse now."""
 

@@ -175,6 +175,9 @@ class Timestamped:
             self._renewals.append(Renewal(at, client, drive.node))
         return result
 
+    async def read_parameter_raw(self, drive: GatewayDrive, code: str) -> int:
+        return await self._gateway.read_parameter_raw(drive, code)
+
     def disconnected(self, connection: str) -> None:
         self._gateway.disconnected(connection)
 

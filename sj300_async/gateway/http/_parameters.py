@@ -35,7 +35,7 @@ from __future__ import annotations
 
 import asyncio
 import logging
-from typing import Any, Final
+from typing import Final
 
 from aiohttp import web
 
@@ -98,7 +98,6 @@ class ParameterRoutes:
     ) -> web.StreamResponse:
         profile = drive.profile
         line = next(line for line in self.gateway.lines if line.config.name == name)
-        target: Any = line.bus.drive(drive.node)
         codes = list(profile.parameters.addressable())
         response = web.StreamResponse(
             headers={"Content-Type": "text/event-stream", "Cache-Control": "no-cache"}
@@ -110,7 +109,7 @@ class ParameterRoutes:
             await response.prepare(request)
             for done, code in enumerate(codes, start=1):
                 try:
-                    raw[code] = int(await target.read_parameter_raw(code))
+                    raw[code] = await self.gateway.read_parameter_raw(drive, code)
                 except NakError as exc:
                     if not profile.absent(int(exc.code)):
                         raise
