@@ -50,9 +50,9 @@ def node_values(bdseq: int, lines: Sequence[GatewayLine]) -> list[object]:
 
 
 def _line_values(line: GatewayLine) -> Iterator[object]:
-    """A line's :data:`NODE_METRICS` values now."""
-    transactions = line.bus.stats.transactions
-    yield line.bus.connected
-    yield sum(1 for drive in line.drives.values() if drive.snapshot.available)
-    yield transactions.timeouts
-    yield transactions.transport_errors
+    """A line's :data:`NODE_METRICS` values now (the core's health of the line)."""
+    health = line.health()
+    yield health.connected
+    yield health.drives_online
+    yield health.timeouts
+    yield health.transport_errors
