@@ -4,7 +4,7 @@
 grants, leases; docs/GATEWAY.md); the flags cover the simple case, one
 read-only line: ``--url URL --nodes LIST [--protocol NAME] --id NAME`` and
 one flag per registered northbound that has one (``--modbus HOST:PORT``,
-``--http HOST:PORT``, ``--mqtt mqtt://HOST:PORT``, ``--opcua HOST:PORT``:
+``--http HOST:PORT``, ``--mqtt mqtt://HOST:PORT``, ``--opcua opc.tcp://HOST:PORT``:
 each northbound declares its own, :class:`~sj300_async.gateway.Flag`). A bad configuration
 starts nothing (exit 2, one line naming the file, line and key).
 

@@ -66,7 +66,8 @@ Decisions:
 - The bridge publishes with the configured QoS and waits for each batch's
   acknowledgements (at most ``MAX_IN_FLIGHT`` at once) before the next: a
   slow broker makes the outbox coalesce, never grow. A broker that never
-  acknowledges loses the connection after ``keepalive_s`` (:mod:`.client`,
+  acknowledges loses the connection after ``keepalive_s`` (the transport's client,
+  :mod:`sj300_async.gateway.mqttlink.client`,
   counted by the transport, :mod:`sj300_async.gateway.mqttlink`): its will then says ``offline``.
 - **Home Assistant's births coalesce** (:mod:`._births`): anyone may publish
   one; a storm of them costs one re-discovery per 10 s, never one each.

@@ -54,7 +54,8 @@ Decisions:
   command line fails at once). Lost later: reconnect with a back-off of
   0.5 s doubling to 10 s (a viewer wants to see the fleet back soon); the
   broker then hands over the retained states again.
-- The client is the gateway's own (:mod:`.client`, standard library only):
+- The client is the gateway's own (the MQTT transport's,
+  :mod:`sj300_async.gateway.mqttlink.client`, standard library only):
   the view needs no extra.
 """
 

@@ -12,9 +12,10 @@ The deprecated alias (for one release): ``[mqtt] sparkplug = true`` with
 its ``group_id`` and optional ``primary_host_id`` configures this
 northbound from ``[mqtt]``'s broker keys (its client id, if given, with
 ``-spb``: the two connections need two ids), and logs one WARNING naming
-``[sparkplug]``. Both at once is an error. ``[mqtt]`` itself knows nothing
-of Sparkplug: this spec reads its table through the registry's
-``borrows`` hook (:mod:`sj300_async.gateway`).
+``[sparkplug]``. Both at once is an error. ``[mqtt]`` only accepts the
+keys (``mqtt.SPARKPLUG_ALIAS_KEYS``) and imports nothing of Sparkplug:
+this spec reads its table through the registry's ``borrows`` hook
+(:mod:`sj300_async.gateway`).
 """
 
 from __future__ import annotations
