@@ -70,9 +70,11 @@ from ._audit import AuditLog
 from ._drive import GatewayDrive, Lease
 from ._lapse import LapseRunner, LineGate, PollHold
 from ._model import LineConfig
+from ._parameter_values import parameter_request, raw_refusal
 from ._writes import (
     DONE,
     Heartbeat,
+    ParameterValue,
     ParameterWrite,
     Refusal,
     RunCommand,
@@ -190,6 +192,10 @@ class Controller:
         if refused is not None:
             self.audit.write(client, drive, *self._describe(drive, request), refused)
             return refused
+        if isinstance(request, ParameterValue):  # judged: the drive's integer now
+            converted = parameter_request(drive.profile, request.code, request.value, request.text)
+            assert isinstance(converted, ParameterWrite)
+            request = converted
         if isinstance(request, Heartbeat):
             what, old, _ = self._describe(drive, request)
             self._renew(client, drive, connection)
@@ -276,12 +282,20 @@ class Controller:
     def _judge(
         self, client: str, drive: GatewayDrive, request: WriteRequest, now: float
     ) -> WriteResult | None:
-        if isinstance(request, ParameterWrite):
+        if isinstance(request, ParameterWrite | ParameterValue):
             if request.code not in self.config.writable_parameters(drive.node):
                 return WriteResult(
                     Refusal.NOT_ALLOWED,
                     f"the configuration does not allow writing {request.code} to this drive",
                 )
+            if isinstance(request, ParameterValue):
+                verdict = parameter_request(
+                    drive.profile, request.code, request.value, request.text
+                )
+                if isinstance(verdict, WriteResult):
+                    return verdict
+            elif (refused := raw_refusal(drive.profile, request)) is not None:
+                return refused
             return _offline(drive)
         if not self.config.control_allowed(drive.node):
             return WriteResult(
@@ -359,6 +373,8 @@ class Controller:
         spec = drive.profile.parameters.spec(request.code)
         old_raw = drive.readings.parameters.get(request.code)
         old = None if old_raw is None else float(spec.from_raw(old_raw))
+        if isinstance(request, ParameterValue):
+            return f"parameter {request.code}", old, request.value
         return f"parameter {request.code}", old, float(spec.from_raw(request.raw))
 
     async def _carry_out(self, drive: GatewayDrive, request: WriteRequest) -> bool:

@@ -22,6 +22,7 @@ from ..wire import Direction
 __all__ = [
     "DROPPED_BY_STOP",
     "Heartbeat",
+    "ParameterValue",
     "ParameterWrite",
     "Refusal",
     "RunCommand",
@@ -52,13 +53,33 @@ class SetFrequency:
 
 @dataclass(frozen=True, slots=True)
 class ParameterWrite:
-    """Write one parameter: *raw* is the drive's integer (its setting increment counted)."""
+    """Write one parameter: *raw* is the drive's integer (its setting increment counted).
+
+    For a door whose wire carries the integer (Modbus, the HTTP API's ``raw``);
+    the gateway refuses one outside the parameter's range.
+    """
 
     code: str
     raw: int
 
 
-WriteRequest = Heartbeat | RunCommand | SetFrequency | ParameterWrite
+@dataclass(frozen=True, slots=True)
+class ParameterValue:
+    """Write one parameter: *value* in its unit, as the client sent it (*text*, for the
+    refusal's sentence).
+
+    For a door whose wire carries a number in the parameter's unit (MQTT, Sparkplug,
+    OPC UA, the HTTP API's ``value``). The gateway makes it the drive's integer, or
+    refuses it (outside the range, finer than the setting increment, not a number),
+    after the grants and before the drive's state, as it judges every write.
+    """
+
+    code: str
+    value: float
+    text: str = ""
+
+
+WriteRequest = Heartbeat | RunCommand | SetFrequency | ParameterWrite | ParameterValue
 
 
 class Refusal(enum.Enum):

@@ -129,7 +129,8 @@ class ParameterInfo:
         raw = round(value * self.scale)
         if abs(raw - value * self.scale) > 1e-6 * max(1.0, abs(value * self.scale)):
             raise LocalProtocolError(
-                f"{self.code} has a resolution of {1 / self.scale:g}{self.unit}: "
+                f"{self.code} has a resolution of {1 / self.scale:g}"
+                f"{' ' + self.unit if self.unit else ''}: "
                 f"{value!r} cannot be sent exactly"
             )
         return raw

@@ -134,7 +134,8 @@ GATEWAY_NAMES = (
     "GatewayStartError",
     "LAPSE_ACTIONS", "POLL_READS", "LapseAction", "Lease", "LineConfig", "LineHealth", "LineView",
     "Northbound",
-    "NorthboundSpec", "ParameterWrite", "PollRead", "Refusal", "RunCommand", "SectionContext",
+    "NorthboundSpec", "ParameterValue", "ParameterWrite", "PollRead", "Refusal", "RunCommand",
+    "SectionContext",
     "SetFrequency",
     # the listeners' limits (Modbus and HTTP): issue 26
     "ConnectionLimit", "LIMIT_KEYS", "Listener", "ListenerLimits", "RateLimitedLog",

@@ -267,7 +267,7 @@ async def test_no_arguments_is_a_usage_error() -> None:
 @pytest.mark.parametrize(
     ("module", "flag"),
     [
-        ("google.protobuf", ["--mqtt", "mqtt://127.0.0.1:1"]),
+        ("orjson", ["--mqtt", "mqtt://127.0.0.1:1"]),  # protobuf is Sparkplug's only
         ("prometheus_client", ["--metrics", "127.0.0.1:0"]),
     ],
 )

@@ -25,7 +25,11 @@ from sj300_async.gateway import (
     Refusal,
     RunCommand,
     SetFrequency,
+    WriteResult,
+    parameter_request,
 )
+from sj300_async.gateway._parameter_values import raw_refusal
+from sj300_async.profiles import get_profile
 from sj300_async.wire import Direction
 
 from .conftest import drive_of, polled, running_gateway
@@ -99,3 +103,38 @@ async def test_a_drive_held_offline_gets_no_run_frequency_or_parameter_but_a_sto
         assert not _sim_running(gateway, 2)
         offline = [e for e in gateway.audit.recent if e.get("detail") == refused[0].detail]
         assert len(offline) == 3  # each refusal audited, once
+
+
+@pytest.mark.parametrize(
+    ("value", "text", "sentence"),
+    [
+        (1e308, "1e308", "A004 (maximum frequency) must be within 30..400 Hz, got 1e+308"),
+        (math.inf, "1e400", "1e400 is no value of A004"),
+        (math.nan, "nan", "nan is no value of A004"),
+        (60.01, "60.01", "A004 has a resolution of 0.1 Hz: 60.01 cannot be sent exactly"),
+        (20.0, "20", "must be within 30..400 Hz"),
+    ],
+)
+def test_a_parameter_value_is_never_rounded_to_what_the_drive_holds(
+    value: float, text: str, sentence: str
+) -> None:
+    # The controller's judgement of a ParameterValue (MQTT, Sparkplug, OPC UA, the API's
+    # value), in the catalogue's words.
+    result = parameter_request(get_profile("sj300"), "A004", value, text)
+    assert isinstance(result, WriteResult)
+    assert result.refusal is Refusal.INVALID_VALUE
+    assert sentence in str(result)
+    assert parameter_request(get_profile("sj300"), "A004", 60.0, "60") == ParameterWrite(
+        "A004", 600
+    )
+
+
+def test_a_raw_integer_is_refused_outside_the_range_but_a_special_setting_is_not() -> None:
+    sj300, fr700 = get_profile("sj300"), get_profile("fr700")
+    refused = raw_refusal(sj300, ParameterWrite("A004", 4010))  # 401 Hz
+    assert refused is not None
+    assert refused.refusal is Refusal.INVALID_VALUE
+    assert "raw 4010" in str(refused)
+    assert raw_refusal(sj300, ParameterWrite("A004", 600)) is None
+    assert raw_refusal(fr700, ParameterWrite("Pr.122", 9999)) is None  # no communication check
+    assert raw_refusal(fr700, ParameterWrite("Pr.122", 10000)) is not None

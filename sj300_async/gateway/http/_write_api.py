@@ -44,12 +44,14 @@ from typing import Any, Final
 
 from aiohttp import web
 
-from ...wire import Direction, LocalProtocolError
+from ...wire import Direction
 from .. import (
+    DIRECTION_WORDS,
     GatewayDrive,
     GatewayView,
     Heartbeat,
     KeyedBudget,
+    ParameterValue,
     ParameterWrite,
     PasswordChecks,
     Refusal,
@@ -86,7 +88,8 @@ REFUSAL_STATUS: Final = {
     Refusal.NO_ANSWER: 504,
 }
 _TAB: Final = re.compile(r"[A-Za-z0-9]{1,16}\Z")
-_DIRECTIONS: Final = {"forward": Direction.FORWARD, "reverse": Direction.REVERSE}
+#: A run's directions, in the gateway's words (a stop is a call of its own).
+_DIRECTIONS: Final = {DIRECTION_WORDS[d]: d for d in (Direction.FORWARD, Direction.REVERSE)}
 
 Handler = Callable[[web.Request], Awaitable[web.StreamResponse]]
 
@@ -253,13 +256,10 @@ class WriteRoutes:
             code = catalogue.code(text)
             if code is None:
                 raise _BadBody(f"code: {excerpt(text)} is not a parameter code")
-            if value is not None:  # in the parameter's unit: the catalogue makes it raw
+            if value is not None:  # in the parameter's unit: the gateway judges it
                 if isinstance(value, bool) or not isinstance(value, int | float):
                     raise _BadBody("value: expected a number in the parameter's unit")
-                try:
-                    raw = catalogue.spec(code).to_raw(float(value))
-                except LocalProtocolError as exc:
-                    raise _Invalid(str(exc)) from None
+                return ParameterValue(code, float(value), repr(value))
             if isinstance(raw, bool) or not isinstance(raw, int):
                 raise _BadBody("raw: expected the drive's integer (or value: in its unit)")
             return ParameterWrite(code, raw)
@@ -282,8 +282,6 @@ class WriteRoutes:
             write = command(body)
         except _BadBody as bad:
             return self._refuse(client, drive, request, str(bad))
-        except _Invalid as bad:
-            return self._refuse(client, drive, request, str(bad), Refusal.INVALID_VALUE)
         result = await self.gateway.write(client, drive, write)
         return _answer(result, client, drive)
 
@@ -302,10 +300,6 @@ class WriteRoutes:
 
 class _BadBody(Exception):
     """A field of the body is missing or mistyped."""
-
-
-class _Invalid(Exception):
-    """A value the drive must not get (out of range, finer than its increment)."""
 
 
 #: A valid hash of nothing anyone types: an unknown name costs a real verification.

@@ -22,13 +22,13 @@ from ...profiles import Profile
 from ...wire import Direction
 from .. import (
     Heartbeat,
+    ParameterValue,
     Refusal,
     RunCommand,
     SetFrequency,
     WriteRequest,
     WriteResult,
     excerpt,
-    parameter_request,
 )
 
 __all__ = [
@@ -111,7 +111,7 @@ def parse_command(profile: Profile, what: str, payload: bytes) -> WriteRequest |
         return WriteResult(
             Refusal.MALFORMED, f"expected a number in {code}'s unit, got {_quoted(text)}"
         )
-    return parameter_request(profile, code, value, text)
+    return ParameterValue(code, value, text)  # the gateway judges it, as from every door
 
 
 #: What a client on MQTT can do about a refusal, where the neutral sentence does not say.

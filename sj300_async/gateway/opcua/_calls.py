@@ -34,19 +34,19 @@ session closes.
 from __future__ import annotations
 
 import logging
-import math
 from collections import Counter
 from collections.abc import Callable
 from typing import Any, Final
 
 from asyncua import ua
 
-from ...wire import Direction, LocalProtocolError
+from ...wire import Direction
 from .. import (
+    DIRECTION_WORDS,
     GatewayDrive,
     GatewayView,
     Heartbeat,
-    ParameterWrite,
+    ParameterValue,
     Refusal,
     RunCommand,
     SetFrequency,
@@ -61,7 +61,8 @@ __all__ = ["Calls"]
 
 _log = logging.getLogger("sj300_async.gateway.opcua")
 
-_DIRECTIONS: Final = {"forward": Direction.FORWARD, "reverse": Direction.REVERSE}
+#: A run's directions, in the gateway's words (a stop is a call of its own).
+_DIRECTIONS: Final = {DIRECTION_WORDS[d]: d for d in (Direction.FORWARD, Direction.REVERSE)}
 _NUMBERS: Final = frozenset(
     {
         ua.VariantType.Double, ua.VariantType.Float,
@@ -104,10 +105,10 @@ def _arguments(args: tuple[Any, ...], types: tuple[ua.VariantType, ...]) -> list
 
 
 def _number(variant: ua.Variant) -> float:
-    """A written number (any numeric type), finite.
+    """A written number (any numeric type; NaN and infinities are the gateway's to refuse).
 
     Raises:
-        _Refused: not a number (BadTypeMismatch), NaN or infinite (BadOutOfRange).
+        _Refused: not a number (BadTypeMismatch).
     """
     if (
         variant.VariantType not in _NUMBERS
@@ -119,10 +120,7 @@ def _number(variant: ua.Variant) -> float:
             Refusal.MALFORMED,
             f"expected a number, got {variant.VariantType.name}",
         )
-    value = float(variant.Value)
-    if not math.isfinite(value):
-        raise _Refused(ua.StatusCodes.BadOutOfRange, Refusal.INVALID_VALUE, f"{value} is no value")
-    return value
+    return float(variant.Value)
 
 
 Build = Callable[[list[object]], WriteRequest]
@@ -258,14 +256,9 @@ class Calls:
                     "a value written with a status code other than Good is not sent",
                 )
             variant = value.Value if value.Value is not None else ua.Variant(None)
-            number = _number(variant)
-            try:
-                raw = drive.profile.parameters.spec(code).to_raw(number)
-            except LocalProtocolError as exc:
-                raise _Refused(
-                    ua.StatusCodes.BadOutOfRange, Refusal.INVALID_VALUE, str(exc)
-                ) from None
-            return ParameterWrite(code, int(raw))
+            # In its unit: the range and the setting increment are the gateway's to judge
+            # (after the grants, before the drive's state), as from every door (issue 42).
+            return ParameterValue(code, _number(variant), repr(variant.Value))
 
         shown = value.Value.Value if value.Value is not None else None
         return await self._handle(drive, code, shown, build)

@@ -11,28 +11,28 @@ A DCMD names its metrics by alias (the specification's rule) or by name
   member (a host may send a Float for a Double); an integer member is read
   as unsigned, as the specification encodes it, so a negative number must
   come as a Float or Double;
-- then the value as the MQTT commands judge it: a frequency at 0.01 Hz, a
-  parameter exact at its setting increment and within its range, a
-  direction among ``stop``, ``forward``, ``reverse``; ``Control/Lease`` and
+- then the value: a frequency or a parameter becomes the gateway's neutral
+  request, judged by its controller as from every door (the range, the
+  0.01 Hz step, a parameter's setting increment); a direction is one of
+  ``stop``, ``forward``, ``reverse``; ``Control/Lease`` and
   ``Control/Stop`` take ``true`` only.
 """
 
 from __future__ import annotations
 
-import math
 from typing import Final
 
 from ...wire import Direction
 from .. import (
     DIRECTION_WORDS,
     Heartbeat,
+    ParameterValue,
     Refusal,
     RunCommand,
     SetFrequency,
     WriteRequest,
     WriteResult,
     excerpt,
-    parameter_request,
 )
 from ._device import Device, DeviceMetric, Writes
 from ._payload import BOOLEAN, DOUBLE, STRING, ReceivedMetric
@@ -106,11 +106,9 @@ def _request(device: Device, metric: DeviceMetric, value: object) -> WriteReques
         assert isinstance(value, int | float)
         number = float(value)
         if metric.write == Writes.FREQUENCY:  # judged by the gateway, as from every door
-            return SetFrequency(number)  # judged by the gateway, as from every door
-        if not math.isfinite(number):
-            return WriteResult(Refusal.INVALID_VALUE, f"{name}: {number} is no value")
+            return SetFrequency(number)
         assert metric.code is not None
-        return parameter_request(device.drive.profile, metric.code, number, repr(value))
+        return ParameterValue(metric.code, number, repr(value))  # judged by the gateway too
     if metric.write == Writes.DIRECTION:
         direction = _DIRECTIONS.get(str(value).strip().lower())
         if direction is None:
