@@ -88,7 +88,7 @@ def add_parser(subparsers: Any) -> None:
         type=float,
         default=None,
         metavar="S",
-        help="with --url: refuse reads of data older than this (default 5 s)",
+        help="with --url: serve values read longer ago than this as stale (default 5 s)",
     )
     p.add_argument("--interval", type=float, default=None, metavar="S", help="poll interval")
     p.add_argument(

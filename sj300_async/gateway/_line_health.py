@@ -37,7 +37,7 @@ class LineHealth:
 
     connected: bool
     drives: int
-    #: Drives whose latest poll answered.
+    #: Drives available: online by the poller's verdict and heard from at least once.
     drives_online: int
     #: Share of the last window the line carried bytes, 0..1; None before the first window.
     utilisation: float | None

@@ -20,6 +20,7 @@ from collections.abc import AsyncIterator
 from pathlib import Path
 
 import pytest
+from cryptography.hazmat.primitives import serialization
 from mqtt_broker import Broker, TlsListener, running_broker
 from mqtt_tls import Identity, Pki, make_pki
 from waiting import wait_for
@@ -143,6 +144,16 @@ def test_the_certificate_and_its_key_are_loaded_at_parse_time(pki: Pki, tmp_path
     (tmp_path / "conf").mkdir()
     for name in ("gateway.crt", "gateway.key", "stranger.key", "ca.crt"):
         (tmp_path / "conf" / name).write_bytes((pki.ca.parent / name).read_bytes())
+    # The gateway's key with a passphrase: refused at parse time, never prompted for (OpenSSL
+    # would ask on the terminal, the event loop blocked at each connection attempt).
+    key = serialization.load_pem_private_key((pki.ca.parent / "gateway.key").read_bytes(), None)
+    (tmp_path / "conf" / "locked.key").write_bytes(
+        key.private_bytes(
+            serialization.Encoding.PEM,
+            serialization.PrivateFormat.PKCS8,
+            serialization.BestAvailableEncryption(b"secret"),
+        )
+    )
     line = '[[lines]]\nurl = "sim://"\nnodes = "1"\n'
     source = str(tmp_path / "conf" / "gateway.toml")
 
@@ -164,6 +175,7 @@ def test_the_certificate_and_its_key_are_loaded_at_parse_time(pki: Pki, tmp_path
             "mqtt.tls_cert: cannot load the certificate and key",
         ),
         ('tls_cert = "ca.crt"\ntls_key = "ca.crt"\n', "mqtt.tls_cert: cannot load"),
+        ('tls_cert = "gateway.crt"\ntls_key = "locked.key"\n', "the key is encrypted"),
     ]:
         with pytest.raises(GatewayConfigError) as raised:
             parse(keys)

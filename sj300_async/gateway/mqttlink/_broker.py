@@ -29,7 +29,13 @@ from typing import Any, Final
 
 from .. import ConfigTable, SectionContext
 
-__all__ = ["BROKER_KEYS", "BrokerConfig", "broker_fields", "parse_broker"]
+__all__ = [
+    "BROKER_KEYS",
+    "BrokerConfig",
+    "broker_fields",
+    "load_client_certificate",
+    "parse_broker",
+]
 
 #: The keys of a section that names a broker (each northbound adds its own).
 BROKER_KEYS: Final = (
@@ -123,10 +129,29 @@ def _pem(table: ConfigTable, context: SectionContext, key: str) -> Path | None:
     return path
 
 
+def load_client_certificate(context: ssl.SSLContext, cert: Path, key: Path | None) -> None:
+    """The client's certificate and key into *context*.
+
+    A key encrypted with a passphrase is refused (ValueError), never asked for:
+    OpenSSL would prompt on the terminal, blocking the event loop at every
+    connection attempt. The key is kept unencrypted, readable by the gateway's
+    user only (docs/GATEWAY.md).
+
+    Raises:
+        OSError: a file cannot be read, or the pair does not load (ssl.SSLError).
+        ValueError: the key is encrypted.
+    """
+    context.load_cert_chain(str(cert), None if key is None else str(key), password=_no_passphrase)
+
+
+def _no_passphrase() -> str:
+    raise ValueError("the key is encrypted: give the gateway an unencrypted key file")
+
+
 def _check_pair(table: ConfigTable, cert: Path, key: Path | None) -> None:
     """The certificate and key load together now: a mismatch would fail every attempt."""
     try:
-        ssl.create_default_context().load_cert_chain(str(cert), None if key is None else str(key))
+        load_client_certificate(ssl.create_default_context(), cert, key)
     except (OSError, ValueError) as exc:  # ssl.SSLError is an OSError
         raise table.error("tls_cert", f"cannot load the certificate and key: {exc}") from None
 

@@ -60,6 +60,7 @@ from collections.abc import Awaitable, Callable, Coroutine
 from dataclasses import dataclass, field
 from typing import TYPE_CHECKING, Any, Final
 
+from ._broker import load_client_certificate
 from .client import Client, MqttError, PublishUnacknowledged, SubscribeUnacknowledged, Will
 
 if TYPE_CHECKING:
@@ -134,8 +135,7 @@ def new_client(
         )
         if config.tls_cert is not None:
             # Read at each attempt, as the CA is: a renewed certificate needs no restart.
-            key = None if config.tls_key is None else str(config.tls_key)
-            tls.load_cert_chain(str(config.tls_cert), key)
+            load_client_certificate(tls, config.tls_cert, config.tls_key)
     return Client(
         config.host,
         config.port,

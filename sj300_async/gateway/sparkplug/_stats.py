@@ -20,6 +20,7 @@ BAD_INPUTS: Final = (
     "unknown_metric",  # an alias or name the device's birth did not have
     "wrong_type",  # a value of another type than the metric's, or none
     "offline",  # a command to a device that is dead (a stop is still tried)
+    "not_born",  # a command while the edge node is not born (a stop is still tried)
     "retained",  # a command the broker kept: nobody sent it now
     "oversized",  # longer than the edge node reads
     "unknown_device",  # a DCMD to no device of this edge node

@@ -207,7 +207,7 @@ class DeviceCommands:
         session = self._session
         why = self._not_now(request)
         if why is not None:
-            session.bad("offline", f"DCMD {name} to {device.id}")
+            session.bad("not_born", f"DCMD {name} to {device.id}")
             self.refuse(device, name, value, WriteResult(Refusal.NO_ANSWER, why))
             return
         assert session.gateway is not None
