@@ -140,8 +140,12 @@ def opcua_toml(
 
 
 @contextlib.asynccontextmanager
-async def opcua_gateway(text: str) -> AsyncIterator[tuple[Gateway, OpcuaServer]]:
-    async with Gateway(parse_config(text, "test.toml")) as gateway:
+async def opcua_gateway(
+    text: str, *, tune_collector: bool = False
+) -> AsyncIterator[tuple[Gateway, OpcuaServer]]:
+    """A gateway with an OPC UA northbound; *tune_collector* as ``sj300 gateway`` runs it."""
+    config = parse_config(text, "test.toml")
+    async with Gateway(config, tune_collector=tune_collector) as gateway:
         server = gateway.northbounds["opcua"]
         assert isinstance(server, OpcuaServer)
         yield gateway, server
