@@ -8,6 +8,15 @@ drops what is past it unread. Checked here over real sockets (a mosquitto
 of the test's own, the junk sent by tests/adversarial/attacker.py in a
 process of its own, so the loop measured runs only the gateway), and the
 budgets themselves sans-IO, on a clock the test turns.
+
+The loop's lag is judged twice: its 99th percentile by the gateway's own
+monitor (the figure ``/metrics`` serves, on the clock), and its largest
+stall by tests/host_pauses.py's ``LoopLag``, which leaves out a tick late
+only because the scheduler gave both cores to the suite's other worker (a
+clean run of the workbench's login-burst test saw 0.75 s so). The gateway
+tunes the collector as ``sj300 gateway`` does: untuned, a full collection of
+the pytest worker's heap runs on the loop's thread (0.48-0.82 s in clean
+runs of the other attack tests).
 """
 
 from __future__ import annotations
@@ -21,6 +30,7 @@ from pathlib import Path
 from typing import Any
 
 import pytest
+from host_pauses import LoopLag
 from mqtt_broker import Broker, publish, running_broker
 from mqtt_misbehaving import misbehaving_broker
 from waiting import wait_for
@@ -71,7 +81,7 @@ async def test_a_flood_is_dropped_unread_answered_within_a_budget_and_a_stop_get
     motor = sim_line.sim.drives[1]
     async with (
         subscriber(broker, "sj300/gw1/hall/+/error", "sjtest/barrier/#") as sub,
-        running_gateway(mqtt_toml(sim_line.url, broker)) as gateway,
+        running_gateway(mqtt_toml(sim_line.url, broker), tune_collector=True) as gateway,
     ):
         mqtt, _ = await leased(gateway, broker)
         await publish(broker, TOPICS.command("hall", 1, "frequency_hz"), "20")
@@ -79,21 +89,23 @@ async def test_a_flood_is_dropped_unread_answered_within_a_budget_and_a_stop_get
         await wait_for(lambda: motor.state(loop.time()).outputting, "the motor running")
         monitor = gateway.loop_monitor
         mark, started = monitor.mark(), loop.time()
-        flood = asyncio.create_task(junk(broker, 6.0))
-        await wait_for(lambda: mqtt.stats.throttled > 100, "the flood past the budget")
-        # A person at Home Assistant meanwhile: drive 1 stopped, drive 2 taken.
-        await publish(broker, TOPICS.command("hall", 1, "command"), "stop")
-        await publish(broker, TOPICS.command("hall", 2, "lease"), "")
-        await wait_for(
-            lambda: any(e["new"] == "stop" and e["result"] == "ok" for e in gateway.audit.recent),
-            "the stop carried out",
-        )
-        await wait_for(lambda: drive_of(gateway, "hall", 2).lease.holder == "mqtt",
-                       "drive 2's lease taken")  # fmt: skip
-        assert not flood.done()  # both while the flood went on
-        report = await flood
-        elapsed = loop.time() - started
-        lag = monitor.since(mark)
+        with LoopLag() as held:
+            flood = asyncio.create_task(junk(broker, 6.0))
+            await wait_for(lambda: mqtt.stats.throttled > 100, "the flood past the budget")
+            # A person at Home Assistant meanwhile: drive 1 stopped, drive 2 taken.
+            await publish(broker, TOPICS.command("hall", 1, "command"), "stop")
+            await publish(broker, TOPICS.command("hall", 2, "lease"), "")
+            audit = gateway.audit
+            await wait_for(
+                lambda: any(e["new"] == "stop" and e["result"] == "ok" for e in audit.recent),
+                "the stop carried out",
+            )
+            await wait_for(lambda: drive_of(gateway, "hall", 2).lease.holder == "mqtt",
+                           "drive 2's lease taken")  # fmt: skip
+            assert not flood.done()  # both while the flood went on
+            report = await flood
+            elapsed = loop.time() - started
+            lag = monitor.since(mark)
         # The attacker has gone, so the broker has queued its whole flood to the gateway:
         # a command published now reaches the gateway after it (one broker, one
         # connection to the gateway). It names no drive: counted as ignored, nothing else.
@@ -122,7 +134,7 @@ async def test_a_flood_is_dropped_unread_answered_within_a_budget_and_a_stop_get
     assert dropped[0].startswith(f"MQTT: a command on {TOPICS.drive('hall', 1)}/set/")
     assert lag.samples >= 10 * elapsed, lag  # the probe ran
     assert lag.p99_s < P99_BOUND_S, lag
-    assert lag.max_s < MAX_BOUND_S, lag
+    assert held.close() < MAX_BOUND_S, (held.describe(), lag)
 
 
 async def test_a_flood_under_way_at_a_connection_does_not_hang_its_set_up(

@@ -4,7 +4,8 @@ Each attack comes from client addresses of its own (127.0.0.2, 127.0.0.3:
 Linux routes all of 127/8 to the loopback), and each test shows that the
 attack happened (its refusals and counters), that a legitimate client at
 127.0.0.1 still logs in and reads, and that the event loop was not stalled:
-a probe scheduled every 20 ms records how late it ran, at most 200 ms.
+a probe scheduled every 20 ms (tests/host_pauses.py's ``LoopLag``) records how
+long the loop's own work held it, at most 200 ms.
 
 The probe measures this process's loop, so whatever else runs on it is charged
 to the gateway. The combined attack's attackers therefore run in a process of
@@ -31,8 +32,7 @@ import json
 import logging
 import struct
 import sys
-import time
-from collections.abc import AsyncIterator, Iterator
+from collections.abc import AsyncIterator
 from pathlib import Path
 
 import pytest
@@ -40,6 +40,7 @@ from asyncua import Client, ua
 from asyncua.client.ua_client import UaClient
 from asyncua.ua.ua_binary import struct_to_binary
 from asyncua.ua.uaerrors import UaStatusCodeError
+from host_pauses import LoopLag
 from waiting import wait_for
 
 from sj300_async.gateway.opcua._server import OpcuaServer
@@ -70,54 +71,6 @@ PROBE_S, LATE_S = 0.02, 0.2
 SECURE_ONLY = '["Basic256Sha256_SignAndEncrypt", "Basic256Sha256_Sign"]'
 
 
-class LagProbe:
-    """A callback every :data:`PROBE_S` on the loop; how late each ran, for the loop's sake.
-
-    The gateway, the attack's client side (but for the combined attack's, which runs in
-    a process of its own) and the test share this process's loop, and the suite's
-    other worker shares the machine's two cores. A tick late while this thread did not
-    run (the scheduler gave its core to another process) is the machine's load, not a
-    stall of the loop: a clean run saw one tick 265 ms late here. So each tick's
-    lateness counts up to the processor time this thread spent since the last tick,
-    which is at least any stall the loop's own work made; the lateness on the clock is
-    kept beside it (:attr:`late_on_the_clock`).
-    """
-
-    def __init__(self) -> None:
-        self.late: list[float] = []
-        self.late_on_the_clock: list[float] = []
-        self._loop = asyncio.get_running_loop()
-        self._due = self._loop.time() + PROBE_S
-        self._cpu = time.thread_time()
-        self._handle = self._loop.call_at(self._due, self._tick)
-
-    def _tick(self) -> None:
-        now, cpu = self._loop.time(), time.thread_time()
-        late = now - self._due
-        self.late_on_the_clock.append(late)
-        self.late.append(min(late, cpu - self._cpu))
-        self._due, self._cpu = now + PROBE_S, cpu
-        self._handle = self._loop.call_at(self._due, self._tick)
-
-    def stop(self) -> float:
-        """Stop probing; the greatest lateness the loop's own work made (checked: the
-        probe ran)."""
-        self._handle.cancel()
-        assert self.late, "the probe never ran"
-        return max(self.late)
-
-
-@contextlib.contextmanager
-def probed() -> Iterator[LagProbe]:
-    """A :class:`LagProbe` for the block (its :meth:`~LagProbe.stop` after it, once more,
-    is the lateness seen in it)."""
-    probe = LagProbe()
-    try:
-        yield probe
-    finally:
-        probe._handle.cancel()
-
-
 def _counts(server: OpcuaServer, family: str) -> dict[str, float]:
     (found,) = [f for f in server.metrics() if f.name == family]
     return {next(iter(s.labels.values())): s.value for s in found.samples}
@@ -143,18 +96,6 @@ async def _read_online(client: Client) -> bool:
 # -- sessions never activated ---------------------------------------------------------------
 
 
-async def test_the_lag_probe_counts_the_loop_held_by_its_own_work() -> None:
-    """The probe the attacks are judged by can fail: 0.3 s of work on the loop counts."""
-    with probed() as probe:
-        await asyncio.sleep(PROBE_S * 2)
-        end = time.thread_time() + 0.3
-        while time.thread_time() < end:  # the loop held by work of its own
-            pass
-        await asyncio.sleep(PROBE_S * 2)
-    assert probe.stop() >= 0.25
-    assert max(probe.late_on_the_clock) >= 0.25
-
-
 async def test_unactivated_sessions_are_rationed_and_the_operator_still_logs_in(
     tmp_path: Path, client_pair: Pair
 ) -> None:
@@ -168,7 +109,7 @@ async def test_unactivated_sessions_are_rationed_and_the_operator_still_logs_in(
         opcua_gateway(text, tune_collector=True) as (_, server),
         contextlib.AsyncExitStack() as stack,
     ):
-        with probed() as probe:
+        with LoopLag(PROBE_S) as probe:
             answers, clients = [], []
             for source in (ATTACKER, SECOND_ATTACKER):
                 for _ in range(3):
@@ -188,7 +129,7 @@ async def test_unactivated_sessions_are_rationed_and_the_operator_still_logs_in(
                 assert await _read_online(client)
                 assert server.session_count == 8
             evicted = _counts(server, "sj300_opcua_refused_sessions")["evicted"]
-    assert probe.stop() < LATE_S
+    assert probe.close() < LATE_S, probe.describe()
     # Per address: two connections' two sessions each, then the third connection's 33
     # refused for the address; the operator's session pushed the oldest out.
     assert refused["per_connection"] == 4 * (33 - 2)
@@ -225,7 +166,7 @@ async def test_activated_anonymous_sessions_hold_only_their_address_s_share(
         opcua_gateway(text, tune_collector=True) as (_, server),
         contextlib.AsyncExitStack() as stack,
     ):
-        with probed() as probe:
+        with LoopLag(PROBE_S) as probe:
             answers = []
             for _ in range(3):
                 client = await stack.enter_async_context(unsecured_channel(server.url, ATTACKER))
@@ -234,7 +175,7 @@ async def test_activated_anonymous_sessions_hold_only_their_address_s_share(
             async with operator(server.url, client_pair) as scada:
                 assert await _read_online(scada)
         refused = _counts(server, "sj300_opcua_refused_sessions")
-    assert probe.stop() < LATE_S
+    assert probe.close() < LATE_S, probe.describe()
     too_many = "BadTooManySessions"
     assert answers == [["Good"] * 2 + [too_many] * 2] * 2 + [[too_many] * 4]
     assert (refused["per_connection"], refused["per_address"]) == (4, 4)
@@ -283,7 +224,7 @@ async def test_a_stream_of_wrong_passwords_refuses_only_its_own_address(
                 tried += 1
 
         refusals = server._users.refusals
-        with probed() as probe:
+        with LoopLag(PROBE_S) as probe:
             task = asyncio.create_task(stream())
             try:
                 await wait_for(lambda: refusals["rate"] >= 20, "the stream past its budget")
@@ -301,7 +242,7 @@ async def test_a_stream_of_wrong_passwords_refuses_only_its_own_address(
     assert refusals["rate"] >= 20
     assert tried == refusals["password"] + refusals["rate"]
     assert server._defences.checks.checked == refusals["password"] + 6  # all off the loop
-    assert probe.stop() < LATE_S
+    assert probe.close() < LATE_S, probe.describe()
 
 
 def _token(password: bytes, algorithm: str | None) -> ua.UserNameIdentityToken:
@@ -317,7 +258,7 @@ async def test_a_password_in_clear_is_refused_where_its_policy_asks_for_encrypti
     Part 4, 7.36.4), and the password was accepted in clear there."""
     async with opcua_gateway(opcua_toml(tmp_path), tune_collector=True) as (_, server):
         refused = []
-        with probed() as probe:
+        with LoopLag(PROBE_S) as probe:
             # Over None, as a raw client would send it.
             async with unsecured_channel(server.url, ATTACKER) as client:
                 for token in (
@@ -356,7 +297,7 @@ async def test_a_password_in_clear_is_refused_where_its_policy_asks_for_encrypti
     ]  # fmt: skip
     assert server._users.refusals["unencrypted"] == 3
     assert server._users.refusals["password"] == 0  # none of them was checked
-    assert probe.stop() < LATE_S
+    assert probe.close() < LATE_S, probe.describe()
 
 
 # -- malformed messages -----------------------------------------------------------------------
@@ -381,7 +322,7 @@ async def test_a_malformed_message_closes_its_connection_once(
     caplog.set_level(logging.DEBUG, logger="sj300_async.gateway.opcua")
     async with opcua_gateway(opcua_toml(tmp_path), tune_collector=True) as (_, server):
         url = server.url
-        with probed() as probe:
+        with LoopLag(PROBE_S) as probe:
             if kind == "chunk":
                 answer = await _on_channel(url, _wrong_tokens)
             elif kind == "request":
@@ -394,7 +335,7 @@ async def test_a_malformed_message_closes_its_connection_once(
             async with operator(url, client_pair) as client:
                 assert await _read_online(client)
         malformed = _counts(server, "sj300_opcua_malformed")
-    assert probe.stop() < LATE_S
+    assert probe.close() < LATE_S, probe.describe()
     assert malformed == {name: float(name == kind) for name in malformed}
     status = getattr(ua.StatusCodes, error)
     if kind == "request":  # a ServiceFault on the channel
@@ -421,12 +362,12 @@ async def test_2000_chunks_with_a_wrong_token_id_close_their_connection_quietly(
     traceback is logged."""
     caplog.set_level(logging.WARNING)
     async with opcua_gateway(opcua_toml(tmp_path), tune_collector=True) as (_, server):
-        with probed() as probe:
+        with LoopLag(PROBE_S) as probe:
             await _on_channel(server.url, lambda connection: _wrong_tokens(connection, 2000))
             async with operator(server.url, client_pair) as client:
                 assert await _read_online(client)
         malformed = _counts(server, "sj300_opcua_malformed")
-    assert probe.stop() < LATE_S
+    assert probe.close() < LATE_S, probe.describe()
     assert malformed["chunk"] <= 1
     assert not [r for r in caplog.records if r.exc_info]
     assert len([r for r in caplog.records if r.name.startswith("asyncua.server")]) <= 2
@@ -488,7 +429,7 @@ async def test_a_well_behaved_client_keeps_reading_through_the_attacks(
             )
             late: list[float] = []
             loop = asyncio.get_running_loop()
-            with probed() as probe:
+            with LoopLag(PROBE_S) as probe:
                 for _ in range(2):  # a SCADA that reconnects during the attack
                     async with operator(server.url, client_pair) as scada:
                         for _ in range(10):
@@ -513,13 +454,12 @@ async def test_a_well_behaved_client_keeps_reading_through_the_attacks(
     assert child.returncode == 0
     report = json.loads(out.decode().strip().splitlines()[-1])
     print(
-        f"\nlag probe: max {probe.stop() * 1000:.1f} ms (on the clock "
-        f"{max(probe.late_on_the_clock) * 1000:.1f} ms); reads: max {max(late) * 1000:.1f} ms, "
+        f"\nlag probe: {probe.describe()}; reads: max {max(late) * 1000:.1f} ms, "
         f"{' '.join(f'{t * 1000:.0f}' for t in late)} ms\nattacker: {json.dumps(report)}"
     )
     assert len(late) == 20
     assert max(late) < 1.0, f"a read took {max(late):.2f} s"
-    assert probe.stop() < LATE_S
+    assert probe.close() < LATE_S, probe.describe()
     # The attacks really ran, each round to its end at least once (the sessions' round:
     # 100 sessions held until told to stop).
     for attack in ("sessions", "passwords", "chunks", "raw"):
