@@ -25,6 +25,7 @@ from ._errors import GatewayStartError
 from ._fastjson import compact_json
 from ._gateway import Gateway, GatewayLine
 from ._line_health import LineHealth
+from ._line_traffic import LineTraffic
 from ._listeners import (
     LIMIT_KEYS,
     ConnectionLimit,
@@ -64,6 +65,7 @@ from ._northbound import (
     Northbound,
     NorthboundSpec,
     SectionContext,
+    ServedLine,
     UnitScope,
     get_northbound,
     northbound_extra,
@@ -126,6 +128,7 @@ __all__ = [
     "Lease",
     "LineConfig",
     "LineHealth",
+    "LineTraffic",
     "LineView",
     "Listener",
     "ListenerLimits",
@@ -141,6 +144,7 @@ __all__ = [
     "RunCommand",
     "SectionContext",
     "ServedDrive",
+    "ServedLine",
     "ServedValues",
     "SetFrequency",
     "Slot",

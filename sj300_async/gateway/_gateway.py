@@ -58,6 +58,7 @@ from ._drive import GatewayDrive, Lease
 from ._errors import GatewayStartError
 from ._heap import collector_paused, freeze_long_lived, thaw, young_collections_raised
 from ._line_health import LineHealth, UtilisationMeter, line_health
+from ._line_traffic import LineTraffic
 from ._logflood import FloodLimit
 from ._looplag import LoopMonitor
 from ._metrics import LineView, drive_view, gateway_metrics, line_problems
@@ -96,6 +97,14 @@ class GatewayLine:
         if now is None:
             now = asyncio.get_running_loop().time()
         return line_health(self.bus, self.drives.values(), self.meter, now)
+
+    def traffic(self) -> LineTraffic:
+        """The line's traffic, recorded from now until the recording's ``close()``.
+
+        What a northbound may show of the wire (the workbench's line trace):
+        never the bus itself (issue 42).
+        """
+        return LineTraffic(self.config.name, self.bus)
 
 
 class Gateway:

@@ -31,7 +31,7 @@ must import nothing heavy (the command line loads every spec to build the
 from __future__ import annotations
 
 import re
-from collections.abc import Iterable, Sequence
+from collections.abc import Iterable, Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING, Final, Protocol
@@ -47,8 +47,11 @@ from ._writes import WriteRequest, WriteResult
 if TYPE_CHECKING:
     from prometheus_client.core import Metric
 
+    from ..profiles import Profile
     from ._audit import AuditLog
-    from ._gateway import GatewayLine
+    from ._line_health import LineHealth
+    from ._line_traffic import LineTraffic
+    from ._model import LineConfig
 
 __all__ = [
     "Flag",
@@ -56,6 +59,7 @@ __all__ = [
     "Northbound",
     "NorthboundSpec",
     "SectionContext",
+    "ServedLine",
     "UnitScope",
     "get_northbound",
     "northbound_extra",
@@ -69,6 +73,28 @@ __all__ = [
 ]
 
 
+class ServedLine(Protocol):
+    """What a northbound sees of a line (a :class:`~._gateway.GatewayLine`): its settings,
+    drives, health and traffic; never its bus, poller or controller (issue 42)."""
+
+    @property
+    def config(self) -> LineConfig: ...
+
+    @property
+    def profile(self) -> Profile:
+        """The line's protocol profile (its parameters, its words)."""
+
+    @property
+    def drives(self) -> Mapping[int, GatewayDrive]:
+        """The line's drives by node."""
+
+    def health(self, now: float | None = None) -> LineHealth:
+        """The line's link, counters and utilisation at *now* (loop time; default: now)."""
+
+    def traffic(self) -> LineTraffic:
+        """The line's traffic, recorded from now until the recording is closed."""
+
+
 class GatewayView(Protocol):
     """What a northbound sees of the gateway (the :class:`~._gateway.Gateway` itself)."""
 
@@ -80,8 +106,8 @@ class GatewayView(Protocol):
         """The audit log of every write, whichever door it came through."""
 
     @property
-    def lines(self) -> Sequence[GatewayLine]:
-        """Every line, in the configuration's order: its bus, poller, controller and drives."""
+    def lines(self) -> Sequence[ServedLine]:
+        """Every line, in the configuration's order: its settings, drives, health, traffic."""
 
     @property
     def drives(self) -> Sequence[GatewayDrive]:

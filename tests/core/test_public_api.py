@@ -128,6 +128,8 @@ GATEWAY_NAMES = (
     "KeyedBudget", "PasswordChecks", "Slot",
     # a drive as served, decided once for every northbound (issue 42)
     "DIRECTION_WORDS", "Quality", "ServedDrive", "ServedValues",
+    # what a northbound sees of a line: never its bus (issue 42)
+    "LineTraffic", "ServedLine",
     # the doors' shared write checks, the core's since Sparkplug rides no other door (issue 42)
     "DROPPED_BY_STOP", "parameter_request",
     # a northbound that cannot start (its port in use...)

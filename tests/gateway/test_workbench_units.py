@@ -112,3 +112,17 @@ def test_an_event_is_one_json_line() -> None:
     assert end == b"\n"
     # never "NaN" on the wire (JSON has none): unknown, as the page shows a missing value
     assert sse_frame("drive", {"x": math.nan}) == b'event: drive\ndata: {"x":null}\n\n'
+
+
+async def test_a_batch_put_without_waking_is_sent_whole_at_the_flush() -> None:
+    """A drive's frames wait for the gateway's batch to end (its flush), then go in one
+    write; the stream keeps no timer of its own (issue 42)."""
+    hub = EventHub()
+    stream = hub.open()
+    hub.publish("drive/x/1", b"a\n\n", wake=False)
+    hub.publish("drive/x/2", b"b\n\n", wake=False)
+    assert await stream.take(0.01) == b""  # not woken: the batch is not whole yet
+    hub.flush()
+    assert await stream.take(0.01) == b"a\n\nb\n\n"
+    hub.flush()  # nothing pending: no wake, no empty write
+    assert await stream.take(0.01) == b""

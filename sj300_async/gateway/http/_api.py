@@ -37,7 +37,7 @@ from aiohttp import web
 from prometheus_client import CollectorRegistry
 
 from .. import ConnectionLimit, Endpoint, GatewayDrive
-from ._events import GATHER_S, KEEPALIVE
+from ._events import KEEPALIVE
 from ._guards import PerAddress, client_address
 from ._json import trip_log_json, unix_time
 from ._linetrace import KEEP_S, LineTrace
@@ -293,7 +293,7 @@ async def _stream_events(request: web.Request) -> web.StreamResponse:
         await response.prepare(request)
         await response.write(b"retry: 2000\n\n")
         while True:
-            chunk = await stream.take(KEEPALIVE_S, GATHER_S)
+            chunk = await stream.take(KEEPALIVE_S)
             if chunk is None:
                 break
             transport = request.transport

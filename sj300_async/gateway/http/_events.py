@@ -17,13 +17,15 @@ Decisions:
   nothing is dropped silently.
 - Publishing never blocks and never awaits: it runs on the poller's
   sample (the northbound's ``publish``).
-- **One write per gathering, not per sample.** A stream that wakes for a
-  frame waits :data:`GATHER_S` for the frames that follow (the rest of the
-  poll cycle's drives) and writes them together: waking every stream's
-  task for every sample cost the gateway more than the poll itself (see
-  docs/BENCHMARKS.md, "workbench"). The delay it adds is far inside the
-  poll interval the page must follow, and the page redraws at most once a
-  frame anyway.
+- **One write per batch, not per sample.** A drive's frame is put in
+  every stream without waking it (``wake=False``); the gateway's batch of
+  snapshots ends with the northbound's ``flush``, which wakes each stream
+  with frames pending (:meth:`EventHub.flush`), and the stream writes
+  them together. Waking every stream's task for every sample cost the
+  gateway more than the poll itself (see docs/BENCHMARKS.md, "workbench").
+  The gateway's batch did the gathering: a stream has no timer of its own
+  (it used to wait 50 ms more, issue 42). A line's frames come from the
+  workbench's own tick, all in one step, and wake the streams at once.
 - The frames are SSE's (``event: NAME`` and one ``data:`` line of JSON);
   a comment line keeps an idle stream alive through proxies and tells a
   dead client from a quiet gateway (the write fails).
@@ -36,10 +38,8 @@ from typing import Any, Final
 
 from .. import compact_json
 
-__all__ = ["GATHER_S", "KEEPALIVE", "EventHub", "EventStream", "sse_frame"]
+__all__ = ["KEEPALIVE", "EventHub", "EventStream", "sse_frame"]
 
-#: Seconds a stream that woke for a frame waits for more before it writes them together.
-GATHER_S: Final = 0.05
 #: What an idle stream is sent every ``keepalive_s`` (an SSE comment).
 KEEPALIVE: Final = b": keepalive\n\n"
 
@@ -58,27 +58,31 @@ class EventStream:
         self._ready = asyncio.Event()
         self.closed = False
 
-    def put(self, subject: str, frame: bytes) -> None:
+    def put(self, subject: str, frame: bytes, *, wake: bool = True) -> None:
+        """*frame* of *subject* to send, replacing one not sent yet; *wake*: now (else at
+        the next :meth:`wake`)."""
         if subject in self._pending:
             self._hub.replaced += 1
         self._pending[subject] = frame
-        self._ready.set()
+        if wake:
+            self._ready.set()
 
-    async def take(self, timeout_s: float, gather_s: float = 0.0) -> bytes | None:
-        """The pending frames as one chunk, waiting up to *timeout_s* for one.
+    def wake(self) -> None:
+        """Send what is pending (the batch it belongs to is whole)."""
+        if self._pending:
+            self._ready.set()
 
-        Once one is there, waits *gather_s* more for the others of the same cycle, so
-        that a poll cycle of many drives goes out in one write (module docstring).
+    async def take(self, timeout_s: float) -> bytes | None:
+        """The pending frames as one chunk, waiting up to *timeout_s* to be woken for them.
+
         Returns b"" when none came in time, None once the stream is closed.
         """
-        if not self._pending and not self.closed:
+        if not self._ready.is_set() and not self.closed:
             try:
                 async with asyncio.timeout(timeout_s):
                     await self._ready.wait()
             except TimeoutError:
                 return b""
-            if gather_s > 0 and not self.closed:
-                await asyncio.sleep(gather_s)
         if self.closed:
             return None
         chunk = b"".join(self._pending.values())
@@ -116,9 +120,15 @@ class EventHub:
         stream.close()
         self._streams.discard(stream)
 
-    def publish(self, subject: str, frame: bytes) -> None:
+    def publish(self, subject: str, frame: bytes, *, wake: bool = True) -> None:
+        """*frame* of *subject* into every stream; *wake*: sent now, else at :meth:`flush`."""
         for stream in self._streams:
-            stream.put(subject, frame)
+            stream.put(subject, frame, wake=wake)
+
+    def flush(self) -> None:
+        """Wake every stream with frames pending: the batch they belong to is whole."""
+        for stream in self._streams:
+            stream.wake()
 
     def close(self) -> None:
         """End every stream (the gateway is stopping)."""

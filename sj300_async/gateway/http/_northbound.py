@@ -86,6 +86,11 @@ class HttpNorthbound:
         if self.workbench is not None:
             self.workbench.publish(served)
 
+    def flush(self) -> None:
+        """The gateway's batch is whole: the event streams send what it left them."""
+        if self.workbench is not None:
+            self.workbench.hub.flush()
+
     def metrics(self) -> Iterator[Metric]:
         from prometheus_client.core import CounterMetricFamily, GaugeMetricFamily
 

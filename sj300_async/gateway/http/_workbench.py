@@ -17,7 +17,7 @@ Decisions:
   frames the values as of the request; the lease holder and its seconds left
   are the served drive's, at the moment the JSON is written.
 - A line's link, counters and utilisation are the core's health of the
-  line (``GatewayLine.health``), the same figures OPC UA serves; the
+  line (``ServedLine.health``), the same figures OPC UA serves; the
   utilisation is the share of the last second or so the line carried bytes,
   the figure ``rate(sj300_line_busy_seconds_total[1s])`` would give.
 """
@@ -31,7 +31,7 @@ from typing import Any, Final
 
 from ...profiles import NEVER
 from ...version import __version__
-from .. import GatewayLine, GatewayView, ServedDrive
+from .. import GatewayView, ServedDrive, ServedLine
 from ._events import EventHub, sse_frame
 from ._json import Json, drive_json, monitor_time
 from ._linetrace import LineTrace
@@ -66,7 +66,7 @@ class Workbench:
         }
         #: Each line's recent traffic (the line page; kept by the line's bus's recorder).
         self.traces: dict[str, LineTrace] = {
-            line.config.name: LineTrace(line.config.name, line.bus) for line in gateway.lines
+            line.config.name: LineTrace(line.traffic()) for line in gateway.lines
         }
         #: Each drive's latest monitor read: its loop time, and its Unix time in the trend.
         self._monitor_at: dict[tuple[str, int], float] = {}
@@ -100,6 +100,7 @@ class Workbench:
             self.hub.publish(
                 f"drive/{snapshot.line}/{snapshot.node}",
                 sse_frame("drive", self.drive_json(served, at_sample=True)),
+                wake=False,  # sent at the batch's flush
             )
 
     def drive_json(self, served: ServedDrive, *, at_sample: bool = False) -> Json:
@@ -120,7 +121,7 @@ class Workbench:
 
     # -- lines -----------------------------------------------------------------------------
 
-    def line_json(self, line: GatewayLine) -> Json:
+    def line_json(self, line: ServedLine) -> Json:
         """A line's link and counters, and its utilisation (the core's health of the line)."""
         health = line.health(self.now())
         return {

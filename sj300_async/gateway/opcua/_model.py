@@ -59,7 +59,7 @@ from typing import Final
 from asyncua import ua
 
 from ...profiles import DriveSnapshot, ParameterSpec, ReadGroup, Trip
-from .. import GatewayDrive, GatewayLine, Quality, ServedDrive
+from .. import GatewayDrive, Quality, ServedDrive, ServedLine
 from ._quality import QUALITY_STATUS
 from ._space import Argument, SpaceBuilder
 
@@ -273,7 +273,7 @@ class DriveNodes:
 class LineNodes:
     """One line's object: its counters, by name."""
 
-    line: GatewayLine
+    line: ServedLine
     node: ua.NodeId
     counters: dict[str, ua.NodeId] = field(default_factory=dict)
     #: What each counter last showed to subscriptions.
@@ -538,7 +538,7 @@ def _methods(space: SpaceBuilder, node: ua.NodeId, path: str) -> MethodNodes:
     )  # fmt: skip
 
 
-def build_line(space: SpaceBuilder, parent: ua.NodeId, line: GatewayLine) -> LineNodes:
+def build_line(space: SpaceBuilder, parent: ua.NodeId, line: ServedLine) -> LineNodes:
     """Gather *line*'s object under the Lines folder (its drives are added by the caller)."""
     config = line.config
     path = config.name

@@ -2,7 +2,7 @@
 
 A drive variable's value and status come from its :class:`~._model.Binding`
 (the drive as served); this module only makes the DataValue. A line's
-counters are the core's health of the line (``GatewayLine.health``), read
+counters are the core's health of the line (``ServedLine.health``), read
 when a client reads them, and pushed by the server's tick only while a
 monitored item watches them.
 """
@@ -15,7 +15,7 @@ from typing import Any, Final, cast
 
 from asyncua import ua
 
-from .. import GatewayLine
+from .. import ServedLine
 from ._model import LINE_COUNTERS, Binding, LineNodes
 from ._quality import BAD_WAITING, GOOD, utc
 from ._speedups import ServedDataValue
@@ -108,7 +108,7 @@ def _datavalue(name: str, value: object) -> ua.DataValue:
     )
 
 
-def _values(line: GatewayLine, now: float | None = None) -> dict[str, object]:
+def _values(line: ServedLine, now: float | None = None) -> dict[str, object]:
     """A line's counters as the OPC UA model names them (the core's health of the line)."""
     health = line.health(now)
     return {

@@ -12,7 +12,7 @@ from __future__ import annotations
 from collections.abc import Iterator, Sequence
 from typing import Final
 
-from .. import GatewayLine
+from .. import ServedLine
 from ._payload import BOOLEAN, INT64, UINT32, UINT64, MetricDef
 
 __all__ = ["NODE_METRICS", "REBIRTH", "SESSION_METRICS", "node_definitions", "node_values"]
@@ -29,7 +29,7 @@ NODE_METRICS: Final = (
 )
 
 
-def node_definitions(lines: Sequence[GatewayLine]) -> list[MetricDef]:
+def node_definitions(lines: Sequence[ServedLine]) -> list[MetricDef]:
     """The edge node's metrics for *lines*, ``bdSeq`` first (the NDEATH carries it alone)."""
     definitions = [MetricDef("bdSeq", None, INT64), MetricDef(REBIRTH, None, BOOLEAN)]
     aliases = iter(range(1, 1 + len(lines) * len(NODE_METRICS)))
@@ -41,7 +41,7 @@ def node_definitions(lines: Sequence[GatewayLine]) -> list[MetricDef]:
     return definitions
 
 
-def node_values(bdseq: int, lines: Sequence[GatewayLine]) -> list[object]:
+def node_values(bdseq: int, lines: Sequence[ServedLine]) -> list[object]:
     """The values of :func:`node_definitions` now (Rebirth is always false)."""
     values: list[object] = [bdseq, False]
     for line in lines:
@@ -49,7 +49,7 @@ def node_values(bdseq: int, lines: Sequence[GatewayLine]) -> list[object]:
     return values
 
 
-def _line_values(line: GatewayLine) -> Iterator[object]:
+def _line_values(line: ServedLine) -> Iterator[object]:
     """A line's :data:`NODE_METRICS` values now (the core's health of the line)."""
     health = line.health()
     yield health.connected
