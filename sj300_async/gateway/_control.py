@@ -188,14 +188,11 @@ class Controller:
         self._credit_stall(lease)
         if lease.holder is not None and now >= lease.expires_at:
             self._expire(drive)  # its time is up: lapse it before judging (module docstring)
-        refused = self._judge(client, drive, request, now)
-        if refused is not None:
-            self.audit.write(client, drive, *self._describe(drive, request), refused)
-            return refused
-        if isinstance(request, ParameterValue):  # judged: the drive's integer now
-            converted = parameter_request(drive.profile, request.code, request.value, request.text)
-            assert isinstance(converted, ParameterWrite)
-            request = converted
+        judged = self._judge(client, drive, request, now)
+        if isinstance(judged, WriteResult):
+            self.audit.write(client, drive, *self._describe(drive, request), judged)
+            return judged
+        request = judged  # a parameter in its unit is the drive's integer now
         if isinstance(request, Heartbeat):
             what, old, _ = self._describe(drive, request)
             self._renew(client, drive, connection)
@@ -281,22 +278,27 @@ class Controller:
 
     def _judge(
         self, client: str, drive: GatewayDrive, request: WriteRequest, now: float
-    ) -> WriteResult | None:
+    ) -> WriteRequest | WriteResult:
+        """*request* refused (the result), or what to carry out: *request* itself, or a
+        parameter in its unit as the drive's integer (judged and converted once)."""
         if isinstance(request, ParameterWrite | ParameterValue):
             if request.code not in self.config.writable_parameters(drive.node):
                 return WriteResult(
                     Refusal.NOT_ALLOWED,
                     f"the configuration does not allow writing {request.code} to this drive",
                 )
+            raw: ParameterWrite | WriteResult
             if isinstance(request, ParameterValue):
-                verdict = parameter_request(
-                    drive.profile, request.code, request.value, request.text
-                )
-                if isinstance(verdict, WriteResult):
-                    return verdict
-            elif (refused := raw_refusal(drive.profile, request)) is not None:
-                return refused
-            return _offline(drive)
+                raw = parameter_request(drive.profile, request.code, request.value, request.text)
+            else:
+                raw = raw_refusal(drive.profile, request) or request
+            return raw if isinstance(raw, WriteResult) else _offline(drive) or raw
+        refused = self._judge_control(client, drive, request, now)
+        return request if refused is None else refused
+
+    def _judge_control(
+        self, client: str, drive: GatewayDrive, request: WriteRequest, now: float
+    ) -> WriteResult | None:
         if not self.config.control_allowed(drive.node):
             return WriteResult(
                 Refusal.NOT_ALLOWED, "the configuration does not allow control of this drive"
@@ -439,6 +441,24 @@ class Controller:
                           *drive.key, connection)  # fmt: skip
                 self._expire(drive)
 
+    def release(self, client: str, drive: GatewayDrive) -> bool:
+        """*client* hands *drive*'s lease back: it ends now, with no lapse action.
+
+        A holder that is present and says it is done (an operator switching the
+        drive to local control, a test resetting a drive), not one that went
+        silent: the motor keeps what it was last told, and the next client may
+        take the lease at once. Not a door's request (yet): the library's.
+        False (nothing changed) when *client* does not hold the lease.
+        """
+        lease = drive.lease
+        if lease.holder != client:
+            return False
+        self._disarm(drive)
+        lease.holder = None
+        lease.connection = None
+        _log.info("line %s node %d: %s released the control lease", *drive.key, client)
+        return True
+
     def _renew(self, client: str, drive: GatewayDrive, connection: str | None) -> None:
         loop = asyncio.get_running_loop()
         lease = drive.lease
@@ -452,10 +472,14 @@ class Controller:
         lease.credited_s = 0.0
         self._arm(drive)
 
+    def _disarm(self, drive: GatewayDrive) -> None:
+        timer = self._timers.pop(drive.node, None)
+        if timer is not None:
+            timer.cancel()
+        self._timer_drives.pop(drive.node, None)
+
     def _arm(self, drive: GatewayDrive) -> None:
-        old = self._timers.pop(drive.node, None)
-        if old is not None:
-            old.cancel()
+        self._disarm(drive)
         loop = asyncio.get_running_loop()
         self._timers[drive.node] = loop.call_at(drive.lease.expires_at, self._due, drive)
         self._timer_drives[drive.node] = drive
@@ -495,10 +519,7 @@ class Controller:
         self._expire(drive)
 
     def _expire(self, drive: GatewayDrive) -> None:
-        timer = self._timers.pop(drive.node, None)
-        if timer is not None:
-            timer.cancel()
-        self._timer_drives.pop(drive.node, None)
+        self._disarm(drive)
         holder = drive.lease.holder
         if holder is None:
             return

@@ -26,6 +26,7 @@ from sj300_async.gateway import (
 from sj300_async.gateway.http import HttpConfig
 from sj300_async.gateway.modbus import ModbusConfig
 from sj300_async.gateway.mqtt import MqttConfig
+from sj300_async.gateway.mqtt._intake import Budget
 from sj300_async.wire import LocalProtocolError
 
 FULL = """\
@@ -218,6 +219,10 @@ def test_mqtt_every_key(tmp_path: Path) -> None:
         discovery = false
         discovery_prefix = "ha"
         keepalive_s = 5
+        command_burst = 50
+        commands_per_s = 40
+        all_command_burst = 500
+        all_commands_per_s = 400
         {LINE}"""
     config = parse_config(textwrap.dedent(text), str(tmp_path / "g.toml"))
 
@@ -235,6 +240,7 @@ def test_mqtt_every_key(tmp_path: Path) -> None:
         discovery=False,
         discovery_prefix="ha",
         keepalive_s=5,
+        commands=Budget(burst=50, per_s=40, all_burst=500, all_per_s=400),
     )
     assert "secret" not in repr(config.northbounds)
     assert mqtt_of(parse('[mqtt]\nurl = "mqtt://b"\ntls_ca = "/etc/hostname"\n' + LINE)) == (
@@ -740,6 +746,22 @@ REFUSALS = [
         '[mqtt]\nurl = "mqtt://broker"\ndiscovery = "on"\n',
         "gateway.toml:3: mqtt.discovery: expected true or false, got string",
         id="mqtt-discovery-not-a-boolean",
+    ),
+    pytest.param(
+        '[mqtt]\nurl = "mqtt://broker"\ncommands_per_s = 0\n',
+        "gateway.toml:3: mqtt.commands_per_s: expected a whole number from 1 to 1,000,000, got 0",
+        id="mqtt-commands-per-s-zero",
+    ),
+    pytest.param(
+        '[mqtt]\nurl = "mqtt://broker"\nall_command_burst = 1000001\n',
+        "gateway.toml:3: mqtt.all_command_burst: expected a whole number from 1 to 1,000,000, "
+        "got 1000001",
+        id="mqtt-all-command-burst-too-large",
+    ),
+    pytest.param(
+        '[mqtt]\nurl = "mqtt://broker"\ncommand_burst = 2.5\n',
+        "gateway.toml:3: mqtt.command_burst: expected an integer, got float",
+        id="mqtt-command-burst-not-whole",
     ),
     pytest.param(
         '[mqtt]\nurl = "mqtt://broker"\nqoss = 1\n',

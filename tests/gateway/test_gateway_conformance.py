@@ -36,7 +36,6 @@ from __future__ import annotations
 
 import asyncio
 import contextlib
-import logging
 import math
 import textwrap
 from collections.abc import AsyncIterator, Callable
@@ -66,7 +65,6 @@ from sj300_async.gateway.http import hash_token
 from sj300_async.gateway.http._write_api import REFUSAL_STATUS as HTTP_STATUS
 from sj300_async.gateway.modbus._registers import REFUSAL_CODES
 from sj300_async.gateway.mqtt._bridge import MqttBridge
-from sj300_async.gateway.mqtt._intake import Budget, CommandIntake
 from sj300_async.gateway.opcua._quality import REFUSAL_STATUS as OPCUA_STATUS
 from sj300_async.simulator.sj300 import SimulatedBus
 from sj300_async.wire import Direction
@@ -285,6 +283,12 @@ def _toml(directory: Path, broker: Broker) -> str:
         [mqtt]
         url = "{broker.url}"
         keepalive_s = 30
+        # The table sends more commands a second to a drive than a person would: the
+        # intake's budget lifted (it guards a flood, which this is not).
+        command_burst = 1000000
+        commands_per_s = 1000000
+        all_command_burst = 1000000
+        all_commands_per_s = 1000000
         [sparkplug]
         url = "{broker.url}"
         group_id = "plant"
@@ -338,12 +342,6 @@ async def _plant(directory: Path) -> AsyncIterator[Plant]:
         assert isinstance(sim, SimulatedBus)
         bridge = gateway.northbounds["mqtt"]
         assert isinstance(bridge, MqttBridge)
-        # The table sends more commands a second to a drive than a person would: lift the
-        # intake's budget (it guards a flood, which this is not).
-        endless = Budget(burst=10**6, per_s=10**6, all_burst=10**6, all_per_s=10**6)
-        bridge._intake = CommandIntake(
-            logging.getLogger("sj300_async.gateway.mqtt"), commands=endless, replies=endless
-        )
         await wait_for(lambda: bridge.connected, "connected to the broker")
         await spb.until(lambda m: m.kind == "DBIRTH", "a birth per drive", count=4)
         await wait_for(
@@ -390,15 +388,12 @@ def _since(gateway: Gateway, mark: int) -> list[dict[str, object]]:
 
 
 def _release(gateway: Gateway, drive: GatewayDrive) -> None:
-    """Nobody holds *drive*'s lease, and no lapse follows (there is no release request:
-    a lapse would stop the drive and audit it, so the test clears the lease itself)."""
-    controller = gateway.lines[0].controller
-    timer = controller._timers.pop(drive.node, None)
-    if timer is not None:
-        timer.cancel()
-    controller._timer_drives.pop(drive.node, None)
-    drive.lease.holder = None
-    drive.lease.connection = None
+    """Nobody holds *drive*'s lease, and no lapse follows: its holder releases it (a lapse
+    would stop the drive and audit it)."""
+    holder = drive.lease.holder
+    if holder is not None:
+        assert gateway.lines[0].controller.release(holder, drive)
+    assert drive.lease.holder is None
 
 
 def _state(sim: SimulatedBus, node: int) -> tuple[int, int, str]:
@@ -406,7 +401,7 @@ def _state(sim: SimulatedBus, node: int) -> tuple[int, int, str]:
     return (
         simulated.parameters["F001"],
         simulated.parameters["F002"],
-        simulated._serial_run.name,  # the run command it obeys (stopping may still ramp)
+        simulated.run_command.name,  # the run command it obeys (stopping may still ramp)
     )
 
 

@@ -18,6 +18,7 @@ import textwrap
 from waiting import wait_for
 
 from sj300_async import sj300 as sj3
+from sj300_async.gateway import Heartbeat
 from sj300_async.simulator import RunState
 
 from .conftest import SimLine, drive_of, gateway_toml, modbus_port, running_gateway
@@ -115,3 +116,28 @@ async def test_a_killed_controller_gets_its_drive_stopped_within_the_lease(
         )
         assert gateway.lines[0].controller.lapses == 1
     assert len(_stops(sim_line)) == 1  # closing the gateway sent no second stop: no lease held
+
+
+async def test_a_holder_that_releases_the_lease_leaves_no_lapse_behind(sim_line: SimLine) -> None:
+    """Controller.release: the holder hands the lease back; only the holder can; the next
+    client takes it at once; the released lease's end passes with no stop."""
+    loop = asyncio.get_running_loop()
+    async with running_gateway(gateway_toml(sim_line.url, line_extra=WRITES)) as gateway:
+        drive = drive_of(gateway, "hall", 1)
+        controller = gateway.lines[0].controller
+        assert (await gateway.write("scada", drive, Heartbeat())).ok
+        released_end = drive.lease.expires_at
+        assert not controller.release("intruder", drive)
+        assert drive.lease.holder == "scada"
+        assert controller.release("scada", drive)
+        assert drive.lease.holder is None
+        assert not controller.release("scada", drive)  # nothing left to release
+        # The next client takes it at once, and hands it back too.
+        assert (await gateway.write("panel", drive, Heartbeat())).ok
+        assert drive.lease.holder == "panel"
+        assert controller.release("panel", drive)
+        await wait_for(lambda: loop.time() > released_end + ONE_TRANSACTION_S, "the lease's end")
+        assert controller.lapses == 0
+        assert controller.pending_lapses == 0
+        assert not drive.lapse_pending
+    assert _stops(sim_line) == []  # nothing stopped: not at the lease's end, not at the close

@@ -54,6 +54,7 @@ from sj300_async.gateway.mqtt import (
     state_message,
 )
 from sj300_async.gateway.mqtt._bridge import MqttBridge
+from sj300_async.gateway.mqtt._messages import state_payload
 from sj300_async.profiles import get_profile
 from sj300_async.simulator.fr700 import Fr700SimulatedBus
 from sj300_async.sj300 import InverterStatus, MonitorData, StatusA, StatusB, StatusC
@@ -783,7 +784,10 @@ def test_a_state_message_leaves_stale_values_null() -> None:
 def test_a_state_message_is_the_served_view_byte_for_byte() -> None:
     """Nothing judged by the message: its payload is the served values, worded (pinned)."""
     served = _served(lapse_pending=True)
-    assert state_message("gw1", served).to_json() == (
+    payload = state_payload("gw1", served)  # the bridge's path: no message object
+    assert payload == state_message("gw1", served).to_json()
+    assert state_payload("gw1", _served()) == state_message("gw1", _served()).to_json()
+    assert payload == (
         b'{"direction":null,"gateway":"gw1","lapse_pending":true,"line":"hall","node":2,'
         b'"online":true,"output_current_a":null,"output_frequency_hz":null,'
         b'"output_torque_percent":null,"output_voltage_v":null,"parameters":{"A004":50.0},'

@@ -109,7 +109,7 @@ from ._commands import MAX_PAYLOAD_BYTES, error_text, oversized, parse_command
 from ._config import MqttConfig
 from ._discovery import discovery
 from ._intake import CommandIntake
-from ._messages import state_message
+from ._messages import state_payload
 from ._stats import BridgeStats, mqtt_families
 from ._topics import AVAILABLE, UNAVAILABLE, Topics
 
@@ -155,7 +155,7 @@ class MqttBridge:
         self.config = config
         self.stats = BridgeStats()
         self._subscriptions = Subscriptions(self.stats, _log, "MQTT")
-        self._intake = CommandIntake(_log)
+        self._intake = CommandIntake(_log, commands=config.commands)
         self.topics = Topics("", config.prefix)  # the gateway's id is known at start
         self._gateway: GatewayView | None = None
         self._birth = f"{config.discovery_prefix}/status"
@@ -207,11 +207,11 @@ class MqttBridge:
         """
         if self._closing:
             return
-        message = state_message(self.topics.gateway, served)
+        payload = state_payload(self.topics.gateway, served)
         snapshot = served.snapshot
         key = (snapshot.line, snapshot.node)
         self.stats.samples[key] += 1
-        out = _Out(self.topics.state(*key), message.to_json(), retain=True, drive=key)
+        out = _Out(self.topics.state(*key), payload, retain=True, drive=key)
         self._latest[key] = out
         self._put(out, wake=False)  # sent at the batch's flush
         available = snapshot.available

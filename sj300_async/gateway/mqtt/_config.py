@@ -5,8 +5,14 @@ The broker keys (``url``, ``client_id``, ``username``, ``password``,
 transport's (:mod:`sj300_async.gateway.mqttlink`, parsed there for this
 section and ``[sparkplug]`` alike); the client id defaults to
 ``sj300-<gateway id>``. This section adds the topics' ``prefix``, the
-``qos``, Home Assistant's ``discovery`` and ``discovery_prefix``, and
-``state_topics``.
+``qos``, Home Assistant's ``discovery`` and ``discovery_prefix``,
+``state_topics``, and the command intake's budget (:mod:`._intake`):
+``command_burst`` and ``commands_per_s`` per drive, ``all_command_burst``
+and ``all_commands_per_s`` for every drive together. The defaults (20, 10,
+200, 100) are far above what a person, Home Assistant or a heartbeating
+SCADA sends; a controller that streams setpoints faster raises them. Each
+is a whole number from 1 to :data:`MAX_BUDGET`: a budget of 0 would drop
+every command, and one past a million is no budget.
 
 Sparkplug B has its own section, ``[sparkplug]``. For one release
 ``[mqtt]`` still takes ``sparkplug = true`` with ``group_id`` and
@@ -24,15 +30,19 @@ from typing import Final
 
 from .. import ConfigTable, SectionContext, valid_name
 from ..mqttlink import BROKER_KEYS, BrokerConfig, broker_fields, parse_broker
+from ._intake import COMMAND_BUDGET, Budget
 from ._topics import DEFAULT_PREFIX, DISCOVERY_PREFIX
 
-__all__ = ["MQTT_KEYS", "SPARKPLUG_ALIAS_KEYS", "MqttConfig", "parse_mqtt_section"]
+__all__ = ["MAX_BUDGET", "MQTT_KEYS", "SPARKPLUG_ALIAS_KEYS", "MqttConfig", "parse_mqtt_section"]
 
 #: Sparkplug B's keys of old, read by the Sparkplug northbound (deprecated alias).
 SPARKPLUG_ALIAS_KEYS: Final = ("sparkplug", "group_id", "primary_host_id")
+#: The largest command budget a key takes (see the module docstring).
+MAX_BUDGET: Final = 1_000_000
 MQTT_KEYS: Final = (
     *BROKER_KEYS,
     *("prefix", "qos", "discovery", "discovery_prefix", "state_topics"),
+    *("command_burst", "commands_per_s", "all_command_burst", "all_commands_per_s"),
     *SPARKPLUG_ALIAS_KEYS,
 )
 
@@ -48,6 +58,8 @@ class MqttConfig(BrokerConfig):
     #: Home Assistant's MQTT discovery: configs published, and republished on its birth.
     discovery: bool = True
     discovery_prefix: str = DISCOVERY_PREFIX
+    #: Commands taken per drive and in all (stops: the same again, apart).
+    commands: Budget = COMMAND_BUDGET
 
 
 _DEFAULT: Final = MqttConfig(host="localhost", port=1883)
@@ -79,7 +91,22 @@ def parse_mqtt_section(table: ConfigTable, context: SectionContext) -> MqttConfi
         qos=_DEFAULT.qos if qos is None else qos,
         discovery=_DEFAULT.discovery if discovery is None else discovery,
         discovery_prefix=discovery_prefix,
+        commands=Budget(
+            burst=_budget(table, "command_burst", COMMAND_BUDGET.burst),
+            per_s=_budget(table, "commands_per_s", COMMAND_BUDGET.per_s),
+            all_burst=_budget(table, "all_command_burst", COMMAND_BUDGET.all_burst),
+            all_per_s=_budget(table, "all_commands_per_s", COMMAND_BUDGET.all_per_s),
+        ),
     )
+
+
+def _budget(table: ConfigTable, name: str, default: int) -> int:
+    value = table.integer(name)
+    if value is None:
+        return default
+    if not 1 <= value <= MAX_BUDGET:
+        raise table.error(name, f"expected a whole number from 1 to {MAX_BUDGET:,}, got {value}")
+    return value
 
 
 def _topic_prefix(table: ConfigTable, name: str, default: str) -> str:

@@ -160,6 +160,15 @@ class SimulatedDrive(DriveModel):
         return InputTerminal(self._terminals)
 
     @property
+    def run_command(self) -> Direction:
+        """The run command given over the serial link (command 00) that it obeys now.
+
+        What the drive was told, not what it does: a drive told to stop may
+        still be ramping down (:meth:`state`).
+        """
+        return self._serial_run
+
+    @property
     def tripped(self) -> bool:
         """True while a trip is latched."""
         return self._tripped
