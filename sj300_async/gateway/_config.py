@@ -129,6 +129,8 @@ _GRANT_KEYS: Final = ("nodes", "parameters", "control")
 _READS: Final[dict[str, PollRead]] = {read: read for read in POLL_READS}
 _LAPSE: Final[dict[str, LapseAction]] = {action: action for action in LAPSE_ACTIONS}
 _SCOPES: Final[dict[str, LeaseScope]] = {scope: scope for scope in LEASE_SCOPES}
+#: What Home Assistant's entity ids write as "_" (after lower-casing): see _line_name.
+_AS_AN_ID: Final = re.compile(r"[^a-z0-9]")
 #: The shortest poll interval: a floor against a typo (milliseconds written
 #: as seconds) that would leave the line no time for anything but polls.
 _MIN_INTERVAL_S: Final = 0.05
@@ -322,6 +324,8 @@ class _Claims:
 
     #: line name → its key path (``lines[0]``)
     names: dict[str, str] = field(default_factory=dict)
+    #: a line name as Home Assistant's ids write it → (the name, its key path)
+    ids: dict[str, tuple[str, str]] = field(default_factory=dict)
     #: transport (``tcp://HOST:PORT``, a serial device) → line name
     transports: dict[str, str] = field(default_factory=dict)
     #: The scopes within which unit ids are checked (a Modbus listener each).
@@ -396,7 +400,19 @@ def _line_name(table: ConfigTable, index: int, claims: _Claims) -> str:
         raise table.error("name", f"a line name is letters, digits, '_', '.' and '-', got {name!r}")
     if name in claims.names:
         raise table.error("name", f"duplicate line name {name!r} (also {claims.names[name]})")
+    # Home Assistant's entity ids are lower case with '_' for anything else, and its
+    # discovery node ids have '_' for '.': two names alike there share a drive's ids,
+    # and one drive's entities take the other's (issue 43).
+    written = _AS_AN_ID.sub("_", name.lower())
+    if written in claims.ids:
+        other, path = claims.ids[written]
+        raise table.error(
+            "name",
+            f"{name!r} and {other!r} ({path}) are one name in Home Assistant's ids "
+            f"({written}): name the lines apart",
+        )
     claims.names[name] = table.path
+    claims.ids[written] = (name, table.path)
     return name
 
 

@@ -427,6 +427,18 @@ REFUSALS = [
         id="name-repeats-a-default",
     ),
     pytest.param(
+        LINE + 'name = "hall.a"\n[[lines]]\nname = "hall_a"\nurl = "sim://"\nnodes = "1"\n',
+        "gateway.toml:6: lines[1].name: 'hall_a' and 'hall.a' (lines[0]) are one name in "
+        "Home Assistant's ids (hall_a): name the lines apart",
+        id="line-names-alike-in-home-assistant",
+    ),
+    pytest.param(
+        LINE + 'name = "Hall-A"\n[[lines]]\nname = "hall_a"\nurl = "sim://"\nnodes = "1"\n',
+        "gateway.toml:6: lines[1].name: 'hall_a' and 'Hall-A' (lines[0]) are one name in "
+        "Home Assistant's ids (hall_a): name the lines apart",
+        id="line-names-alike-but-for-case",
+    ),
+    pytest.param(
         LINE + 'name = "line2"\n[[lines]]\nurl = "sim://"\nnodes = "1"\n',
         "gateway.toml:5: lines[1].name: duplicate line name 'line2' (also lines[0])",
         id="default-name-taken",

@@ -218,13 +218,14 @@ async def test_discovery_configs_are_retained_json_with_every_required_key(
         assert topic.endswith("/config")
         assert body["unique_id"] == f"{node_id}_{object_id}"
         assert body["default_entity_id"] == f"{component}.{node_id}_{object_id}".lower()
+        assert body["object_id"] == body["default_entity_id"].partition(".")[2]
         assert re.fullmatch(r"[a-z_]+\.[a-z0-9_]+", body["default_entity_id"])
         if node_id == "sj300_gw1":
             continue
         node = int(node_id.rsplit("_", 1)[1])
         assert body["device"] == {
             "identifiers": [f"sj300_gw1_hall_{node}"],
-            "name": f"hall node {node}",
+            "name": f"gw1 hall node {node}",
             "model": "SJ300",
             "manufacturer": "Hitachi",
             "via_device": "sj300_gw1",
@@ -835,7 +836,7 @@ def test_fr700_discovery_has_its_own_sensors_and_the_trip() -> None:
         "Status",
         "Trip",
     }  # fmt: skip  (no torque or power: the FR-700's monitor read has neither)
-    assert station[0]["device"]["name"] == "Hall-B.2 station 3"
+    assert station[0]["device"]["name"] == "gw1 Hall-B.2 station 3"
     assert station[0]["default_entity_id"].startswith("sensor.sj300_gw1_hall_b_2_3_")
     assert station[0]["device"]["manufacturer"] == "Mitsubishi Electric"
     assert station[0]["state_topic"] == "plant/sj300/gw1/Hall-B.2/3/state"

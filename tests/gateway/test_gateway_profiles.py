@@ -182,7 +182,7 @@ async def test_a_toy_line_is_published_on_mqtt(toy_registered: None, broker: Bro
     }  # fmt: skip
     device = next(iter(unit_2.values()))["device"]
     assert (device["name"], device["model"], device["manufacturer"]) == (
-        "toys unit 2",
+        "gwt toys unit 2",
         "Toy unit",
         "the tests",
     )

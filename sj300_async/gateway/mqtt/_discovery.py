@@ -9,11 +9,20 @@ its profile reads trip histories, and, for a drive whose configuration
 grants control, a number (set frequency) and buttons (run forward, run
 reverse, stop, the lease heartbeat).
 
-Decisions: discovery uses ``default_entity_id``, not ``object_id`` (Home
-Assistant deprecated ``object_id`` in 2025.10 and stopped honouring it in
-2026.4). A discovery node id holds only ``[A-Za-z0-9_-]``, so a line
-name's ``.`` becomes ``_`` there: two lines named ``a.b`` and ``a_b`` would
-share their drives' node ids (name lines apart).
+Decisions:
+
+- **Identity.** A drive's device is named ``<gateway id> <line> <noun>
+  <node>`` (``gw1 hall-a node 1``) and its ids hold the gateway id too, so
+  two gateways with a line of the same name are two devices, and which
+  drive gets an ``_2`` never depends on discovery order (issue 43). A
+  discovery node id holds only ``[A-Za-z0-9_-]`` and an entity id only
+  ``[a-z0-9_]``: the configuration refuses two line names written alike
+  there (``a.b`` and ``a_b``, ``Hall`` and ``hall``).
+- **Entity ids as documented on every Home Assistant from 2024 on**: each
+  config sends ``default_entity_id`` (``sensor.sj300_gw1_hall_3_power``,
+  honoured from 2025.10) and ``object_id`` (the part after the dot, which
+  older releases build the id from; deprecated in 2025.10, ignored from
+  2026.4, and harmless there).
 """
 
 from __future__ import annotations
@@ -87,8 +96,7 @@ def discovery(
         f"{prefix}/binary_sensor/{gateway_device}/connectivity/config",
         {
             "name": "Connectivity",
-            "unique_id": f"{gateway_device}_connectivity",
-            "default_entity_id": _entity_id("binary_sensor", f"{gateway_device}_connectivity"),
+            **_ids("binary_sensor", f"{gateway_device}_connectivity"),
             "device": {
                 "identifiers": [gateway_device],
                 "name": f"sj300 gateway {gateway}",
@@ -116,7 +124,7 @@ def discovery(
             common: dict[str, Any] = {
                 "device": {
                     "identifiers": [drive],
-                    "name": f"{line.name} {noun} {node}",
+                    "name": f"{gateway} {line.name} {noun} {node}",
                     "model": model,
                     "manufacturer": manufacturer,
                     "via_device": gateway_device,
@@ -195,17 +203,21 @@ def _entity(
     **keys: Any,
 ) -> tuple[str, dict[str, Any]]:
     """One discovery config of a drive's entity: its topic and payload."""
-    unique = f"{drive}_{object_id}"
     body = {
         "name": name,
-        "unique_id": unique,
-        "default_entity_id": _entity_id(component, unique),
+        **_ids(component, f"{drive}_{object_id}"),
         **common,
         **keys,
     }
     return f"{prefix}/{component}/{drive}/{object_id}/config", body
 
 
-def _entity_id(component: str, unique_id: str) -> str:
-    """``sensor.sj300_gw1_hall_a_3_power``: an entity id holds only ``[a-z0-9_]``."""
-    return f"{component}.{_NOT_IN_ENTITY_ID.sub('_', unique_id.lower())}"
+def _ids(component: str, unique_id: str) -> dict[str, str]:
+    """An entity's ids: its unique id, and the entity id it gets on every Home Assistant
+    (``sensor.sj300_gw1_hall_a_3_power``: only ``[a-z0-9_]``), both ways of saying it."""
+    object_id = _NOT_IN_ENTITY_ID.sub("_", unique_id.lower())
+    return {
+        "unique_id": unique_id,
+        "object_id": object_id,
+        "default_entity_id": f"{component}.{object_id}",
+    }
