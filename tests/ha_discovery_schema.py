@@ -29,7 +29,8 @@ Deliberately not checked: abbreviated keys (``stat_t``, ``dev``...) and the
 they are reported as unknown); templates are not parsed; URLs
 (``configuration_url``, ``support_url``) are only checked to be strings;
 units are not checked against ``DEVICE_CLASS_UNITS``; device-based
-discovery (``components``) is not handled. HA's validators coerce
+discovery (``components``) is not handled, though ``platform`` is accepted
+when it names the component, as in one of its entries. HA's validators coerce
 (``cv.string`` accepts numbers, ``cv.boolean`` accepts ``"on"``); we are
 stricter and want the JSON type itself to be right.
 
@@ -42,10 +43,6 @@ from __future__ import annotations
 from collections.abc import Callable, Mapping
 
 Check = Callable[[object], str | None]  # None if fine, else what was expected
-
-
-def _is_int(v: object) -> bool:
-    return isinstance(v, int) and not isinstance(v, bool)
 
 
 def _string(v: object) -> str | None:
@@ -61,11 +58,12 @@ def _boolean(v: object) -> str | None:
 
 
 def _positive_int(v: object) -> str | None:
-    return None if _is_int(v) and v >= 0 else "an integer >= 0"  # type: ignore[operator]
+    ok = isinstance(v, int) and not isinstance(v, bool) and v >= 0
+    return None if ok else "an integer >= 0"
 
 
 def _number(v: object) -> str | None:
-    return None if _is_int(v) or isinstance(v, float) else "a number"
+    return None if isinstance(v, int | float) and not isinstance(v, bool) else "a number"
 
 
 def _str_list(v: object) -> str | None:
@@ -74,7 +72,9 @@ def _str_list(v: object) -> str | None:
 
 
 def _qos(v: object) -> str | None:
-    return None if _is_int(v) and v in (0, 1, 2) else "0, 1 or 2"
+    return (
+        None if isinstance(v, int) and not isinstance(v, bool) and v in (0, 1, 2) else "0, 1 or 2"
+    )
 
 
 def _subscribe_topic(v: object) -> str | None:
@@ -103,7 +103,11 @@ def _one_of(values: frozenset[str], nullable: bool = False) -> Check:
     return check
 
 
-_NUMBER_CLASSES = frozenset(
+def _words(text: str) -> frozenset[str]:
+    return frozenset(text.split())
+
+
+_NUMBER_CLASSES = _words(
     "absolute_humidity apparent_power aqi area atmospheric_pressure battery"
     " blood_glucose_concentration carbon_monoxide carbon_dioxide conductivity current"
     " data_rate data_size distance duration energy energy_distance energy_storage"
@@ -112,15 +116,15 @@ _NUMBER_CLASSES = frozenset(
     " precipitation precipitation_intensity pressure reactive_energy reactive_power"
     " signal_strength sound_pressure speed sulphur_dioxide temperature"
     " volatile_organic_compounds volatile_organic_compounds_parts voltage volume"
-    " volume_storage volume_flow_rate water weight wind_direction wind_speed".split()
+    " volume_storage volume_flow_rate water weight wind_direction wind_speed"
 )
 DEVICE_CLASSES: dict[str, frozenset[str]] = {
     "sensor": _NUMBER_CLASSES | {"date", "enum", "timestamp"},
     "number": _NUMBER_CLASSES,
-    "binary_sensor": frozenset(
+    "binary_sensor": _words(
         "battery battery_charging carbon_monoxide cold connectivity door garage_door gas"
         " heat light lock moisture motion moving occupancy opening plug power presence"
-        " problem running safety smoke sound tamper update vibration window".split()
+        " problem running safety smoke sound tamper update vibration window"
     ),
     "button": frozenset({"identify", "restart", "update"}),
     "event": frozenset({"doorbell", "button", "motion"}),
@@ -227,8 +231,9 @@ _DEVICE_KEYS: dict[str, Check] = {
         else "a list of [type, value] string pairs"
     ),
     **dict.fromkeys(
-        "manufacturer model model_id name hw_version serial_number sw_version via_device"
-        " suggested_area configuration_url".split(),
+        _words(
+            "manufacturer model model_id name hw_version serial_number sw_version via_device"
+        " suggested_area configuration_url",
         _string,
     ),
 }
@@ -303,7 +308,9 @@ def check(component: str, payload: Mapping[str, object]) -> list[str]:
     if "device" in payload:
         device = payload["device"]
         problems += _nested("device", device, _DEVICE_KEYS, ())
-        if isinstance(device, dict) and not (device.get("identifiers") or device.get("connections")):
+        if isinstance(device, dict) and not (
+            device.get("identifiers") or device.get("connections")
+        ):
             problems.append("'device' needs at least one of 'identifiers' or 'connections'")
     if "origin" in payload:
         problems += _nested("origin", payload["origin"], _ORIGIN_KEYS, ("name",))
@@ -317,8 +324,8 @@ def check(component: str, payload: Mapping[str, object]) -> list[str]:
         problems += _sensor_rules(payload)
     if component == "number":
         lo, hi, step = payload.get("min", 0.0), payload.get("max", 100.0), payload.get("step", 1.0)
-        if not (_number(lo) or _number(hi)) and lo >= hi:  # type: ignore[operator]
+        if isinstance(lo, int | float) and isinstance(hi, int | float) and lo >= hi:
             problems.append("'max' must be greater than 'min'")
-        if not _number(step) and step < 1e-3:  # type: ignore[operator]
+        if isinstance(step, int | float) and step < 1e-3:
             problems.append("'step' must be >= 0.001")
     return problems

@@ -1,7 +1,8 @@
 """The northbound seam: how the gateway serves its drives, one small interface per way.
 
 A northbound is one way of serving the drives to the outside: Modbus TCP,
-MQTT, HTTP (metrics and health), and whatever comes next. Each is one
+MQTT (JSON and Home Assistant), Sparkplug B, OPC UA, HTTP (the workbench,
+its API, metrics and health), and whatever comes next. Each is one
 package that registers a :class:`NorthboundSpec` under the name of its
 configuration section; the gateway knows none of them by name:
 
@@ -10,8 +11,10 @@ configuration section; the gateway knows none of them by name:
   the file, line and key like every other) and, optionally, one command
   line flag (:class:`Flag`: ``--modbus HOST:PORT`` sets ``modbus.listen``);
 - the running part, a :class:`Northbound` the spec creates: ``start`` (given
-  a :class:`GatewayView`), ``publish`` (a drive's new snapshot: it must
-  never block, since it runs on the poller's sample), ``metrics`` (its own
+  a :class:`GatewayView`), ``publish`` (a drive's new snapshot as served,
+  handed over in the gateway's 50 ms batch: it must never block, the
+  batch runs on the event loop every door and the poll share), an
+  optional ``flush`` (the batch is whole), ``metrics`` (its own
   Prometheus families, e.g. its clients' counters), ``close``.
 
 Writes arrive from a northbound's clients and go through

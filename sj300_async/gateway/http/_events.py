@@ -15,8 +15,8 @@ Decisions:
   the gateway's memory per stream is bounded by the number of subjects.
   Each replaced frame is counted (``sj300_http_events_replaced_total``):
   nothing is dropped silently.
-- Publishing never blocks and never awaits: it runs on the poller's
-  sample (the northbound's ``publish``).
+- Publishing never blocks and never awaits: it runs in the gateway's
+  batch (the northbound's ``publish``).
 - **One write per batch, not per sample.** A drive's frame is put in
   every stream without waking it (``wake=False``); the gateway's batch of
   snapshots ends with the northbound's ``flush``, which wakes each stream
