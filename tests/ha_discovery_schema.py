@@ -1,41 +1,34 @@
 """A small, dependency-free checker of Home Assistant MQTT discovery payloads.
 
-The rules were read (not copied) from Home Assistant core's source, 2025.x
-line (``dev`` branch as stored in mid/late 2025; no single tag was
-pinned), files:
+Rules read (not copied) from Home Assistant core's own source, the 2025.x line
+(stored copies of the ``dev`` branch from 2025; the copies carry no release
+tag, so no single tag is pinned), files:
 
-* ``homeassistant/components/mqtt/{sensor,binary_sensor,number,button,select,event}.py``
-  (each platform's ``_PLATFORM_SCHEMA_BASE`` / ``PLATFORM_SCHEMA_MODERN`` and
-  ``DISCOVERY_SCHEMA``, plus ``validate_sensor_state_and_device_class_config``
-  and number's ``validate_config``);
-* ``homeassistant/components/mqtt/config.py`` (``MQTT_BASE_SCHEMA``,
-  ``MQTT_RO_SCHEMA``, ``MQTT_RW_SCHEMA``);
-* ``homeassistant/components/mqtt/schemas.py`` (availability, device, origin
-  and ``MQTT_ENTITY_COMMON_SCHEMA``), ``mqtt/const.py`` (``AVAILABILITY_MODES``,
-  ``CONF_DEFAULT_ENTITY_ID``), ``mqtt/util.py`` (topic and QoS validators);
-* the device-class enums in ``sensor/const.py``, ``binary_sensor/__init__.py``,
-  ``number/const.py`` (also ``NumberMode``), ``button/__init__.py`` and
-  ``event/__init__.py``.
+* ``homeassistant/components/mqtt/{sensor,binary_sensor,number,button,select,event}.py``:
+  each ``_PLATFORM_SCHEMA_BASE`` / ``PLATFORM_SCHEMA_MODERN`` / ``DISCOVERY_SCHEMA``,
+  sensor's ``validate_sensor_state_and_device_class_config``, number's ``validate_config``;
+* ``mqtt/config.py`` (``MQTT_BASE_SCHEMA``, ``MQTT_RO_SCHEMA``, ``MQTT_RW_SCHEMA``),
+  ``mqtt/schemas.py`` (availability, device, origin, ``MQTT_ENTITY_COMMON_SCHEMA``),
+  ``mqtt/const.py`` (``AVAILABILITY_MODES``, ``CONF_DEFAULT_ENTITY_ID``), ``mqtt/util.py``;
+* the device-class enums of ``sensor/const.py``, ``binary_sensor/__init__.py``,
+  ``number/const.py`` (and ``NumberMode``), ``button/__init__.py``, ``event/__init__.py``.
 
-Unknown keys: every platform's ``DISCOVERY_SCHEMA`` is the platform schema
-extended with ``extra=vol.REMOVE_EXTRA``, so HA silently *drops* an unknown
-top-level key (and in the availability list items, which are plain nested
-dicts). ``device`` and ``origin`` are separate ``vol.Schema`` objects with the
-default ``PREVENT_EXTRA``, so an unknown key there makes HA *reject* the
-whole payload. Either way we report it.
+Unknown keys: each platform's ``DISCOVERY_SCHEMA`` is its schema extended with
+``extra=vol.REMOVE_EXTRA``, so HA silently *drops* an unknown top-level key (and one
+in an availability item, a plain nested dict). ``device`` and ``origin`` are separate
+``vol.Schema`` objects with the default ``PREVENT_EXTRA``: an unknown key there makes
+HA *reject* the payload. Either way we report it.
 
-Deliberately not checked: abbreviated keys (``stat_t``, ``dev``...) and the
-``~`` topic base, which HA expands before validation (we emit full keys, so
-they are reported as unknown); templates are not parsed; URLs
-(``configuration_url``, ``support_url``) are only checked to be strings;
-units are not checked against ``DEVICE_CLASS_UNITS``; device-based
-discovery (``components``) is not handled, though ``platform`` is accepted
-when it names the component, as in one of its entries. HA's validators coerce
-(``cv.string`` accepts numbers, ``cv.boolean`` accepts ``"on"``); we are
-stricter and want the JSON type itself to be right.
+Deliberately not checked: abbreviations (``stat_t``, ``dev``...) and the ``~`` topic
+base, which HA expands first (we emit full keys, so they show up as unknown);
+templates are not parsed; URLs are only checked to be strings; units are not checked
+against ``DEVICE_CLASS_UNITS``; device-based discovery (``components``) is not
+handled, though ``platform`` is accepted when it names the component, as in one of
+its entries. HA's validators coerce (``cv.string`` takes numbers, ``cv.boolean``
+takes ``"on"``); we are stricter and want the JSON type itself right.
 
-Not an HA rule but ours: a sensor with device class ``enum`` must list its
-``options`` (HA's MQTT schema only demands the converse).
+Ours, not HA's schema: an ``enum`` sensor must list ``options`` (HA's MQTT schema
+only demands the converse).
 """
 
 from __future__ import annotations
@@ -45,36 +38,32 @@ from collections.abc import Callable, Mapping
 Check = Callable[[object], str | None]  # None if fine, else what was expected
 
 
-def _string(v: object) -> str | None:
-    return None if isinstance(v, str) else "a string"
+def _is(what: str, *types: type) -> Check:
+    """Exactly these JSON types: a bool is neither an int nor a number here."""
+
+    def check(v: object) -> str | None:
+        return None if type(v) in types else what
+
+    return check
 
 
-def _opt_string(v: object) -> str | None:
-    return None if v is None or isinstance(v, str) else "a string or null"
-
-
-def _boolean(v: object) -> str | None:
-    return None if isinstance(v, bool) else "a boolean"
+_string = _is("a string", str)
+_opt_string = _is("a string or null", str, type(None))
+_boolean = _is("a boolean", bool)
+_number = _is("a number", int, float)
 
 
 def _positive_int(v: object) -> str | None:
-    ok = isinstance(v, int) and not isinstance(v, bool) and v >= 0
-    return None if ok else "an integer >= 0"
+    return None if type(v) is int and v >= 0 else "an integer >= 0"
 
 
-def _number(v: object) -> str | None:
-    return None if isinstance(v, int | float) and not isinstance(v, bool) else "a number"
+def _qos(v: object) -> str | None:
+    return None if type(v) is int and v in (0, 1, 2) else "0, 1 or 2"
 
 
 def _str_list(v: object) -> str | None:
     ok = isinstance(v, list) and all(isinstance(x, str) for x in v)
     return None if ok else "a list of strings"
-
-
-def _qos(v: object) -> str | None:
-    return (
-        None if isinstance(v, int) and not isinstance(v, bool) and v in (0, 1, 2) else "0, 1 or 2"
-    )
 
 
 def _subscribe_topic(v: object) -> str | None:
@@ -107,19 +96,21 @@ def _words(text: str) -> frozenset[str]:
     return frozenset(text.split())
 
 
+# NumberDeviceClass; SensorDeviceClass is these plus the four added below. absolute_humidity
+# is a 2025 addition not in every 2025.x copy read; the other values were in all of them.
 _NUMBER_CLASSES = _words(
     "absolute_humidity apparent_power aqi area atmospheric_pressure battery"
     " blood_glucose_concentration carbon_monoxide carbon_dioxide conductivity current"
     " data_rate data_size distance duration energy energy_distance energy_storage"
     " frequency gas humidity illuminance irradiance moisture monetary nitrogen_dioxide"
     " nitrogen_monoxide nitrous_oxide ozone ph pm1 pm10 pm25 power_factor power"
-    " precipitation precipitation_intensity pressure reactive_energy reactive_power"
+    " precipitation precipitation_intensity pressure reactive_power"
     " signal_strength sound_pressure speed sulphur_dioxide temperature"
     " volatile_organic_compounds volatile_organic_compounds_parts voltage volume"
     " volume_storage volume_flow_rate water weight wind_direction wind_speed"
 )
 DEVICE_CLASSES: dict[str, frozenset[str]] = {
-    "sensor": _NUMBER_CLASSES | {"date", "enum", "timestamp"},
+    "sensor": _NUMBER_CLASSES | {"date", "enum", "timestamp", "reactive_energy"},
     "number": _NUMBER_CLASSES,
     "binary_sensor": _words(
         "battery battery_charging carbon_monoxide cold connectivity door garage_door gas"
@@ -233,7 +224,8 @@ _DEVICE_KEYS: dict[str, Check] = {
     **dict.fromkeys(
         _words(
             "manufacturer model model_id name hw_version serial_number sw_version via_device"
-        " suggested_area configuration_url",
+            " suggested_area configuration_url"
+        ),
         _string,
     ),
 }
