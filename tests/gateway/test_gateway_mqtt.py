@@ -28,6 +28,7 @@ from typing import Any
 
 import pytest
 from cli.clirun import cli_env
+from ha_discovery_schema import check
 from mqtt_broker import READY, TIMEOUT_S, Broker, publish, running_broker, stop_process
 from waiting import wait_for
 
@@ -42,6 +43,7 @@ from sj300_async.gateway import (
     RunCommand,
     ServedDrive,
     SetFrequency,
+    WriteGrant,
     WriteResult,
     excerpt,
 )
@@ -940,3 +942,19 @@ async def test_a_command_a_bug_stops_leaves_the_drive_s_next_command_going(
         await wait_for(
             lambda: not drive.state(asyncio.get_running_loop().time()).outputting, "stopped"
         )
+
+
+def test_every_discovery_config_passes_home_assistant_s_schema() -> None:
+    """What ``make test`` checks in place of a real Home Assistant (``make test-ha``): every
+    config of both protocols, with control granted and without, against the keys, types
+    and classes HA's MQTT platforms accept (tests/ha_discovery_schema.py)."""
+    control = (WriteGrant(nodes=frozenset({1}), parameters=frozenset({"A004"}), control=True),)
+    lines = [
+        LineConfig("hall-a", "sim://", "sj300", (1, 2), grants=control),
+        LineConfig("Hall-B.2", "sim://?protocol=fr700", "fr700", (0, 3), unit_offset=100),
+    ]
+    found = list(discovery(MqttConfig("b", 1883), Topics("gw1"), lines))
+    components = {topic.split("/")[1] for topic, _ in found}
+    assert components == {"binary_sensor", "sensor", "number", "button"}
+    problems = {topic: check(topic.split("/")[1], body) for topic, body in found}
+    assert {topic: found for topic, found in problems.items() if found} == {}
