@@ -90,6 +90,10 @@ class Fr700Extras:
     status: Fr700Status | None = None
 
 
+#: Every word :func:`fr700_state` gives (the profile's ``states``).
+FR700_STATES: Final = ("running", "running reverse", "stopped", "tripped")
+
+
 def fr700_state(status: Fr700Status) -> str:
     """The drive's state in a word or two (see the module docstring)."""
     if status.tripped:
@@ -225,7 +229,7 @@ class Fr700Profile:
     manufacturer = "Mitsubishi Electric"
     node_noun = "station"
     node_range = (MIN_STATION, MAX_STATION)
-    capabilities = Capabilities(trip_history=True, parameter_backup=True)
+    capabilities = Capabilities(trip_history=True, parameter_backup=True, states=FR700_STATES)
     unit_offset = 100
     max_frequency_hz = 400.0
     max_frequency_parameter: str | None = "Pr.1"

@@ -72,6 +72,11 @@ class Capabilities:
     #: The optional snapshot values its monitor read fills
     #: (``"output_torque_percent"``, ``"power_kw"``).
     measures: frozenset[str] = frozenset()
+    #: Every word the profile's state gives for a status it knows (``"stopped"``,
+    #: ``"accelerating"``...): Home Assistant's status sensor offers them as its
+    #: options. Empty: not listed (the sensor is plain text). A status the drive
+    #: reports that the profile does not know may give another word.
+    states: tuple[str, ...] = ()
 
 
 class ParameterSpec(Protocol):

@@ -98,6 +98,12 @@ _MOVING: Final[dict[StatusC, str]] = {
 }
 
 
+#: Every word :func:`sj300_state` gives for a known status (the profile's ``states``).
+SJ300_STATES: Final = tuple(
+    sorted({*_STATES.values(), *_MOVING.values(), "running", "stopping", "tripped"})
+)
+
+
 def sj300_state(status: InverterStatus) -> str:
     """The drive's state in a word or two (see the module docstring)."""
     if status.tripped:
@@ -279,6 +285,7 @@ class Sj300Profile:
         store=True,
         parameter_backup=True,
         measures=frozenset({"output_torque_percent", "power_kw"}),
+        states=SJ300_STATES,
     )
     unit_offset = 0
     max_frequency_hz = 400.0

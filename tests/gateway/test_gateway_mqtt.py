@@ -26,6 +26,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
+import jinja2
 import pytest
 from cli.clirun import cli_env
 from ha_discovery_schema import check
@@ -78,8 +79,8 @@ GRANTS = """
     control = true
     """
 #: Discovery configs of gateway_toml's line with GRANTS: the gateway's connectivity
-#: sensor; 7 sensors per SJ300 drive; a number and 4 buttons per drive with control.
-CONFIGS = 1 + 4 * 7 + 2 * 5
+#: sensor; 7 sensors per SJ300 drive; a number, a select and 4 buttons per drive with control.
+CONFIGS = 1 + 4 * 7 + 2 * 6
 _RUNNING = "mosquitto version [0-9.]+ running"
 
 
@@ -245,17 +246,16 @@ async def test_discovery_configs_are_retained_json_with_every_required_key(
     assert frequency["value_template"] == "{{ value_json.output_frequency_hz }}"
     assert (frequency["unit_of_measurement"], frequency["device_class"]) == ("Hz", "frequency")
     assert frequency["state_class"] == "measurement"
-    # The status sensor shows the state in words, as the drive's profile words it.
+    # The status sensor shows the state in words, as the drive's profile words it (an
+    # enum of them: test_status_is_an_enum_of_the_profile_s_words_and_direction_a_select).
     status = found["homeassistant/sensor/sj300_gw1_hall_3/status/config"]
-    assert status["value_template"] == (
-        "{% if value_json.state is none %}None{% else %}{{ value_json.state }}{% endif %}"
-    )
+    assert status["device_class"] == "enum"
     # Control only where the configuration grants it: nodes 1 and 2.
     controls = {(t.split("/")[2], t.split("/")[3]) for t in found if t.split("/")[1] != "sensor"}
     assert controls == {("sj300_gw1", "connectivity")} | {
         (f"sj300_gw1_hall_{node}", what)
         for node in (1, 2)
-        for what in ("set_frequency", "run_forward", "run_reverse", "stop", "lease")
+        for what in ("set_frequency", "direction", "run_forward", "run_reverse", "stop", "lease")
     }
     number = found["homeassistant/number/sj300_gw1_hall_1/set_frequency/config"]
     assert number["command_topic"] == topics.command("hall", 1, "frequency_hz")
@@ -955,6 +955,40 @@ def test_every_discovery_config_passes_home_assistant_s_schema() -> None:
     ]
     found = list(discovery(MqttConfig("b", 1883), Topics("gw1"), lines))
     components = {topic.split("/")[1] for topic, _ in found}
-    assert components == {"binary_sensor", "sensor", "number", "button"}
+    assert components == {"binary_sensor", "sensor", "number", "button", "select"}
     problems = {topic: check(topic.split("/")[1], body) for topic, body in found}
     assert {topic: found for topic, found in problems.items() if found} == {}
+
+
+def _render(template: str, *, value: str = "", **state: object) -> str:
+    """*template* as Home Assistant renders it: a state message's JSON (*state*) as
+    ``value_json``, a command's option as ``value``."""
+    environment = jinja2.Environment(autoescape=False)
+    return environment.from_string(template).render(value_json=state, value=value)
+
+
+def test_status_is_an_enum_of_the_profile_s_words_and_direction_a_select() -> None:
+    control = (WriteGrant(nodes=frozenset({1}), control=True),)
+    lines = [LineConfig("hall", "sim://", "sj300", (1,), grants=control)]
+    found = dict(discovery(MqttConfig("b", 1883), Topics("gw1"), lines))
+    status = found["homeassistant/sensor/sj300_gw1_hall_1/status/config"]
+    assert status["device_class"] == "enum"
+    assert {"accelerating", "tripped"} <= set(status["options"])
+    assert status["options"][-1] == "other"
+    template = status["value_template"]
+    assert _render(template, state="accelerating") == "accelerating"
+    assert _render(template, state="state 1") == "other"  # a status the profile does not name
+    assert _render(template, state=None) == "None"  # stale: unknown in Home Assistant
+    direction = found["homeassistant/select/sj300_gw1_hall_1/direction/config"]
+    assert direction["options"] == ["stop", "forward", "reverse"]
+    assert direction["command_topic"] == Topics("gw1").command("hall", 1, "command")
+    shown = {_render(direction["value_template"], direction=d) for d in ("forward", None)}
+    assert shown == {"forward", "None"}
+    sent = [_render(direction["command_template"], value=o) for o in direction["options"]]
+    # What the command topic takes (parse_command), and nothing else.
+    assert sent == ["stop", "run_forward", "run_reverse"]
+    assert [parse_command(get_profile("sj300"), "command", s.encode()) for s in sent] == [
+        RunCommand(Direction.STOP),
+        RunCommand(Direction.FORWARD),
+        RunCommand(Direction.REVERSE),
+    ]

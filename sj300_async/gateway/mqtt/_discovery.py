@@ -66,6 +66,15 @@ _OPTIONAL_SENSORS: Final = (
 _STATUS_TEMPLATE: Final = (
     "{% if value_json.state is none %}None{% else %}{{ value_json.state }}{% endif %}"
 )
+#: The option a state the profile does not list shows as (its status fields say more).
+OTHER_STATE: Final = "other"
+#: The direction select's options: the state message's ``direction`` words.
+_DIRECTIONS: Final = ("stop", "forward", "reverse")
+_DIRECTION_TEMPLATE: Final = (
+    "{% if value_json.direction is none %}None{% else %}{{ value_json.direction }}{% endif %}"
+)
+# The option chosen, as the command topic takes it (COMMAND_DIRECTIONS).
+_DIRECTION_COMMAND: Final = "{{ 'stop' if value == 'stop' else 'run_' ~ value }}"
 _TRIP_TEMPLATE: Final = (
     "{% if value_json.tripped is none %}None"
     "{% elif value_json.tripped %}{{ value_json.trip or 'tripped' }}"
@@ -157,9 +166,9 @@ def discovery(
                 "status",
                 "Status",
                 state_topic=state_topic,
-                value_template=_STATUS_TEMPLATE,
                 json_attributes_topic=state_topic,
                 json_attributes_template="{{ (value_json.status or {}) | tojson }}",
+                **_status_keys(profile.capabilities.states),
             )
             if profile.capabilities.trip_history:  # a trip is named only from the history
                 yield entity(
@@ -182,6 +191,17 @@ def discovery(
                 device_class="frequency",
                 retain=False,
             )
+            yield entity(
+                "select",
+                "direction",
+                "Direction",
+                command_topic=topics.command(line.name, node, "command"),
+                command_template=_DIRECTION_COMMAND,
+                state_topic=state_topic,
+                value_template=_DIRECTION_TEMPLATE,
+                options=list(_DIRECTIONS),
+                retain=False,
+            )
             for object_id, name, what, payload in _BUTTONS:
                 yield entity(
                     "button",
@@ -191,6 +211,22 @@ def discovery(
                     payload_press=payload,
                     retain=False,
                 )
+
+
+def _status_keys(states: Sequence[str]) -> dict[str, Any]:
+    """The status sensor's value: an enum of the profile's *states* (and
+    :data:`OTHER_STATE` for a word it does not list), or plain text without them."""
+    if not states:
+        return {"value_template": _STATUS_TEMPLATE}
+    listed = ", ".join(f"'{state}'" for state in states)
+    return {
+        "value_template": (
+            "{% set s = value_json.state %}{% if s is none %}None"
+            f"{{% elif s in [{listed}] %}}{{{{ s }}}}{{% else %}}{OTHER_STATE}{{% endif %}}"
+        ),
+        "device_class": "enum",
+        "options": [*states, OTHER_STATE],
+    }
 
 
 def _entity(
