@@ -967,7 +967,7 @@ def _render(template: str, *, value: str = "", **state: object) -> str:
     return environment.from_string(template).render(value_json=state, value=value)
 
 
-def test_status_is_an_enum_of_the_profile_s_words_and_direction_a_select() -> None:
+def test_status_and_trip_are_enums_of_the_profile_s_words_and_direction_a_select() -> None:
     control = (WriteGrant(nodes=frozenset({1}), control=True),)
     lines = [LineConfig("hall", "sim://", "sj300", (1,), grants=control)]
     found = dict(discovery(MqttConfig("b", 1883), Topics("gw1"), lines))
@@ -979,6 +979,17 @@ def test_status_is_an_enum_of_the_profile_s_words_and_direction_a_select() -> No
     assert _render(template, state="accelerating") == "accelerating"
     assert _render(template, state="state 1") == "other"  # a status the profile does not name
     assert _render(template, state=None) == "None"  # stale: unknown in Home Assistant
+    trip = found["homeassistant/sensor/sj300_gw1_hall_1/trip/config"]
+    assert (trip["device_class"], trip["options"][:3]) == ("enum", ["ok", "tripped", "E01"])
+    assert "E07" in trip["options"]
+    template = trip["value_template"]
+    assert _render(template, tripped=True, trip="E07") == "E07"
+    assert _render(template, tripped=True, trip=None) == "tripped"  # history not read yet
+    assert _render(template, tripped=True, trip="E99") == "other"
+    assert _render(template, tripped=False, trip="E07") == "ok"  # the last trip, cleared
+    assert _render(template, tripped=None) == "None"
+    meaning = _render(trip["json_attributes_template"], trip_meaning="over-voltage")
+    assert json.loads(meaning) == {"meaning": "over-voltage"}
     direction = found["homeassistant/select/sj300_gw1_hall_1/direction/config"]
     assert direction["options"] == ["stop", "forward", "reverse"]
     assert direction["command_topic"] == Topics("gw1").command("hall", 1, "command")

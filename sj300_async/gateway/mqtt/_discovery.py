@@ -80,6 +80,8 @@ _TRIP_TEMPLATE: Final = (
     "{% elif value_json.tripped %}{{ value_json.trip or 'tripped' }}"
     "{% else %}ok{% endif %}"
 )
+#: The trip sensor's attribute: what the present trip means (null when none is known).
+_TRIP_ATTRIBUTES: Final = "{{ {'meaning': value_json.trip_meaning} | tojson }}"
 _BUTTONS: Final = (
     ("run_forward", "Run forward", "command", "run_forward"),
     ("run_reverse", "Run reverse", "command", "run_reverse"),
@@ -172,7 +174,13 @@ def discovery(
             )
             if profile.capabilities.trip_history:  # a trip is named only from the history
                 yield entity(
-                    "sensor", "trip", "Trip", state_topic=state_topic, value_template=_TRIP_TEMPLATE
+                    "sensor",
+                    "trip",
+                    "Trip",
+                    state_topic=state_topic,
+                    json_attributes_topic=state_topic,
+                    json_attributes_template=_TRIP_ATTRIBUTES,
+                    **_trip_keys([trip.code for trip in profile.trip_codes()]),
                 )
             if not line.control_allowed(node):
                 continue
@@ -226,6 +234,26 @@ def _status_keys(states: Sequence[str]) -> dict[str, Any]:
         ),
         "device_class": "enum",
         "options": [*states, OTHER_STATE],
+    }
+
+
+def _trip_keys(codes: Sequence[str]) -> dict[str, Any]:
+    """The trip sensor's value: ``ok``, ``tripped`` (before the history names it) or the
+    code, as an enum of the profile's *codes* (:data:`OTHER_STATE` for one it does not
+    name), or plain text without them."""
+    if not codes:
+        return {"value_template": _TRIP_TEMPLATE}
+    listed = ", ".join(f"'{code}'" for code in codes)
+    return {
+        "value_template": (
+            "{% if value_json.tripped is none %}None"
+            "{% elif not value_json.tripped %}ok"
+            "{% elif value_json.trip is none %}tripped"
+            f"{{% elif value_json.trip in [{listed}] %}}{{{{ value_json.trip }}}}"
+            f"{{% else %}}{OTHER_STATE}{{% endif %}}"
+        ),
+        "device_class": "enum",
+        "options": ["ok", "tripped", *codes, OTHER_STATE],
     }
 
 
