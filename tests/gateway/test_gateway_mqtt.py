@@ -22,7 +22,7 @@ import signal
 import sys
 import textwrap
 from collections.abc import AsyncIterator, Callable
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any
 
@@ -79,8 +79,12 @@ GRANTS = """
     control = true
     """
 #: Discovery configs of gateway_toml's line with GRANTS: the gateway's connectivity
-#: sensor; 7 sensors per SJ300 drive; a number, a select and 4 buttons per drive with control.
-CONFIGS = 1 + 4 * 7 + 2 * 6
+#: sensor; 7 sensors per SJ300 drive; per drive with control a number (set frequency), a
+#: select and 4 buttons, and a number for its granted parameter (A004).
+CONFIGS = 1 + 4 * 7 + 2 * (6 + 1)
+#: The entities of a drive with GRANTS beyond its sensors (their object ids).
+CONTROLS = ("set_frequency", "direction", "run_forward", "run_reverse", "stop", "lease",
+            "parameter_A004")  # fmt: skip
 _RUNNING = "mosquitto version [0-9.]+ running"
 
 
@@ -253,9 +257,7 @@ async def test_discovery_configs_are_retained_json_with_every_required_key(
     # Control only where the configuration grants it: nodes 1 and 2.
     controls = {(t.split("/")[2], t.split("/")[3]) for t in found if t.split("/")[1] != "sensor"}
     assert controls == {("sj300_gw1", "connectivity")} | {
-        (f"sj300_gw1_hall_{node}", what)
-        for node in (1, 2)
-        for what in ("set_frequency", "direction", "run_forward", "run_reverse", "stop", "lease")
+        (f"sj300_gw1_hall_{node}", what) for node in (1, 2) for what in CONTROLS
     }
     number = found["homeassistant/number/sj300_gw1_hall_1/set_frequency/config"]
     assert number["command_topic"] == topics.command("hall", 1, "frequency_hz")
@@ -968,8 +970,8 @@ def _render(template: str, *, value: str = "", **state: object) -> str:
 
 
 def test_status_and_trip_are_enums_of_the_profile_s_words_and_direction_a_select() -> None:
-    control = (WriteGrant(nodes=frozenset({1}), control=True),)
-    lines = [LineConfig("hall", "sim://", "sj300", (1,), grants=control)]
+    grant = WriteGrant(nodes=frozenset({1}), parameters=frozenset({"A004"}), control=True)
+    lines = [LineConfig("hall", "sim://", "sj300", (1,), grants=(grant,))]
     found = dict(discovery(MqttConfig("b", 1883), Topics("gw1"), lines))
     status = found["homeassistant/sensor/sj300_gw1_hall_1/status/config"]
     assert status["device_class"] == "enum"
@@ -990,11 +992,24 @@ def test_status_and_trip_are_enums_of_the_profile_s_words_and_direction_a_select
     assert _render(template, tripped=None) == "None"
     meaning = _render(trip["json_attributes_template"], trip_meaning="over-voltage")
     assert json.loads(meaning) == {"meaning": "over-voltage"}
+    parameter = found["homeassistant/number/sj300_gw1_hall_1/parameter_A004/config"]
+    assert parameter["name"] == "A004 maximum frequency"
+    assert (parameter["min"], parameter["max"], parameter["step"]) == (30.0, 400.0, 0.1)
+    assert parameter["command_topic"] == Topics("gw1").command("hall", 1, "A004")
+    assert "state_topic" not in parameter  # the line does not poll it: nothing to show
+    polled = discovery(
+        MqttConfig("b", 1883), Topics("gw1"), [replace(lines[0], parameters=("A004",))]
+    )
+    shown = dict(polled)["homeassistant/number/sj300_gw1_hall_1/parameter_A004/config"]
+    template = shown["value_template"]
+    assert _render(template, parameters={"A004": 60.0}) == "60.0"
+    assert _render(template, parameters={"A004": None}) == "None"  # stale or refused
+    assert _render(template, parameters={}) == "None"  # not read yet
     direction = found["homeassistant/select/sj300_gw1_hall_1/direction/config"]
     assert direction["options"] == ["stop", "forward", "reverse"]
     assert direction["command_topic"] == Topics("gw1").command("hall", 1, "command")
-    shown = {_render(direction["value_template"], direction=d) for d in ("forward", None)}
-    assert shown == {"forward", "None"}
+    rendered = {_render(direction["value_template"], direction=d) for d in ("forward", None)}
+    assert rendered == {"forward", "None"}
     sent = [_render(direction["command_template"], value=o) for o in direction["options"]]
     # What the command topic takes (parse_command), and nothing else.
     assert sent == ["stop", "run_forward", "run_reverse"]

@@ -33,7 +33,7 @@ from collections.abc import Iterator, Sequence
 from typing import Any, Final
 
 from ... import __version__
-from ...profiles import get_profile
+from ...profiles import ParameterSpec, get_profile
 from .. import LineConfig
 from ._config import MqttConfig
 from ._topics import AVAILABLE, UNAVAILABLE, Topics
@@ -182,6 +182,18 @@ def discovery(
                     json_attributes_template=_TRIP_ATTRIBUTES,
                     **_trip_keys([trip.code for trip in profile.trip_codes()]),
                 )
+            for code in sorted(line.writable_parameters(node)):
+                spec = profile.parameters.spec(code)
+                yield entity(
+                    "number",
+                    node_id("parameter", code),  # Pr.7: parameter_Pr_7
+                    f"{code} {spec.name}",
+                    **_parameter_keys(
+                        spec,
+                        topics.command(line.name, node, code),
+                        state_topic if code in line.parameters else None,
+                    ),
+                )
             if not line.control_allowed(node):
                 continue
             yield entity(
@@ -255,6 +267,31 @@ def _trip_keys(codes: Sequence[str]) -> dict[str, Any]:
         "device_class": "enum",
         "options": ["ok", "tripped", *codes, OTHER_STATE],
     }
+
+
+def _parameter_keys(spec: ParameterSpec, command: str, state: str | None) -> dict[str, Any]:
+    """A granted parameter's number: its range and step from the catalogue (the drive
+    refuses a value between steps it does not take: ``invalid_value`` on ``…/error``),
+    its value from the state message when the line polls it (else none is shown)."""
+    keys: dict[str, Any] = {
+        "command_topic": command,
+        "min": spec.minimum,
+        "max": spec.maximum,
+        "step": 1 / spec.scale,
+        "mode": "box",
+        "entity_category": "config",
+        "retain": False,
+    }
+    if spec.unit:
+        keys["unit_of_measurement"] = spec.unit
+    if state is not None:
+        value = f"value_json.parameters[{spec.code!r}]"
+        keys["state_topic"] = state
+        keys["value_template"] = (
+            f"{{% if {value} is defined and {value} is not none %}}{{{{ {value} }}}}"
+            "{% else %}None{% endif %}"
+        )
+    return keys
 
 
 def _entity(
