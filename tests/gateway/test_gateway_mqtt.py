@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import asyncio
 import contextlib
+import functools
 import itertools
 import json
 import logging
@@ -57,6 +58,7 @@ from sj300_async.gateway.mqtt import (
     state_message,
 )
 from sj300_async.gateway.mqtt._bridge import MqttBridge
+from sj300_async.gateway.mqtt._drive_events import DriveEvents
 from sj300_async.gateway.mqtt._messages import state_payload
 from sj300_async.profiles import get_profile
 from sj300_async.simulator.fr700 import Fr700SimulatedBus
@@ -79,9 +81,9 @@ GRANTS = """
     control = true
     """
 #: Discovery configs of gateway_toml's line with GRANTS: the gateway's connectivity
-#: sensor; 7 sensors per SJ300 drive; per drive with control a number (set frequency), a
-#: select and 4 buttons, and a number for its granted parameter (A004).
-CONFIGS = 1 + 4 * 7 + 2 * (6 + 1)
+#: sensor; 7 sensors and an event entity per SJ300 drive; per drive with control a number
+#: (set frequency), a select and 4 buttons, and a number for its granted parameter (A004).
+CONFIGS = 1 + 4 * (7 + 1) + 2 * (6 + 1)
 #: The entities of a drive with GRANTS beyond its sensors (their object ids).
 CONTROLS = ("set_frequency", "direction", "run_forward", "run_reverse", "stop", "lease",
             "parameter_A004")  # fmt: skip
@@ -257,8 +259,8 @@ async def test_discovery_configs_are_retained_json_with_every_required_key(
     # Control only where the configuration grants it: nodes 1 and 2.
     controls = {(t.split("/")[2], t.split("/")[3]) for t in found if t.split("/")[1] != "sensor"}
     assert controls == {("sj300_gw1", "connectivity")} | {
-        (f"sj300_gw1_hall_{node}", what) for node in (1, 2) for what in CONTROLS
-    }
+        (f"sj300_gw1_hall_{node}", "events") for node in range(1, 5)
+    } | {(f"sj300_gw1_hall_{node}", what) for node in (1, 2) for what in CONTROLS}
     number = found["homeassistant/number/sj300_gw1_hall_1/set_frequency/config"]
     assert number["command_topic"] == topics.command("hall", 1, "frequency_hz")
     assert (number["min"], number["max"], number["step"]) == (0, 400.0, 0.01)
@@ -480,6 +482,8 @@ async def test_commands_reach_the_drive_and_refusals_are_answered(
 
         async def refused(node: int, what: str, payload: str, error: str) -> None:
             count = len(errors(sub, node))
+            is_event = functools.partial(lambda t, m: m.topic == t, topics.event("hall", node))
+            events = len(sub.where(is_event))
             await publish(broker, topics.command("hall", node, what), payload)
             await sub.until(lambda m: m.topic == topics.error("hall", node), error, count + 1)
             reply = errors(sub, node)[count]
@@ -487,6 +491,16 @@ async def test_commands_reach_the_drive_and_refusals_are_answered(
             assert reply["payload"] == payload
             assert reply["error"].startswith(error), reply
             assert reply["reason"] == error.split(":", 1)[0], reply
+            # The same refusal as an event, for Home Assistant's event entity.
+            event = (await sub.until(is_event, "its event", events + 1))[events]
+            assert event.retained is False
+            assert {k: v for k, v in event.json().items() if k != "time"} == {
+                "event_type": "refused",
+                "command": what,
+                "payload": payload,
+                "reason": reply["reason"],
+                "error": reply["error"],
+            }
 
         await refused(
             1,
@@ -839,6 +853,7 @@ def test_fr700_discovery_has_its_own_sensors_and_the_trip() -> None:
         "Output voltage",
         "Status",
         "Trip",
+        "Events",
     }  # fmt: skip  (no torque or power: the FR-700's monitor read has neither)
     assert station[0]["device"]["name"] == "gw1 Hall-B.2 station 3"
     assert station[0]["default_entity_id"].startswith("sensor.sj300_gw1_hall_b_2_3_")
@@ -957,7 +972,7 @@ def test_every_discovery_config_passes_home_assistant_s_schema() -> None:
     ]
     found = list(discovery(MqttConfig("b", 1883), Topics("gw1"), lines))
     components = {topic.split("/")[1] for topic, _ in found}
-    assert components == {"binary_sensor", "sensor", "number", "button", "select"}
+    assert components == {"binary_sensor", "sensor", "number", "button", "select", "event"}
     problems = {topic: check(topic.split("/")[1], body) for topic, body in found}
     assert {topic: found for topic, found in problems.items() if found} == {}
 
@@ -1018,3 +1033,30 @@ def test_status_and_trip_are_enums_of_the_profile_s_words_and_direction_a_select
         RunCommand(Direction.FORWARD),
         RunCommand(Direction.REVERSE),
     ]
+
+
+def test_a_trip_and_a_lapse_are_events_once_each_and_a_first_sample_is_none() -> None:
+    profile = get_profile("sj300")
+    line = LineConfig("hall", "sim://", "sj300", (2,))
+    drive = GatewayDrive(line, 2, profile, Lease(5.0), stale_after_s=1.0)
+    readings, events = drive.readings, DriveEvents()
+    readings.online, readings.last_ok = True, 10.0
+
+    def served(at: float, b: StatusB) -> list[dict[str, Any]]:
+        readings.set_status(InverterStatus(StatusA.RUNNING, b, StatusC.STOP), at, profile)
+        drive.rebuild(at, wall=1e9 + at)
+        return events.on_served(drive.served)
+
+    assert served(10.0, StatusB.TRIPPED) == []  # tripped at the start: the trip sensor says
+    assert served(11.0, StatusB.RUNNING) == []
+    assert served(12.0, StatusB.TRIPPED) == [
+        {"event_type": "tripped", "trip": None, "meaning": None, "time": 1e9 + 12.0}
+    ]  # the history names it later: the trip sensor shows the code then
+    assert served(13.0, StatusB.TRIPPED) == []  # still the same trip
+    drive.lapse_pending = True
+    assert served(14.0, StatusB.RUNNING) == [{"event_type": "lapsed", "time": 1e9 + 14.0}]
+    assert served(15.0, StatusB.RUNNING) == []
+    drive.rebuild(17.0, wall=1e9 + 17.0)  # the status stale: no news either way
+    assert events.on_served(drive.served) == []
+    drive.lapse_pending = False
+    assert served(18.0, StatusB.RUNNING) == []

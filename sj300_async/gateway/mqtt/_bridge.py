@@ -108,6 +108,7 @@ from ._births import Rediscovery
 from ._commands import MAX_PAYLOAD_BYTES, error_text, oversized, parse_command
 from ._config import MqttConfig
 from ._discovery import discovery
+from ._drive_events import DriveEvents, refused_event
 from ._intake import CommandIntake
 from ._messages import state_payload
 from ._stats import BridgeStats, mqtt_families
@@ -156,6 +157,7 @@ class MqttBridge:
         self.stats = BridgeStats()
         self._subscriptions = Subscriptions(self.stats, _log, "MQTT")
         self._intake = CommandIntake(_log, commands=config.commands)
+        self._events = DriveEvents()
         self.topics = Topics("", config.prefix)  # the gateway's id is known at start
         self._gateway: GatewayView | None = None
         self._birth = f"{config.discovery_prefix}/status"
@@ -214,6 +216,8 @@ class MqttBridge:
         out = _Out(self.topics.state(*key), payload, retain=True, drive=key)
         self._latest[key] = out
         self._put(out, wake=False)  # sent at the batch's flush
+        for event in self._events.on_served(served):
+            self._put_error(_Out(self.topics.event(*key), json.dumps(event).encode(), False))
         available = snapshot.available
         if self._availability.get(key) != available:
             self._availability[key] = available
@@ -247,6 +251,8 @@ class MqttBridge:
             self._wake.set()
 
     def _put_error(self, out: _Out) -> None:
+        """An error reply or an event: sent in order and never replaced (at most
+        :data:`MAX_ERRORS` wait; past that the oldest is dropped, counted)."""
         if len(self._errors) >= MAX_ERRORS:
             dropped = self._errors.popleft()
             self.stats.errors_dropped += 1
@@ -532,9 +538,10 @@ class MqttBridge:
         reason = None if result.refusal is None else result.refusal.value
         body = {"topic": topic, "payload": text, "error": error, "reason": reason,
                 "time": time.time()}  # fmt: skip
-        self._put_error(
-            _Out(self.topics.error(drive.line.name, drive.node), json.dumps(body).encode(), False)
-        )
+        line, node = drive.line.name, drive.node
+        self._put_error(_Out(self.topics.error(line, node), json.dumps(body).encode(), False))
+        event = refused_event(excerpt(what), text, error, reason)
+        self._put_error(_Out(self.topics.event(line, node), json.dumps(event).encode(), False))
 
     # -- stopping ------------------------------------------------------------------------
 

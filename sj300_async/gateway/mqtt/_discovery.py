@@ -5,8 +5,10 @@ config (``homeassistant/<component>/<node_id>/<object_id>/config``). The
 gateway is a device of its own (a connectivity sensor); each drive is a
 device naming the gateway as ``via_device``, with sensors for what its
 profile measures, a status sensor (the state in words), a trip sensor when
-its profile reads trip histories, and, for a drive whose configuration
-grants control, a number (set frequency) and buttons (run forward, run
+its profile reads trip histories, an event entity (refused, tripped,
+lapsed: :mod:`._drive_events`), a number per parameter its configuration
+grants, and, for a drive whose configuration grants control, a number
+(set frequency), a select (direction) and buttons (run forward, run
 reverse, stop, the lease heartbeat).
 
 Decisions:
@@ -36,6 +38,7 @@ from ... import __version__
 from ...profiles import ParameterSpec, get_profile
 from .. import LineConfig
 from ._config import MqttConfig
+from ._drive_events import EVENT_TYPES
 from ._topics import AVAILABLE, UNAVAILABLE, Topics
 
 __all__ = ["discovery", "node_id"]
@@ -182,6 +185,13 @@ def discovery(
                     json_attributes_template=_TRIP_ATTRIBUTES,
                     **_trip_keys([trip.code for trip in profile.trip_codes()]),
                 )
+            yield entity(
+                "event",
+                "events",
+                "Events",
+                state_topic=topics.event(line.name, node),
+                event_types=list(EVENT_TYPES),
+            )
             for code in sorted(line.writable_parameters(node)):
                 spec = profile.parameters.spec(code)
                 yield entity(

@@ -83,6 +83,10 @@ class Topics:
     def error(self, line: str, node: int) -> str:
         return f"{self.drive(line, node)}/error"
 
+    def event(self, line: str, node: int) -> str:
+        """The drive's events (:mod:`._drive_events`), not retained."""
+        return f"{self.drive(line, node)}/event"
+
     @property
     def command_filter(self) -> str:
         """What the bridge subscribes to for commands."""
