@@ -109,6 +109,13 @@ def add_parser(subparsers: Any) -> None:
         "admits it, then exit",
     )
     p.add_argument(
+        "--decommission",
+        action="store_true",
+        help="clear everything this gateway id left retained on its [mqtt] broker (states, "
+        "availability, Home Assistant's configs: its devices go), then exit; run it with "
+        "the gateway stopped",
+    )
+    p.add_argument(
         "--no-collector-tuning",
         dest="tune_collector",
         action="store_false",
@@ -225,6 +232,10 @@ def run(args: argparse.Namespace) -> int:
         )
     config = _config(args)  # a bad one raises here: nothing has started
     _check_requirements(config)
+    if args.decommission:
+        from ._decommission import decommission
+
+        return decommission(config)
     return asyncio.run(
         _serve(config, args.capture, demo=args.demo, tune_collector=args.tune_collector)
     )

@@ -112,6 +112,7 @@ from ._drive_events import DriveEvents, refused_event
 from ._intake import CommandIntake
 from ._messages import state_payload
 from ._stats import BridgeStats, mqtt_families
+from ._sweep import sweep_and_say
 from ._topics import AVAILABLE, UNAVAILABLE, Topics
 
 if TYPE_CHECKING:
@@ -158,6 +159,8 @@ class MqttBridge:
         self._subscriptions = Subscriptions(self.stats, _log, "MQTT")
         self._intake = CommandIntake(_log, commands=config.commands)
         self._events = DriveEvents()
+        #: The start's sweep of what the configuration no longer has (:mod:`._sweep`).
+        self._sweep: asyncio.Task[None] | None = None
         self.topics = Topics("", config.prefix)  # the gateway's id is known at start
         self._gateway: GatewayView | None = None
         self._birth = f"{config.discovery_prefix}/status"
@@ -262,11 +265,9 @@ class MqttBridge:
 
     def _announce(self) -> None:
         """Everything retained, again: discovery, availability, the latest states."""
-        if self.config.discovery and self._gateway is not None:
-            configs = list(dict.fromkeys(d.line for d in self._gateway.drives))
-            for topic, body in discovery(self.config, self.topics, configs):
-                payload = json.dumps(body, separators=(",", ":")).encode()
-                self._put(_Out(topic, payload, retain=True))
+        for topic, body in self._discovery():
+            payload = json.dumps(body, separators=(",", ":")).encode()
+            self._put(_Out(topic, payload, retain=True))
         # Only the drives polled already: "offline" for a drive not polled yet
         # would be a guess (it follows its first poll).
         for key in self._availability:
@@ -383,6 +384,19 @@ class MqttBridge:
         await client.publish(self.topics.availability, AVAILABLE, qos=qos, retain=True)
         self._client = client
         self._announce()
+        if self._sweep is None and self._gateway is not None:  # once, at the first connection
+            drives = [drive.key for drive in self._gateway.drives]
+            made = [topic for topic, _ in self._discovery()]
+            self._sweep = asyncio.create_task(
+                sweep_and_say(self.config, self.topics, drives, made, self.stats), name="mqtt sweep"
+            )
+
+    def _discovery(self) -> list[tuple[str, dict[str, object]]]:
+        """Every discovery config of the drives served now (none with discovery off)."""
+        if not self.config.discovery or self._gateway is None:
+            return []
+        lines = list(dict.fromkeys(d.line for d in self._gateway.drives))
+        return list(discovery(self.config, self.topics, lines))
 
     async def _session(self, client: Client, receiver: asyncio.Task[None]) -> None:
         """Publish, and receive (*receiver*), until the connection fails (raises its MqttError)."""
@@ -551,6 +565,8 @@ class MqttBridge:
             return
         self._closing = True
         self._rediscovery.cancel()
+        if self._sweep is not None:
+            await cancel_and_wait({self._sweep})
         self._epoch += 1  # commands waiting are not carried out any more
         loop = asyncio.get_running_loop()
         # A write under way finishes (a write and its read-back stay together; its

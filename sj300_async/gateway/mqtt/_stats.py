@@ -56,6 +56,9 @@ class BridgeStats(SessionStats):
     #: (one was scheduled already: :mod:`._births`).
     rediscoveries: int = 0
     births_coalesced: int = 0
+    #: Retained topics cleared at the start: left by drives or entities the
+    #: configuration no longer has (:mod:`._sweep`).
+    swept: int = 0
 
 
 #: The bridge's counters: (name, HELP, BridgeStats attribute).
@@ -78,6 +81,11 @@ _COUNTERS: Final = (
         "sj300_mqtt_births_coalesced",
         "Home Assistant births that added nothing: a re-discovery was scheduled already.",
         "births_coalesced",
+    ),
+    (
+        "sj300_mqtt_swept",
+        "Retained topics cleared at the start: drives and entities no longer configured.",
+        "swept",
     ),
     (
         "sj300_mqtt_puback_timeouts",

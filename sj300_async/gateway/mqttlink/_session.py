@@ -113,7 +113,7 @@ def new_client(
     config: BrokerConfig,
     *,
     identifier: str,
-    will: Will,
+    will: Will | None = None,
     max_in_flight: int = 256,
     max_payload: int = 1 << 20,
 ) -> Client:
