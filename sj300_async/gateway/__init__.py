@@ -95,6 +95,7 @@ from ._writes import (
     SetFrequency,
     WriteRequest,
     WriteResult,
+    needs_lease,
 )
 
 __all__ = [
@@ -167,6 +168,7 @@ __all__ = [
     "listener_families",
     "load_config",
     "named_entries",
+    "needs_lease",
     "northbound_extra",
     "northbound_names",
     "parameter_request",

@@ -81,6 +81,7 @@ from ._writes import (
     SetFrequency,
     WriteRequest,
     WriteResult,
+    needs_lease,
 )
 
 __all__ = ["Controller"]
@@ -198,7 +199,7 @@ class Controller:
             self._renew(client, drive, connection)
             self.audit.write(client, drive, what, old, client, DONE)
             return DONE
-        if not _needs_lease(request):
+        if not needs_lease(request):
             return await self._carry_out_locked(client, drive, request, _Audit())
         # Its own task, so that the lapse can cancel it without cancelling the caller.
         audit = _Audit()
@@ -586,10 +587,3 @@ def _offline(drive: GatewayDrive) -> WriteResult | None:
     if readings.online or not readings.polled:  # no verdict before the first poll: try it
         return None
     return WriteResult(Refusal.NO_ANSWER, "the drive is offline: nothing was sent")
-
-
-def _needs_lease(request: WriteRequest) -> bool:
-    """Run and frequency commands need the lease (a stop and a parameter write do not)."""
-    if isinstance(request, RunCommand):
-        return request.direction != Direction.STOP
-    return isinstance(request, SetFrequency)

@@ -29,6 +29,7 @@ __all__ = [
     "SetFrequency",
     "WriteRequest",
     "WriteResult",
+    "needs_lease",
 ]
 
 
@@ -132,3 +133,11 @@ DONE = WriteResult()
 #: (a stop waits behind no command). Every door that queues commands per drive
 #: (the MQTT JSON topics, Sparkplug) answers the dropped one with it.
 DROPPED_BY_STOP: Final = WriteResult(Refusal.BUSY, "dropped: a stop came after it")
+
+
+def needs_lease(request: WriteRequest) -> bool:
+    """Run and frequency commands need the control lease (a stop and a parameter write do
+    not: a stop is the safe direction, a parameter no motion)."""
+    if isinstance(request, RunCommand):
+        return request.direction != Direction.STOP
+    return isinstance(request, SetFrequency)

@@ -131,7 +131,7 @@ GATEWAY_NAMES = (
     # what a northbound sees of a line: never its bus (issue 42)
     "LineTraffic", "ServedLine",
     # the doors' shared write checks, the core's since Sparkplug rides no other door (issue 42)
-    "DROPPED_BY_STOP", "parameter_request",
+    "DROPPED_BY_STOP", "parameter_request", "needs_lease",
     # a northbound that cannot start (its port in use...)
     "GatewayStartError",
     "LAPSE_ACTIONS", "POLL_READS", "LapseAction", "Lease", "LineConfig", "LineHealth", "LineView",

@@ -17,10 +17,9 @@ contract, shared with the fleet subscriber) lays out:
   drive (and it has answered at least once), published when that changes.
 - Home Assistant discovery (``discovery = true``, :mod:`._discovery`).
 - ``…/<line>/<node>/set/<what>``: commands (:mod:`._commands`), judged and
-  carried out by the gateway exactly like Modbus writes (allow-list,
-  lease, validation, read-back, audit). A refusal is answered on
-  ``…/<line>/<node>/error`` (JSON, not retained: the topic, an excerpt of
-  the payload, the neutral ``reason`` and a sentence in ``error``).
+  carried out by the gateway like every door's writes. A refusal is
+  answered on ``…/<line>/<node>/error`` (JSON, not retained: the topic, an
+  excerpt of the payload, the neutral ``reason`` and a sentence).
 
 Decisions:
 
@@ -66,9 +65,11 @@ Decisions:
 - The bridge publishes with the configured QoS and waits for each batch's
   acknowledgements (at most ``MAX_IN_FLIGHT`` at once) before the next: a
   slow broker makes the outbox coalesce, never grow. A broker that never
-  acknowledges loses the connection after ``keepalive_s`` (the transport's client,
-  :mod:`sj300_async.gateway.mqttlink.client`,
-  counted by the transport, :mod:`sj300_async.gateway.mqttlink`): its will then says ``offline``.
+  acknowledges loses the connection after ``keepalive_s`` (counted by the
+  transport, :mod:`sj300_async.gateway.mqttlink`): its will says ``offline``.
+- Home Assistant's side: events (:mod:`._drive_events`), the lease its
+  presence keeps (:mod:`._presence`), what an earlier configuration left
+  retained cleared at the first connection (:mod:`._sweep`).
 - **Home Assistant's births coalesce** (:mod:`._births`): anyone may publish
   one; a storm of them costs one re-discovery per 10 s, never one each.
 - A subscription the broker refuses (an ACL: the commands, Home
@@ -107,10 +108,11 @@ from ..mqttlink.client import Client, MqttError, Will
 from ._births import Rediscovery
 from ._commands import MAX_PAYLOAD_BYTES, error_text, oversized, parse_command
 from ._config import MqttConfig
-from ._discovery import discovery
+from ._discovery import served_discovery
 from ._drive_events import DriveEvents, refused_event
 from ._intake import CommandIntake
 from ._messages import state_payload
+from ._presence import HomeAssistantLease
 from ._stats import BridgeStats, mqtt_families
 from ._sweep import sweep_and_say
 from ._topics import AVAILABLE, UNAVAILABLE, Topics
@@ -159,6 +161,7 @@ class MqttBridge:
         self._subscriptions = Subscriptions(self.stats, _log, "MQTT")
         self._intake = CommandIntake(_log, commands=config.commands)
         self._events = DriveEvents()
+        self._presence = HomeAssistantLease(CLIENT, enabled=config.home_assistant_lease)
         #: The start's sweep of what the configuration no longer has (:mod:`._sweep`).
         self._sweep: asyncio.Task[None] | None = None
         self.topics = Topics("", config.prefix)  # the gateway's id is known at start
@@ -265,7 +268,7 @@ class MqttBridge:
 
     def _announce(self) -> None:
         """Everything retained, again: discovery, availability, the latest states."""
-        for topic, body in self._discovery():
+        for topic, body in served_discovery(self.config, self.topics, self._gateway):
             payload = json.dumps(body, separators=(",", ":")).encode()
             self._put(_Out(topic, payload, retain=True))
         # Only the drives polled already: "offline" for a drive not polled yet
@@ -352,6 +355,7 @@ class MqttBridge:
         finally:
             receiver.cancel()  # (awaited by the session, when there was one)
             self._client = None
+            self._presence.lost()
             self._epoch += 1  # commands received on that connection are stale now
             session, self._session_name = self._session_name, None
             if session is not None and self._gateway is not None:
@@ -379,28 +383,24 @@ class MqttBridge:
         qos = self.config.qos
         subscribe = self._subscriptions.subscribe
         await subscribe(client, self.topics.command_filter, qos=qos, unheard="commands")
-        if self.config.discovery:
+        if self.config.discovery or self._presence.enabled:
             await subscribe(client, self._birth, qos=qos, unheard="Home Assistant's status")
         await client.publish(self.topics.availability, AVAILABLE, qos=qos, retain=True)
         self._client = client
         self._announce()
         if self._sweep is None and self._gateway is not None:  # once, at the first connection
             drives = [drive.key for drive in self._gateway.drives]
-            made = [topic for topic, _ in self._discovery()]
+            made = [t for t, _ in served_discovery(self.config, self.topics, self._gateway)]
             self._sweep = asyncio.create_task(
                 sweep_and_say(self.config, self.topics, drives, made, self.stats), name="mqtt sweep"
             )
 
-    def _discovery(self) -> list[tuple[str, dict[str, object]]]:
-        """Every discovery config of the drives served now (none with discovery off)."""
-        if not self.config.discovery or self._gateway is None:
-            return []
-        lines = list(dict.fromkeys(d.line for d in self._gateway.drives))
-        return list(discovery(self.config, self.topics, lines))
-
     async def _session(self, client: Client, receiver: asyncio.Task[None]) -> None:
         """Publish, and receive (*receiver*), until the connection fails (raises its MqttError)."""
         tasks = {asyncio.create_task(self._publisher(client), name="mqtt publisher"), receiver}
+        if self._gateway is not None and self._presence.enabled:
+            keeper = self._presence.keep(self._gateway, self._session_name)
+            tasks.add(asyncio.create_task(keeper, name="mqtt home assistant lease"))
         try:
             done, _ = await asyncio.wait(tasks, return_when=asyncio.FIRST_COMPLETED)
         finally:
@@ -417,6 +417,7 @@ class MqttBridge:
                 # retained birth is the one it sent before we connected: already covered.
                 if payload == AVAILABLE.encode() and not message.retain:
                     self._rediscovery.birth()
+                self._presence.heard(payload)
                 continue
             self._receive_command(topic, payload, retained=message.retain, length=message.length)
 
@@ -520,11 +521,14 @@ class MqttBridge:
             self._refuse(drive, topic, what, payload, request)
             return
         assert self._gateway is not None
+        await self._presence.before(self._gateway, drive, request, self._session_name)
         result = await self._gateway.write(
             CLIENT, drive, request, connection=self._session_name
         )  # audited there
         if result.refusal is not None:
             self._refuse(drive, topic, what, payload, result, audited=True)
+        else:
+            self._presence.after(drive, request)
 
     def _refuse(
         self,

@@ -6,7 +6,8 @@ transport's (:mod:`sj300_async.gateway.mqttlink`, parsed there for this
 section and ``[sparkplug]`` alike); the client id defaults to
 ``sj300-<gateway id>``. This section adds the topics' ``prefix``, the
 ``qos``, Home Assistant's ``discovery`` and ``discovery_prefix``,
-``state_topics``, and the command intake's budget (:mod:`._intake`):
+``state_topics``, ``home_assistant_lease`` (:mod:`._presence`), and the
+command intake's budget (:mod:`._intake`):
 ``command_burst`` and ``commands_per_s`` per drive, ``all_command_burst``
 and ``all_commands_per_s`` for every drive together. The defaults (20, 10,
 200, 100) are far above what a person, Home Assistant or a heartbeating
@@ -43,6 +44,7 @@ MQTT_KEYS: Final = (
     *BROKER_KEYS,
     *("prefix", "qos", "discovery", "discovery_prefix", "state_topics"),
     *("command_burst", "commands_per_s", "all_command_burst", "all_commands_per_s"),
+    "home_assistant_lease",
     *SPARKPLUG_ALIAS_KEYS,
 )
 
@@ -60,6 +62,8 @@ class MqttConfig(BrokerConfig):
     discovery_prefix: str = DISCOVERY_PREFIX
     #: Commands taken per drive and in all (stops: the same again, apart).
     commands: Budget = COMMAND_BUDGET
+    #: The control lease kept while Home Assistant is present (:mod:`._presence`).
+    home_assistant_lease: bool = True
 
 
 _DEFAULT: Final = MqttConfig(host="localhost", port=1883)
@@ -76,6 +80,7 @@ def parse_mqtt_section(table: ConfigTable, context: SectionContext) -> MqttConfi
     if qos is not None and qos not in (0, 1):
         raise table.error("qos", f"must be 0 or 1, got {qos}")
     discovery = table.boolean("discovery")
+    home_assistant_lease = table.boolean("home_assistant_lease")
     prefix = _topic_prefix(table, "prefix", DEFAULT_PREFIX)
     discovery_prefix = _topic_prefix(table, "discovery_prefix", DISCOVERY_PREFIX)
     if table.boolean("state_topics") is False:
@@ -91,6 +96,7 @@ def parse_mqtt_section(table: ConfigTable, context: SectionContext) -> MqttConfi
         qos=_DEFAULT.qos if qos is None else qos,
         discovery=_DEFAULT.discovery if discovery is None else discovery,
         discovery_prefix=discovery_prefix,
+        home_assistant_lease=home_assistant_lease is not False,
         commands=Budget(
             burst=_budget(table, "command_burst", COMMAND_BUDGET.burst),
             per_s=_budget(table, "commands_per_s", COMMAND_BUDGET.per_s),

@@ -36,12 +36,12 @@ from typing import Any, Final
 
 from ... import __version__
 from ...profiles import ParameterSpec, get_profile
-from .. import LineConfig
+from .. import GatewayView, LineConfig
 from ._config import MqttConfig
 from ._drive_events import EVENT_TYPES
 from ._topics import AVAILABLE, UNAVAILABLE, Topics
 
-__all__ = ["discovery", "node_id"]
+__all__ = ["discovery", "node_id", "served_discovery"]
 
 _NOT_IN_NODE_ID: Final = re.compile(r"[^A-Za-z0-9_-]")
 _NOT_IN_ENTITY_ID: Final = re.compile(r"[^a-z0-9_]")
@@ -241,6 +241,16 @@ def discovery(
                     payload_press=payload,
                     retain=False,
                 )
+
+
+def served_discovery(
+    config: MqttConfig, topics: Topics, gateway: GatewayView | None
+) -> list[tuple[str, dict[str, Any]]]:
+    """Every config of the drives *gateway* serves now (none with ``discovery`` off)."""
+    if not config.discovery or gateway is None:
+        return []
+    lines = list(dict.fromkeys(drive.line for drive in gateway.drives))
+    return list(discovery(config, topics, lines))
 
 
 def _status_keys(states: Sequence[str]) -> dict[str, Any]:
