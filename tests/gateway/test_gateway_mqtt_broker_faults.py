@@ -202,6 +202,8 @@ async def test_a_subscribe_never_answered_ends_the_set_up_within_the_keepalive(
         "the oldest of 1 waiting); retrying"
     ), warning
     second = broker.connections[1]
-    assert [f for f, _, _ in second.subscriptions] == [TOPICS.command_filter,
-                                                       "homeassistant/status"]  # fmt: skip
+    filters = [f for f, _, _ in second.subscriptions]
+    assert filters[:2] == [TOPICS.command_filter, "homeassistant/status"]
+    # Then the sweep's (mqtt/_sweep.py), on the same connection: this gateway's own topics.
+    assert all(f.startswith(("sj300/gw1/", "homeassistant/+/sj300_gw1")) for f in filters[2:])
     assert (TOPICS.availability, b"online", 1) in second.publishes

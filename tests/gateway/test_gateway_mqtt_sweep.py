@@ -47,7 +47,7 @@ async def served_once(gateway: Gateway) -> None:
     mqtt = bridge(gateway)
     await wait_for(lambda: mqtt.stats.published >= CONFIGS, "the configs published")
     await wait_for(lambda: len(mqtt.stats.states) == len(gateway.drives), "a state a drive")
-    await wait_for(lambda: mqtt._sweep is not None and mqtt._sweep.done(), "the sweep done")
+    await wait_for(lambda: mqtt._sweeper is not None and mqtt._sweeper.done, "the sweep done")
 
 
 async def test_removed_drives_and_controls_are_cleared_and_the_rest_kept(

@@ -53,10 +53,9 @@ Decisions:
   (counted in ``BridgeStats.replaced``), so a broker that is down or slow
   costs memory bounded by the number of drives, and the state that reaches
   it is always the latest. The bridge's task drains the outbox.
-- **Reconnecting** (:mod:`sj300_async.gateway.mqttlink`): back off 0.5 s doubling to 30 s,
-  then republish availability, discovery and every drive's latest state
-  (the broker may have restarted without its retained messages). The
-  Modbus side does not depend on the broker.
+- **Reconnecting** (:mod:`sj300_async.gateway.mqttlink`): back off 0.5 s doubling to
+  30 s, then republish availability, discovery and every drive's latest state
+  (the broker may have restarted without its retained messages).
 - Commands to one drive are carried out in order (a lease, then a
   frequency); each drive has its own queue, so a drive that does not
   answer delays only its own commands, never another drive's heartbeat.
@@ -67,9 +66,8 @@ Decisions:
   slow broker makes the outbox coalesce, never grow. A broker that never
   acknowledges loses the connection after ``keepalive_s`` (counted by the
   transport, :mod:`sj300_async.gateway.mqttlink`): its will says ``offline``.
-- Home Assistant's side: events (:mod:`._drive_events`), the lease its
-  presence keeps (:mod:`._presence`), what an earlier configuration left
-  retained cleared at the first connection (:mod:`._sweep`).
+- For Home Assistant: events (:mod:`._drive_events`), the lease its presence
+  keeps (:mod:`._presence`), an earlier configuration's leftovers cleared (:mod:`._sweep`).
 - **Home Assistant's births coalesce** (:mod:`._births`): anyone may publish
   one; a storm of them costs one re-discovery per 10 s, never one each.
 - A subscription the broker refuses (an ACL: the commands, Home
@@ -114,7 +112,7 @@ from ._intake import CommandIntake
 from ._messages import state_payload
 from ._presence import HomeAssistantLease
 from ._stats import BridgeStats, mqtt_families
-from ._sweep import sweep_and_say
+from ._sweep import Sweeper, keep_of, sweep_and_say
 from ._topics import AVAILABLE, UNAVAILABLE, Topics
 
 if TYPE_CHECKING:
@@ -162,7 +160,8 @@ class MqttBridge:
         self._intake = CommandIntake(_log, commands=config.commands)
         self._events = DriveEvents()
         self._presence = HomeAssistantLease(CLIENT, enabled=config.home_assistant_lease)
-        #: The start's sweep of what the configuration no longer has (:mod:`._sweep`).
+        #: The sweep of what the configuration no longer has (:mod:`._sweep`), until done.
+        self._sweeper: Sweeper | None = None
         self._sweep: asyncio.Task[None] | None = None
         self.topics = Topics("", config.prefix)  # the gateway's id is known at start
         self._gateway: GatewayView | None = None
@@ -355,6 +354,8 @@ class MqttBridge:
         finally:
             receiver.cancel()  # (awaited by the session, when there was one)
             self._client = None
+            if self._sweep is not None:  # it ran on this connection
+                await cancel_and_wait({self._sweep})
             self._presence.lost()
             self._epoch += 1  # commands received on that connection are stale now
             session, self._session_name = self._session_name, None
@@ -388,12 +389,13 @@ class MqttBridge:
         await client.publish(self.topics.availability, AVAILABLE, qos=qos, retain=True)
         self._client = client
         self._announce()
-        if self._sweep is None and self._gateway is not None:  # once, at the first connection
+        if (self._sweeper is None or not self._sweeper.done) and self._gateway is not None:
             drives = [drive.key for drive in self._gateway.drives]
             made = [t for t, _ in served_discovery(self.config, self.topics, self._gateway)]
-            self._sweep = asyncio.create_task(
-                sweep_and_say(self.config, self.topics, drives, made, self.stats), name="mqtt sweep"
-            )
+            keep, own = keep_of(self.topics, drives, made)
+            self._sweeper = sweeper = Sweeper(self.config, self.topics)
+            sweeping = sweep_and_say(sweeper, client, keep, own, self.stats)
+            self._sweep = asyncio.create_task(sweeping, name="mqtt sweep")
 
     async def _session(self, client: Client, receiver: asyncio.Task[None]) -> None:
         """Publish, and receive (*receiver*), until the connection fails (raises its MqttError)."""
@@ -411,6 +413,8 @@ class MqttBridge:
 
     async def _receiver(self, client: Client) -> None:
         async for message in client.messages:
+            if self._sweeper is not None and self._sweeper.feed(message):
+                continue  # what the sweep reads (and its echo): never a command
             topic, payload = message.topic, message.payload
             if topic == self._birth:
                 # Home Assistant (re)started: it needs the configs and states again. A
@@ -569,8 +573,6 @@ class MqttBridge:
             return
         self._closing = True
         self._rediscovery.cancel()
-        if self._sweep is not None:
-            await cancel_and_wait({self._sweep})
         self._epoch += 1  # commands waiting are not carried out any more
         loop = asyncio.get_running_loop()
         # A write under way finishes (a write and its read-back stay together; its

@@ -18,10 +18,13 @@ message) what the present configuration would not publish:
 - decommissioning (``keep=None``: ``sj300 gateway --decommission``) clears
   everything, the gateway's own availability and device too.
 
-It runs once at the gateway's start, beside the bridge, on a connection of
-its own (``<client id>-sweep``, no will), and waits for the broker's
+It runs at the bridge's first connection, on that connection (a broker
+that ties client ids to its ACL, as AWS IoT does, needs no second id), and
+again at the next one until it ran to its end. It waits for the broker's
 retained messages with a barrier: a message it publishes to itself after
-subscribing arrives after them (one connection, in order). What it cleared
+subscribing arrives after them (one connection, in order); once done it
+unsubscribes, not to get every state the gateway publishes back.
+``--decommission`` runs it on a connection of its own. What it cleared
 is counted and said in one line. A broker whose ACL refuses the
 subscriptions leaves things as they were, said once at WARNING.
 """
@@ -29,6 +32,7 @@ subscriptions leaves things as they were, said once at WARNING.
 from __future__ import annotations
 
 import asyncio
+import contextlib
 import functools
 import logging
 import secrets
@@ -43,7 +47,7 @@ from ._discovery import node_id
 from ._stats import BridgeStats
 from ._topics import Topics
 
-__all__ = ["SweepRefused", "Swept", "sweep", "sweep_and_say", "sweep_served"]
+__all__ = ["SweepRefused", "Sweeper", "Swept", "keep_of", "sweep", "sweep_and_say"]
 
 _log = logging.getLogger("sj300_async.gateway.mqtt")
 
@@ -53,6 +57,8 @@ BARRIER_TIMEOUT_S: Final = 30.0
 FILTERS_PER_SUBSCRIBE: Final = 256
 #: Retained topics read at most: a broker holding more under one gateway id is not ours.
 MAX_TOPICS: Final = 200_000
+#: Drives no longer configured whose configs one sweep looks for (the next gets the rest).
+MAX_GONE_DRIVES: Final = 4096
 
 
 class SweepRefused(Exception):
@@ -69,26 +75,105 @@ class Swept:
     topics: int
 
 
-class _Collector:
-    """The retained messages read until a barrier comes back."""
+class Sweeper:
+    """One sweep on a connection whose reader hands it every message (:meth:`feed`).
 
-    def __init__(self, client: Client) -> None:
-        self._client = client
+    The bridge runs it on its own connection (one connection per gateway: a
+    broker that ties client ids to ACLs, as AWS IoT does, needs no second
+    id); ``sweep`` runs it on one of its own for ``--decommission``.
+    """
+
+    def __init__(self, config: MqttConfig, topics: Topics) -> None:
+        self._config, self._topics = config, topics
+        self._own = f"{topics.prefix}/{topics.gateway}"
+        self._barrier = f"{self._own}/sweep/{secrets.token_hex(8)}"
+        self._arrived = asyncio.Event()
+        self._subscribed: list[str] = []
+        #: The non-empty retained topics read so far.
         self.retained: set[str] = set()
+        #: It ran to its end (the bridge's: no sweep at the next connection).
+        self.done = False
 
-    async def until_barrier(self, barrier: str) -> None:
-        await self._client.publish(barrier, b"", qos=1)
-        async with asyncio.timeout(BARRIER_TIMEOUT_S):
-            async for message in self._client.messages:
-                if message.topic == barrier:
-                    return
-                self._take(message)
-
-    def _take(self, message: Message) -> None:
-        # A live message (the bridge publishing as we read) says nothing of the past;
-        # an empty retained one is a cleared topic.
+    def feed(self, message: Message) -> bool:
+        """True when *message* is the sweep's (then the reader drops it): on the topics it
+        reads, which the bridge never subscribes to otherwise, also once it is done
+        (the echo of the gateway's own publishes, until the unsubscription took)."""
+        topic = message.topic
+        if topic == self._barrier:
+            self._arrived.set()
+            return True
+        ours = topic.startswith(f"{self._own}/") and topic.endswith(("/state", "/availability"))
+        if not ours and not (
+            topic.startswith(f"{self._config.discovery_prefix}/") and topic.endswith("/config")
+        ):
+            return False
+        # A live message (the bridge publishing as we read) says nothing of the past; an
+        # empty retained one is a cleared topic.
         if message.retain and message.length > 0 and len(self.retained) < MAX_TOPICS:
-            self.retained.add(message.topic)
+            self.retained.add(topic)
+        return True
+
+    async def run(
+        self,
+        client: Client,
+        keep: Mapping[tuple[str, int], Iterable[str]] | None,
+        gateway_configs: Iterable[str] = (),
+    ) -> Swept:
+        """Clear what the gateway left retained that is not in *keep* (:func:`sweep`)."""
+        topics, own = self._topics, self._own
+        kept = {} if keep is None else {drive: set(configs) for drive, configs in keep.items()}
+        discovered = f"{self._config.discovery_prefix}/+/{{}}/+/config"
+        try:
+            await self._subscribe(
+                client,
+                [
+                    f"{own}/+/+/state",
+                    f"{own}/+/+/availability",
+                    topics.availability,
+                    discovered.format(node_id("sj300", topics.gateway)),
+                    self._barrier,
+                ],
+            )
+            await self._until_barrier(client)
+            served = {d for d in map(functools.partial(_drive, own), self.retained) if d}
+            # Anyone the broker lets publish under this gateway's id could leave retained
+            # junk for thousands of drives: their configs are looked for up to a bound.
+            drives = sorted(served | set(kept))[: len(kept) + MAX_GONE_DRIVES]
+            await self._subscribe(client, [discovered.format(_node_id(topics, d)) for d in drives])
+            await self._until_barrier(client)
+            wanted: set[str] = set()
+            if keep is not None:
+                wanted |= {topics.availability, *gateway_configs}
+            for (line, node), configs in kept.items():
+                wanted |= {
+                    topics.state(line, node),
+                    topics.drive_availability(line, node),
+                    *configs,
+                }
+            clear = sorted(self.retained - wanted)
+            if clear:
+                await client.publish_many(((topic, b"", True) for topic in clear), qos=1)
+        finally:
+            if self._subscribed:  # not to get every state the gateway publishes back
+                with contextlib.suppress(MqttError, OSError):  # the connection's gone: moot
+                    await client.unsubscribe(self._subscribed)
+        return Swept(tuple(d for d in drives if d not in kept), len(clear))
+
+    async def _subscribe(self, client: Client, filters: list[str]) -> None:
+        for start in range(0, len(filters), FILTERS_PER_SUBSCRIBE):
+            chunk = filters[start : start + FILTERS_PER_SUBSCRIBE]
+            granted = await client.subscribe([(f, 1) for f in chunk], qos=1)
+            self._subscribed += chunk
+            refused = [f for f, qos in zip(chunk, granted, strict=True) if qos >= 0x80]
+            if refused:
+                raise SweepRefused(f"the broker refused the subscription to {refused[0]}")
+
+    async def _until_barrier(self, client: Client) -> None:
+        """Until everything the broker had retained for the subscriptions so far came."""
+        self._arrived.clear()
+        await client.publish(self._barrier, b"", qos=1)
+        async with asyncio.timeout(BARRIER_TIMEOUT_S):
+            await self._arrived.wait()
 
 
 async def sweep(
@@ -98,7 +183,8 @@ async def sweep(
     *,
     gateway_configs: Iterable[str] = (),
 ) -> Swept:
-    """Clear what *topics*' gateway left retained that is not in *keep* (module docstring).
+    """Clear what *topics*' gateway left retained that is not in *keep* (module docstring),
+    on a connection of its own.
 
     *keep*: every drive configured now and the discovery config topics it has
     now; None: nothing is kept (decommissioning). *gateway_configs*: the
@@ -108,67 +194,37 @@ async def sweep(
         SweepRefused: a subscription refused.
         MqttError, OSError, TimeoutError: the broker unreachable or too slow.
     """
-    kept = {} if keep is None else {drive: set(configs) for drive, configs in keep.items()}
-    own = f"{topics.prefix}/{topics.gateway}"
-    discovered = f"{config.discovery_prefix}/+/{{}}/+/config"
+    sweeper = Sweeper(config, topics)
     async with new_client(config, identifier=f"{config.client_id}-sweep") as client:
-        collector = _Collector(client)
-        barrier = f"{own}/sweep/{secrets.token_hex(8)}"
-        await _subscribe(
-            client,
-            [
-                f"{own}/+/+/state",
-                f"{own}/+/+/availability",
-                topics.availability,
-                discovered.format(node_id("sj300", topics.gateway)),
-                barrier,
-            ],
-        )
-        await collector.until_barrier(barrier)
-        served = {d for d in map(functools.partial(_drive, own), collector.retained) if d}
-        drives = sorted(served | set(kept))
-        await _subscribe(client, [discovered.format(_node_id(topics, d)) for d in drives])
-        await collector.until_barrier(barrier)
-        wanted: set[str] = set()
-        if keep is not None:
-            wanted |= {topics.availability, *gateway_configs}
-        for (line, node), configs in kept.items():
-            wanted |= {topics.state(line, node), topics.drive_availability(line, node), *configs}
-        clear = sorted(collector.retained - wanted)
-        if clear:
-            await client.publish_many(((topic, b"", True) for topic in clear), qos=1)
-    gone = tuple(d for d in drives if d not in kept)
-    return Swept(gone, len(clear))
 
+        async def read() -> None:
+            async for message in client.messages:
+                sweeper.feed(message)
 
-async def sweep_served(
-    config: MqttConfig, topics: Topics, drives: Iterable[tuple[str, int]], made: Iterable[str]
-) -> Swept:
-    """:func:`sweep` keeping *drives* (served now) and the discovery config topics *made*
-    now (each under its drive's node id, or the gateway's own)."""
-    by_node: dict[str, list[str]] = {}
-    for topic in made:
-        by_node.setdefault(topic.split("/")[-3], []).append(topic)
-    keep = {drive: by_node.get(_node_id(topics, drive), []) for drive in drives}
-    own = by_node.get(node_id("sj300", topics.gateway), [])
-    return await sweep(config, topics, keep, gateway_configs=own)
+        reading = asyncio.create_task(read())
+        try:
+            return await sweeper.run(client, keep, gateway_configs)
+        finally:
+            reading.cancel()
+            await asyncio.gather(reading, return_exceptions=True)
 
 
 async def sweep_and_say(
-    config: MqttConfig,
-    topics: Topics,
-    drives: Iterable[tuple[str, int]],
-    made: Iterable[str],
+    sweeper: Sweeper,
+    client: Client,
+    keep: Mapping[tuple[str, int], Iterable[str]],
+    gateway_configs: Iterable[str],
     stats: BridgeStats,
 ) -> None:
-    """:func:`sweep_served` at the bridge's start: counted in *stats*, said in one line,
-    a failure said at WARNING (the next start tries again)."""
+    """The bridge's sweep at its connection: counted in *stats*, said in one line, a
+    failure said at WARNING (``sweeper.done`` stays False: the next connection tries)."""
     try:
-        swept = await sweep_served(config, topics, drives, made)
+        swept = await sweeper.run(client, keep, gateway_configs)
     except (SweepRefused, MqttError, OSError, TimeoutError) as exc:
         _log.warning("MQTT: could not clear what an earlier configuration left retained: %s",
                      exc or type(exc).__name__)  # fmt: skip
         return
+    sweeper.done = True
     stats.swept += swept.topics
     if swept.topics:
         gone = ", ".join(f"{line} {node}" for line, node in swept.drives) or "none"
@@ -176,13 +232,16 @@ async def sweep_and_say(
                   "longer configured: %s)", swept.topics, gone)  # fmt: skip
 
 
-async def _subscribe(client: Client, filters: list[str]) -> None:
-    for start in range(0, len(filters), FILTERS_PER_SUBSCRIBE):
-        chunk = filters[start : start + FILTERS_PER_SUBSCRIBE]
-        granted = await client.subscribe([(f, 1) for f in chunk], qos=1)
-        refused = [f for f, qos in zip(chunk, granted, strict=True) if qos >= 0x80]
-        if refused:
-            raise SweepRefused(f"the broker refused the subscription to {refused[0]}")
+def keep_of(
+    topics: Topics, drives: Iterable[tuple[str, int]], made: Iterable[str]
+) -> tuple[dict[tuple[str, int], list[str]], list[str]]:
+    """What to keep: *drives* (served now) each with its discovery config topics among
+    *made*, and the gateway device's own configs."""
+    by_node: dict[str, list[str]] = {}
+    for topic in made:
+        by_node.setdefault(topic.split("/")[-3], []).append(topic)
+    keep = {drive: by_node.get(_node_id(topics, drive), []) for drive in drives}
+    return keep, by_node.get(node_id("sj300", topics.gateway), [])
 
 
 def _drive(own: str, topic: str) -> tuple[str, int] | None:
