@@ -112,6 +112,7 @@ class GatewayDrive:
             lapse_pending=self.lapse_pending,
             trips_interval_s=self.line.trips_interval_s,
             verdict=self.readings.polled,
+            frequency_limit=(self.profile.max_frequency_parameter, self.profile.max_frequency_hz),
         )
 
     def _build(self, now: float, wall: float) -> DriveSnapshot:

@@ -117,6 +117,7 @@ class ServedDrive:
 
     __slots__ = (
         "_at_sample",
+        "_frequency_limit",
         "_lease",
         "_online",
         "_parameter_window_s",
@@ -141,9 +142,12 @@ class ServedDrive:
         lapse_pending: bool = False,
         trips_interval_s: float = 0.0,
         verdict: bool = True,
+        frequency_limit: tuple[str | None, float] = (None, math.inf),
     ) -> None:
         """*verdict*: the snapshot's ``online`` is the poller's verdict (False before the
-        drive's first poll: then no value is offline, only not read yet)."""
+        drive's first poll: then no value is offline, only not read yet).
+        *frequency_limit*: the profile's maximum-frequency parameter and its highest
+        frequency (:meth:`max_frequency_hz`)."""
         s = snapshot
         self._online = s.online or not verdict or s.taken_at == -math.inf
         self.snapshot = s
@@ -161,6 +165,7 @@ class ServedDrive:
         self.verdict = verdict
         self.lapse_pending = lapse_pending
         self._lease = lease
+        self._frequency_limit = frequency_limit
         self._at_sample: ServedValues | None = None
 
     # -- freshness and quality --------------------------------------------------------
@@ -258,6 +263,19 @@ class ServedDrive:
             trip=s.trip if status and s.tripped else None,
             parameters=parameters,
         )
+
+    @property
+    def highest_frequency_hz(self) -> float:
+        """The protocol's highest frequency (what :meth:`max_frequency_hz` is at most)."""
+        return self._frequency_limit[1]
+
+    def max_frequency_hz(self) -> float:
+        """The highest frequency the drive takes: its own maximum-frequency parameter when
+        the line polls it and it was read (at most the protocol's highest), else the
+        protocol's highest. The controller refuses above the same (with the reason)."""
+        code, highest = self._frequency_limit
+        reading = None if code is None else self.snapshot.parameters.get(code)
+        return highest if reading is None else min(reading.value, highest)
 
     # -- the lease ----------------------------------------------------------------------
 

@@ -58,6 +58,7 @@ from sj300_async.gateway.mqtt import (
     state_message,
 )
 from sj300_async.gateway.mqtt._bridge import MqttBridge
+from sj300_async.gateway.mqtt._discovery import FrequencyLimits
 from sj300_async.gateway.mqtt._drive_events import DriveEvents
 from sj300_async.gateway.mqtt._messages import state_payload
 from sj300_async.profiles import get_profile
@@ -193,6 +194,32 @@ def configs(sub: Sub, *, retained: bool) -> list[Message]:
     return sub.where(lambda m: m.topic.endswith("/config") and m.retained == retained)
 
 
+#: The set-frequency configs of the drives with control (GRANTS): published again once
+#: the drive's own maximum (A004, polled: 50 Hz on the simulator) is read.
+FREQUENCY_CONFIGS = [
+    f"homeassistant/number/sj300_gw1_hall_{node}/set_frequency/config" for node in (1, 2)
+]
+
+
+def own_maximum(m: Message) -> bool:
+    """A set-frequency config with the drive's own maximum (A004, 50 Hz)."""
+    return m.topic in FREQUENCY_CONFIGS and m.json()["max"] == 50.0
+
+
+async def configs_settled(sub: Sub) -> int:
+    """How many configs *sub* got once each set-frequency config has the drive's own
+    maximum: every config once (CONFIGS), and a set-frequency config again for each
+    drive whose maximum was read after the connect published them."""
+    await sub.until(own_maximum, "the drives' own maxima", count=len(FREQUENCY_CONFIGS))
+    await sub.barrier()
+    sent = configs(sub, retained=False)
+    assert len({m.topic for m in sent}) == CONFIGS
+    again = [m.topic for m in sent[CONFIGS:]]  # after the connect's: never in its batch
+    assert set(again) <= set(FREQUENCY_CONFIGS)
+    assert len(again) == len(set(again))
+    return len(sent)
+
+
 def errors(sub: Sub, node: int) -> list[dict[str, Any]]:
     return [m.json() for m in sub.topic(Topics("gw1").error("hall", node))]
 
@@ -209,8 +236,9 @@ def bridge(gateway: Gateway) -> MqttBridge:
 async def test_discovery_configs_are_retained_json_with_every_required_key(
     sim_line: SimLine, broker: Broker
 ) -> None:
-    async with running_gateway(mqtt_toml(sim_line.url, broker)) as gateway:
-        await wait_for(lambda: bridge(gateway).stats.published >= CONFIGS, "the configs sent")
+    async with subscriber(broker) as live, running_gateway(mqtt_toml(sim_line.url, broker)):
+        # Published again once each drive's own maximum (A004, polled) was read.
+        await live.until(own_maximum, "the configs with the drives' own maxima", count=2)
         async with subscriber(broker) as sub:  # after they were published: retained ones only
             await sub.barrier()
     found = {m.topic: m.json() for m in configs(sub, retained=True)}
@@ -263,7 +291,7 @@ async def test_discovery_configs_are_retained_json_with_every_required_key(
     } | {(f"sj300_gw1_hall_{node}", what) for node in (1, 2) for what in CONTROLS}
     number = found["homeassistant/number/sj300_gw1_hall_1/set_frequency/config"]
     assert number["command_topic"] == topics.command("hall", 1, "frequency_hz")
-    assert (number["min"], number["max"], number["step"]) == (0, 400.0, 0.01)
+    assert (number["min"], number["max"], number["step"]) == (0, 50.0, 0.01)
     lease = found["homeassistant/button/sj300_gw1_hall_2/lease/config"]
     assert lease["command_topic"] == topics.command("hall", 2, "lease")
     run = found["homeassistant/button/sj300_gw1_hall_2/run_reverse/config"]
@@ -285,16 +313,15 @@ async def test_home_assistant_birth_republishes_every_config(
     ):
         availability = Topics("gw1").drive_availability("hall", 4)
         await sub.until(lambda m: m.topic == availability, "node 4 polled")
-        await sub.barrier()
-        assert len(configs(sub, retained=False)) == CONFIGS
+        connected = await configs_settled(sub)
         assert [m.payload for m in sub.topic(availability)] == ["online"]
         # Home Assistant starts again: everything it needs, again, live.
         await publish(broker, "homeassistant/status", "online")
         await sub.until(lambda m: m.topic.endswith("/config") and not m.retained,
-                        "the configs again", count=2 * CONFIGS)  # fmt: skip
+                        "the configs again", count=connected + CONFIGS)  # fmt: skip
         await sub.until(lambda m: m.topic == availability, "the availability again", count=2)
         await sub.barrier()
-        assert len(configs(sub, retained=False)) == 2 * CONFIGS
+        assert len(configs(sub, retained=False)) == connected + CONFIGS
     await publish(broker, "homeassistant/status", None, retain=True)  # cleared
 
 
@@ -1060,3 +1087,22 @@ def test_a_trip_and_a_lapse_are_events_once_each_and_a_first_sample_is_none() ->
     assert events.on_served(drive.served) == []
     drive.lapse_pending = False
     assert served(18.0, StatusB.RUNNING) == []
+
+
+def test_the_set_frequency_maximum_is_the_drive_s_own_once_read() -> None:
+    profile = get_profile("sj300")
+    grant = WriteGrant(nodes=frozenset({2}), control=True)
+    line = LineConfig("hall", "sim://", "sj300", (2,), grants=(grant,), parameters=("A004",))
+    drive = GatewayDrive(line, 2, profile, Lease(5.0), stale_after_s=1.0)
+    limits = FrequencyLimits()
+    assert drive.served.max_frequency_hz() == 400.0  # not read yet: the SJ300's highest
+    assert not limits.changed(drive.served)  # what the connect's configs have already
+    drive.readings.set_parameter("A004", 500, 10.0)  # 50.0 Hz
+    drive.rebuild(10.0, wall=1e9)
+    assert drive.served.max_frequency_hz() == 50.0
+    assert limits.changed(drive.served)
+    ((topic, body),) = limits.config(MqttConfig("b", 1883), Topics("gw1"), drive)
+    assert topic == "homeassistant/number/sj300_gw1_hall_2/set_frequency/config"
+    assert body["max"] == 50.0
+    assert check("number", body) == []
+    assert limits.config(MqttConfig("b", 1883), Topics("gw1"), None) == []

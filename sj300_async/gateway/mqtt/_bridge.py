@@ -99,6 +99,7 @@ from .. import (
     Refusal,
     ServedDrive,
     WriteResult,
+    compact_json,
     excerpt,
 )
 from ..mqttlink import Subscriptions, cancel_and_wait, keep_connected, new_client, reader
@@ -106,13 +107,13 @@ from ..mqttlink.client import Client, MqttError, Will
 from ._births import Rediscovery
 from ._commands import MAX_PAYLOAD_BYTES, error_text, oversized, parse_command
 from ._config import MqttConfig
-from ._discovery import served_discovery
+from ._discovery import FrequencyLimits, served_discovery
 from ._drive_events import DriveEvents, refused_event
 from ._intake import CommandIntake
 from ._messages import state_payload
 from ._presence import HomeAssistantLease
 from ._stats import BridgeStats, mqtt_families
-from ._sweep import Sweeper, keep_of, sweep_and_say
+from ._sweep import Sweeper, sweep_and_say
 from ._topics import AVAILABLE, UNAVAILABLE, Topics
 
 if TYPE_CHECKING:
@@ -137,6 +138,8 @@ MAX_IN_FLIGHT: Final = 256
 CLOSE_TIMEOUT_S: Final = 3.0
 
 Key = tuple[str, int]
+_RETAINED: Final = WriteResult(Refusal.NOT_ALLOWED, "a retained command is never carried "
+                               "out (publish commands without retain)")  # fmt: skip
 
 
 @dataclass(frozen=True, slots=True)
@@ -159,6 +162,7 @@ class MqttBridge:
         self._subscriptions = Subscriptions(self.stats, _log, "MQTT")
         self._intake = CommandIntake(_log, commands=config.commands)
         self._events = DriveEvents()
+        self._limits = FrequencyLimits()
         self._presence = HomeAssistantLease(CLIENT, enabled=config.home_assistant_lease)
         #: The sweep of what the configuration no longer has (:mod:`._sweep`), until done.
         self._sweeper: Sweeper | None = None
@@ -221,6 +225,9 @@ class MqttBridge:
         out = _Out(self.topics.state(*key), payload, retain=True, drive=key)
         self._latest[key] = out
         self._put(out, wake=False)  # sent at the batch's flush
+        if self.config.discovery and self._limits.changed(served):  # its own maximum now
+            for topic, body in self._limits.config(self.config, self.topics, self._drive(*key)):
+                self._put(_Out(topic, compact_json(body), retain=True), wake=False)
         for event in self._events.on_served(served):
             self._put_error(_Out(self.topics.event(*key), json.dumps(event).encode(), False))
         available = snapshot.available
@@ -267,9 +274,10 @@ class MqttBridge:
 
     def _announce(self) -> None:
         """Everything retained, again: discovery, availability, the latest states."""
-        for topic, body in served_discovery(self.config, self.topics, self._gateway):
-            payload = json.dumps(body, separators=(",", ":")).encode()
-            self._put(_Out(topic, payload, retain=True))
+        for topic, body in served_discovery(
+            self.config, self.topics, self._gateway, self._limits.known
+        ):
+            self._put(_Out(topic, compact_json(body), retain=True))
         # Only the drives polled already: "offline" for a drive not polled yet
         # would be a guess (it follows its first poll).
         for key in self._availability:
@@ -390,11 +398,11 @@ class MqttBridge:
         self._client = client
         self._announce()
         if (self._sweeper is None or not self._sweeper.done) and self._gateway is not None:
-            drives = [drive.key for drive in self._gateway.drives]
             made = [t for t, _ in served_discovery(self.config, self.topics, self._gateway)]
-            keep, own = keep_of(self.topics, drives, made)
-            self._sweeper = sweeper = Sweeper(self.config, self.topics)
-            sweeping = sweep_and_say(sweeper, client, keep, own, self.stats)
+            drives = [drive.key for drive in self._gateway.drives]
+            self._sweeper, sweeping = sweep_and_say(
+                self.config, self.topics, client, made, self.stats, drives
+            )
             self._sweep = asyncio.create_task(sweeping, name="mqtt sweep")
 
     async def _session(self, client: Client, receiver: asyncio.Task[None]) -> None:
@@ -456,16 +464,7 @@ class MqttBridge:
             return
         if retained:
             # Stored by the broker, not sent now: carrying it out would replay it.
-            self._refuse(
-                drive,
-                topic,
-                what,
-                payload,
-                WriteResult(
-                    Refusal.NOT_ALLOWED,
-                    "a retained command is never carried out (publish commands without retain)",
-                ),
-            )
+            self._refuse(drive, topic, what, payload, _RETAINED)
             return
         queue = self._commands.get((line, node))
         if queue is None:

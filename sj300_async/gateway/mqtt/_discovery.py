@@ -31,17 +31,17 @@ from __future__ import annotations
 
 import functools
 import re
-from collections.abc import Iterator, Sequence
+from collections.abc import Iterator, Mapping, Sequence
 from typing import Any, Final
 
 from ... import __version__
 from ...profiles import ParameterSpec, get_profile
-from .. import GatewayView, LineConfig
+from .. import GatewayDrive, GatewayView, LineConfig, ServedDrive
 from ._config import MqttConfig
 from ._drive_events import EVENT_TYPES
 from ._topics import AVAILABLE, UNAVAILABLE, Topics
 
-__all__ = ["discovery", "node_id", "served_discovery"]
+__all__ = ["FrequencyLimits", "discovery", "drive_discovery", "node_id", "served_discovery"]
 
 _NOT_IN_NODE_ID: Final = re.compile(r"[^A-Za-z0-9_-]")
 _NOT_IN_ENTITY_ID: Final = re.compile(r"[^a-z0-9_]")
@@ -94,7 +94,11 @@ _BUTTONS: Final = (
 
 
 def discovery(
-    config: MqttConfig, topics: Topics, lines: Sequence[LineConfig]
+    config: MqttConfig,
+    topics: Topics,
+    lines: Sequence[LineConfig],
+    *,
+    limits: Mapping[tuple[str, int], float] | None = None,
 ) -> Iterator[tuple[str, dict[str, Any]]]:
     """Every Home Assistant discovery config: ``(topic, payload)``.
 
@@ -127,130 +131,179 @@ def discovery(
             "qos": config.qos,
         },
     )
+    known = {} if limits is None else limits
     for line in lines:
-        profile = get_profile(line.protocol)
-        model, manufacturer, noun = profile.model, profile.manufacturer, profile.node_noun
-        measures = profile.capabilities.measures
-        sensors = _SENSORS + tuple(s for s in _OPTIONAL_SENSORS if s[2] in measures)
         for node in line.nodes:
-            drive = node_id("sj300", gateway, line.name, node)
-            state_topic = topics.state(line.name, node)
-            common: dict[str, Any] = {
-                "device": {
-                    "identifiers": [drive],
-                    "name": f"{gateway} {line.name} {noun} {node}",
-                    "model": model,
-                    "manufacturer": manufacturer,
-                    "via_device": gateway_device,
-                },
-                "origin": origin,
-                "availability": [
-                    {"topic": topics.availability},
-                    {"topic": topics.drive_availability(line.name, node)},
-                ],
-                "availability_mode": "all",
-                "payload_available": AVAILABLE,
-                "payload_not_available": UNAVAILABLE,
-                "qos": config.qos,
-            }
+            yield from drive_discovery(config, topics, line, node, known.get((line.name, node)))
 
-            entity = functools.partial(_entity, prefix, drive, common)
 
-            for object_id, name, key, unit, device_class in sensors:
-                keys: dict[str, Any] = {
-                    "state_topic": state_topic,
-                    "value_template": f"{{{{ value_json.{key} }}}}",
-                    "unit_of_measurement": unit,
-                    "state_class": "measurement",
-                }
-                if device_class is not None:
-                    keys["device_class"] = device_class
-                yield entity("sensor", object_id, name, **keys)
-            yield entity(
-                "sensor",
-                "status",
-                "Status",
-                state_topic=state_topic,
-                json_attributes_topic=state_topic,
-                json_attributes_template="{{ (value_json.status or {}) | tojson }}",
-                **_status_keys(profile.capabilities.states),
-            )
-            if profile.capabilities.trip_history:  # a trip is named only from the history
-                yield entity(
-                    "sensor",
-                    "trip",
-                    "Trip",
-                    state_topic=state_topic,
-                    json_attributes_topic=state_topic,
-                    json_attributes_template=_TRIP_ATTRIBUTES,
-                    **_trip_keys([trip.code for trip in profile.trip_codes()]),
-                )
-            yield entity(
-                "event",
-                "events",
-                "Events",
-                state_topic=topics.event(line.name, node),
-                event_types=list(EVENT_TYPES),
-            )
-            for code in sorted(line.writable_parameters(node)):
-                spec = profile.parameters.spec(code)
-                yield entity(
-                    "number",
-                    node_id("parameter", code),  # Pr.7: parameter_Pr_7
-                    f"{code} {spec.name}",
-                    **_parameter_keys(
-                        spec,
-                        topics.command(line.name, node, code),
-                        state_topic if code in line.parameters else None,
-                    ),
-                )
-            if not line.control_allowed(node):
-                continue
-            yield entity(
-                "number",
-                "set_frequency",
-                "Set frequency",
-                command_topic=topics.command(line.name, node, "frequency_hz"),
-                state_topic=state_topic,
-                value_template="{{ value_json.set_frequency_hz }}",
-                min=0,
-                max=profile.max_frequency_hz,
-                step=0.01,
-                mode="box",
-                unit_of_measurement="Hz",
-                device_class="frequency",
-                retain=False,
-            )
-            yield entity(
-                "select",
-                "direction",
-                "Direction",
-                command_topic=topics.command(line.name, node, "command"),
-                command_template=_DIRECTION_COMMAND,
-                state_topic=state_topic,
-                value_template=_DIRECTION_TEMPLATE,
-                options=list(_DIRECTIONS),
-                retain=False,
-            )
-            for object_id, name, what, payload in _BUTTONS:
-                yield entity(
-                    "button",
-                    object_id,
-                    name,
-                    command_topic=topics.command(line.name, node, what),
-                    payload_press=payload,
-                    retain=False,
-                )
+def drive_discovery(
+    config: MqttConfig, topics: Topics, line: LineConfig, node: int, max_hz: float | None = None
+) -> Iterator[tuple[str, dict[str, Any]]]:
+    """One drive's discovery configs (:func:`discovery`); *max_hz*: the set frequency's
+    maximum, the drive's own once known (else the protocol's highest)."""
+    prefix, gateway = config.discovery_prefix, topics.gateway
+    origin = {"name": "sj300-async", "sw_version": __version__}
+    gateway_device = node_id("sj300", gateway)
+    profile = get_profile(line.protocol)
+    model, manufacturer, noun = profile.model, profile.manufacturer, profile.node_noun
+    measures = profile.capabilities.measures
+    sensors = _SENSORS + tuple(s for s in _OPTIONAL_SENSORS if s[2] in measures)
+    drive = node_id("sj300", gateway, line.name, node)
+    state_topic = topics.state(line.name, node)
+    common: dict[str, Any] = {
+        "device": {
+            "identifiers": [drive],
+            "name": f"{gateway} {line.name} {noun} {node}",
+            "model": model,
+            "manufacturer": manufacturer,
+            "via_device": gateway_device,
+        },
+        "origin": origin,
+        "availability": [
+            {"topic": topics.availability},
+            {"topic": topics.drive_availability(line.name, node)},
+        ],
+        "availability_mode": "all",
+        "payload_available": AVAILABLE,
+        "payload_not_available": UNAVAILABLE,
+        "qos": config.qos,
+    }
+
+    entity = functools.partial(_entity, prefix, drive, common)
+
+    for object_id, name, key, unit, device_class in sensors:
+        keys: dict[str, Any] = {
+            "state_topic": state_topic,
+            "value_template": f"{{{{ value_json.{key} }}}}",
+            "unit_of_measurement": unit,
+            "state_class": "measurement",
+        }
+        if device_class is not None:
+            keys["device_class"] = device_class
+        yield entity("sensor", object_id, name, **keys)
+    yield entity(
+        "sensor",
+        "status",
+        "Status",
+        state_topic=state_topic,
+        json_attributes_topic=state_topic,
+        json_attributes_template="{{ (value_json.status or {}) | tojson }}",
+        **_status_keys(profile.capabilities.states),
+    )
+    if profile.capabilities.trip_history:  # a trip is named only from the history
+        yield entity(
+            "sensor",
+            "trip",
+            "Trip",
+            state_topic=state_topic,
+            json_attributes_topic=state_topic,
+            json_attributes_template=_TRIP_ATTRIBUTES,
+            **_trip_keys([trip.code for trip in profile.trip_codes()]),
+        )
+    yield entity(
+        "event",
+        "events",
+        "Events",
+        state_topic=topics.event(line.name, node),
+        event_types=list(EVENT_TYPES),
+    )
+    for code in sorted(line.writable_parameters(node)):
+        spec = profile.parameters.spec(code)
+        yield entity(
+            "number",
+            node_id("parameter", code),  # Pr.7: parameter_Pr_7
+            f"{code} {spec.name}",
+            **_parameter_keys(
+                spec,
+                topics.command(line.name, node, code),
+                state_topic if code in line.parameters else None,
+            ),
+        )
+    if not line.control_allowed(node):
+        return
+    yield entity(
+        "number",
+        "set_frequency",
+        "Set frequency",
+        command_topic=topics.command(line.name, node, "frequency_hz"),
+        state_topic=state_topic,
+        value_template="{{ value_json.set_frequency_hz }}",
+        min=0,
+        max=profile.max_frequency_hz if max_hz is None else max_hz,
+        step=0.01,
+        mode="box",
+        unit_of_measurement="Hz",
+        device_class="frequency",
+        retain=False,
+    )
+    yield entity(
+        "select",
+        "direction",
+        "Direction",
+        command_topic=topics.command(line.name, node, "command"),
+        command_template=_DIRECTION_COMMAND,
+        state_topic=state_topic,
+        value_template=_DIRECTION_TEMPLATE,
+        options=list(_DIRECTIONS),
+        retain=False,
+    )
+    for object_id, name, what, payload in _BUTTONS:
+        yield entity(
+            "button",
+            object_id,
+            name,
+            command_topic=topics.command(line.name, node, what),
+            payload_press=payload,
+            retain=False,
+        )
+
+
+class FrequencyLimits:
+    """The set-frequency numbers' maximum: each drive's own once known (issue 43).
+
+    Home Assistant's number offered up to 400 Hz on a drive whose maximum
+    (A004, polled) is 50 Hz. The bridge asks :meth:`changed` at every
+    snapshot: a drive's served maximum that differs from the one its config
+    was last published with means publishing that config again (once at the
+    first read of the parameter, then at a write of it).
+    """
+
+    def __init__(self) -> None:
+        #: Per drive: the maximum its set-frequency config was last published with.
+        self.known: dict[tuple[str, int], float] = {}
+
+    def changed(self, served: ServedDrive) -> bool:
+        """True (and remembered) when *served*'s maximum is not the one last published."""
+        snapshot = served.snapshot
+        key, limit = (snapshot.line, snapshot.node), served.max_frequency_hz()
+        # Not published with one of its own yet: with the protocol's highest.
+        if self.known.get(key, served.highest_frequency_hz) == limit:
+            return False
+        self.known[key] = limit
+        return True
+
+    def config(
+        self, config: MqttConfig, topics: Topics, drive: GatewayDrive | None
+    ) -> list[tuple[str, dict[str, Any]]]:
+        """*drive*'s set-frequency config with its maximum now (none without control)."""
+        if drive is None:
+            return []
+        found = drive_discovery(config, topics, drive.line, drive.node, self.known.get(drive.key))
+        return [c for c in found if c[0].endswith("/set_frequency/config")]
 
 
 def served_discovery(
-    config: MqttConfig, topics: Topics, gateway: GatewayView | None
+    config: MqttConfig,
+    topics: Topics,
+    gateway: GatewayView | None,
+    limits: Mapping[tuple[str, int], float] | None = None,
 ) -> list[tuple[str, dict[str, Any]]]:
     """Every config of the drives *gateway* serves now (none with ``discovery`` off)."""
     if not config.discovery or gateway is None:
         return []
     lines = list(dict.fromkeys(drive.line for drive in gateway.drives))
-    return list(discovery(config, topics, lines))
+    return list(discovery(config, topics, lines, limits=limits))
 
 
 def _status_keys(states: Sequence[str]) -> dict[str, Any]:

@@ -36,9 +36,9 @@ import contextlib
 import functools
 import logging
 import secrets
-from collections.abc import Iterable, Mapping
+from collections.abc import Coroutine, Iterable, Mapping
 from dataclasses import dataclass
-from typing import Final
+from typing import Any, Final
 
 from ..mqttlink import new_client
 from ..mqttlink.client import Client, Message, MqttError
@@ -209,27 +209,36 @@ async def sweep(
             await asyncio.gather(reading, return_exceptions=True)
 
 
-async def sweep_and_say(
-    sweeper: Sweeper,
+def sweep_and_say(
+    config: MqttConfig,
+    topics: Topics,
     client: Client,
-    keep: Mapping[tuple[str, int], Iterable[str]],
-    gateway_configs: Iterable[str],
+    made: Iterable[str],
     stats: BridgeStats,
-) -> None:
-    """The bridge's sweep at its connection: counted in *stats*, said in one line, a
-    failure said at WARNING (``sweeper.done`` stays False: the next connection tries)."""
-    try:
-        swept = await sweeper.run(client, keep, gateway_configs)
-    except (SweepRefused, MqttError, OSError, TimeoutError) as exc:
-        _log.warning("MQTT: could not clear what an earlier configuration left retained: %s",
-                     exc or type(exc).__name__)  # fmt: skip
-        return
-    sweeper.done = True
-    stats.swept += swept.topics
-    if swept.topics:
-        gone = ", ".join(f"{line} {node}" for line, node in swept.drives) or "none"
-        _log.info("MQTT: cleared %d retained topics an earlier configuration left (drives no "
-                  "longer configured: %s)", swept.topics, gone)  # fmt: skip
+    drives: Iterable[tuple[str, int]],
+) -> tuple[Sweeper, Coroutine[Any, Any, None]]:
+    """The bridge's sweep at its connection *client*, keeping *drives* and the configs it
+    *made*: the sweeper (its reader feeds it) and the sweep to run as a task, counted
+    in *stats*, said in one line, a failure said at WARNING (``done`` stays False: the
+    next connection tries)."""
+    sweeper = Sweeper(config, topics)
+    keep, own = keep_of(topics, drives, made)
+
+    async def run() -> None:
+        try:
+            swept = await sweeper.run(client, keep, own)
+        except (SweepRefused, MqttError, OSError, TimeoutError) as exc:
+            _log.warning("MQTT: could not clear what an earlier configuration left retained: "
+                         "%s", exc or type(exc).__name__)  # fmt: skip
+            return
+        sweeper.done = True
+        stats.swept += swept.topics
+        if swept.topics:
+            gone = ", ".join(f"{line} {node}" for line, node in swept.drives) or "none"
+            _log.info("MQTT: cleared %d retained topics an earlier configuration left (drives "
+                      "no longer configured: %s)", swept.topics, gone)  # fmt: skip
+
+    return sweeper, run()
 
 
 def keep_of(
