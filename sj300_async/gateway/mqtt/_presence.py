@@ -61,12 +61,17 @@ class HomeAssistantLease:
         self.present: bool | None = None
         #: The drives whose lease the bridge renews while Home Assistant is present.
         self._kept: set[tuple[str, int]] = set()
+        #: What Home Assistant said (and connections lost), counted: a command keeps its
+        #: lease only under the presence it began under (:meth:`before`, :meth:`after`).
+        self._heard = 0
+        self._began: dict[tuple[str, int], int] = {}
 
     def heard(self, payload: bytes) -> None:
         """Home Assistant said *payload* on its status topic (a birth, its will)."""
         said = payload.strip()
         if said not in (_ONLINE, _OFFLINE):
             return
+        self._heard += 1
         if self._kept:
             # Its birth (a restart) or its end: the leases it kept lapse now on their own.
             _log.info("MQTT: Home Assistant said %s: the leases it kept (%d) are left to lapse",
@@ -83,6 +88,7 @@ class HomeAssistantLease:
     ) -> None:
         """A command from MQTT is about to go through: while Home Assistant is present, take
         the free lease for a command that needs it."""
+        self._began[drive.key] = self._heard
         if not (self.enabled and self.present) or not needs_lease(request):
             return
         now = asyncio.get_running_loop().time()
@@ -91,8 +97,11 @@ class HomeAssistantLease:
 
     def after(self, drive: GatewayDrive, request: WriteRequest) -> None:
         """A command from MQTT went through: while Home Assistant is present, the lease it
-        took or renewed is kept (a stop keeps nothing new)."""
-        if not (self.enabled and self.present):
+        took or renewed is kept (a stop keeps nothing new). Not when Home Assistant said
+        anything since :meth:`before`: its birth during the write (a restart) or its will
+        ended the renewals, the lease this command took with them."""
+        began = self._began.pop(drive.key, None)
+        if not (self.enabled and self.present) or began != self._heard:
             return
         now = asyncio.get_running_loop().time()
         if drive.lease.held_by(self._client, now) and (
@@ -119,4 +128,5 @@ class HomeAssistantLease:
         """The broker connection ended: no renewals without it (the leases lapse), and
         Home Assistant's presence unknown until it is heard again (a retained birth)."""
         self._kept.clear()
+        self._heard += 1
         self.present = None

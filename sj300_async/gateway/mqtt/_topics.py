@@ -46,6 +46,7 @@ __all__ = [
     "UNAVAILABLE",
     "StateMessage",
     "Topics",
+    "parse_node",
     "parse_state_topic",
 ]
 
@@ -99,7 +100,15 @@ class Topics:
         if len(parts) != len(head) + 4 or parts[: len(head)] != head or parts[-2] != "set":
             return None
         line, node, _, what = parts[len(head) :]
-        return (line, int(node), what) if node.isdigit() else None
+        number = parse_node(node)
+        return None if number is None else (line, number, what)
+
+
+def parse_node(level: str) -> int | None:
+    """A topic level's node number, else None. ASCII digits only, and few: ``str.isdigit``
+    takes ``²``, which ``int`` refuses, and ``int`` refuses 4,301 digits (a junk topic's
+    ValueError ended the bridge's receiver, and the connection, at every delivery)."""
+    return int(level) if len(level) <= 9 and level.isascii() and level.isdigit() else None
 
 
 def parse_state_topic(topic: str, prefix: str = DEFAULT_PREFIX) -> tuple[str, str, int] | None:
@@ -109,7 +118,8 @@ def parse_state_topic(topic: str, prefix: str = DEFAULT_PREFIX) -> tuple[str, st
     if len(parts) != len(head) + 4 or parts[: len(head)] != head or parts[-1] != "state":
         return None
     gateway, line, node = parts[len(head) : len(head) + 3]
-    return (gateway, line, int(node)) if node.isdigit() else None
+    number = parse_node(node)
+    return None if number is None else (gateway, line, number)
 
 
 @dataclass(frozen=True, slots=True)
