@@ -16,13 +16,17 @@ of the test's own and a simulated line:
   from MQTT was being carried out made the bridge keep, and renew for
   ever, the lease that command took under the presence before: the birth
   is meant to end the renewals.
+- The sweep's two rounds shared one barrier topic, which every subscriber
+  sees: replayed, it ended the second round before its retained configs
+  came, and a removed drive's configs stayed (the sweep said done).
 """
 
 from __future__ import annotations
 
 import asyncio
-from collections.abc import AsyncIterator
+from collections.abc import AsyncIterator, Iterable
 from pathlib import Path
+from typing import cast
 
 import pytest
 from mqtt_broker import Broker, publish, running_broker
@@ -30,7 +34,8 @@ from waiting import wait_for
 
 from sj300_async.gateway import GatewayDrive, RunCommand, WriteRequest, WriteResult
 from sj300_async.gateway.mqtt import MqttConfig, Topics, parse_state_topic
-from sj300_async.gateway.mqtt._sweep import sweep
+from sj300_async.gateway.mqtt._sweep import Sweeper, sweep
+from sj300_async.gateway.mqttlink.client import Client, Message
 
 from .conftest import SimLine, drive_of, running_gateway
 from .test_gateway_mqtt import bridge, mqtt_toml
@@ -141,3 +146,50 @@ async def test_a_birth_during_a_command_ends_the_lease_it_took(
         # Nobody renews the lease now: it lapses within lease_s, and the motor stops.
         await wait_for(lambda: controller.lapses == 1, "the lapse", timeout=LEASE_S + 2)
         await wait_for(lambda: not motor.state(loop.time()).outputting, "stopped", timeout=30)
+
+
+class _ReplayingBroker:
+    """A client for :class:`Sweeper` whose broker hands over each round's retained
+    messages just after its barrier was published, with an attacker who saw the
+    earlier barriers (they go to every subscriber) replaying them first."""
+
+    def __init__(self, rounds: list[list[Message]]) -> None:
+        self.rounds, self.barriers, self.cleared = rounds, list[str](), list[str]()
+        self.sweeper: Sweeper | None = None
+
+    async def subscribe(self, filters: list[tuple[str, int]], qos: int) -> list[int]:
+        return [qos] * len(filters)
+
+    async def unsubscribe(self, filters: list[str]) -> None:
+        pass
+
+    async def publish(self, topic: str, payload: bytes, qos: int) -> None:
+        sweeper = self.sweeper
+        assert sweeper is not None
+        for seen in self.barriers:
+            sweeper.feed(Message(seen, b"", 1, False, 0))
+        self.barriers.append(topic)
+        retained = self.rounds.pop(0)
+        barrier = Message(topic, b"", 1, False, 0)
+        loop = asyncio.get_running_loop()
+        loop.call_soon(lambda: [sweeper.feed(m) for m in (*retained, barrier)])
+
+    async def publish_many(self, messages: Iterable[tuple[str, bytes, bool]], qos: int) -> None:
+        self.cleared += [topic for topic, _, _ in messages]
+
+
+async def test_a_replayed_barrier_does_not_end_the_sweep_s_next_round() -> None:
+    gone_state = TOPICS.state("old", 1)
+    gone_config = "homeassistant/sensor/sj300_gw1_old_1/status/config"
+    body = f'{{"state_topic":"{gone_state}"}}'.encode()
+    client = _ReplayingBroker(
+        [
+            [Message(gone_state, b"{}", 1, True, 2)],
+            [Message(gone_config, body, 1, True, len(body))],
+        ]
+    )
+    sweeper = client.sweeper = Sweeper(MqttConfig("b", 1883), TOPICS)
+    swept = await sweeper.run(cast(Client, client), None)
+    assert sorted(client.cleared) == sorted([gone_state, gone_config])
+    assert len(set(client.barriers)) == 2  # a barrier of its own each round
+    assert swept.topics == 2

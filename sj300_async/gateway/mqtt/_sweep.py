@@ -103,8 +103,11 @@ class Sweeper:
         reads, which the bridge never subscribes to otherwise, also once it is done
         (the echo of the gateway's own publishes, until the unsubscription took)."""
         topic = message.topic
-        if topic == self._barrier:
-            self._arrived.set()
+        if topic.startswith(f"{self._own}/sweep/"):
+            # Only this round's: a barrier goes to every subscriber, who could replay it
+            # to end the next round before its retained messages came.
+            if topic == self._barrier:
+                self._arrived.set()
             return True
         ours = topic.startswith(f"{self._own}/") and topic.endswith(("/state", "/availability"))
         if not ours and not (
@@ -150,7 +153,9 @@ class Sweeper:
             # Anyone the broker lets publish under this gateway's id could leave retained
             # junk for thousands of drives: their configs are looked for up to a bound.
             drives = sorted(served | set(kept))[: len(kept) + MAX_GONE_DRIVES]
-            await self._subscribe(client, [discovered.format(_node_id(topics, d)) for d in drives])
+            self._barrier = f"{own}/sweep/{secrets.token_hex(8)}"  # a round's own (feed)
+            filters = [discovered.format(_node_id(topics, d)) for d in drives]
+            await self._subscribe(client, [*filters, self._barrier])
             await self._until_barrier(client)
             wanted: set[str] = set()
             if keep is not None:
