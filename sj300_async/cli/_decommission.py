@@ -22,8 +22,7 @@ __all__ = ["decommission"]
 
 def decommission(config: GatewayConfig) -> int:
     """Clear the gateway id's retained topics on the ``[mqtt]`` broker; 0 when done."""
-    from ..gateway.mqtt import MqttConfig, Topics
-    from ..gateway.mqtt._sweep import SweepRefused, sweep
+    from ..gateway.mqtt import MqttConfig, SweepRefused, Topics, sweep
     from ..gateway.mqttlink.client import MqttError
 
     mqtt = config.northbounds.get("mqtt")

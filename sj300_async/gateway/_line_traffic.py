@@ -34,7 +34,7 @@ from __future__ import annotations
 import asyncio
 import io
 import time
-from typing import Any, Final
+from typing import Any, ClassVar, Final
 
 from ..bus import Bus, CaptureFile, ChunkLog, Kept, LineSniffer, TraceRecord
 
@@ -50,6 +50,10 @@ LEAD_S: Final = 2.0
 
 class LineTraffic:
     """One line's recent traffic, recorded from now until :meth:`close` (module docstring)."""
+
+    #: Seconds kept (:data:`KEEP_S`), and chunks kept at most (:data:`MAX_RECORDS`).
+    keep_s: ClassVar[float] = KEEP_S
+    max_records: ClassVar[int] = MAX_RECORDS
 
     def __init__(self, name: str, bus: Bus[Any, Any]) -> None:
         self.name = name

@@ -174,6 +174,8 @@ GATEWAY_MQTT_NAMES = (
     "parse_fleet_url", "parse_state_topic", "state_message",
     # Sparkplug B's deprecated keys, which [mqtt] takes for one release (issue 42)
     "SPARKPLUG_ALIAS_KEYS",
+    # what a gateway id left retained, cleared (issue 43: sj300 gateway --decommission)
+    "SweepRefused", "Swept", "sweep",
 )  # fmt: skip
 #: The MQTT transport both MQTT northbounds ride (issue 42): it knows neither.
 GATEWAY_MQTTLINK_NAMES = (

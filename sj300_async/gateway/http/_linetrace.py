@@ -26,10 +26,12 @@ from typing import Any, Final
 from ...bus import SniffedFrame, Unanswered
 from ...profiles import frame_text
 from .. import LineTraffic
-from .._line_traffic import KEEP_S, MAX_RECORDS
 
 __all__ = ["KEEP_S", "MAX_FRAMES", "MAX_RECORDS", "LineTrace"]
 
+#: Seconds of a line's traffic kept (the longest download), and chunks at most.
+KEEP_S: Final = LineTraffic.keep_s
+MAX_RECORDS: Final = LineTraffic.max_records
 #: Frames one answer carries at most (the newest).
 MAX_FRAMES: Final = 2_000
 

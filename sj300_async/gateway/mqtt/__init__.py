@@ -42,6 +42,7 @@ from ._fleet import (
 )
 from ._messages import state_message
 from ._stats import BridgeStats, mqtt_families
+from ._sweep import SweepRefused, Swept, sweep
 from ._topics import (
     AVAILABLE,
     COMMANDS,
@@ -71,6 +72,8 @@ __all__ = [
     "MqttConfig",
     "StateMessage",
     "SubscriptionRefused",
+    "SweepRefused",
+    "Swept",
     "Topics",
     "discovery",
     "error_text",
@@ -82,6 +85,7 @@ __all__ = [
     "parse_fleet_url",
     "parse_state_topic",
     "state_message",
+    "sweep",
 ]
 
 

@@ -16,7 +16,7 @@ from __future__ import annotations
 
 from typing import TYPE_CHECKING, Any
 
-from .._fastjson import compact_json
+from .. import compact_json
 from ._topics import StateMessage
 
 if TYPE_CHECKING:
