@@ -32,7 +32,7 @@ NODE_DIRS := tests/opcua/node tests/sparkplug/node
 NODE_STAMPS := $(addsuffix /node_modules/.installed,$(NODE_DIRS))
 
 .PHONY: demo gateway examples test lint typecheck lint-imports docs system-packages \
-	node-packages pytest attacks test-opcua-public bench bench-compare soak clean venv
+	node-packages pytest attacks test-ha test-opcua-public bench bench-compare soak clean venv
 
 # No pip self-upgrade: the venv's pip installs the package (editable, PEP 660) as it
 # is, and upgrading it costs 1.5 s of the demo's first screen.
@@ -127,6 +127,32 @@ pytest: $(DEV_STAMP) system-packages node-packages
 attacks: $(DEV_STAMP) system-packages node-packages
 	$(BIN)/pytest -n $(PYTEST_WORKERS) --dist worksteal --attacks tests/adversarial $(PYTEST_ARGS)
 
+# The tests against a real Home Assistant (tests/home_assistant; issue 43), from PyPI into
+# a venv of its own: about 800 MB and minutes to install, so not in make test, which
+# checks the same discovery payloads against a schema of HA's keys. HA 2025.4.4 is the
+# newest that installs on Python 3.13.0; HA_PYTHON is a Python >= 3.13 (pyenv's, by
+# default). Every requirement of the integrations the tests load is installed here
+# (tests/home_assistant/requirements.py), since the tests start hass --skip-pip.
+HA_VERSION := 2025.4.4
+HA_VENV := .venv-ha
+HA_PYTHON ?= $(firstword $(wildcard $(HOME)/.pyenv/versions/3.13*/bin/python) \
+	$(shell command -v python3.13))
+HA_STAMP := $(HA_VENV)/.installed-$(HA_VERSION)
+HA_SCREENSHOT ?= docs/guide/images/home-assistant-device.png
+
+$(HA_STAMP): tests/home_assistant/requirements.py
+	@test -n "$(HA_PYTHON)" || { echo "make test-ha needs Python >= 3.13: pyenv install 3.13, or HA_PYTHON=/path/to/python3.13" >&2; exit 2; }
+	$(HA_PYTHON) -m venv $(HA_VENV)
+	$(HA_VENV)/bin/python -m pip install --quiet 'homeassistant==$(HA_VERSION)'
+	$(HA_VENV)/bin/python tests/home_assistant/requirements.py > $(HA_VENV)/requirements.txt
+	$(HA_VENV)/bin/python -m pip install --quiet -r $(HA_VENV)/requirements.txt \
+		-c $$($(HA_VENV)/bin/python -c 'import homeassistant, pathlib; print(pathlib.Path(homeassistant.__file__).parent / "package_constraints.txt")')
+	touch $@
+
+test-ha: $(DEV_STAMP) $(HA_STAMP) system-packages
+	SJ300_HA_SCREENSHOT=$(HA_SCREENSHOT) $(BIN)/pytest -n0 \
+		--home-assistant $(HA_VENV)/bin/hass tests/home_assistant $(PYTEST_ARGS)
+
 # The OPC UA suite with the speed patches off (gateway/opcua/_speedups.py): asyncua's
 # public path, as an asyncua release they were not tested with gets; .ci/run runs it.
 test-opcua-public: $(DEV_STAMP) system-packages node-packages
@@ -148,4 +174,4 @@ soak: $(DEV_STAMP)
 	$(BIN)/pytest --soak -m soak --soak-report $(SOAK_REPORT) $(PYTEST_ARGS)
 
 clean:
-	rm -rf $(VENV) .mypy_cache .ruff_cache .pytest_cache .hypothesis site
+	rm -rf $(VENV) $(HA_VENV) .mypy_cache .ruff_cache .pytest_cache .hypothesis site

@@ -60,6 +60,12 @@ def pytest_addoption(parser: pytest.Parser) -> None:
         default=None,
         help="seed of the reliability runs (default: SJ300_SOAK_SEED, else 300)",
     )
+    group.addoption(
+        "--home-assistant",
+        metavar="HASS",
+        default=None,
+        help="run tests/home_assistant against this Home Assistant (its hass; make test-ha)",
+    )
 
 
 def pytest_configure(config: pytest.Config) -> None:
@@ -75,18 +81,24 @@ def pytest_configure(config: pytest.Config) -> None:
 
 
 def pytest_collection_modifyitems(config: pytest.Config, items: list[pytest.Item]) -> None:
-    """Without ``--attacks``, the attacks run alone are deselected (not skipped).
+    """Without ``--attacks``, the attacks run alone are deselected (not skipped), and
+    without ``--home-assistant`` the tests against a real Home Assistant (``make test-ha``:
+    its install is 800 MB; the default suite checks the same payloads against a schema of
+    HA's discovery keys, tests/ha_discovery_schema.py).
 
     Each of them starts a plant of its own for 15-30 s; the default suite runs
     them all at once in one test (tests/adversarial), and ``make attacks``, which
     .ci/run calls after ``make test``, runs each alone with its own assertions.
     """
-    if config.getoption("--attacks"):
-        return
-    alone = [item for item in items if item.get_closest_marker("attack_alone") is not None]
-    if alone:
-        config.hook.pytest_deselected(items=alone)
-        items[:] = [item for item in items if item.get_closest_marker("attack_alone") is None]
+    wanted = {"attack_alone": config.getoption("--attacks"),
+              "home_assistant": config.getoption("--home-assistant") is not None}  # fmt: skip
+    for marker, asked in wanted.items():
+        if asked:
+            continue
+        alone = [item for item in items if item.get_closest_marker(marker) is not None]
+        if alone:
+            config.hook.pytest_deselected(items=alone)
+            items[:] = [item for item in items if item.get_closest_marker(marker) is None]
 
 
 def _peak_rss_mib() -> float:

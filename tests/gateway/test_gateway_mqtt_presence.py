@@ -44,6 +44,13 @@ def toml(url: str, broker: Broker, mqtt_extra: str = "") -> str:
     return gateway_toml(url, extra=extra, line_extra=lease + GRANTS)
 
 
+def presence(gateway: Gateway) -> tuple[float, ...]:
+    """The metrics of Home Assistant's presence: (present, leases kept for it)."""
+    names = ("sj300_mqtt_home_assistant_present", "sj300_mqtt_home_assistant_leases")
+    found = {f.name: f.samples[0].value for f in bridge(gateway).metrics() if f.name in names}
+    return tuple(float(found[name]) for name in names)
+
+
 async def running(gateway: Gateway, sim_line: SimLine, broker: Broker) -> None:
     """Run drive 1 forward from MQTT, with no lease taken first; until it runs."""
     loop = asyncio.get_running_loop()
@@ -66,6 +73,8 @@ async def test_home_assistant_present_keeps_the_lease_and_its_will_stops_the_mot
             await wait_for(lambda: mqtt._presence.present is True, "HA's presence heard")
             await running(gateway, sim_line, broker)
             assert lease.holder == "mqtt"  # taken for the run, by no one's heartbeat
+            # HA there, and the lease kept for it once the run's write has finished
+            await wait_for(lambda: presence(gateway) == (1.0, 1.0), "the lease kept for HA")
             held_from = loop.time()
             # Three lease times and no heartbeat from anyone: still running, still held.
             await wait_for(lambda: loop.time() > held_from + 3 * LEASE_S, "three lease times",
@@ -79,6 +88,7 @@ async def test_home_assistant_present_keeps_the_lease_and_its_will_stops_the_mot
             await publish(broker, STATUS, "offline")
             await wait_for(lambda: controller.lapses == 1, "the lapse", timeout=LEASE_S + 2)
             assert loop.time() - said <= LEASE_S + 0.5
+            assert presence(gateway) == (0.0, 0.0)
             await wait_for(lambda: motor.state(loop.time()) is RunState.STOPPED, "stopped",
                            timeout=30)  # fmt: skip
     finally:

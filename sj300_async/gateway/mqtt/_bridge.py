@@ -6,9 +6,8 @@ contract, shared with the fleet subscriber) lays out:
 
 - ``<prefix>/<gw>/availability``: ``online`` (retained) once connected; the
   last will says ``offline`` when the broker loses the gateway (a crash: at
-  once; a frozen process, a cut cable: 1.5 ``keepalive_s`` later, plus the
-  broker's own check interval); a clean stop says
-  ``offline`` itself before disconnecting: the drives are no longer served.
+  once; a frozen process, a cut cable: 1.5 ``keepalive_s`` later, plus the broker's
+  check interval); a clean stop says ``offline`` itself: the drives are not served.
 - ``…/<line>/<node>/state``: one retained :class:`~._topics.StateMessage`
   per drive snapshot (every poll, and every write's read-back): the drive
   as the gateway serves it, what is fresh and what is null decided there,
@@ -241,7 +240,8 @@ class MqttBridge:
             self._wake.set()
 
     def metrics(self) -> Iterator[Metric]:
-        return mqtt_families(self.stats)
+        yield from mqtt_families(self.stats)
+        yield from self._presence.metrics()
 
     def problems(self) -> list[str]:
         """Subscriptions the broker refused (the northbound's optional hook, for /healthz)."""

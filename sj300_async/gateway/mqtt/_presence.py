@@ -35,11 +35,14 @@ from __future__ import annotations
 
 import asyncio
 import logging
+from collections.abc import Iterator
 from typing import TYPE_CHECKING, Final
 
 from .. import Heartbeat, WriteRequest, needs_lease
 
 if TYPE_CHECKING:
+    from prometheus_client import Metric
+
     from .. import GatewayDrive, GatewayView
 
 __all__ = ["RENEW_EVERY_S", "HomeAssistantLease"]
@@ -123,6 +126,25 @@ class HomeAssistantLease:
                     self._kept.discard(key)  # lapsed, taken over or released: not ours
                 elif lease.seconds_left(now) < lease.duration_s / 2:
                     await gateway.write(self._client, drive, Heartbeat(), connection=connection)
+
+    def metrics(self) -> Iterator[Metric]:
+        """Whether Home Assistant is present as the bridge sees it, and the leases it keeps:
+        what a user checks when a run from Home Assistant is refused ``no_lease``."""
+        from prometheus_client.core import GaugeMetricFamily
+
+        present = GaugeMetricFamily(
+            "sj300_mqtt_home_assistant_present",
+            "1 while Home Assistant's birth said online and nothing since said offline; 0 "
+            "before it said anything, after its will, and without the broker.",
+        )
+        present.add_metric([], 1.0 if self.enabled and self.present else 0.0)
+        yield present
+        kept = GaugeMetricFamily(
+            "sj300_mqtt_home_assistant_leases",
+            "Drives whose control lease the gateway renews while Home Assistant is present.",
+        )
+        kept.add_metric([], float(len(self._kept)))
+        yield kept
 
     def lost(self) -> None:
         """The broker connection ended: no renewals without it (the leases lapse), and
