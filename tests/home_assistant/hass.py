@@ -131,7 +131,20 @@ class HomeAssistant:
         (storage / "core.config_entries").write_text(json.dumps(entries), encoding="utf-8")
 
     async def start(self) -> None:
-        """Start ``hass``; return once its HTTP API answers (onboarding's, before it)."""
+        """Start ``hass``; return once its HTTP API answers (onboarding's, before it).
+
+        A start that fails leaves no ``hass`` behind: it is stopped before the failure
+        is raised (one left running once kept the CPU of later runs).
+        """
+        try:
+            await self._start()
+        except BaseException:
+            proc, self.proc = self.proc, None
+            if proc is not None:
+                await stop_process(proc, grace_s=STOP_S)
+            raise
+
+    async def _start(self) -> None:
         assert self.proc is None
         output = (self.directory / "hass.out").open("ab")
         try:
