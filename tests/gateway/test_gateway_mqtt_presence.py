@@ -69,8 +69,8 @@ async def test_home_assistant_present_keeps_the_lease_and_its_will_stops_the_mot
     await publish(broker, STATUS, "online", retain=True)  # HA's birth, before the gateway
     try:
         async with running_gateway(toml(sim_line.url, broker)) as gateway:
-            mqtt, lease = bridge(gateway), drive_of(gateway, "hall", 1).lease
-            await wait_for(lambda: mqtt._presence.present is True, "HA's presence heard")
+            lease = drive_of(gateway, "hall", 1).lease
+            await wait_for(lambda: presence(gateway)[0] == 1, "HA's presence heard")
             await running(gateway, sim_line, broker)
             assert lease.holder == "mqtt"  # taken for the run, by no one's heartbeat
             # HA there, and the lease kept for it once the run's write has finished
@@ -101,7 +101,7 @@ async def test_a_birth_ends_the_lease_home_assistant_kept(
     async with running_gateway(toml(sim_line.url, broker)) as gateway:
         await wait_for(lambda: bridge(gateway).connected, "connected")
         await publish(broker, STATUS, "online")
-        await wait_for(lambda: bridge(gateway)._presence.present is True, "HA's presence")
+        await wait_for(lambda: presence(gateway)[0] == 1, "HA's presence")
         await running(gateway, sim_line, broker)
         lease = drive_of(gateway, "hall", 1).lease
         taken = lease.expires_at

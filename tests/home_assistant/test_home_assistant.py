@@ -20,13 +20,14 @@ import json
 import os
 import re
 import textwrap
-from collections.abc import AsyncIterator, Iterable
+from collections.abc import AsyncIterator, Awaitable, Callable, Iterable
 from pathlib import Path
-from typing import Any
+from typing import Any, TypeVar
 
 import pytest
 from gateway.conftest import drive_of, running_gateway
 from gateway.test_gateway_mqtt import subscriber
+from gateway.test_gateway_mqtt_presence import presence
 from mqtt_broker import Broker, running_broker
 from waiting import wait_for
 from workbench.browser import launch_chromium
@@ -37,6 +38,8 @@ from sj300_async.simulator.sj300 import SimulatedBus
 from sj300_async.wire import Direction
 
 from .hass import HassSocket, HomeAssistant
+
+T = TypeVar("T")
 
 pytestmark = [pytest.mark.home_assistant, pytest.mark.timeout(900)]
 
@@ -130,58 +133,45 @@ async def retained_configs(broker: Broker) -> dict[str, dict[str, Any]]:
 CONFIGS = 1 + 2 * 15 + 6 + 1 + 8
 
 
+async def polled(fetch: Callable[[], Awaitable[T]], done: Callable[[T], bool], what: str) -> T:
+    """What *fetch* gives once *done* holds for it, asked every 0.1 s for up to SHOWN_S
+    (HA answers over its API, not on the test's loop: nothing here to wait on instead)."""
+    loop = asyncio.get_running_loop()
+    deadline = loop.time() + SHOWN_S
+    while not done(found := await fetch()):
+        assert loop.time() < deadline, f"{what} not within {SHOWN_S} s: {str(found)[:500]}"
+        await asyncio.sleep(0.1)
+    return found
+
+
 async def settled_configs(broker: Broker) -> dict[str, dict[str, Any]]:
     """The retained configs once every one is there, the set frequencies with the drives'
     own maximum (A004, polled)."""
-    loop = asyncio.get_running_loop()
-    deadline = loop.time() + SHOWN_S
-    while True:
-        configs = await retained_configs(broker)
+
+    def settled(configs: dict[str, dict[str, Any]]) -> bool:
         maxima = [c["max"] for e, c in configs.items() if e.endswith("_set_frequency")]
-        if len(configs) == CONFIGS and maxima == [50.0, 50.0]:
-            return configs
-        assert loop.time() < deadline, (len(configs), maxima)
-        await asyncio.sleep(0.2)
+        return len(configs) == CONFIGS and maxima == [50.0, 50.0]
+
+    return await polled(lambda: retained_configs(broker), settled, "every config retained")
 
 
 async def until_states(socket: HassSocket, entity_ids: Iterable[str], what: str) -> dict[str, Any]:
     """HA's states once every entity of *entity_ids* has one that is not unavailable."""
     wanted = set(entity_ids)
-    found: dict[str, Any] = {}
 
-    async def shown() -> bool:
-        nonlocal found
-        found = await socket.states()
+    def shown(found: dict[str, Any]) -> bool:
         return all(e in found and found[e]["state"] != "unavailable" for e in wanted)
 
-    loop = asyncio.get_running_loop()
-    deadline = loop.time() + SHOWN_S
-    while not await shown():
-        missing = sorted(e for e in wanted if e not in found or found[e]["state"] == "unavailable")
-        assert loop.time() < deadline, f"{what}: not shown in {SHOWN_S} s: {missing[:10]}"
-        await asyncio.sleep(0.2)
-    return found
+    return await polled(socket.states, shown, what)
 
 
 async def until_state(socket: HassSocket, entity_id: str, predicate: Any, what: str) -> Any:
     """HA's state of *entity_id* once *predicate* holds for it."""
-    loop = asyncio.get_running_loop()
-    deadline = loop.time() + SHOWN_S
-    while True:
-        state = (await socket.states()).get(entity_id)
-        if state is not None and predicate(state):
-            return state
-        assert loop.time() < deadline, f"{what}: {entity_id} is {state}"
-        await asyncio.sleep(0.1)
 
+    async def state() -> Any:
+        return (await socket.states()).get(entity_id)
 
-def metric(gateway: Gateway, name: str) -> float:
-    """The value of the MQTT northbound's metric *name* (a family of one sample)."""
-    for family in gateway.northbounds["mqtt"].metrics():
-        if family.name == name:
-            (sample,) = family.samples
-            return float(sample.value)
-    raise AssertionError(f"no metric {name}")
+    return await polled(state, lambda s: s is not None and predicate(s), f"{what} ({entity_id})")
 
 
 def simulator(gateway: Gateway, line: int) -> SimulatedBus:
@@ -232,7 +222,7 @@ async def test_home_assistant_shows_every_drive_and_carries_out_its_commands(
             # -- a parameter, the set frequency and the direction, from HA's services ------
             # HA's birth, which it sends once it has started, is what the lease follows.
             await wait_for(
-                lambda: metric(gw1, "sj300_mqtt_home_assistant_present") == 1,
+                lambda: presence(gw1)[0] == 1,
                 "HA's birth heard",
                 timeout=SHOWN_S,
             )
@@ -410,11 +400,7 @@ async def test_a_drive_removed_from_the_configuration_is_gone_from_home_assistan
         return sorted(d["name"] for d in listed if d["name"].startswith("gw1 hall"))
 
     async def until_devices(socket: HassSocket, names: list[str]) -> None:
-        loop = asyncio.get_running_loop()
-        deadline = loop.time() + SHOWN_S
-        while (shown := await devices(socket)) != names:
-            assert loop.time() < deadline, f"devices {shown}, not {names}"
-            await asyncio.sleep(0.2)
+        await polled(lambda: devices(socket), lambda shown: shown == names, f"devices {names}")
 
     three = gateway_toml(broker, "gw1", GW1_LINES.replace("{nodes}", "1-3"))
     two = gateway_toml(broker, "gw1", GW1_LINES.replace("{nodes}", "1-2"))
