@@ -244,18 +244,18 @@ async def test_every_bad_input_gets_its_status_code_and_changes_nothing(
         assert gateway.lines[0].bus.stats.transactions.requests >= wire
         refused = _refusals(gateway)
         assert len(refused) == len(cases)  # each refusal audited, once
-        # A drive the poller holds offline: nothing is sent, the stop is tried.
+        # A drive the poller holds offline: nothing is sent, the stop is tried. Drive 2 is
+        # heard from first: before its first sample the gateway has no verdict and judges a
+        # run like any other (no lease), and a drive never sampled is "not online" already,
+        # so waiting for that alone passed at once on a loaded machine (CI of stop 50).
+        await polled(gateway)
         sim.faults.silence(2)
         offline = gateway.drive("hall", 2)
         assert offline is not None
         await wait_for(lambda: not offline.snapshot.online, "drive 2 offline", timeout=15)
-        # Each answer beside what the drive's snapshot said then: one clean run in four
-        # saw SetFrequency refused for the lease (the door found drive 2 online), not
-        # reproduced in 8 runs alone; if it comes back, this says which state it was in.
         for method, args in (("Run", ("forward",)), ("SetFrequency", (_hz(5.0),)), ("Stop", ())):
             answer = await _status(_call(client, ns, method, *args, node=2))
-            seen = (offline.snapshot.online, offline.snapshot.taken_at, offline.snapshot.last_ok)
-            assert (method, answer) == (method, "BadNoCommunication"), seen
+            assert (method, answer) == (method, "BadNoCommunication")
         assert _refusals(gateway)[-1]["reason"] == "no_answer"
         # Nobody may change the address space.
         with pytest.raises(UaStatusCodeError) as refused_add:
