@@ -74,16 +74,23 @@ Rows: ``all`` against ``bare`` (the issue's goal: at most twice),
 northbound alone against ``bare`` (information), the JSON topics' and
 Sparkplug's share of samples neither replaced unsent nor lost (goal:
 every one; the states confirmed in a window are shown too, but up to a
-chunk of 256 is in flight at each of its edges), RSS per drive, the p99
+chunk of 256 is in flight at each of its edges), RSS per drive and the
+traced heap per drive (below) of ``all`` against ``bare``, the p99
 delay from a sample to each timed client of ``all`` against the poll
 interval (goal: under it, or the client falls behind), and the drives the
 two gateways' fleet view and Sparkplug host saw against every drive
 (goal: all). The notes give the time to every drive visible, each
 client's figures, and the time until the two views saw every drive.
 
+**Memory** (issue 44, :mod:`benchmarks._memory`): the notes' table gives
+each configuration's RSS per drive against ``bare``'s, and the traced heap
+per drive by package of children of their own (``python -m
+benchmarks.bench_plant heap --with ...``, after the timed ones, at 256
+drives: ``tracemalloc`` slows everything), each against ``bare``'s.
+
 ``--quick`` measures nothing: two lines of four drives, one short window,
 only ``bare`` and ``all`` (with its clients), then two gateways of one
-line each.
+line each, then the heap of ``bare`` and ``mqtt`` on one line of four.
 """
 
 from __future__ import annotations
@@ -105,6 +112,7 @@ from pathlib import Path
 from typing import Any, Final
 
 from ._harness import Config, Result, Section
+from ._memory import Heap, heap_child, measure_heap, memory_notes, memory_rows
 from .bench_mqtt import _mosquitto
 from .bench_opcua import _start_drives, opcua_section
 from .plant_clients import (
@@ -122,6 +130,7 @@ __all__ = [
     "Child",
     "main",
     "measure",
+    "measure_heap",
     "report",
     "run",
 ]
@@ -389,9 +398,10 @@ def _delivery(bridge: Any, edge: Any) -> dict[str, int]:
 
 
 def main(argv: Sequence[str] | None = None) -> None:
-    """``python -m benchmarks.bench_plant gateway ...``: one configuration's child."""
+    """``python -m benchmarks.bench_plant gateway|heap ...``: one configuration's child,
+    timed (gateway) or its heap traced (heap, :func:`benchmarks._memory.heap_child`)."""
     parser = argparse.ArgumentParser(prog="python -m benchmarks.bench_plant")
-    parser.add_argument("role", choices=["gateway"])
+    parser.add_argument("role", choices=["gateway", "heap"])
     parser.add_argument("--with", dest="which", choices=CONFIGURATIONS, required=True)
     parser.add_argument("--lines", type=int, default=LINES)
     parser.add_argument("--per-line", type=int, default=DRIVES_PER_LINE)
@@ -404,7 +414,17 @@ def main(argv: Sequence[str] | None = None) -> None:
     parser.add_argument("--windows", type=int, default=WINDOWS)
     parser.add_argument("--settle", type=float, default=CLIENTS_SETTLE_S)
     args = parser.parse_args(argv)
-    print(json.dumps(asyncio.run(_child(args))), flush=True)
+    if args.role == "gateway":
+        print(json.dumps(asyncio.run(_child(args))), flush=True)
+        return
+    text = _toml(args.which, args.lines, args.per_line, args.broker, Path(args.directory))
+
+    async def clients(gateway: Any) -> _Clients:  # all's, as the timed child starts them
+        return await _Clients.start(gateway, args.broker, summary=args.which == "all")
+
+    start = clients if args.which in WITH_CLIENTS else None
+    body = asyncio.run(heap_child(args.which, text, args.warm_up, start, args.settle))
+    print(json.dumps(body), flush=True)
 
 
 # -- the parent -----------------------------------------------------------------------------
@@ -659,11 +679,16 @@ def _share(delivered: int, samples: int) -> float:
 def run(config: Config) -> Section:
     """Measure each configuration, then two gateways; rows against the bare poll of the
     same run."""
-    return report(measure(config), measure_two_gateways(config))
+    return report(measure(config), measure_two_gateways(config), measure_heap(config))
 
 
-def report(children: dict[str, Child], two: TwoGateways | None = None) -> Section:
-    """The rows and notes of *children*'s figures, and of *two* gateways' when given."""
+def report(
+    children: dict[str, Child],
+    two: TwoGateways | None = None,
+    heap: dict[str, Heap] | None = None,
+) -> Section:
+    """The rows and notes of *children*'s figures, and of *two* gateways' and the *heap*
+    children's when given."""
     bare = children["bare"]
     us = 1e6
     drives = bare.drives
@@ -728,16 +753,8 @@ def report(children: dict[str, Child], two: TwoGateways | None = None) -> Sectio
             against="every sample",
             percent=True,
         ),
-        Result(
-            "plant: RSS per drive, every northbound on",
-            children["all"].rss_bytes / drives / 1024,
-            bare.rss_bytes / drives / 1024,
-            "KiB",
-            higher_is_better=False,
-            against="bare poll",
-            as_multiple=True,
-        ),
     ]
+    results += memory_rows(children, heap)
     results += _delay_rows(children["all"].clients)
     notes = [
         f"{drives} simulated SJ300 drives ({len(children)} children, one after the "
@@ -757,8 +774,7 @@ def report(children: dict[str, Child], two: TwoGateways | None = None) -> Sectio
         delivery = child.delivery
         notes.append(
             f"`{name}`: CPU per sample by window {windows} µs; samples/s {rates}; RSS "
-            f"{child.rss_bytes / 2**20:.0f} MiB ({child.rss_bytes / drives / 1024:.0f} KiB per "
-            f"drive); started in {child.started_s:.1f} s{startup}"
+            f"{child.rss_bytes / 2**20:.0f} MiB; started in {child.started_s:.1f} s{startup}"
             + (f"; every drive visible: {visible}" if visible else "")
             + (f"; JSON states {delivery['mqtt_states']} of {delivery['mqtt_samples']} samples "
                f"confirmed ({delivery['mqtt_replaced']} replaced, {delivery['mqtt_lost']} lost)"
@@ -770,6 +786,7 @@ def report(children: dict[str, Child], two: TwoGateways | None = None) -> Sectio
         clients = children[name].clients
         if clients is not None:
             notes.append(f"`{name}`: " + _clients_note(clients))
+    notes += memory_notes(children, heap)  # RSS per drive for each, the heap's packages
     if two is not None:
         results += _two_rows(two)
         notes.append(_two_note(two))

@@ -7,6 +7,7 @@ got every reply, and reports the rows, units and targets of the issue.
 
 from __future__ import annotations
 
+import asyncio
 import importlib
 import os
 import platform
@@ -672,6 +673,16 @@ def test_plant_runs_its_gateways_and_counts_every_sample(harness: ModuleType) ->
     assert two.fleet_s is not None
     assert two.born_s is not None
     assert [child.drives for child in two.children] == [drives // 2, drives // 2]
+    # the heap children (tracemalloc), at their quick size: bare and one northbound
+    memory = importlib.import_module("benchmarks._memory")
+    heap = bench.measure_heap(_quick(harness))
+    assert set(heap) == set(memory.QUICK_HEAP_CONFIGURATIONS)
+    for which, traced in heap.items():
+        assert traced.drives == memory.QUICK_HEAP_LINES * memory.QUICK_HEAP_DRIVES_PER_LINE
+        assert traced.traced_bytes > 0
+        assert "sj300_async/simulator/sj300/" in traced.by_package, which  # the bench's drives
+    assert "sj300_async/gateway/mqtt/" in heap["mqtt"].by_package
+    assert "sj300_async/gateway/mqtt/" not in heap["bare"].by_package
     section = bench.report(children, two)
     assert [(r.unit, r.target, r.against) for r in section.results] == [
         ("µs", bench.TARGET_ALL, "bare poll"),
@@ -681,6 +692,41 @@ def test_plant_runs_its_gateways_and_counts_every_sample(harness: ModuleType) ->
         *[("ms", 1.0, "poll interval")] * 4,
         *[("drives", 1.0, "every drive")] * 2,
     ]
+    # the memory table: a row per child (RSS), the heap children's after (their packages)
+    notes = bench.report(children, two, heap).notes
+    rows = [note.split(" | ")[0] for note in notes if note.startswith("| ")][1:]  # no header
+    assert rows == ["| bare", "| all", "| mqtt"]
+    assert "`sj300_async/gateway/mqtt/` +" in next(n for n in notes if n.startswith("| mqtt"))
+
+
+def test_plant_memory_is_per_drive_against_the_bare_poll_by_package() -> None:
+    bench = importlib.import_module("benchmarks.bench_plant")
+    memory = importlib.import_module("benchmarks._memory")
+    kib = 1024 * 8  # a KiB per drive, of 8 drives
+
+    def child(which: str, rss_kib: int) -> object:
+        return bench.Child(which, 8, (1e-4,), (8.0,), rss_kib * kib, 0.1, None, {}, {})
+
+    def heap(which: str, **by_package: int) -> object:
+        return memory.Heap(which, 8, {k: v * kib for k, v in by_package.items()}, 0, 0.1, 1.0)
+
+    children = {"bare": child("bare", 40), "all": child("all", 400)}
+    traced = {
+        "bare": heap("bare", sim=15, asyncio=5),
+        "all": heap("all", sim=15, asyncio=7, asyncua=300, http=20),
+    }
+    rows = memory.memory_rows(children, traced)
+    assert [(r.name, r.ours, r.peer) for r in rows] == [
+        ("plant: RSS per drive, every northbound on", 400, 40),
+        ("plant: traced heap per drive, every northbound on (8 drives)", 342, 20),
+    ]
+    table = [n for n in memory.memory_notes(children, traced) if n.startswith("| ")]
+    assert table[1] == "| bare | 40 |  | 20.0 |  | `sim` 15.0, `asyncio` 5.0 |"
+    assert table[2] == (  # the largest deltas first; none for a package both hold alike (sim)
+        "| all | 400 | +360 | 342.0 | +322.0 | `asyncua` +300.0, `http` +20.0, `asyncio` +2.0 |"
+    )
+    assert memory.package_of(memory.__file__) == "benchmarks/"
+    assert memory.package_of(asyncio.__file__) == "stdlib:asyncio"
 
 
 # -- the command line ----------------------------------------------------------------
