@@ -106,6 +106,9 @@ _CHILD = textwrap.dedent(
                 (binding, *_) = server._drives["hall", 1].bindings
                 assert type(drive_datavalue(binding, 0)) is ua.DataValue
                 assert server.session_count == 1
+                # Every node made at start, in asyncua's own table (no _lazy).
+                assert server.lazy_nodes is None
+                assert type(server.address_space._nodes) is dict
 
     asyncio.run(main())
     after = attributes({name for name, _ in before})

@@ -13,17 +13,21 @@ URI.
 
 from __future__ import annotations
 
+import logging
 import os
 import socket
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Final
 
+from asyncua.crypto import uacrypto
 from cryptography import x509
 from cryptography.hazmat.primitives import hashes, serialization
 from cryptography.x509.oid import ExtendedKeyUsageOID
 
-__all__ = ["ServerCertificate", "load_or_generate"]
+__all__ = ["ServerCertificate", "free_port", "load_or_generate", "load_trusted"]
+
+_log = logging.getLogger("sj300_async.gateway.opcua")
 
 #: How long a generated certificate is valid.
 GENERATED_DAYS: Final = 3650
@@ -101,3 +105,31 @@ def load_or_generate(
     # OPC UA names a certificate by its SHA-1 thumbprint (what clients show to trust).
     thumbprint = cert.fingerprint(hashes.SHA1()).hex()
     return ServerCertificate(certificate, private_key, uri, generated, thumbprint)
+
+
+def free_port(host: str) -> int:
+    """A port the system has free now (``port = 0``: the tests' way)."""
+    family = socket.AF_INET6 if ":" in host else socket.AF_INET
+    with socket.socket(family, socket.SOCK_STREAM) as probe:
+        probe.bind((host, 0))
+        port: int = probe.getsockname()[1]
+        return port
+
+
+def load_trusted(directory: Path) -> set[bytes]:
+    """The DER bytes of every certificate in *directory* (DER or PEM files)."""
+    trusted = set()
+    for path in sorted(directory.iterdir()):
+        if not path.is_file():
+            continue
+        data = path.read_bytes()
+        try:
+            if data.lstrip().startswith(b"-----BEGIN"):
+                cert = x509.load_pem_x509_certificate(data)
+            else:
+                cert = x509.load_der_x509_certificate(data)
+        except ValueError:
+            _log.warning("opcua: %s is not a certificate; not trusted", path)
+            continue
+        trusted.add(uacrypto.der_from_x509(cert))
+    return trusted

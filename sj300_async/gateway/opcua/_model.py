@@ -67,12 +67,15 @@ __all__ = [
     "DIRECTION_STATES",
     "LINE_COUNTERS",
     "Binding",
+    "DriveIdentity",
     "DriveNodes",
     "Group",
     "LineNodes",
     "MethodNodes",
     "build_drive",
     "build_line",
+    "drive_identity",
+    "shape_key",
 ]
 
 #: Why the trip history is arrays, not an object per record: an object per
@@ -433,23 +436,69 @@ class _DriveBuilder:
         return node
 
 
+@dataclass(frozen=True, slots=True)
+class DriveIdentity:
+    """What of a drive's nodes is its own: everything else is its shape's (:func:`shape_key`).
+
+    The lazy address space (:mod:`._lazy`) makes a drive's nodes from another
+    drive's of the same shape, with these put in: whatever else
+    :func:`build_drive` makes differ between two drives must be in the shape's
+    key, or here (``tests/opcua/test_opcua_lazy.py`` compares the two ways).
+    """
+
+    #: The drive object's path (``line1/Drive3``), its browse and display name, description.
+    path: str
+    name: str
+    description: str
+    #: Its properties: name, value, type.
+    properties: tuple[tuple[str, object, ua.VariantType], ...]
+
+
+def drive_identity(drive: GatewayDrive, parent_path: str) -> DriveIdentity:
+    """*drive*'s own names and properties (see :class:`DriveIdentity`)."""
+    profile = drive.profile
+    described = f"{profile.manufacturer} {profile.model}, {profile.node_noun} {drive.node}"
+    string, int32 = ua.VariantType.String, ua.VariantType.Int32
+    return DriveIdentity(
+        path=f"{parent_path}/Drive{drive.node}",
+        name=f"Drive{drive.node}",
+        description=f"{described} on line {drive.line.name}",
+        properties=(
+            ("Line", drive.line.name, string),
+            ("Node", drive.node, int32),
+            ("Protocol", drive.line.protocol, string),
+            ("UnitId", drive.unit, int32),
+        ),
+    )
+
+
+def shape_key(drive: GatewayDrive, *, control: bool) -> tuple[object, ...]:
+    """What decides which nodes :func:`build_drive` makes below *drive*'s object, and their
+    attributes: two drives of one key differ only by their :class:`DriveIdentity`."""
+    profile = drive.profile
+    granted = drive.line.writable_parameters(drive.node)
+    return (
+        id(profile),
+        profile.max_frequency_hz,
+        tuple(sorted(profile.capabilities.measures)),
+        tuple(drive.line.parameters),
+        tuple(sorted(granted)),
+        control,
+    )
+
+
 def build_drive(
     space: SpaceBuilder, parent: ua.NodeId, parent_path: str, drive: GatewayDrive, *, control: bool
 ) -> DriveNodes:
     """Gather *drive*'s object under its line's object (see the module docstring)."""
     profile = drive.profile
-    path = f"{parent_path}/Drive{drive.node}"
-    name = f"Drive{drive.node}"
-    described = f"{profile.manufacturer} {profile.model}, {profile.node_noun} {drive.node}"
-    node = space.object(
-        parent, path, name, f"{described} on line {drive.line.name}", component=True
-    )
+    identity = drive_identity(drive, parent_path)
+    path = identity.path
+    node = space.object(parent, path, identity.name, identity.description, component=True)
     nodes = DriveNodes(drive, node)
     b = _DriveBuilder(space, nodes, path)
-    space.property(node, f"{path}/Line", "Line", drive.line.name, ua.VariantType.String)
-    space.property(node, f"{path}/Node", "Node", drive.node, ua.VariantType.Int32)
-    space.property(node, f"{path}/Protocol", "Protocol", drive.line.protocol, ua.VariantType.String)
-    space.property(node, f"{path}/UnitId", "UnitId", drive.unit, ua.VariantType.Int32)
+    for name, value, vtype in identity.properties:
+        space.property(node, f"{path}/{name}", name, value, vtype)
     b.var(node, path, "Online", ua.VariantType.Boolean, _ONLINE,
           description="the poller hears the drive")  # fmt: skip
 

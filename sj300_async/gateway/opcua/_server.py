@@ -35,18 +35,17 @@ from __future__ import annotations
 
 import asyncio
 import contextlib
+import functools
 import itertools
 import logging
-import socket
 import time
 from collections.abc import Iterable
-from pathlib import Path
 from typing import TYPE_CHECKING, Any, Final
 
 from asyncua import Server, ua
 from asyncua.common.connection import TransportLimits
 from asyncua.crypto import uacrypto
-from asyncua.server.address_space import NodeData
+from asyncua.server.address_space import AddressSpace, NodeData
 from cryptography import x509
 
 from .. import (
@@ -56,7 +55,7 @@ from .. import (
     ServedDrive,
 )
 from ._calls import Calls
-from ._certificate import ServerCertificate, load_or_generate
+from ._certificate import ServerCertificate, free_port, load_or_generate, load_trusted
 from ._config import OpcuaConfig
 from ._defences import Defences
 from ._hooks import (
@@ -66,16 +65,20 @@ from ._hooks import (
     route_writes,
     session_count,
 )
+from ._lazy import LazyNodes, make_shape
 from ._model import (
     Binding,
     DriveNodes,
     LineNodes,
     build_drive,
     build_line,
+    drive_identity,
+    shape_key,
 )
 from ._quality import GOOD
 from ._security import ChannelRules, Principal, Users
 from ._space import SpaceBuilder
+from ._speedups import ENABLED as SPEEDUPS_ENABLED
 from ._speedups import install as install_speedups
 from ._speedups import push_frozen
 from ._subscriptions import bound_subscriptions
@@ -99,34 +102,6 @@ _POLICIES: Final = {
     "Basic256Sha256_Sign": ua.SecurityPolicyType.Basic256Sha256_Sign,
     "None": ua.SecurityPolicyType.NoSecurity,
 }
-
-
-def _free_port(host: str) -> int:
-    """A port the system has free now (``port = 0``: the tests' way)."""
-    family = socket.AF_INET6 if ":" in host else socket.AF_INET
-    with socket.socket(family, socket.SOCK_STREAM) as probe:
-        probe.bind((host, 0))
-        port: int = probe.getsockname()[1]
-        return port
-
-
-def _load_trusted(directory: Path) -> set[bytes]:
-    """The DER bytes of every certificate in *directory* (DER or PEM files)."""
-    trusted = set()
-    for path in sorted(directory.iterdir()):
-        if not path.is_file():
-            continue
-        data = path.read_bytes()
-        try:
-            if data.lstrip().startswith(b"-----BEGIN"):
-                cert = x509.load_pem_x509_certificate(data)
-            else:
-                cert = x509.load_der_x509_certificate(data)
-        except ValueError:
-            _log.warning("opcua: %s is not a certificate; not trusted", path)
-            continue
-        trusted.add(uacrypto.der_from_x509(cert))
-    return trusted
 
 
 class OpcuaServer:
@@ -166,6 +141,10 @@ class OpcuaServer:
         self._tasks: list[asyncio.Task[None]] = []
         self._counters = LineCounters()
         self._loop: asyncio.AbstractEventLoop | None = None
+        #: The node table making drive nodes when asked (None: every node made at start).
+        self._table: LazyNodes | None = None
+        #: Each method node's handler, bound when its node is made (lazy only).
+        self._handlers: dict[ua.NodeId, Any] = {}
 
     # -- the northbound --------------------------------------------------------------
 
@@ -232,7 +211,7 @@ class OpcuaServer:
         )
         server.iserver.max_pending_messages_per_connection = MAX_PENDING_MESSAGES
         if config.trusted_clients is not None:
-            self._trusted = await asyncio.to_thread(_load_trusted, config.trusted_clients)
+            self._trusted = await asyncio.to_thread(load_trusted, config.trusted_clients)
 
             async def validate(cert: x509.Certificate, description: Any) -> None:
                 if not self._admit(uacrypto.der_from_x509(cert)):
@@ -249,18 +228,36 @@ class OpcuaServer:
             )
 
     async def _build(self, server: Server, gateway: GatewayView) -> None:
+        lazy = SPEEDUPS_ENABLED  # drive nodes made when asked for (._lazy), where tested
         space = SpaceBuilder(self.namespace)
         objects = server.nodes.objects.nodeid
         lines = space.object(objects, "Lines", "Lines", "the gateway's RS-485 lines", folder=True)
+        # Lazy: one drive per shape gathers its nodes (the prototypes), the rest only ids.
+        shapes: dict[object, tuple[list[ua.AddNodesItem], str, ua.NodeId]] = {}
+        drives: list[tuple[object, GatewayDrive, LineNodes]] = []
         for line in gateway.lines:
             line_nodes = build_line(space, lines, line)
             self._lines.append(line_nodes)
             for drive in line.drives.values():
                 control = line.config.control_allowed(drive.node)
-                self._drives[drive.key] = build_drive(
-                    space, line_nodes.node, line.config.name, drive, control=control
+                own = space
+                if lazy:
+                    key = shape_key(drive, control=control)
+                    own = SpaceBuilder(self.namespace, gather=key not in shapes)
+                    drives.append((key, drive, line_nodes))
+                self._drives[drive.key] = built = build_drive(
+                    own, line_nodes.node, line.config.name, drive, control=control
                 )
+                if own.gather and own is not space:
+                    shapes[key] = (own.items, str(built.node.Identifier), line_nodes.node)
         await space.commit(server.nodes.objects.session)
+        if lazy:
+            aspace = server.iserver.aspace
+            made = {key: make_shape(aspace, *shape) for key, shape in shapes.items()}
+            self._table = table = LazyNodes.install(aspace, self.namespace, self._bind_node)
+            for shape, drive, line_nodes in drives:
+                identity = functools.partial(drive_identity, drive, line_nodes.line.config.name)
+                table.add_drive(made[shape], identity, line_nodes.node)
         for line_nodes in self._lines:
             for name, counter in line_nodes.counters.items():
                 server.set_attribute_value_callback(
@@ -268,7 +265,7 @@ class OpcuaServer:
                 )
                 server.set_attribute_value_setter(counter, _keep)
         for nodes in self._drives.values():
-            self._bind(server, nodes)
+            self._bind(server, nodes, lazy=lazy)
             for node, code in nodes.writable.items():
                 self._writable[node] = (nodes, code)
             for binding in nodes.bindings:
@@ -291,12 +288,15 @@ class OpcuaServer:
         )
         refuse_registration(server)
 
-    def _bind(self, server: Server, nodes: DriveNodes) -> None:
+    def _bind(self, server: Server, nodes: DriveNodes, *, lazy: bool) -> None:
+        """Take *nodes*' values; bind their nodes now, or (*lazy*) keep what
+        :meth:`_bind_node` binds a node with when it is made."""
         drive = nodes.drive
         for binding in nodes.bindings:
             binding.take(drive.served)
-            server.set_attribute_value_callback(binding.node, self._reader(binding, drive))
-            server.set_attribute_value_setter(binding.node, _keep)
+            if not lazy:
+                server.set_attribute_value_callback(binding.node, self._reader(binding, drive))
+                server.set_attribute_value_setter(binding.node, _keep)
         calls = self._calls
         methods = nodes.methods
         if methods is None or calls is None:
@@ -314,11 +314,28 @@ class OpcuaServer:
                     return ua.StatusCode(ua.StatusCodes.BadMethodInvalid)
                 return await _handler(drive, args)
 
-            server.link_method(server.get_node(node), call)
+            if lazy:
+                self._handlers[node] = call
+            else:
+                server.link_method(server.get_node(node), call)
+
+    def _bind_node(self, node: ua.NodeId, data: NodeData) -> None:
+        """Bind a drive's node the lazy address space has just made (see :meth:`_bind`)."""
+        bound = self._bound.get(node)
+        if bound is not None:
+            nodes, binding = bound
+            value = data.attributes[ua.AttributeIds.Value]
+            value.value = None  # as asyncua's set_attribute_value_callback leaves it
+            value.value_callback = self._reader(binding, nodes.drive)
+            value.value_setter = _keep
+            return
+        handler = self._handlers.get(node)
+        if handler is not None:
+            data.call = handler
 
     async def _listen(self, server: Server) -> None:
         config = self.config
-        port = config.endpoint.port or _free_port(config.endpoint.host)
+        port = config.endpoint.port or free_port(config.endpoint.host)
         host = f"[{config.host_text}]" if ":" in config.host_text else config.host_text
         self.url = f"opc.tcp://{host}:{port}"
         server.set_endpoint(self.url)
@@ -413,10 +430,22 @@ class OpcuaServer:
         return session_count(server)
 
     @property
+    def address_space(self) -> AddressSpace | None:
+        """asyncua's address space (None: not started)."""
+        return None if self._server is None else self._server.iserver.aspace
+
+    @property
+    def lazy_nodes(self) -> LazyNodes | None:
+        """The node table making drive nodes when asked (None: every node made at start)."""
+        return self._table
+
+    @property
     def node_count(self) -> int:
         server = self._server
         if server is None:
             return 0
+        if self._table is not None:
+            return self._table.served()
         return sum(
             1
             for node in server.iserver.aspace.keys()  # noqa: SIM118 - it has no __iter__

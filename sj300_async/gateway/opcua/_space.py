@@ -78,9 +78,17 @@ class Argument:
 class SpaceBuilder:
     """Gathers nodes, then adds them in one call (see the module docstring)."""
 
-    def __init__(self, namespace: int) -> None:
+    def __init__(self, namespace: int, *, gather: bool = True) -> None:
         self.namespace = namespace
+        #: False: only node ids are made, nothing is gathered (a drive whose nodes the
+        #: lazy address space makes from another's: :mod:`._lazy`).
+        self.gather = gather
         self._items: list[ua.AddNodesItem] = []
+
+    @property
+    def items(self) -> list[ua.AddNodesItem]:
+        """The nodes gathered so far, in the order they are added."""
+        return self._items
 
     def node_id(self, path: str) -> ua.NodeId:
         return ua.NodeId(path, self.namespace)
@@ -123,6 +131,8 @@ class SpaceBuilder:
     ) -> ua.NodeId:
         """An object (a folder when *folder*): a component of *parent* when *component*,
         else organised by it (*parent* is a folder)."""
+        if not self.gather:
+            return self.node_id(path)
         kind = ua.ObjectIds.FolderType if folder else ua.ObjectIds.BaseObjectType
         reference = ua.ObjectIds.HasComponent if component else ua.ObjectIds.Organizes
         return self._add(
@@ -148,6 +158,8 @@ class SpaceBuilder:
 
         *array*: its value is a one-dimensional array of *vtype*, of any length.
         """
+        if not self.gather:
+            return self.node_id(path)
         eu = eu_information(unit)
         type_definition = ua.NodeId(ua.ObjectIds.BaseDataVariableType)
         if eu is not None:
@@ -190,6 +202,8 @@ class SpaceBuilder:
         ns0: bool = False,
     ) -> ua.NodeId:
         """A property (its browse name in namespace 0 when *ns0*: the standard's own)."""
+        if not self.gather:
+            return self.node_id(path)
         if isinstance(datatype, ua.VariantType):
             variant = ua.Variant(value, datatype)
             datatype_id = ua.NodeId(datatype.value)
@@ -222,6 +236,8 @@ class SpaceBuilder:
         inputs: Sequence[Argument] = (),
         outputs: Sequence[Argument] = (),
     ) -> ua.NodeId:
+        if not self.gather:
+            return self.node_id(path)
         attributes = ua.MethodAttributes(Executable=True, UserExecutable=True)
         node = self._add(
             ua.NodeClass.Method, parent, path, name, ua.ObjectIds.HasComponent,

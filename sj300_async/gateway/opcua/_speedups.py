@@ -32,6 +32,9 @@ the OPC UA suite so, to show the public path serves the same).
   :class:`FrozenDataValue` of a shape the gateway serves is packed by
   :mod:`._wire` in one ``struct`` call, the same bytes.
 
+- **Drive nodes made when asked for** (:mod:`._lazy`, applied by the
+  server where :data:`ENABLED`): the address space's memory.
+
 Each is checked against asyncua's own by ``tests/opcua/test_opcua_fast_paths.py``
 and ``tests/opcua/test_opcua_wire.py``; ``tests/opcua/test_opcua_speedups.py``
 checks that, switched off, none of asyncua is replaced.
