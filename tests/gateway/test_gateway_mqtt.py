@@ -932,26 +932,6 @@ async def test_the_bridge_counters_are_in_the_metrics(sim_line: SimLine, broker:
     assert values[("sj300_mqtt_commands_total", (("result", "refused"),))] == 0
 
 
-async def test_a_stop_mid_batch_counts_what_it_could_not_confirm() -> None:
-    from sj300_async.gateway.mqtt._bridge import _Out
-
-    class Stuck:
-        """A client whose publishes never complete (a broker that stopped answering)."""
-
-        async def publish_many(self, *args: object, **kwargs: object) -> None:
-            await asyncio.Event().wait()
-
-    bridge = MqttBridge(MqttConfig("b", 1883))
-    for n in range(100):
-        bridge._put(_Out(f"t/{n}", b"x", retain=True))
-    sending = asyncio.create_task(bridge._send(Stuck()))  # type: ignore[arg-type]
-    await wait_for(lambda: not bridge._pending, "the batch taken from the outbox")
-    sending.cancel()
-    with pytest.raises(asyncio.CancelledError):
-        await sending
-    assert (bridge.stats.published, bridge.stats.lost) == (0, 100)
-
-
 async def test_a_command_a_bug_stops_leaves_the_drive_s_next_command_going(
     sim_line: SimLine, broker: Broker, monkeypatch: pytest.MonkeyPatch
 ) -> None:

@@ -82,13 +82,11 @@ DEBUG (refusals also in the audit log).
 from __future__ import annotations
 
 import asyncio
-import collections
 import json
 import logging
 import math
 import time
 from collections.abc import Callable, Iterator
-from dataclasses import dataclass
 from typing import TYPE_CHECKING, Final
 
 from .. import (
@@ -106,10 +104,11 @@ from ..mqttlink.client import Client, MqttError, Will
 from ._births import Rediscovery
 from ._commands import MAX_PAYLOAD_BYTES, error_text, oversized, parse_command
 from ._config import MqttConfig
-from ._discovery import FrequencyLimits, served_discovery
+from ._discovery import FrequencyLimits, iter_discovery
 from ._drive_events import DriveEvents, refused_event
 from ._intake import CommandIntake
 from ._messages import state_payload
+from ._outbox import MAX_IN_FLIGHT, Key, Out, Outbox
 from ._presence import HomeAssistantLease
 from ._stats import BridgeStats, mqtt_families
 from ._sweep import Sweeper, sweep_and_say
@@ -126,30 +125,13 @@ _log = logging.getLogger("sj300_async.gateway.mqtt")
 CLIENT: Final = "mqtt"
 #: The reconnection back-off's ceiling.
 BACKOFF_MAX_S: Final = 30.0
-#: Error replies waiting to be sent, at most (the oldest is dropped, counted).
-MAX_ERRORS: Final = 100
 #: Commands waiting for one drive, at most (more are refused: busy).
 MAX_COMMANDS: Final = 16
-#: Publishes in flight at once: a batch is sent in chunks of this many, each
-#: acknowledged before the next goes.
-MAX_IN_FLIGHT: Final = 256
 #: How long a clean stop waits for a write under way, and for its last publishes.
 CLOSE_TIMEOUT_S: Final = 3.0
 
-Key = tuple[str, int]
 _RETAINED: Final = WriteResult(Refusal.NOT_ALLOWED, "a retained command is never carried "
                                "out (publish commands without retain)")  # fmt: skip
-
-
-@dataclass(frozen=True, slots=True)
-class _Out:
-    """One message to publish."""
-
-    topic: str
-    payload: bytes
-    retain: bool
-    #: The drive of a state message (counted per drive), else None.
-    drive: Key | None = None
 
 
 class MqttBridge:
@@ -171,13 +153,11 @@ class MqttBridge:
         self._birth = f"{config.discovery_prefix}/status"
         #: Home Assistant's births, coalesced: anyone may publish them (see _births).
         self._rediscovery = Rediscovery(self._announce, self.stats, _log)
-        #: Waiting to be published: the latest per topic (state, availability, discovery).
-        self._pending: dict[str, _Out] = {}
-        #: Error replies, in order (each is an answer: never coalesced).
-        self._errors: collections.deque[_Out] = collections.deque()
+        #: Waiting to be published.
+        self._outbox = Outbox(self.stats)
         self._wake = asyncio.Event()
         #: The latest state message of each drive (republished on every connect).
-        self._latest: dict[Key, _Out] = {}
+        self._latest: dict[Key, Out] = {}
         #: The availability last put in the outbox, per drive.
         self._availability: dict[Key, bool] = {}
         self._client: Client | None = None
@@ -221,14 +201,14 @@ class MqttBridge:
         snapshot = served.snapshot
         key = (snapshot.line, snapshot.node)
         self.stats.samples[key] += 1
-        out = _Out(self.topics.state(*key), payload, retain=True, drive=key)
+        out = Out(self.topics.state(*key), payload, retain=True, drive=key)
         self._latest[key] = out
         self._put(out, wake=False)  # sent at the batch's flush
         if self.config.discovery and self._limits.changed(served):  # its own maximum now
             for topic, body in self._limits.config(self.config, self.topics, self._drive(*key)):
-                self._put(_Out(topic, compact_json(body), retain=True), wake=False)
+                self._put(Out(topic, compact_json(body), retain=True), wake=False)
         for event in self._events.on_served(served):
-            self._put_error(_Out(self.topics.event(*key), json.dumps(event).encode(), False))
+            self._put_error(Out(self.topics.event(*key), json.dumps(event).encode(), False))
         available = snapshot.available
         if self._availability.get(key) != available:
             self._availability[key] = available
@@ -236,7 +216,7 @@ class MqttBridge:
 
     def flush(self) -> None:
         """The gateway's batch is whole: send what it left in the outbox."""
-        if self._pending:
+        if self._outbox:
             self._wake.set()
 
     def metrics(self) -> Iterator[Metric]:
@@ -247,71 +227,40 @@ class MqttBridge:
         """Subscriptions the broker refused (the northbound's optional hook, for /healthz)."""
         return self._subscriptions.problems()
 
-    def _availability_out(self, key: Key) -> _Out:
+    def _availability_out(self, key: Key) -> Out:
         payload = AVAILABLE if self._availability.get(key) else UNAVAILABLE
-        return _Out(self.topics.drive_availability(*key), payload.encode(), retain=True)
+        return Out(self.topics.drive_availability(*key), payload.encode(), retain=True)
 
     # -- the outbox ----------------------------------------------------------------------
 
-    def _put(self, out: _Out, *, wake: bool = True) -> None:
-        old = self._pending.pop(out.topic, None)
-        if old is not None and old is not out and old.drive is not None:
-            self.stats.replaced[old.drive] += 1
-            _log.debug("%s: replaced by a newer state before it was sent", out.topic)
-        self._pending[out.topic] = out
+    def _put(self, out: Out, *, wake: bool = True) -> None:
+        self._outbox.put(out)
         if wake:
             self._wake.set()
 
-    def _put_error(self, out: _Out) -> None:
-        """An error reply or an event: sent in order and never replaced (at most
-        :data:`MAX_ERRORS` wait; past that the oldest is dropped, counted)."""
-        if len(self._errors) >= MAX_ERRORS:
-            dropped = self._errors.popleft()
-            self.stats.errors_dropped += 1
-            _log.debug("error reply on %s dropped: %d waiting", dropped.topic, MAX_ERRORS)
-        self._errors.append(out)
+    def _put_error(self, out: Out) -> None:
+        self._outbox.put_error(out)
         self._wake.set()
 
     def _announce(self) -> None:
-        """Everything retained, again: discovery, availability, the latest states."""
-        for topic, body in served_discovery(
-            self.config, self.topics, self._gateway, self._limits.known
-        ):
-            self._put(_Out(topic, compact_json(body), retain=True))
+        """Everything retained, again: discovery (made as it is sent), availability, the
+        latest states."""
+        self._outbox.announce(
+            Out(topic, compact_json(body), retain=True)
+            for topic, body in iter_discovery(
+                self.config, self.topics, self._gateway, self._limits.known
+            )
+        )
         # Only the drives polled already: "offline" for a drive not polled yet
         # would be a guess (it follows its first poll).
         for key in self._availability:
-            self._put(self._availability_out(key))
+            self._put(self._availability_out(key), wake=False)
         for out in self._latest.values():
-            self._put(out)
+            self._put(out, wake=False)
+        self._wake.set()
 
     async def _send(self, client: Client) -> None:
-        """Publish everything waiting; raise the connection's error after counting what it cost."""
-        qos = self.config.qos
-        while self._pending or self._errors:
-            batch = list(self._pending.values())
-            self._pending.clear()
-            batch += self._errors
-            self._errors.clear()
-            for start in range(0, len(batch), MAX_IN_FLIGHT):
-                chunk = batch[start : start + MAX_IN_FLIGHT]
-                try:
-                    await client.publish_many(
-                        [(out.topic, out.payload, out.retain) for out in chunk], qos=qos
-                    )
-                except (asyncio.CancelledError, MqttError) as exc:
-                    # Stopped or lost mid-batch: this chunk's fate is unknown (it may
-                    # have reached the broker), the rest was never sent. Counted as
-                    # lost, since none is confirmed; never silently.
-                    self.stats.lost += len(batch) - start
-                    _log.debug("MQTT: %d messages unconfirmed: %s", len(batch) - start,
-                               exc or type(exc).__name__)  # fmt: skip
-                    raise
-                self.stats.published += len(chunk)
-                states = self.stats.states
-                for out in chunk:
-                    if out.drive is not None:
-                        states[out.drive] += 1
+        await self._outbox.send(client, self.config.qos)
 
     async def _publisher(self, client: Client) -> None:
         while True:
@@ -375,6 +324,9 @@ class MqttBridge:
         loop = asyncio.get_running_loop()
         try:
             async with asyncio.timeout(max(0.1, self._close_by - loop.time())):
+                # Not an announcement's configs not made yet: they are retained from the
+                # last start, and the next one announces them all again.
+                self._outbox.announcing = None
                 await self._send(client)
                 await client.publish(
                     self.topics.availability, UNAVAILABLE, qos=self.config.qos, retain=True
@@ -398,7 +350,8 @@ class MqttBridge:
         self._client = client
         self._announce()
         if (self._sweeper is None or not self._sweeper.done) and self._gateway is not None:
-            made = [t for t, _ in served_discovery(self.config, self.topics, self._gateway)]
+            # Made one at a time: only the topics are kept (see _outbox).
+            made = (t for t, _ in iter_discovery(self.config, self.topics, self._gateway))
             drives = [drive.key for drive in self._gateway.drives]
             self._sweeper, sweeping = sweep_and_say(
                 self.config, self.topics, client, made, self.stats, drives
@@ -560,9 +513,9 @@ class MqttBridge:
         body = {"topic": topic, "payload": text, "error": error, "reason": reason,
                 "time": time.time()}  # fmt: skip
         line, node = drive.line.name, drive.node
-        self._put_error(_Out(self.topics.error(line, node), json.dumps(body).encode(), False))
+        self._put_error(Out(self.topics.error(line, node), json.dumps(body).encode(), False))
         event = refused_event(excerpt(what), text, error, reason)
-        self._put_error(_Out(self.topics.event(line, node), json.dumps(event).encode(), False))
+        self._put_error(Out(self.topics.event(line, node), json.dumps(event).encode(), False))
 
     # -- stopping ------------------------------------------------------------------------
 
@@ -594,7 +547,7 @@ class MqttBridge:
         # own close time: cancelled again sooner, it would leave "online" retained.
         await cancel_and_wait({self._task}, patience_s=2 * CLOSE_TIMEOUT_S)
         self._task = None
-        pending = len(self._pending) + len(self._errors)
+        pending = self._outbox.abandon()
         if pending:
             self.stats.lost += pending
             _log.debug("MQTT: %d messages not published before stopping", pending)

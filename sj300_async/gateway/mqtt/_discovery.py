@@ -41,7 +41,14 @@ from ._config import MqttConfig
 from ._drive_events import EVENT_TYPES
 from ._topics import AVAILABLE, UNAVAILABLE, Topics
 
-__all__ = ["FrequencyLimits", "discovery", "drive_discovery", "node_id", "served_discovery"]
+__all__ = [
+    "FrequencyLimits",
+    "discovery",
+    "drive_discovery",
+    "iter_discovery",
+    "node_id",
+    "served_discovery",
+]
 
 _NOT_IN_NODE_ID: Final = re.compile(r"[^A-Za-z0-9_-]")
 _NOT_IN_ENTITY_ID: Final = re.compile(r"[^a-z0-9_]")
@@ -293,6 +300,20 @@ class FrequencyLimits:
         return [c for c in found if c[0].endswith("/set_frequency/config")]
 
 
+def iter_discovery(
+    config: MqttConfig,
+    topics: Topics,
+    gateway: GatewayView | None,
+    limits: Mapping[tuple[str, int], float] | None = None,
+) -> Iterator[tuple[str, dict[str, Any]]]:
+    """Every config of the drives *gateway* serves, each made as it is asked for (none
+    with ``discovery`` off)."""
+    if not config.discovery or gateway is None:
+        return
+    lines = list(dict.fromkeys(drive.line for drive in gateway.drives))
+    yield from discovery(config, topics, lines, limits=limits)
+
+
 def served_discovery(
     config: MqttConfig,
     topics: Topics,
@@ -300,10 +321,7 @@ def served_discovery(
     limits: Mapping[tuple[str, int], float] | None = None,
 ) -> list[tuple[str, dict[str, Any]]]:
     """Every config of the drives *gateway* serves now (none with ``discovery`` off)."""
-    if not config.discovery or gateway is None:
-        return []
-    lines = list(dict.fromkeys(drive.line for drive in gateway.drives))
-    return list(discovery(config, topics, lines, limits=limits))
+    return list(iter_discovery(config, topics, gateway, limits))
 
 
 def _status_keys(states: Sequence[str]) -> dict[str, Any]:
