@@ -41,8 +41,10 @@ Decisions a real drive leaves open (the seeds do not say):
 
 from __future__ import annotations
 
+import functools
 import logging
 from collections.abc import Callable, Mapping
+from types import MappingProxyType
 from typing import Final
 
 from ...sj300.codec import (
@@ -99,6 +101,16 @@ Result = Reply | NakCode
 Handler = Callable[["SimulatedDrive", bytes, float], Result]
 
 
+@functools.cache
+def _shared_table(country: Country, *, factory_defaults: bool) -> Mapping[str, int]:
+    """The parameter values every drive made alike starts with, shared (the node's own,
+    C072, aside): see :class:`ParameterMemory`."""
+    table = factory_table(country, 0)
+    if not factory_defaults:
+        table |= SERIAL_CONTROL
+    return MappingProxyType(table)
+
+
 class SimulatedDrive(DriveModel):
     """One virtual SJ300 at one node address (see the module docstring for its behaviour).
 
@@ -126,10 +138,9 @@ class SimulatedDrive(DriveModel):
     ) -> None:
         if isinstance(node, bool) or not isinstance(node, int) or not MIN_NODE <= node <= MAX_NODE:
             raise LocalProtocolError(f"a drive's node is 1..32, got {node!r}")
-        table = factory_table(Country(country), node)
-        if not factory_defaults:
-            table |= SERIAL_CONTROL
-        super().__init__(node, ParameterMemory(table, write_s=eeprom_write_s))
+        base = _shared_table(Country(country), factory_defaults=factory_defaults)
+        memory = ParameterMemory(base, {"C072": node}, write_s=eeprom_write_s)
+        super().__init__(node, memory)
         self.processing_s = processing_s
         #: How many times command 0B asked to recalculate the motor constants.
         self.recalculations = 0

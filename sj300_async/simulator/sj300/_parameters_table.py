@@ -44,6 +44,7 @@ common practice):
 from __future__ import annotations
 
 import enum
+from collections.abc import Mapping
 from typing import Final
 
 from ...sj300.codec import PARAMETERS, InputTerminal, motor_capacity_kw
@@ -155,7 +156,7 @@ def line_parameters(line: LinePacing) -> dict[str, int]:
     return settings
 
 
-def value_error(code: str, raw: int, table: dict[str, int]) -> str | None:
+def value_error(code: str, raw: int, table: Mapping[str, int]) -> str | None:
     """Why the drive refuses *raw* for *code* given the rest of *table*, or None if it accepts.
 
     *code* must be one the drive knows (a key of *table*).
