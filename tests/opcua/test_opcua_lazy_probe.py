@@ -279,9 +279,8 @@ async def test_a_flood_of_lookups_of_existing_nodes_holds_keep_and_the_watched(
         assert table.made - table.dropped == table.kept
         assert _untracked(table) == []
         assert _watched_nodes(table) == 0
-        # No monitored item now, but the nodes they held are still held: reading them
-        # makes nothing, so nothing is looked at again.
-        assert table.kept > table.keep
+        # No monitored item now, but the nodes they held may still be held (reading them
+        # makes nothing, so nothing is looked at again): other nodes made drop them.
         others = _drive_ids(table, ns, range(5, 9))
         values = ua.ReadParameters()
         values.NodesToRead = [
