@@ -253,6 +253,9 @@ def _instrument() -> None:
     setattr(InternalSession, "add_nodes", timed("commit", InternalSession.add_nodes))  # noqa: B010
 
 
+_PER_CALL: Final = 11714  # Server_ServerCapabilities_OperationLimits_MaxMonitoredItemsPerCall
+
+
 async def _start_drives(gateway: Gateway) -> None:
     """Run every drive forward towards :data:`RUN_HZ` on a long ramp, through its line's bus."""
     from sj300_async.sj300 import Drive
@@ -663,7 +666,13 @@ async def _subscribe(
 
     subscription = await client.create_subscription(PUBLISHING_MS, handler)
     nodes = [client.get_node(ua.NodeId(i, namespace)) for i in identifiers]
-    results = await subscription.subscribe_data_change(nodes, sampling_interval=0.0)
+    # As a well-behaved client: no more items a request than the server advertises.
+    limit = await client.get_node(ua.NodeId(_PER_CALL)).read_value() or len(nodes)
+    results: list[Any] = []
+    for start in range(0, len(nodes), limit):
+        results += await subscription.subscribe_data_change(
+            nodes[start : start + limit], sampling_interval=0.0
+        )
     bad = [r for r in results if isinstance(r, ua.StatusCode)]
     if bad:
         raise RuntimeError(f"{len(bad)} of {len(nodes)} monitored items refused: {bad[0]}")

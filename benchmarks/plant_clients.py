@@ -207,6 +207,9 @@ class ModbusTally:
         }
 
 
+_PER_CALL: Final = 11714  # Server_ServerCapabilities_OperationLimits_MaxMonitoredItemsPerCall
+
+
 async def _guarded(
     tally: Tally | ModbusTally, client: Awaitable[None], ready: asyncio.Event
 ) -> None:
@@ -314,7 +317,13 @@ async def opcua(
             )
             for line, node in drives
         ]
-        created = await subscription.subscribe_data_change(nodes, sampling_interval=0.0)
+        # As a well-behaved client: no more items a request than the server advertises.
+        limit = await client.get_node(ua.NodeId(_PER_CALL)).read_value() or len(nodes)
+        created: list[Any] = []
+        for start in range(0, len(nodes), limit):
+            created += await subscription.subscribe_data_change(
+                nodes[start : start + limit], sampling_interval=0.0
+            )
         tally.errors += sum(1 for item in created if isinstance(item, ua.StatusCode))
         ready.set()
         await asyncio.Event().wait()  # until cancelled: the handler does the work

@@ -17,9 +17,11 @@ import json
 import os
 import platform
 import resource
+import shutil
 import signal
 import subprocess
 import sys
+import tempfile
 import time
 from pathlib import Path
 from typing import Any
@@ -78,6 +80,15 @@ def pytest_configure(config: pytest.Config) -> None:
     # runs failed 14 tests so). Python's own handler here resets it for them.
     if signal.getsignal(signal.SIGINT) is signal.SIG_IGN:
         signal.signal(signal.SIGINT, signal.default_int_handler)
+    # The OPC UA server keeps the standard nodeset in a cache directory (the user's by
+    # default): the tests, and the gateways they start as children, keep theirs in one of
+    # this run's own (each xdist worker its own), never in the user's.
+    os.environ.pop("CACHE_DIRECTORY", None)
+    os.environ["XDG_CACHE_HOME"] = tempfile.mkdtemp(prefix="sj300-tests-cache-")
+
+
+def pytest_unconfigure(config: pytest.Config) -> None:
+    shutil.rmtree(os.environ.get("XDG_CACHE_HOME", ""), ignore_errors=True)
 
 
 def pytest_collection_modifyitems(config: pytest.Config, items: list[pytest.Item]) -> None:

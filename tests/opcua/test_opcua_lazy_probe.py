@@ -31,6 +31,7 @@ from asyncua.ua.uaerrors import UaStatusCodeError
 from waiting import wait_for
 
 from sj300_async.gateway.opcua._lazy import LazyNodes
+from sj300_async.gateway.opcua._operations import MAX_OPERATIONS
 from sj300_async.gateway.opcua._server import OpcuaServer
 from sj300_async.gateway.opcua._speedups import ENABLED
 
@@ -315,6 +316,17 @@ def _changed(value: ua.Variant, ns: int) -> ua.Variant:
     return ua.Variant(new, kind, is_array=value.is_array)
 
 
+async def _read(client: Client, read: ua.ReadParameters) -> list[ua.DataValue]:
+    """*read*, in requests of the server's most operations each."""
+    values: list[ua.DataValue] = []
+    wanted = read.NodesToRead
+    for start in range(0, len(wanted), MAX_OPERATIONS):
+        chunk = ua.ReadParameters()
+        chunk.NodesToRead = wanted[start : start + MAX_OPERATIONS]
+        values += await client.uaclient.read(chunk)
+    return values
+
+
 async def _snapshot(
     client: Client, ids: list[ua.NodeId]
 ) -> dict[tuple[str, int], tuple[object, object]]:
@@ -326,7 +338,7 @@ async def _snapshot(
         for attribute in _ATTRIBUTES
         if attribute != ua.AttributeIds.Value
     ]
-    values = await client.uaclient.read(read)
+    values = await _read(client, read)
     return {
         (str(item.NodeId.Identifier), int(item.AttributeId)): (value.StatusCode, value.Value)
         for item, value in zip(read.NodesToRead, values, strict=True)
@@ -356,7 +368,7 @@ async def _attack_writes(client: Client, ids: list[ua.NodeId], ns: int) -> list[
         for node in ids
         for attribute in _ATTRIBUTES
     ]
-    current = await uaclient.read(read)
+    current = await _read(client, read)
     writes: list[ua.WriteValue] = []
     for item, value in zip(read.NodesToRead, current, strict=True):
         if not value.StatusCode.is_good() or value.Value is None:
@@ -852,16 +864,14 @@ async def _request(client: Client, service: str, ids: list[ua.NodeId]) -> list[s
 async def test_one_request_names_no_more_nodes_than_the_server_advertises(
     tmp_path: Path, service: str
 ) -> None:
-    """FAILS NOW (a finding of this probe): asyncua advertises 10,000 nodes per Read,
-    Browse and TranslateBrowsePathsToNodeIds (Server/ServerCapabilities/
-    OperationLimits) but serves any number, each request in one turn of the loop, and
-    the lazy table makes every node such a request names that is not held. With 256
-    drives (none held), one anonymous request held the loop, in three runs each: a
-    Read of 30,000 nodes 1.7-2.6 s lazy against 0.7-0.9 s eager; a Browse of 5,000
-    0.36-0.76 s against 0.18-0.29 s; a TranslateBrowsePathsToNodeIds of 10,000
-    0.78-1.14 s against 0.21-0.39 s (issue 41 bounds an attack's lag at 200 ms). A
-    request past the advertised limit must be refused (Part 4, 7.34:
-    BadTooManyOperations), before any node is made."""
+    """A finding of this probe, fixed by ``_operations``: asyncua advertised 10,000 nodes
+    per Read, Browse and TranslateBrowsePathsToNodeIds and served any number, each
+    request in one turn of the loop, the lazy table making every node named that was not
+    held. With 256 drives (none held), one anonymous request held the loop, in three runs
+    each: a Read of 30,000 nodes 1.7-2.6 s lazy against 0.7-0.9 s eager; a Browse of
+    5,000 0.36-0.76 s against 0.18-0.29 s; a TranslateBrowsePathsToNodeIds of 10,000
+    0.78-1.14 s against 0.21-0.39 s. A request past the advertised limit is refused
+    (Part 4, 7.34: BadTooManyOperations), before any node is made."""
     async with opcua_gateway(opcua_toml(tmp_path)) as (_, server), connected(server.url) as client:
         table = _table(server)
         table.keep = 8  # every lookup of the cycle below makes its node
@@ -875,20 +885,17 @@ async def test_one_request_names_no_more_nodes_than_the_server_advertises(
         statuses = await _request(client, service, many)
         assert set(statuses) == {"BadTooManyOperations"}, (len(statuses), sorted(set(statuses)))
         assert table.made == made
+        assert server._defences.requests_refused["too_many_operations"] == 1
 
 
 async def test_watching_the_drives_properties_leaves_nothing_once_unwatched(
     tmp_path: Path,
 ) -> None:
-    """FAILS NOW (a finding of this probe, small): a monitored item on the value of a drive
-    node no binding serves (a property: Node, UnitId, EURange, a method's arguments)
-    is counted as a line counter's watcher (``OpcuaServer._watch`` hands every node it
-    does not bind to ``LineCounters.watch``), and ``LineCounters.watch`` keeps each
-    node's count, at 0 once unwatched, for good. An anonymous client that watches the
-    properties of every drive, a session's 1,000 at a time, leaves an entry per node
-    it ever watched (some 17 a drive: 35,000 at 2,048 drives), though the nodes
-    themselves are dropped: memory the lazy table was made to save. (The eager path
-    keeps these entries too; there the nodes themselves are held anyway.)"""
+    """A finding of this probe (small), fixed: a monitored item on the value of a drive
+    node no binding serves (a property: Node, UnitId, EURange, a method's arguments) is
+    counted as a line counter's watcher, and ``LineCounters.watch`` kept each node's
+    count, at 0 once unwatched, for good: an entry per node ever watched (some 17 a
+    drive, 35,000 at 2,048 drives), though the nodes themselves are dropped."""
     async with opcua_gateway(opcua_toml(tmp_path)) as (_, server), connected(server.url) as client:
         table = _table(server)
         ns = await client.get_namespace_index(NAMESPACE)

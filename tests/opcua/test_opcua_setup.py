@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import importlib.metadata
 import inspect
+import os
 import stat
 import textwrap
 from pathlib import Path
@@ -64,6 +65,18 @@ def test_the_defaults_are_secure_and_relative_to_the_file(tmp_path: Path) -> Non
     assert (config.login_burst, config.login_interval_s) == (5, 12.0)
     items = (config.max_monitored_items_per_session, config.max_monitored_items_per_address)
     assert items == (1000, 2000)
+
+
+def test_the_nodeset_cache_is_the_user_s_unless_named_or_off(tmp_path: Path) -> None:
+    endpoint = 'endpoint = "opc.tcp://h:1"\n'
+    default = _config(endpoint, tmp_path).nodeset_cache
+    assert default == Path(os.environ["XDG_CACHE_HOME"]) / "sj300-async"
+    assert _config(endpoint + 'nodeset_cache = "cache"', tmp_path).nodeset_cache == (
+        tmp_path / "cache"
+    )
+    assert _config(endpoint + 'nodeset_cache = ""', tmp_path).nodeset_cache is None
+    message = _error(endpoint + "nodeset_cache = 3", tmp_path)
+    assert "opcua.nodeset_cache: expected a string" in message
 
 
 @pytest.mark.parametrize(

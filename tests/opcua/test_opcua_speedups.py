@@ -22,6 +22,7 @@ import pytest
 from asyncua import ua
 
 from sj300_async.gateway.opcua import _speedups
+from sj300_async.gateway.opcua._operations import _COUNTED
 
 _CHILD = textwrap.dedent(
     """
@@ -125,6 +126,8 @@ _GUARDED = {
     "asyncua.server.binary_server_asyncio OPCUAProtocol.data_received",
     "asyncua.server.binary_server_asyncio OPCUAProtocol._process_one_msg",
     "asyncua.server.uaprocessor UaProcessor._process_message",
+    # _operations.limit_operations: each service's operations per request.
+    *(f"asyncua.server.internal_session InternalSession.{name}" for name in _COUNTED),
 }
 
 

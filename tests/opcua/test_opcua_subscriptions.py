@@ -14,6 +14,7 @@ from asyncua import Client, ua
 from asyncua.ua.uaerrors import UaStatusCodeError
 
 from sj300_async.gateway.opcua import _subscriptions
+from sj300_async.gateway.opcua._operations import MAX_OPERATIONS
 from sj300_async.gateway.opcua._subscriptions import MIN_PUBLISHING_INTERVAL_MS
 
 from .conftest import NAMESPACE, connected, opcua_gateway, opcua_toml
@@ -50,14 +51,14 @@ async def _items(
         )
         for n in range(count)
     ]
-    params = ua.CreateMonitoredItemsParameters(
-        SubscriptionId=subscription,
-        TimestampsToReturn=ua.TimestampsToReturn.Both,
-        ItemsToCreate=requests,
-    )
-    results: list[ua.MonitoredItemCreateResult] = await client.uaclient.create_monitored_items(
-        params
-    )
+    results: list[ua.MonitoredItemCreateResult] = []
+    for start in range(0, count, MAX_OPERATIONS):  # the server's most per request
+        params = ua.CreateMonitoredItemsParameters(
+            SubscriptionId=subscription,
+            TimestampsToReturn=ua.TimestampsToReturn.Both,
+            ItemsToCreate=requests[start : start + MAX_OPERATIONS],
+        )
+        results += await client.uaclient.create_monitored_items(params)
     return results
 
 

@@ -17,6 +17,7 @@
     login_interval_s = 12.0
     max_monitored_items_per_session = 1000
     max_monitored_items_per_address = 2000
+    nodeset_cache = "/var/cache/sj300"  # default: $CACHE_DIRECTORY, ~/.cache/sj300-async
     [[opcua.users]]
     name = "operator"
     password_hash = "scrypt$16384$8$1$..."   # sj300 gateway --hash-password
@@ -48,6 +49,8 @@ Decisions:
   (:mod:`._logins`: five at once, then five a minute, the HTTP door's).
   Each default is far above what a plant's clients do; a key tunes it,
   within bounds that keep it a limit.
+- **The standard nodeset's cache** (``nodeset_cache``, a directory; ``""``
+  turns it off): :mod:`._nodeset`.
 - Port 0 picks a free port (the tests' way); the announce line names it.
 """
 
@@ -59,6 +62,7 @@ from pathlib import Path
 from typing import Final
 
 from .. import ConfigTable, Endpoint, SectionContext, User, parse_users, unknown_choice
+from ._nodeset import default_cache
 
 __all__ = [
     "DEFAULT_SECURITY",
@@ -73,7 +77,7 @@ OPCUA_KEYS: Final = (
     *("endpoint", "security", "certificate", "private_key", "trusted_clients"),
     *("users", "namespace", "max_connections", "max_connections_per_address"),
     *("max_unactivated_per_address", "activate_within_s", "login_burst", "login_interval_s"),
-    *("max_monitored_items_per_session", "max_monitored_items_per_address"),
+    *("max_monitored_items_per_session", "max_monitored_items_per_address", "nodeset_cache"),
 )
 #: The security modes a configuration may name, strongest first.
 SECURITY_MODES: Final = ("Basic256Sha256_SignAndEncrypt", "Basic256Sha256_Sign", "None")
@@ -121,6 +125,8 @@ class OpcuaConfig:
     login_interval_s: float = DEFAULT_LOGIN_INTERVAL_S
     max_monitored_items_per_session: int = DEFAULT_ITEMS_PER_SESSION
     max_monitored_items_per_address: int = DEFAULT_ITEMS_PER_ADDRESS
+    #: Where the standard nodeset is kept between starts (None: not kept; :mod:`._nodeset`).
+    nodeset_cache: Path | None = None
 
     @property
     def url(self) -> str:
@@ -190,6 +196,9 @@ def parse_opcua_section(table: ConfigTable, context: SectionContext) -> OpcuaCon
     items_per_address = _bounded(
         table, "max_monitored_items_per_address", 1, 100_000, DEFAULT_ITEMS_PER_ADDRESS
     )
+    cache: Path | None = default_cache()
+    if (text := table.string("nodeset_cache")) is not None:
+        cache = context.base_dir / text if text.strip() else None
     return OpcuaConfig(
         endpoint=Endpoint(host, port),
         host_text=host,
@@ -207,6 +216,7 @@ def parse_opcua_section(table: ConfigTable, context: SectionContext) -> OpcuaCon
         login_interval_s=login_interval_s,
         max_monitored_items_per_session=items_per_session,
         max_monitored_items_per_address=items_per_address,
+        nodeset_cache=cache,
     )
 
 

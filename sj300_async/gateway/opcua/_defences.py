@@ -100,6 +100,10 @@ class Door:
         return int(status)
 
 
+#: Why a request was refused whole.
+_REQUEST_REASONS: Final = ("too_many_operations",)
+
+
 class Defences:
     """The door's defences for one server (see the module docstring)."""
 
@@ -121,6 +125,12 @@ class Defences:
         #: Whether asyncua's request processing is guarded (False: an asyncua unlike the
         #: releases tested; _hooks warned).
         self.guarded = False
+        #: Requests refused whole, by reason (:mod:`._operations`).
+        self.requests_refused: dict[str, int] = dict.fromkeys(_REQUEST_REASONS, 0)
+
+    def refuse_operations(self) -> None:
+        """A request held more operations than one may (:mod:`._operations`)."""
+        self.requests_refused["too_many_operations"] += 1
 
     def install(
         self,
@@ -176,6 +186,12 @@ class Defences:
                 "sj300_opcua_refused_connections",
                 "Connections refused: their client address held its share.",
                 "reason", ("per_address",), self.admission.connections_refused,
+            ),
+            (
+                "sj300_opcua_refused_requests",
+                "Requests refused whole: more operations (nodes, items, calls) than one may "
+                "hold.",
+                "reason", _REQUEST_REASONS, self.requests_refused,
             ),
             (
                 "sj300_opcua_malformed",

@@ -48,6 +48,8 @@ tested with, and never needed), and the subscription bounds,
 - **Writes that wait for the line** (:func:`route_writes`): asyncua's
   write service stores a value and returns; a parameter write must go to
   the drive and answer with what became of it.
+- **Operations per request** (:mod:`._operations`): asyncua advertises
+  limits it does not enforce; a request over the gateway's is refused.
 - **Discovery registration** (:func:`refuse_registration`): asyncua
   lets any client, without a session, register servers that FindServers
   then lists; the gateway is no discovery server.
@@ -386,6 +388,10 @@ def _wrap_processing() -> None:
                 status = await _login(self, door, requesthdr, body)
             if status is None:
                 return await process(self, typeid, requesthdr, seqhdr, body)
+        except ServiceError as exc:
+            if exc.code != ua.StatusCodes.BadTooManyOperations:
+                raise  # asyncua answers it as it does
+            status = exc.code  # counted by _operations; answered without asyncua's ERROR line
         except Exception as exc:
             if not _decoding(exc):
                 raise  # ours or asyncua's own failure: asyncua answers and logs it

@@ -44,6 +44,7 @@ one asyncua makes for the same drive.
 from __future__ import annotations
 
 import collections
+import copy
 import dataclasses
 from collections.abc import Callable, Iterator, MutableMapping, Sequence
 from dataclasses import dataclass
@@ -132,7 +133,17 @@ class _Drive:
 
 def _rename(value: AttributeValue, new: object, vtype: ua.VariantType) -> AttributeValue:
     assert value.value is not None
-    return AttributeValue(dataclasses.replace(value.value, Value=ua.Variant(new, vtype)))
+    data = copy.copy(value.value)  # dataclasses.replace runs __init__: 5x slower
+    data.Value = ua.Variant(new, vtype)
+    return AttributeValue(data)
+
+
+def _moved(ref: ua.ReferenceDescription, **fields: object) -> ua.ReferenceDescription:
+    """*ref* with *fields* changed (a copy: the prototype's stays as it is)."""
+    moved = copy.copy(ref)
+    for name, value in fields.items():
+        setattr(moved, name, value)
+    return moved
 
 
 class _Maker:
@@ -182,14 +193,12 @@ class _Maker:
         shape = self.shape
         if target == shape.line:  # the drive object's, to its line
             browse, display = self.line_names
-            return dataclasses.replace(
-                ref, NodeId=self.line, BrowseName=browse, DisplayName=display
-            )
+            return _moved(ref, NodeId=self.line, BrowseName=browse, DisplayName=display)
         identifier = target.Identifier
         if target.NamespaceIndex != shape.namespace or not isinstance(identifier, str):
             return ref  # to namespace 0 (a type definition): shared
         if identifier == shape.path:  # to the drive object
-            return dataclasses.replace(
+            return _moved(
                 ref,
                 NodeId=self.object,
                 BrowseName=ua.QualifiedName(self.identity.name, shape.namespace),
@@ -197,7 +206,7 @@ class _Maker:
             )
         if identifier.startswith(f"{shape.path}/"):  # to another of the drive's nodes
             moved = ua.NodeId(self.path + identifier[len(shape.path) :], shape.namespace)
-            return dataclasses.replace(ref, NodeId=moved)
+            return _moved(ref, NodeId=moved)
         return ref
 
 

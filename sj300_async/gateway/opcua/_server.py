@@ -75,6 +75,8 @@ from ._model import (
     drive_identity,
     shape_key,
 )
+from ._nodeset import initialised
+from ._operations import limit_operations
 from ._quality import GOOD
 from ._security import ChannelRules, Principal, Users
 from ._space import SpaceBuilder
@@ -165,8 +167,9 @@ class OpcuaServer:
             raise GatewayStartError(
                 "opcua", (), f"cannot use the certificate {config.certificate}: {exc}"
             ) from None
-        server = Server(user_manager=self._users)
-        await server.init()
+        server = await initialised(
+            functools.partial(Server, user_manager=self._users), self.config.nodeset_cache
+        )
         self._server = server
         try:
             await self._configure(server, gateway)
@@ -287,6 +290,7 @@ class OpcuaServer:
             items_per_address=self.config.max_monitored_items_per_address,
         )
         refuse_registration(server)
+        await limit_operations(server, self._defences.refuse_operations)
 
     def _bind(self, server: Server, nodes: DriveNodes, *, lazy: bool) -> None:
         """Take *nodes*' values; bind their nodes now, or (*lazy*) keep what

@@ -64,7 +64,11 @@ class LineCounters:
 
     def watch(self, node: ua.NodeId, change: int) -> None:
         """A monitored item added to (+1) or deleted from (-1) a counter's node."""
-        self._watched[node] = self._watched.get(node, 0) + change
+        count = self._watched.get(node, 0) + change
+        if count > 0:
+            self._watched[node] = count
+        else:  # no count kept for a node nobody watches (a drive's property, too)
+            self._watched.pop(node, None)
 
     def reader(self, nodes: LineNodes, name: str) -> Any:
         """The read callback of the line's counter *name*."""
