@@ -162,18 +162,7 @@ async def _every_lookup(client: Client, ids: list[ua.NodeId]) -> list[str]:
     ]
     values = await answered(uaclient.read(read))
     statuses += [v.StatusCode.name for v in values or ()]
-    browse = ua.BrowseParameters()
-    browse.View = ua.ViewDescription()
-    browse.RequestedMaxReferencesPerNode = 0
-    browse.NodesToBrowse = [
-        ua.BrowseDescription(
-            NodeId=node,
-            BrowseDirection=ua.BrowseDirection.Both,
-            IncludeSubtypes=True,
-            ResultMask=63,
-        )
-        for node in ids
-    ]
+    browse = _browse_both(ids)
     browsed = await answered(uaclient.browse(browse))
     statuses += [r.StatusCode.name for r in browsed or ()]
     paths = [
@@ -671,20 +660,24 @@ async def test_a_method_dropped_and_made_again_is_still_bound(
         assert _untracked(table) == []
 
 
-async def _browse_all(client: Client, ids: list[ua.NodeId]) -> list[object]:
-    """Every reference of *ids*, both ways, as a client sees it."""
+def _browse_both(ids: list[ua.NodeId]) -> ua.BrowseParameters:
+    """A Browse of every reference of *ids*, both ways, every field of each."""
     browse = ua.BrowseParameters()
     browse.View = ua.ViewDescription()
     browse.RequestedMaxReferencesPerNode = 0
     browse.NodesToBrowse = [
         ua.BrowseDescription(
-            NodeId=node,
-            BrowseDirection=ua.BrowseDirection.Both,
-            IncludeSubtypes=True,
+            NodeId=node, BrowseDirection=ua.BrowseDirection.Both, IncludeSubtypes=True,
             ResultMask=63,
         )
         for node in ids
-    ]
+    ]  # fmt: skip
+    return browse
+
+
+async def _browse_all(client: Client, ids: list[ua.NodeId]) -> list[object]:
+    """Every reference of *ids*, both ways, as a client sees it."""
+    browse = _browse_both(ids)
     results = await client.uaclient.browse(browse)
     return [
         (
