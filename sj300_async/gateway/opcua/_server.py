@@ -133,9 +133,8 @@ class OpcuaServer:
         self._lines: list[LineNodes] = []
         #: Writable parameter variables: node -> (its drive, the parameter's code).
         self._writable: dict[ua.NodeId, tuple[DriveNodes, str]] = {}
-        #: Every drive variable: node -> (its drive, its name for the audit log).
-        self._owners: dict[ua.NodeId, tuple[DriveNodes, str]] = {}
-        #: Every drive variable's binding, by node; those watched by a monitored item.
+        #: Every drive variable's binding (its name is the audit log's), by node; those
+        #: watched by a monitored item.
         self._bound: dict[ua.NodeId, tuple[DriveNodes, Binding]] = {}
         self._watched: dict[ua.NodeId, tuple[DriveNodes, Binding]] = {}
         self._outbox: dict[ua.NodeId, ua.DataValue] = {}
@@ -272,7 +271,6 @@ class OpcuaServer:
             for node, code in nodes.writable.items():
                 self._writable[node] = (nodes, code)
             for binding in nodes.bindings:
-                self._owners[binding.node] = (nodes, binding.name)
                 self._bound[binding.node] = (nodes, binding)
         follow_watchers(server, self._watch)
         route_writes(server, self.namespace, self._write)
@@ -543,9 +541,10 @@ class OpcuaServer:
             written = value.Value if value.Value is not None else ua.DataValue()
             return ua.StatusCode(await self._calls.write_parameter(nodes.drive, code, written))
         assert self._calls is not None
-        owner = self._owners.get(value.NodeId)
+        owner = self._bound.get(value.NodeId)
         if owner is not None:  # a drive's read-only variable: a refused write, audited
-            return ua.StatusCode(self._calls.not_writable(owner[0].drive, owner[1]))
+            nodes, binding = owner
+            return ua.StatusCode(self._calls.not_writable(nodes.drive, binding.name))
         known = self._server is not None and value.NodeId in self._server.iserver.aspace
         status = ua.StatusCodes.BadNotWritable if known else ua.StatusCodes.BadNodeIdUnknown
         self._calls.count(status)
