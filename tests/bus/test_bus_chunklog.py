@@ -1,7 +1,7 @@
 """A bus recorder's compact log of a line's chunks (bus/_chunklog.py).
 
 A model check: whatever is appended, ``since(t)`` gives exactly the chunks
-a plain list would, for every ``t`` inside what the log promises to keep
+a plain list would (times to the microsecond), for every ``t`` inside what the log promises to keep
 (the last ``keep_s`` seconds, the newest ``max_chunks``), and what it holds
 beyond that is bounded: segments are judged when a new one starts.
 """
@@ -33,7 +33,7 @@ def _fill(log: ChunkLog, chunks: list[tuple[float, str, bytes, bool]]) -> list[K
         at += gap
         side: Literal["tx", "rx"] = "rx" if direction == "rx" else "tx"
         log.append(at, side, data, early)
-        kept.append((at, side, data, early))
+        kept.append((round(at * 1e6) / 1e6, side, data, early))  # kept to the microsecond
     return kept
 
 
@@ -79,3 +79,23 @@ def test_an_empty_log_gives_nothing() -> None:
     log = ChunkLog(keep_s=300.0, max_chunks=100)
     assert len(log) == 0
     assert list(log.since(0.0)) == []
+
+
+def test_a_polled_line_is_kept_in_a_few_bytes_a_chunk() -> None:
+    """The plant's traffic (a request and a reply per read, the replies' values moving):
+    sealed segments hold it in under 6 bytes a chunk (2.6 here), against 25 in plain arrays
+    and their 12 of times and marks."""
+    log = ChunkLog(keep_s=300.0, max_chunks=50_000)
+    at, kept = 1000.0, []
+    for cycle in range(400):
+        for node in range(1, 33):
+            request = b"\x02%02d01\r" % node
+            reply = b"\x02%02d%08d%08d\x06\r" % (node, 5000 + cycle % 7, 120 + node)
+            for direction, data in (("tx", request), ("rx", reply)):
+                at += 0.0037
+                side: Literal["tx", "rx"] = "rx" if direction == "rx" else "tx"
+                log.append(at, side, data, False)
+                kept.append((round(at * 1e6) / 1e6, side, data, False))
+    assert list(log.since(-1.0)) == kept
+    plain = sum(len(c[2]) + 12 for c in kept)
+    assert log.nbytes < 6 * len(kept) < plain / 4

@@ -50,7 +50,8 @@ def test_replies_are_described_for_traces() -> None:
 
 
 def _as_kept(records: list[sjbus.TraceRecord]) -> list[sjbus.Kept]:
-    return [(r.timestamp, r.direction, r.data, bool(r.early)) for r in records]
+    # The log keeps times to the microsecond (the pcapng resolution).
+    return [(round(r.timestamp * 1e6) / 1e6, r.direction, r.data, bool(r.early)) for r in records]
 
 
 async def test_a_recorder_keeps_what_the_trace_sees_chunk_for_chunk(scripted: MakeRig) -> None:
