@@ -12,11 +12,12 @@ application that embeds a Gateway keeps its collector as it set it.
 from __future__ import annotations
 
 import gc
+import weakref
 
 import pytest
 
 from sj300_async.gateway import GatewayStartError
-from sj300_async.gateway._heap import YOUNG_OBJECTS
+from sj300_async.gateway._heap import YOUNG_OBJECTS, collector_paused, freeze_long_lived, thaw
 
 from .conftest import running_gateway
 
@@ -75,3 +76,25 @@ async def test_an_embedded_gateway_leaves_the_collector_alone_unless_asked() -> 
         drive = gateway.drives[0]
         assert any(o is drive for o in gc.get_objects())  # scanned as any other object
     assert gc.get_threshold() == before
+
+
+class _Cycle:
+    """An object that refers to itself: freed only by the collector."""
+
+    def __init__(self) -> None:
+        self.me = self
+
+
+def test_cycles_made_while_the_collector_was_paused_are_not_frozen() -> None:
+    """What the northbounds' start leaves in cycles (asyncua's nodeset cache leaves one
+    per key read) is garbage, not a long-lived object: collected before the freeze."""
+    gc.unfreeze()
+    with collector_paused():
+        gone = weakref.ref(_Cycle())
+        assert gone() is not None  # the collector is paused: the cycle is still there
+        freeze_long_lived()
+    try:
+        assert gone() is None
+        assert gc.get_freeze_count() > 0
+    finally:
+        thaw()
