@@ -12,6 +12,13 @@ that is not finite is ``null`` (json writes ``NaN``, which is not JSON), a
 small float's exponent has no leading zero (``1e-5``, not ``1e-05``), and an
 integer past 64 bits is refused (TypeError) where json writes it: the
 gateway's values are drive readings and counters.
+
+**Right-sized.** Since 3.12, orjson returns its writer's buffer as the bytes
+object, at least 4 KiB and rounded up, never shrunk: a 500-byte state held
+8 KiB. The gateway keeps many of them (each drive's retained state, what
+waits in MQTT's outbox while the broker is away), so each is copied into a
+bytes of its own size (``bytes(memoryview(...))``: about 0.2 us, against
+8 KiB a drive at the plant's 2,048; issue 44, CHANGELOG).
 """
 
 from __future__ import annotations
@@ -39,4 +46,4 @@ def compact_json(value: Any, *, sort_keys: bool = False) -> bytes:
 
         _orjson = orjson
     written: bytes = _orjson.dumps(value, option=_orjson.OPT_SORT_KEYS if sort_keys else None)
-    return written
+    return bytes(memoryview(written))  # right-sized (module docstring)
