@@ -577,7 +577,7 @@ def test_workbench_streams_every_sample_and_times_the_overview(harness: ModuleTy
     # as its arrays' samples.
     assert memory.drives == bench.QUICK_MEMORY_DRIVES
     assert memory.capacity == 1980
-    assert memory.nbytes == memory.payload == 1980 * 20
+    assert memory.nbytes == memory.payload == 1980 * 16
     assert memory.per_drive >= memory.payload + memory.spare
     section = bench.report(result, config)
     assert [(r.unit, r.target, r.against, r.as_multiple) for r in section.results] == [

@@ -10,7 +10,13 @@ from hypothesis import given
 from hypothesis import strategies as st
 
 from sj300_async.gateway.http._events import EventHub, sse_frame
-from sj300_async.gateway.http._trend import SAMPLE_BYTES, Trend, trend_capacity
+from sj300_async.gateway.http._trend import (
+    MAX_OFFSET_MS,
+    SAMPLE_BYTES,
+    Trend,
+    millisecond,
+    trend_capacity,
+)
 
 
 def test_the_capacity_covers_the_window_with_a_margin() -> None:
@@ -70,10 +76,45 @@ def test_the_ring_is_the_tail_of_the_increasing_samples(capacity: int, times: li
     kept: list[float] = []
     for at in times:
         if trend.add(at, 1.0, 1.0, 1.0):
-            kept.append(at)
+            kept.append(millisecond(at))
     assert kept == sorted(set(kept))
     assert trend.columns()["time"] == kept[-capacity:]
-    assert trend.last_time == (kept[-1] if kept else None)
+
+
+def test_times_are_kept_to_the_millisecond_as_served() -> None:
+    trend = Trend(4)
+    assert trend.add(1_764_763_323.4561, 1.0, 1.0, 1.0)
+    assert not trend.add(1_764_763_323.4564, 2.0, 2.0, 2.0)  # the same millisecond
+    assert trend.add(1_764_763_323.4576, 3.0, 3.0, 3.0)
+    assert trend.columns()["time"] == [1_764_763_323.456, 1_764_763_323.458]
+    assert trend.last_time == millisecond(1_764_763_323.4576)
+
+
+DAY = 86_400.0
+
+
+def test_past_seven_weeks_the_base_moves_to_the_oldest_sample_kept() -> None:
+    trend = Trend(3)
+    start = 1_700_000_000.0
+    times = [start + day * DAY + 0.123 for day in (0, 20, 40, 60, 80)]
+    for at in times:
+        assert trend.add(at, 1.0, 1.0, 1.0)
+    assert times[-1] - times[0] > MAX_OFFSET_MS / 1000
+    assert trend.columns()["time"] == [millisecond(t) for t in times[-3:]]
+    assert trend.columns(since=times[3])["time"] == [millisecond(times[4])]
+
+
+def test_samples_kept_further_apart_than_seven_weeks_start_the_trend_again() -> None:
+    trend = Trend(3)
+    assert trend.add(1_700_000_000.0, 1.0, 1.0, 1.0)
+    assert trend.add(1_700_000_001.0, 2.0, 2.0, 2.0)
+    back = 1_700_000_001.0 + 50 * DAY  # a drive back after 50 days
+    assert trend.add(back, 3.0, 3.0, 3.0)
+    columns = trend.columns()
+    assert columns["time"] == [back]
+    assert columns["output_frequency_hz"] == [3.0]
+    assert trend.add(back + 1, 4.0, 4.0, 4.0)
+    assert len(trend) == 2
 
 
 def test_the_hub_sends_the_latest_frame_of_each_subject_and_counts_the_rest() -> None:

@@ -35,7 +35,7 @@ from .. import GatewayView, ServedDrive, ServedLine
 from ._events import EventHub, sse_frame
 from ._json import Json, drive_json, monitor_time
 from ._linetrace import LineTrace
-from ._trend import Trend, trend_capacity
+from ._trend import Trend, millisecond, trend_capacity
 
 __all__ = ["LINE_EVENT_S", "Workbench"]
 
@@ -89,7 +89,7 @@ class Workbench:
             self._monitor_at[key] = snapshot.monitor_at
             at = monitor_time(snapshot)
             assert at is not None
-            self._monitor_time[key] = at
+            self._monitor_time[key] = millisecond(at)  # as the trend keeps it
             trend.add(
                 at,
                 snapshot.output_frequency_hz,
