@@ -201,8 +201,10 @@ def _toml(
     directory: Path,
     gateway_id: str = GATEWAY_ID,
     first_line: int = 0,
+    interval_s: float = INTERVAL_S,
 ) -> str:
-    """The configuration of *which*: lines ``l<first_line>`` on, *lines* of them."""
+    """The configuration of *which*: lines ``l<first_line>`` on, *lines* of them, polled
+    every *interval_s*."""
     parts = EVERY if which in WITH_CLIENTS else set(which.split("+")) - {"bare"}
     text = f'[gateway]\nid = "{gateway_id}"\n'
     if "mqtt" in parts:
@@ -229,7 +231,7 @@ def _toml(
             url = "sim://?nodes=1-{per_line}"
             nodes = "1-{per_line}"
             unit_offset = {((index - first_line) % LINES_PER_LISTENER) * DRIVES_PER_LINE}
-            interval_s = {INTERVAL_S!r}
+            interval_s = {interval_s!r}
             trips_interval_s = 0
             setpoint_interval_s = 0
             """
@@ -398,8 +400,15 @@ def _delivery(bridge: Any, edge: Any) -> dict[str, int]:
 
 
 def main(argv: Sequence[str] | None = None) -> None:
-    """``python -m benchmarks.bench_plant gateway|heap ...``: one configuration's child,
-    timed (gateway) or its heap traced (heap, :func:`benchmarks._memory.heap_child`)."""
+    """``python -m benchmarks.bench_plant gateway|heap|soak ...``: one configuration's child,
+    timed (gateway) or its heap traced (heap, :func:`benchmarks._memory.heap_child`), or a
+    long run of ``all`` sampling its memory and descriptors (soak, :mod:`benchmarks._soak`)."""
+    argv = sys.argv[1:] if argv is None else argv
+    if argv[:1] == ["soak"]:
+        from ._soak import main as soak
+
+        soak(argv[1:])
+        return
     parser = argparse.ArgumentParser(prog="python -m benchmarks.bench_plant")
     parser.add_argument("role", choices=["gateway", "heap"])
     parser.add_argument("--with", dest="which", choices=CONFIGURATIONS, required=True)
