@@ -577,8 +577,9 @@ def test_workbench_streams_every_sample_and_times_the_overview(harness: ModuleTy
     # as its arrays' samples.
     assert memory.drives == bench.QUICK_MEMORY_DRIVES
     assert memory.capacity == 1980
-    assert memory.nbytes == memory.payload == 1980 * 16
-    assert memory.per_drive >= memory.payload + memory.spare
+    assert memory.payload == 1980 * 16
+    assert 0 < memory.nbytes < memory.payload / 2  # sealed: a ramp packs
+    assert memory.per_drive >= memory.nbytes
     section = bench.report(result, config)
     assert [(r.unit, r.target, r.against, r.as_multiple) for r in section.results] == [
         ("µs", bench.TARGET_CPU_RATIO, "no stream", True),
