@@ -222,6 +222,8 @@ _HEADLINES = frozenset(
         "untyped_errors",
         "swallowed_cancellations",
         "leaks",
+        "rss_peak_growth_pct",
+        "fds_after_settle",
         "elapsed_s",
     )
 )

@@ -91,6 +91,9 @@ def _figures(soak: Soak, elapsed_s: float) -> dict[str, Any]:
             for s in soak.series
         ],
         "verdict": soak.verdict,
+        # the headlines (tests/conftest.py): the largest growth above settling, fds min/max
+        "rss_peak_growth_pct": round(soak.verdict.get("peak_growth_pct", float("nan")), 2),
+        "fds_after_settle": [soak.verdict.get("fds_min"), soak.verdict.get("fds_max")],
         "clients_at_the_end": {
             name: one.get("messages", one.get("reads")) for name, one in clients.items()
         },
