@@ -11,6 +11,16 @@ reading the summary). The plant is ``--lines`` lines of ``--per-line``
 simulated drives polled every ``--interval`` seconds (8 x 32 at 0.1 s by
 default: issue 44's soak, a plant's hours compressed).
 
+The workbench keeps a :data:`TREND_S` trend of each drive (``[http]
+trend_s``; ``--trend-s``), not its default 15 minutes: the trend is a ring
+of ``trend_s`` over the poll interval samples, compressed as it fills (issue
+44), and at this plant's pace (about 0.15 s a poll: 8 lines of 32 drives do
+not keep 0.1 s) 15 minutes of samples take 25 minutes to fill, growing some
+40 KiB a drive all the while, 10 MiB for the plant: a soak judged from
+minute 5 would count it. Two minutes' ring is full and wrapping by minute
+4, so the soak exercises what a leak would hide in: a ring that drops its
+oldest block as it seals a new one, over and over.
+
 The drives never settle: each runs forward on a :data:`RAMP_S` ramp (both
 ways), rises to :data:`HIGH_HZ`, then swings between :data:`LOW_HZ` and
 :data:`HIGH_HZ` for ever, its setpoint (written through its line's bus, the
@@ -61,6 +71,7 @@ __all__ = [
     "HIGH_HZ",
     "LOW_HZ",
     "RAMP_S",
+    "TREND_S",
     "Sample",
     "Soak",
     "child_main",
@@ -79,6 +90,8 @@ SAMPLE_EVERY_S: Final = 60.0
 SETTLE_S: Final = 300.0
 #: The clients' final window, in which each must receive something.
 CHECK_S: Final = 10.0
+#: The workbench's trend window (module docstring): full, and wrapping, before SETTLE_S.
+TREND_S: Final = 120.0
 #: The drives' ramp: 0 Hz to the maximum frequency (A004) in this long, both ways.
 RAMP_S: Final = 120.0
 #: The output swings between these, once it has first risen to HIGH_HZ.
@@ -163,7 +176,7 @@ async def _child(args: argparse.Namespace) -> None:
 
     text = _toml(
         "all", args.lines, args.per_line, args.broker, Path(args.directory),
-        interval_s=args.interval,
+        interval_s=args.interval, trend_s=args.trend,
     )  # fmt: skip
     loop = asyncio.get_running_loop()
     began = loop.time()
@@ -250,6 +263,7 @@ def child_main(argv: Sequence[str] | None = None) -> None:
     parser.add_argument("--duration", type=float, required=True)
     parser.add_argument("--sample-every", type=float, required=True)
     parser.add_argument("--check", type=float, required=True)
+    parser.add_argument("--trend", type=float, required=True)
     asyncio.run(_child(parser.parse_args(argv)))
 
 
@@ -281,6 +295,7 @@ class Soak:
     interval_s: float
     duration_s: float
     settle_s: float
+    trend_s: float
     #: From the child's start: the gateway built, and every drive visible (``ready``).
     started_s: float
     ready_s: float
@@ -332,13 +347,14 @@ async def _soak(
     sample_every_s: float,
     settle_s: float,
     check_s: float,
+    trend_s: float,
 ) -> Soak:
     command = [
         sys.executable, "-m", "benchmarks._soak",
         "--lines", str(lines), "--per-line", str(per_line), "--interval", str(interval_s),
         "--broker", str(broker), "--directory", str(directory),
         "--duration", str(duration_s), "--sample-every", str(sample_every_s),
-        "--check", str(check_s),
+        "--check", str(check_s), "--trend", str(trend_s),
     ]  # fmt: skip
     log = directory / "child.log"
     with log.open("wb") as stderr:  # a file, not a pipe: a chatty child never blocks on it
@@ -375,6 +391,7 @@ async def _soak(
         interval_s=interval_s,
         duration_s=duration_s,
         settle_s=settle_s,
+        trend_s=trend_s,
         started_s=ready["started_s"],
         ready_s=ready["ready_s"],
         series=tuple(series),
@@ -449,6 +466,7 @@ def run_soak(
     sample_every_s: float = SAMPLE_EVERY_S,
     settle_s: float = SETTLE_S,
     check_s: float = CHECK_S,
+    trend_s: float = TREND_S,
 ) -> Soak:
     """One soak on a mosquitto of its own (module docstring); raises if the child fails."""
     from .bench_mqtt import _mosquitto
@@ -460,7 +478,7 @@ def run_soak(
             _soak(
                 broker, Path(directory), lines=lines, per_line=per_line, interval_s=interval_s,
                 duration_s=duration_s, sample_every_s=sample_every_s, settle_s=settle_s,
-                check_s=check_s,
+                check_s=check_s, trend_s=trend_s,
             )
         )  # fmt: skip
 
@@ -469,8 +487,9 @@ def summary(soak: Soak) -> str:
     """The series as a table, and the verdict: for a reader (the JSON has everything)."""
     out = [
         f"soak: {soak.lines} x {soak.per_line} drives at {soak.interval_s:g} s, "
-        f"{soak.duration_s:g} s; gateway built in {soak.started_s:.1f} s, every drive "
-        f"visible and the clients subscribed after {soak.ready_s:.1f} s",
+        f"{soak.duration_s:g} s, trends of {soak.trend_s:g} s; gateway built in "
+        f"{soak.started_s:.1f} s, every drive visible and the clients subscribed after "
+        f"{soak.ready_s:.1f} s",
         "| t (s) | RSS (MiB) | fds | samples/s | JSON states/s | DDATA/s | CPU |",
         "|---:|---:|---:|---:|---:|---:|---:|",
     ]
@@ -494,13 +513,14 @@ def main(argv: Sequence[str] | None = None) -> None:
     parser.add_argument("--sample-every", type=float, default=SAMPLE_EVERY_S)
     parser.add_argument("--settle", type=float, default=SETTLE_S, help="growth counted from here")
     parser.add_argument("--check", type=float, default=CHECK_S, help="the clients' final window")
+    parser.add_argument("--trend-s", type=float, default=TREND_S, help="the workbench's trend")
     parser.add_argument("--max-growth-pct", type=float, default=1.0)
     parser.add_argument("--json", metavar="PATH", help="also write the soak as JSON")
     args = parser.parse_args(argv)
     soak = run_soak(
         lines=args.lines, per_line=args.per_line, interval_s=args.interval,
         duration_s=args.duration, sample_every_s=args.sample_every, settle_s=args.settle,
-        check_s=args.check,
+        check_s=args.check, trend_s=args.trend_s,
     )  # fmt: skip
     print(summary(soak), flush=True)
     if args.json:

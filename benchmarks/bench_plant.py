@@ -202,9 +202,10 @@ def _toml(
     gateway_id: str = GATEWAY_ID,
     first_line: int = 0,
     interval_s: float = INTERVAL_S,
+    trend_s: float | None = None,
 ) -> str:
     """The configuration of *which*: lines ``l<first_line>`` on, *lines* of them, polled
-    every *interval_s*."""
+    every *interval_s*; the workbench's trends *trend_s* long (None: its default)."""
     parts = EVERY if which in WITH_CLIENTS else set(which.split("+")) - {"bare"}
     text = f'[gateway]\nid = "{gateway_id}"\n'
     if "mqtt" in parts:
@@ -223,6 +224,7 @@ def _toml(
         text += opcua_section(directory)
     if "http" in parts:
         text += '[http]\nlisten = "127.0.0.1:0"\n'
+        text += "" if trend_s is None else f"trend_s = {trend_s!r}\n"
     for index in indices:
         text += textwrap.dedent(
             f"""
