@@ -52,6 +52,7 @@ counters (:mod:`._values`) are Good whenever the line has a value for them.
 from __future__ import annotations
 
 import math
+import sys
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 from typing import Final
@@ -414,7 +415,8 @@ class _DriveBuilder:
             value_range=value_range, states=states, writable=writable, array=array,
         )  # fmt: skip
         read, stamp, read_group = source
-        relative = f"{path}/{name}".removeprefix(f"{self.path}/")
+        # One string for every drive (the same path below each): 18 a drive, 2.9 MiB at 2,048.
+        relative = sys.intern(f"{path}/{name}".removeprefix(f"{self.path}/"))
         binding = Binding(
             node,
             vtype,
