@@ -15,7 +15,7 @@ import pytest
 from sj300_async.gateway import KeyedBudget, PasswordChecks, hash_password
 from sj300_async.gateway import _logflood as logflood
 from sj300_async.gateway._logflood import FloodLimit
-from sj300_async.gateway._looplag import LAG_BUCKETS_S, TOLERANCE_S, LoopMonitor
+from sj300_async.gateway._looplag import KEPT_SAMPLES, LAG_BUCKETS_S, TOLERANCE_S, LoopMonitor
 
 
 class Clock:
@@ -178,6 +178,24 @@ def test_the_limit_is_on_every_logger_while_installed_and_gone_after() -> None:
 
 
 # -- LoopMonitor -----------------------------------------------------------------------
+
+
+def test_the_monitor_keeps_the_last_samples_in_a_ring_of_fixed_size() -> None:
+    monitor = LoopMonitor()
+    held = monitor._samples.buffer_info()
+    for n in range(KEPT_SAMPLES + 500):
+        monitor.record(n / 1e6, float(n))
+    assert monitor._samples.buffer_info() == held  # made full size, never grown
+    everything = monitor.since(0)  # as far back as kept: the newest KEPT_SAMPLES
+    assert everything.samples == KEPT_SAMPLES
+    assert everything.max_s == (KEPT_SAMPLES + 499) / 1e6
+    assert everything.p50_s == (500 + (KEPT_SAMPLES - 1) // 2) / 1e6
+    last = monitor.since(monitor.mark() - 3)
+    assert (last.samples, last.p50_s, last.max_s) == (
+        3,
+        (KEPT_SAMPLES + 498) / 1e6,
+        (KEPT_SAMPLES + 499) / 1e6,
+    )
 
 
 def test_the_monitor_counts_lags_into_its_histogram_and_stalls_beyond_the_tolerance() -> None:
