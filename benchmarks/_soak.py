@@ -172,7 +172,7 @@ def _emit(body: dict[str, Any]) -> None:
 async def _child(args: argparse.Namespace) -> None:
     from sj300_async.gateway import Gateway, parse_config
 
-    from .bench_plant import _Clients, _delivery, _toml
+    from .bench_plant import SampleCount, _Clients, _delivery, _toml
 
     text = _toml(
         "all", args.lines, args.per_line, args.broker, Path(args.directory),
@@ -182,14 +182,7 @@ async def _child(args: argparse.Namespace) -> None:
     began = loop.time()
     async with Gateway(parse_config(text, "soak.toml"), tune_collector=True) as gateway:
         started_s = loop.time() - began
-        samples = 0
-
-        def on_sample(sample: Any) -> None:
-            nonlocal samples
-            samples += 1
-
-        for line in gateway.lines:
-            line.poller.on_sample(on_sample)
+        counted = SampleCount(gateway)
         drives = len(gateway.drives)
         bridge: Any = gateway.northbounds["mqtt"]
         edge: Any = gateway.northbounds["sparkplug"]
@@ -218,7 +211,7 @@ async def _child(args: argparse.Namespace) -> None:
                     "event": "sample",
                     "t_s": at - start,
                     "cpu_s": time.process_time(),
-                    "samples": samples,
+                    "samples": counted.samples,
                     "mqtt_states": delivery["mqtt_states"],
                     "mqtt_lost": delivery["mqtt_lost"],
                     "spb_ddata": edge.stats.published["DDATA"],

@@ -245,6 +245,18 @@ def _toml(
 # -- the child ------------------------------------------------------------------------------
 
 
+class SampleCount:
+    """Every drive sample *gateway*'s lines take, counted (what CPU is divided by)."""
+
+    def __init__(self, gateway: Any) -> None:
+        self.samples = 0
+        for line in gateway.lines:
+            line.poller.on_sample(self._one)
+
+    def _one(self, sample: object) -> None:
+        self.samples += 1
+
+
 async def _child(args: argparse.Namespace) -> dict[str, Any]:
     from sj300_async.gateway import Gateway, parse_config
 
@@ -256,14 +268,7 @@ async def _child(args: argparse.Namespace) -> dict[str, Any]:
     began = loop.time()
     async with Gateway(parse_config(text, "bench_plant.toml"), tune_collector=True) as gateway:
         started_s = loop.time() - began
-        samples = 0
-
-        def on_sample(sample: Any) -> None:
-            nonlocal samples
-            samples += 1
-
-        for line in gateway.lines:
-            line.poller.on_sample(on_sample)
+        counted = SampleCount(gateway)
         drives = len(gateway.drives)
         bridge: Any = gateway.northbounds.get("mqtt")
         edge: Any = gateway.northbounds.get("sparkplug")
@@ -297,9 +302,9 @@ async def _child(args: argparse.Namespace) -> dict[str, Any]:
             before = _delivery(bridge, edge)
             windows = []
             for _ in range(args.windows):
-                cpu, count, wall = time.process_time(), samples, loop.time()
+                cpu, count, wall = time.process_time(), counted.samples, loop.time()
                 await asyncio.sleep(args.window)
-                cpu, count = time.process_time() - cpu, samples - count
+                cpu, count = time.process_time() - cpu, counted.samples - count
                 windows.append({"cpu_s": cpu, "samples": count, "wall_s": loop.time() - wall})
             after = _delivery(bridge, edge)
             figures = None if clients is None else await clients.results()
