@@ -17,8 +17,9 @@ to the collector's permanent generation (:func:`freeze_long_lived`, Python's
 again. One full collection comes first, as Python's documentation advises:
 frozen, the cycles made while the collector was paused would never be freed
 (each key of asyncua's nodeset cache is read by ``ast.literal_eval``, whose
-closures leave a cycle per call: 5.3 MiB kept, issue 44). The gateway's stop moves it back (:func:`thaw`), so that a process
-that starts many gateways (the tests) collects what each left in cycles.
+closures leave a cycle per call: 5.3 MiB kept, issue 44). The gateway's
+stop moves the frozen back (:func:`thaw`), so that a process that starts
+many gateways (the tests) collects what each left in cycles.
 
 While a gateway runs, the youngest generation is collected after
 :data:`YOUNG_OBJECTS` more objects than were freed, not Python's 700
