@@ -911,8 +911,7 @@ def _allocated(make: Callable[[], object]) -> tuple[int, object]:
 def _filled(capacity: int) -> object:
     """A trend as a running drive leaves it: its window full and a block more, ramping, its
     current and voltage wavering in their last digit, each read a few ms late or early."""
-    from sj300_async.gateway.http import Trend
-    from sj300_async.gateway.http._trend import BLOCK
+    from sj300_async.gateway.http import BLOCK, Trend
 
     trend = Trend(capacity)
     for at in range(capacity + BLOCK):

@@ -196,7 +196,7 @@ GATEWAY_HTTP_NAMES = (
     # who may write through the workbench, and the hashes their configuration holds
     "ApiToken", "User", "hash_password", "hash_token", "new_token",
     # each drive's trend (its memory is a benchmark's figure)
-    "SAMPLE_BYTES", "Trend", "trend_capacity",
+    "BLOCK", "SAMPLE_BYTES", "Trend", "trend_capacity",
 )  # fmt: skip
 GATEWAY_OPCUA_NAMES = (
     "DEFAULT_SECURITY", "NORTHBOUND", "OPCUA_KEYS", "SECURITY_MODES", "OpcuaConfig",

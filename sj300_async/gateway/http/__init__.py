@@ -43,7 +43,7 @@ from .. import (
     parse_users,
 )
 from ._auth import ApiToken, hash_token, new_token
-from ._trend import SAMPLE_BYTES, Trend, trend_capacity
+from ._trend import BLOCK, SAMPLE_BYTES, Trend, trend_capacity
 
 #: Seconds a request's head and body may take, from its first byte (``_server``): a
 #: 1 MiB backup needs 1.7 Mbit/s, a login or a write a few hundred bytes.
@@ -54,6 +54,7 @@ DEFAULT_BODY_TIMEOUT_S: Final = 5.0
 DEFAULT_STREAMS_PER_ADDRESS: Final = 16
 
 __all__ = [
+    "BLOCK",
     "DEFAULT_LIMITS",
     "DEFAULT_TREND_S",
     "NORTHBOUND",
