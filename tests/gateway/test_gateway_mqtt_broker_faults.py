@@ -207,3 +207,26 @@ async def test_a_subscribe_never_answered_ends_the_set_up_within_the_keepalive(
     # Then the sweep's (mqtt/_sweep.py), on the same connection: this gateway's own topics.
     assert all(f.startswith(("sj300/gw1/", "homeassistant/+/sj300_gw1")) for f in filters[2:])
     assert (TOPICS.availability, b"online", 1) in second.publishes
+
+
+async def test_a_clean_stop_lets_the_batch_on_its_way_be_acknowledged_and_counts_it_delivered(
+    sim_line: SimLine,
+) -> None:
+    # A broker slow to acknowledge: the stop comes while a batch of states waits for
+    # its PUBACKs. Cancelled there, the bridge counted as lost states the broker had
+    # (the flaky count of test_a_state_message_per_drive_per_poll, one run in ~50).
+    async with misbehaving_broker() as broker:
+        broker.puback_delay_s = 0.4
+        async with running_gateway(toml(sim_line.url, broker)) as gateway:
+            mqtt = bridge(gateway)
+            await wait_for(lambda: mqtt.connected and mqtt.stats.states.total() >= 4, "states")
+            first = broker.connections[0]
+            sent = len(first.publishes)
+            await broker.until(lambda: len(first.publishes) > sent, "a batch on its way")
+            stats = mqtt.stats
+        # (the gateway stopped: the bridge's close returned)
+    states = [p for p in first.publishes if p[0].endswith("/state")]
+    assert stats.lost == 0
+    assert len(states) == stats.states.total()  # every state the broker has, counted
+    assert first.disconnected  # clean: the will is dropped
+    assert first.publishes[-1] == (TOPICS.availability, b"offline", 1)

@@ -82,6 +82,7 @@ DEBUG (refusals also in the audit log).
 from __future__ import annotations
 
 import asyncio
+import contextlib
 import json
 import logging
 import math
@@ -156,6 +157,11 @@ class MqttBridge:
         #: Waiting to be published.
         self._outbox = Outbox(self.stats)
         self._wake = asyncio.Event()
+        #: Clear while the publisher has a batch on its way: a clean stop waits for it
+        #: (cancelled between a PUBLISH and its PUBACK, a message that did reach the
+        #: broker would be counted lost).
+        self._idle = asyncio.Event()
+        self._idle.set()
         #: The latest state message of each drive (republished on every connect).
         self._latest: dict[Key, Out] = {}
         #: The availability last put in the outbox, per drive.
@@ -266,7 +272,13 @@ class MqttBridge:
         while True:
             await self._wake.wait()  # the gateway's batch did the gathering: no timer here
             self._wake.clear()
-            await self._send(client)
+            if self._closing:
+                continue  # a clean stop: _say_offline sends what waits, on its own time
+            self._idle.clear()
+            try:
+                await self._send(client)
+            finally:
+                self._idle.set()
 
     # -- the connection ------------------------------------------------------------------
 
@@ -543,6 +555,12 @@ class MqttBridge:
         # The connection's own task says "offline" as it ends (see _connection), after
         # anything it was publishing: never before an "online" still on its way.
         self._close_by = loop.time() + CLOSE_TIMEOUT_S
+        # The batch on its way finishes first (no new one starts: see _publisher); an
+        # announcement's configs not made yet wait for the next start.
+        self._outbox.announcing = None
+        with contextlib.suppress(TimeoutError):
+            async with asyncio.timeout_at(self._close_by):
+                await self._idle.wait()
         # Its "offline" and its disconnect take up to CLOSE_TIMEOUT_S and the client's
         # own close time: cancelled again sooner, it would leave "online" retained.
         await cancel_and_wait({self._task}, patience_s=2 * CLOSE_TIMEOUT_S)
