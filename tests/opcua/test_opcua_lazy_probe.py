@@ -511,7 +511,7 @@ def _no_watch_left(server: OpcuaServer) -> None:
     table = _table(server)
     assert _watched_nodes(table) == 0
     assert server._watched == {}
-    assert all(binding.watched == 0 for _, binding in server._bound.values())
+    assert all(binding.watched == 0 for binding in server._bound.values())
     assert all(nodes.watched == 0 for nodes in server._drives.values())
     space = server.address_space
     assert space is not None

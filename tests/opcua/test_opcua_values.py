@@ -10,7 +10,7 @@ from collections.abc import AsyncIterator
 from dataclasses import dataclass
 from datetime import datetime
 from pathlib import Path
-from typing import Any
+from typing import Any, cast
 
 import pytest
 from asyncua import Client, ua
@@ -22,6 +22,7 @@ from sj300_async.gateway.opcua._model import (
     _SETPOINT,
     _TRIP_COUNT,
     Binding,
+    DriveNodes,
     Source,
     _parameter,
 )
@@ -422,8 +423,9 @@ def test_each_served_quality_is_worded_as_one_status_code() -> None:
 
 def _binding(source: Source, served: ServedDrive, parameter: str | None = None) -> Binding:
     read, _, read_group = source
+    owner = cast(DriveNodes, None)  # its drive's object: not looked at by a judgement
     binding = Binding(
-        ua.NodeId(1, 2), ua.VariantType.Double, read, served, read_group=read_group,
+        ua.NodeId(1, 2), ua.VariantType.Double, read, served, owner, read_group=read_group,
         parameter=parameter,
     )  # fmt: skip
     binding.take(served)

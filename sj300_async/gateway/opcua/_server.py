@@ -135,8 +135,8 @@ class OpcuaServer:
         self._writable: dict[ua.NodeId, tuple[DriveNodes, str]] = {}
         #: Every drive variable's binding (its name is the audit log's), by node; those
         #: watched by a monitored item.
-        self._bound: dict[ua.NodeId, tuple[DriveNodes, Binding]] = {}
-        self._watched: dict[ua.NodeId, tuple[DriveNodes, Binding]] = {}
+        self._bound: dict[ua.NodeId, Binding] = {}
+        self._watched: dict[ua.NodeId, Binding] = {}
         self._outbox: dict[ua.NodeId, ua.DataValue] = {}
         self._wake = asyncio.Event()
         self._tasks: list[asyncio.Task[None]] = []
@@ -271,7 +271,7 @@ class OpcuaServer:
             for node, code in nodes.writable.items():
                 self._writable[node] = (nodes, code)
             for binding in nodes.bindings:
-                self._bound[binding.node] = (nodes, binding)
+                self._bound[binding.node] = binding
         follow_watchers(server, self._watch)
         route_writes(server, self.namespace, self._write)
         install_speedups()  # where asyncua is a release they were tested with (logged if not)
@@ -323,12 +323,11 @@ class OpcuaServer:
 
     def _bind_node(self, node: ua.NodeId, data: NodeData) -> None:
         """Bind a drive's node the lazy address space has just made (see :meth:`_bind`)."""
-        bound = self._bound.get(node)
-        if bound is not None:
-            nodes, binding = bound
+        binding = self._bound.get(node)
+        if binding is not None:
             value = data.attributes[ua.AttributeIds.Value]
             value.value = None  # as asyncua's set_attribute_value_callback leaves it
-            value.value_callback = self._reader(binding, nodes.drive)
+            value.value_callback = self._reader(binding, binding.owner.drive)
             value.value_setter = _keep
             return
         handler = self._handlers.get(node)
@@ -516,7 +515,7 @@ class OpcuaServer:
         assert self._loop is not None
         now = self._loop.time()
         changed = False
-        for _, binding in self._watched.values():
+        for binding in self._watched.values():
             pushed = binding.pushed
             # Between samples only time changes a pushed value's status, and time only
             # ages a Good one, past its group's served deadline: the rest are left as they
@@ -541,10 +540,9 @@ class OpcuaServer:
             written = value.Value if value.Value is not None else ua.DataValue()
             return ua.StatusCode(await self._calls.write_parameter(nodes.drive, code, written))
         assert self._calls is not None
-        owner = self._bound.get(value.NodeId)
-        if owner is not None:  # a drive's read-only variable: a refused write, audited
-            nodes, binding = owner
-            return ua.StatusCode(self._calls.not_writable(nodes.drive, binding.name))
+        binding = self._bound.get(value.NodeId)
+        if binding is not None:  # a drive's read-only variable: a refused write, audited
+            return ua.StatusCode(self._calls.not_writable(binding.owner.drive, binding.name))
         known = self._server is not None and value.NodeId in self._server.iserver.aspace
         status = ua.StatusCodes.BadNotWritable if known else ua.StatusCodes.BadNodeIdUnknown
         self._calls.count(status)
@@ -570,16 +568,16 @@ class OpcuaServer:
 
     def _watch(self, node: ua.NodeId, change: int) -> None:
         """A monitored item added to (+1) or deleted from (-1) *node*'s value."""
-        bound = self._bound.get(node)
-        if bound is None:  # a line counter, or a node not ours
+        binding = self._bound.get(node)
+        if binding is None:  # a line counter, or a node not ours
             self._counters.watch(node, change)
             return
-        nodes, binding = bound
+        nodes = binding.owner
         binding.watched += change
         nodes.watched += change
         nodes.follow()
         if binding.watched > 0:
-            self._watched[node] = bound
+            self._watched[node] = binding
             return
         # Nobody watches it now: what it showed is forgotten. A subscription made
         # later starts from a read, and a first push of the same value notifies
