@@ -61,9 +61,9 @@ def judge(device: Device, received: ReceivedMetric) -> Judged:
     """The write *received* asks of *device* (see the module docstring)."""
     metric = None
     if received.alias is not None:
-        metric = device.by_alias.get(received.alias)
+        metric = device.by_alias(received.alias)
     elif received.name is not None:
-        metric = device.by_name.get(received.name)
+        metric = device.by_name(received.name)
     if metric is None:
         what = excerpt(received.label)
         return (

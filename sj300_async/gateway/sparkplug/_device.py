@@ -37,9 +37,12 @@ configuration, so they are the same at every birth.
 
 from __future__ import annotations
 
+import functools
 import operator
-from collections.abc import Callable, Sequence
+import sys
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
+from types import MappingProxyType
 from typing import Final
 
 from ...profiles import ParameterSpec
@@ -104,6 +107,11 @@ def device_id(line: str, node: int) -> str:
     return f"{line}-{node}"
 
 
+# The readers and properties below are made once for every device (functools.cache):
+# each device's own came to some 2 KiB a drive at 2,048 (issue 44).
+
+
+@functools.cache
 def _unit(unit: str) -> tuple[Property, ...]:
     return (Property("engUnit", STRING, unit),) if unit else ()
 
@@ -128,10 +136,12 @@ class _Constant:
         return self.value
 
 
+@functools.cache
 def _field(name: str) -> Reader:
     return _Field(name)
 
 
+@functools.cache
 def _parameter(code: str) -> Reader:
     def read(values: ServedValues, flags: DeviceFlags) -> object:
         reading = values.parameters.get(code)
@@ -165,12 +175,23 @@ def _never(values: ServedValues, flags: DeviceFlags) -> object:
 
 
 def _parameter_properties(spec: ParameterSpec) -> tuple[Property, ...]:
+    return _properties(spec.unit, float(spec.minimum), float(spec.maximum), spec.name)
+
+
+@functools.cache
+def _properties(unit: str, low: float, high: float, name: str) -> tuple[Property, ...]:
     return (
-        *_unit(spec.unit),
-        Property("engLow", DOUBLE, float(spec.minimum)),
-        Property("engHigh", DOUBLE, float(spec.maximum)),
-        Property("Documentation", STRING, spec.name),
+        *_unit(unit),
+        Property("engLow", DOUBLE, low),
+        Property("engHigh", DOUBLE, high),
+        Property("Documentation", STRING, name),
     )
+
+
+@functools.cache
+def _indices(names: tuple[str, ...]) -> Mapping[str, int]:
+    """Each metric's index by name: one mapping for every device of these metrics."""
+    return MappingProxyType({name: index for index, name in enumerate(names)})
 
 
 class Device:
@@ -222,7 +243,7 @@ class Device:
             spec = profile.parameters.spec(code)
             rows.append(
                 (
-                    f"Parameters/{code}",
+                    sys.intern(f"Parameters/{code}"),
                     DOUBLE,
                     _parameter_properties(spec),
                     _parameter(code),
@@ -263,11 +284,21 @@ class Device:
             for i, m in enumerate(self.metrics)
             if not isinstance(m.read, (_Field, _Constant))
         )
-        self.by_alias = {m.definition.alias: m for m in self.metrics}
-        self.by_name = {m.definition.name: m for m in self.metrics}
+        self._base = base
+        self._indices = _indices(tuple(m.definition.name for m in self.metrics))
         self._refusal_index = next(
             (i for i, m in enumerate(self.metrics) if m.definition.name == LAST_REFUSAL), None
         )
+
+    def by_alias(self, alias: int) -> DeviceMetric | None:
+        """The metric of alias *alias*, None: none of this device's."""
+        index = alias - self._base
+        return self.metrics[index] if 0 <= index < len(self.metrics) else None
+
+    def by_name(self, name: str) -> DeviceMetric | None:
+        """The metric named *name*, None: none of this device's."""
+        index = self._indices.get(name)
+        return None if index is None else self.metrics[index]
 
     def values(
         self, values: ServedValues, flags: DeviceFlags, refusal: tuple[str, int] | None
