@@ -8,7 +8,7 @@ chunks a second (32 drives, two reads a sample, a request and a reply
 each, 34 bytes on average): 2.6 million chunks, 40,000 a line. As a tuple
 each (its float, its bytes object, its slot in a deque) a chunk took about
 150 bytes; in plain arrays its bytes plus 16, 1.9 MB a line, 58 KiB a
-drive; compressed as below about 6 bytes (see CHANGELOG for the figures).
+drive; compressed as below 3 to 5 bytes (see CHANGELOG for the figures).
 
 Decisions:
 

@@ -25,13 +25,13 @@ Decisions:
   appended to the drive's one buffer of sealed blocks, whose sizes one
   array keeps. A block's first sample is its step from zero, so a block
   reads on its own and the oldest is dropped by cutting its bytes off the
-  buffer's front. A 15-minute trend at 1 s took 15.5 KiB a drive held
-  plainly (16 bytes a sample); a ramping drive's now takes about 2 KiB
-  with its objects, where a deque of block objects and four typed arrays
-  took 7.2 KiB (issue 44, CHANGELOG). Writing a sample costs about a
-  microsecond more than four array appends; reading the trend decodes its
-  varints in Python (about 1 ms for 1,000 samples), which only a request
-  does.
+  buffer's front. A 15-minute trend at 0.5 s is 31 KiB a drive held
+  plainly (16 bytes a sample); a ramping drive's now takes 2.7 KiB with
+  its objects, where a deque of block objects and four typed
+  arrays took 7.2 KiB (issue 44, CHANGELOG). Writing a sample costs about
+  a tenth of a microsecond more than four array appends did; reading the
+  trend decodes its varints in Python (about 1 ms for 1,000 samples),
+  which only a request does.
 - Whole blocks expire: the trend holds the last ``capacity`` samples and
   at most one block more, and serves the last ``capacity``.
 - A sample is kept only when the monitor was read again since the last one
