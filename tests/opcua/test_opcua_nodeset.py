@@ -34,7 +34,9 @@ async def _reads_the_standard(server: Server) -> None:
 async def test_the_first_start_makes_the_shelf_and_the_next_reads_it(tmp_path: Path) -> None:
     cache = tmp_path / "cache"
     first, table = await _start(cache)
-    assert table is dict  # built from asyncua's code, as without a cache
+    # Made by a child process, then read: the first start's process holds no built
+    # nodes (module docstring), as any later start.
+    assert table.__name__ == "LazyLoadingDict"
     await _reads_the_standard(first)
     shelf = shelf_directory(cache)
     assert (shelf / SHELF_NAME).is_file()
@@ -43,6 +45,30 @@ async def test_the_first_start_makes_the_shelf_and_the_next_reads_it(tmp_path: P
     second, table = await _start(cache)
     assert table.__name__ == "LazyLoadingDict"  # asyncua's, reading the shelf
     await _reads_the_standard(second)
+
+
+async def test_where_the_child_fails_the_nodes_are_built_here_and_the_shelf_made(
+    tmp_path: Path, caplog: pytest.LogCaptureFixture, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    caplog.set_level(logging.INFO, logger="sj300_async.gateway.opcua")
+    monkeypatch.setattr("sys.executable", "/bin/false")  # a child that fails at once
+    cache = tmp_path / "cache"
+    server, table = await _start(cache)
+    assert table is dict  # built from asyncua's code, in this process
+    await _reads_the_standard(server)
+    assert (shelf_directory(cache) / SHELF_NAME).is_file()  # and the shelf made here
+    assert any("nodeset cache child failed (1" in r.getMessage() for r in caplog.records)
+
+
+async def test_a_child_that_cannot_start_is_no_reason_not_to_start(
+    tmp_path: Path, caplog: pytest.LogCaptureFixture, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    caplog.set_level(logging.INFO, logger="sj300_async.gateway.opcua")
+    monkeypatch.setattr("sys.executable", str(tmp_path / "no-such-python"))
+    server, table = await _start(tmp_path / "cache")
+    assert table is dict
+    await _reads_the_standard(server)
+    assert any("not made by a child" in r.getMessage() for r in caplog.records)
 
 
 async def test_without_a_cache_the_nodes_are_built(tmp_path: Path) -> None:

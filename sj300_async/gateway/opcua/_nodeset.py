@@ -17,11 +17,20 @@ Decisions:
 - **One file per asyncua and Python**, named by both
   (``asyncua-2.1.0-py3.11/``): a shelf holds pickled asyncua objects,
   which only the same releases read.
-- **Made once, whole or not at all.** The first start builds the nodes as
-  before and asyncua writes the shelf in a directory of its own, which is
-  renamed into place when complete: two gateways starting together each
-  make one, one of them is kept, and a start that dies half-way leaves no
-  half shelf (only a directory ``tmp-*``, removed by a start an hour later).
+- **Made once, whole or not at all.** asyncua writes the shelf in a
+  directory of its own, which is renamed into place when complete: two
+  gateways starting together each make one, one of them is kept, and a
+  start that dies half-way leaves no half shelf (only a directory
+  ``tmp-*``, removed by a start an hour later).
+- **Made in a child process** (``python -m
+  sj300_async.gateway.opcua._nodeset DIRECTORY``), which the start awaits
+  without blocking the loop, then read like any later start's. Built in
+  the gateway's own process, the standard nodes' 50 MB stayed resident for
+  the process's life after the server was made again from the shelf
+  (Python's arenas stay fragmented; issue 44): a first start, after an
+  install or an asyncua upgrade, kept 50 MB more than every start after
+  it. Where the child cannot run or fails, the nodes are built in the
+  process as before, and the reason is logged.
 - **Trusted only when ours.** A shelf is unpickled: the cache directory
   must belong to the gateway's user and be writable by nobody else (as
   ssh treats its keys), or it is not used (a WARNING says why).
@@ -70,6 +79,8 @@ _log = logging.getLogger("sj300_async.gateway.opcua")
 SHELF_NAME: Final = "nodeset"
 #: A directory being made this much older is one whose start died (a make takes seconds).
 STALE_S: Final = 3600.0
+#: Seconds the child making a shelf has (about 3 s here: asyncua's import and the build).
+CHILD_TIMEOUT_S: Final = 120.0
 
 
 def default_cache() -> Path | None:
@@ -143,10 +154,43 @@ def discard(shelf: Path) -> None:
     shutil.rmtree(shelf.parent, ignore_errors=True)
 
 
+async def _made_by_a_child(make: Path) -> bool:
+    """Have a child process make the shelf at *make*, and publish it: False (said why)
+    when it could not."""
+    try:
+        child = await asyncio.create_subprocess_exec(
+            sys.executable, "-m", __name__, str(make),
+            stdin=asyncio.subprocess.DEVNULL,
+            stdout=asyncio.subprocess.DEVNULL,
+            stderr=asyncio.subprocess.PIPE,
+        )  # fmt: skip
+    except OSError as exc:
+        _log.info("opcua: nodeset cache not made by a child (%s): built here", exc)
+        return False
+    try:
+        async with asyncio.timeout(CHILD_TIMEOUT_S):
+            _, err = await child.communicate()
+    except TimeoutError:
+        child.kill()
+        await child.wait()
+        _log.info("opcua: nodeset cache child timed out after %s s: built here", CHILD_TIMEOUT_S)
+        return False
+    if child.returncode != 0:
+        last = err.decode(errors="replace").strip().splitlines()[-1:] or ["no message"]
+        _log.info("opcua: nodeset cache child failed (%s, %s): built here", child.returncode,
+                  last[0][:200])  # fmt: skip
+        return False
+    await asyncio.to_thread(publish, make)
+    return True
+
+
 async def initialised(make_server: Callable[[], Server], cache: Path | None) -> Server:
     """A server from *make_server*, initialised, its standard nodes from the shelf in
-    *cache* where there is one (made there where not; see the module docstring)."""
+    *cache* where there is one (made there where not, by a child process; see the
+    module docstring)."""
     load, make = prepare(cache)
+    if make is not None and await _made_by_a_child(make):
+        load, make = prepare(cache)  # the one just made, or another start's
     server = make_server()
     try:
         await server.init(load or make)
@@ -159,3 +203,14 @@ async def initialised(make_server: Callable[[], Server], cache: Path | None) -> 
     if make is not None:
         await asyncio.to_thread(publish, make)
     return server
+
+
+async def _make(shelf: Path) -> None:
+    """The child's work: asyncua builds its standard nodes and writes them to *shelf*."""
+    from asyncua import Server
+
+    await Server().init(shelf)
+
+
+if __name__ == "__main__":  # the child of _made_by_a_child
+    asyncio.run(_make(Path(sys.argv[1])))
