@@ -53,7 +53,7 @@ from typing import Any, Final
 
 import pytest
 
-from benchmarks._soak import CHECK_S, Sample, Soak, run_soak, verdict
+from benchmarks._soak import CHECK_S, Sample, Soak, fds_flat, run_soak, verdict
 
 from .rel_sizes import Sizes
 
@@ -123,7 +123,7 @@ def test_gateway_soak_keeps_memory_and_descriptors_flat(
     soak_figures["gateway_soak"] = _figures(run, time.perf_counter() - began)
     held = run.verdict
     assert held["problems"] == [], "the gateway must still deliver, every interval and at the end"
-    assert held["fds_min"] == held["fds_max"], [s.fds for s in run.series]
+    assert fds_flat(held), [s.fds for s in run.series]  # never above the steady count
     series = [(round(s.t_s), s.rss_kib) for s in run.series]
     if soak:
         assert held["peak_growth_pct"] < LONG_MAX_GROWTH_PCT, series
@@ -152,6 +152,19 @@ def test_the_verdict_fails_a_stalled_gateway_and_measures_from_settling() -> Non
         100_000, 200, 500,
     )  # fmt: skip
     assert (held["fds_min"], held["fds_max"]) == (17, 17)  # the warm-up's 18 is not counted
+    assert held["fds_steady"] == 17
+    assert fds_flat(held)
+    # a client reconnecting: fewer for a moment, never more (not a leak)
+    dip = (*flat[:3], replace(flat[3], fds=14), flat[4])
+    assert fds_flat(verdict(replace(soak, series=dip)))
+    # a leak: each sample more than the one before
+    leak = (*flat[:3], replace(flat[3], fds=18), replace(flat[4], fds=19))
+    held = verdict(replace(soak, series=leak))
+    assert held["fds_steady"] == 17
+    assert not fds_flat(held)
+    # a dip at settling is not the steady count
+    late = (*flat[:2], replace(flat[2], fds=14), flat[3], flat[4])
+    assert fds_flat(verdict(replace(soak, series=late)))
     # memory flat for the wrong reason: the poll stopped for an interval
     stalled = (*flat[:3], Sample(18, 100_000, 17, 0.0, 320, 320, 0.0), flat[4])
     assert verdict(replace(soak, series=stalled))["problems"] == [
