@@ -3,12 +3,14 @@ start."""
 
 from __future__ import annotations
 
+import asyncio
 import logging
 import os
 from pathlib import Path
 
 import pytest
 from asyncua import Server, ua
+from waiting import wait_for
 
 from sj300_async.gateway.opcua._nodeset import (
     SHELF_NAME,
@@ -144,3 +146,49 @@ def test_the_default_cache_is_systemd_s_then_xdg_then_home(
     assert default_cache() == Path("/home/op/.cache/sj300-async")
     monkeypatch.delenv("HOME")
     assert default_cache() is None
+
+
+def _sleeping_child(tmp_path: Path) -> tuple[Path, Path]:
+    """A stand-in for the child (sys.executable) that writes its pid, then sleeps."""
+    pid_file = tmp_path / "child.pid"
+    script = tmp_path / "slow-python"
+    script.write_text(f"#!/bin/sh\necho $$ > {pid_file}\nexec sleep 60\n", encoding="ascii")
+    script.chmod(0o700)
+    return script, pid_file
+
+
+def _gone(pid: int) -> bool:
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return True
+    return False
+
+
+async def test_a_start_cancelled_while_the_child_works_leaves_no_child(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    script, pid_file = _sleeping_child(tmp_path)
+    monkeypatch.setattr("sys.executable", str(script))
+    start = asyncio.create_task(_start(tmp_path / "cache"))
+    await wait_for(pid_file.exists, "the child started")
+    await wait_for(lambda: pid_file.read_text().strip() != "", "its pid written")
+    pid = int(pid_file.read_text())
+    start.cancel()
+    with pytest.raises(asyncio.CancelledError):
+        await start
+    assert _gone(pid)  # killed and reaped before the cancellation went on
+
+
+async def test_a_child_past_its_time_is_killed_and_the_nodes_built_here(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch, caplog: pytest.LogCaptureFixture
+) -> None:
+    caplog.set_level(logging.INFO, logger="sj300_async.gateway.opcua")
+    script, pid_file = _sleeping_child(tmp_path)
+    monkeypatch.setattr("sys.executable", str(script))
+    monkeypatch.setattr("sj300_async.gateway.opcua._nodeset.CHILD_TIMEOUT_S", 0.5)
+    server, table = await _start(tmp_path / "cache")
+    assert table is dict
+    await _reads_the_standard(server)
+    assert _gone(int(pid_file.read_text()))
+    assert any("child timed out after 0.5 s" in r.getMessage() for r in caplog.records)

@@ -171,10 +171,12 @@ async def _made_by_a_child(make: Path) -> bool:
         async with asyncio.timeout(CHILD_TIMEOUT_S):
             _, err = await child.communicate()
     except TimeoutError:
-        child.kill()
-        await child.wait()
         _log.info("opcua: nodeset cache child timed out after %s s: built here", CHILD_TIMEOUT_S)
         return False
+    finally:
+        if child.returncode is None:  # timed out, or the start was cancelled: no orphan
+            child.kill()
+            await asyncio.shield(child.wait())
     if child.returncode != 0:
         last = err.decode(errors="replace").strip().splitlines()[-1:] or ["no message"]
         _log.info("opcua: nodeset cache child failed (%s, %s): built here", child.returncode,
