@@ -63,6 +63,20 @@ def add_parser(subparsers: Any) -> None:
         "Needs the gateway extra.",
     )
     p.add_argument("--config", metavar="FILE", help="the gateway's TOML configuration")
+    p.add_argument(
+        "--check-config",
+        metavar="FILE",
+        help="check FILE as a start would (the TOML, lines, grants, users, certificates, "
+        "ports free) without opening a line or a port; print a summary (exit 0) or the "
+        "start's one-line error (exit 2)",
+    )
+    p.add_argument(
+        "--no-port-check",
+        dest="port_check",
+        action="store_false",
+        help="with --check-config: leave the listening ports out (checking beside the "
+        "running gateway, whose ports are in use)",
+    )
     # Its own --url and --protocol: the bus options of other commands (--timeout,
     # --trace...) do not apply to a process that owns several lines.
     p.add_argument("--url", default=None, help="the one line's bus URL (without --config)")
@@ -230,6 +244,8 @@ def run(args: argparse.Namespace) -> int:
             level=logging.DEBUG if args.verbose > 1 else logging.INFO,
             format="%(asctime)s %(name)s %(levelname)s %(message)s",
         )
+    if args.check_config is not None:
+        return _check(args)
     config = _config(args)  # a bad one raises here: nothing has started
     _check_requirements(config)
     if args.decommission:
@@ -239,6 +255,48 @@ def run(args: argparse.Namespace) -> int:
     return asyncio.run(
         _serve(config, args.capture, demo=args.demo, tune_collector=args.tune_collector)
     )
+
+
+def _check(args: argparse.Namespace) -> int:
+    """``--check-config FILE``: the start's checks, nothing opened (gateway._check)."""
+    from ..gateway import GatewayStartError, check_config
+
+    others = [
+        option
+        for option, given in (
+            ("--config", args.config),
+            ("--url", args.url),
+            ("--nodes", args.nodes),
+            ("--demo", args.demo),
+            ("--id", args.id),
+            ("--capture", args.capture),
+            ("--decommission", args.decommission),
+        )
+        if given
+    ]
+    others += [flag.option for section, flag in _flags() if getattr(args, _dest(section))]
+    if others:
+        raise CliError(f"--check-config FILE checks that file alone: no {', '.join(others)}")
+    config = load_config(args.check_config)  # the start's own reading: the same error
+    _check_requirements(config)
+    try:
+        found = check_config(config, ports=args.port_check)
+    except GatewayStartError as exc:
+        raise CliError(str(exc)) from None
+    except OSError as exc:
+        raise CliError(_cannot_serve(exc)) from None
+    print(f"{args.check_config}: the gateway would start")
+    for line in found.summary:
+        print(f"  {line}")
+    for warning in found.warnings:
+        print(f"warning: {warning}", file=sys.stderr)
+    return 0
+
+
+def _cannot_serve(exc: OSError) -> str:
+    """The one line of an error a start meets outside the northbounds (the audit log)."""
+    where = f": {exc.filename}" if exc.filename else ""
+    return f"cannot serve: {exc.strerror or exc}{where}"
 
 
 async def _serve(
@@ -283,7 +341,7 @@ async def _serve(
     except GatewayStartError as exc:  # a northbound's port in use...: which, where, why
         raise CliError(str(exc)) from None
     except OSError as exc:
-        raise CliError(f"cannot serve: {exc.strerror or exc}") from None
+        raise CliError(_cannot_serve(exc)) from None
     finally:
         for sig in EXIT_ON_SIGNAL:
             loop.remove_signal_handler(sig)

@@ -18,6 +18,7 @@ from __future__ import annotations
 
 from ._audit import AuditLog, excerpt
 from ._budget import KeyedBudget
+from ._check import ConfigCheck, check_config
 from ._config import config_from_flags, load_config, parse_config, valid_name
 from ._control import Controller
 from ._drive import GatewayDrive, Lease
@@ -109,6 +110,7 @@ __all__ = [
     "POLL_READS",
     "UNIT_RANGE",
     "AuditLog",
+    "ConfigCheck",
     "ConfigContext",
     "ConfigTable",
     "ConnectionLimit",
@@ -155,6 +157,7 @@ __all__ = [
     "WriteRequest",
     "WriteResult",
     "busy_seconds",
+    "check_config",
     "compact_json",
     "config_from_flags",
     "cumulative_buckets",

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import os
+import socket
 from collections.abc import Sequence
 from typing import Any
 
@@ -40,7 +41,10 @@ class GatewayStartError(SJ300Error, OSError):
     @classmethod
     def of(cls, section: str, endpoints: Sequence[Endpoint], exc: OSError) -> GatewayStartError:
         """The error of northbound *section*, which raised *exc* from its ``start``."""
-        reason = os.strerror(exc.errno) if exc.errno else str(exc) or type(exc).__name__
+        if isinstance(exc, socket.gaierror):  # its errno is a resolver's, not the system's
+            reason = f"cannot resolve the address: {exc.strerror}"
+        else:
+            reason = os.strerror(exc.errno) if exc.errno else str(exc) or type(exc).__name__
         return cls(section, endpoints, reason, exc.errno)
 
     def __str__(self) -> str:

@@ -248,6 +248,12 @@ class NorthboundSpec(Protocol):
     # keys configure nothing of it. Its own section and the borrowed keys at once are an
     # error. Read through :func:`section_borrows`; the owner need not know the borrower.
 
+    # Optional: ``check(config) -> Sequence[str]``, for ``sj300 gateway --check-config``
+    # (:mod:`._check`): what its start would refuse beyond the parser and its ports (its
+    # files that do not load: OPC UA's certificate), raised as the ``GatewayStartError``
+    # the start gives, without starting or writing anything; else a few words for the
+    # summary (``"HTTPS, writes by 2 user(s)"``). Read through getattr.
+
     def endpoints(self, config: object) -> Sequence[tuple[str, Endpoint]]:
         """The sockets it listens on, with the key that names each (two may not collide)."""
 

@@ -200,6 +200,17 @@ class _Spec:
         assert isinstance(config, HttpConfig)
         return [("listen", config.listen)]
 
+    def check(self, config: object) -> Sequence[str]:
+        """``--check-config``'s words for it (its files were loaded by the parser)."""
+        assert isinstance(config, HttpConfig)
+        scheme = "HTTPS" if config.tls_cert is not None else "HTTP"
+        writes = (
+            f"writes by {len(config.users)} user(s) and {len(config.tokens)} token(s)"
+            if config.authentication
+            else "read-only (no user or token)"
+        )
+        return (f"{scheme}, {writes}",)
+
     def create(self, config: object) -> Northbound:
         from ._northbound import HttpNorthbound
 

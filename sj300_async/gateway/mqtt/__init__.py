@@ -107,6 +107,11 @@ class _Spec:
     def endpoints(self, config: object) -> Sequence[tuple[str, Endpoint]]:
         return ()  # a client: it listens on nothing
 
+    def check(self, config: object) -> Sequence[str]:
+        """``--check-config``'s words for it (the broker is not contacted)."""
+        assert isinstance(config, MqttConfig)
+        return (f"to {config.url} as {config.client_id}, not contacted by the check",)
+
     def create(self, config: object) -> Northbound:
         from ._bridge import MqttBridge
 

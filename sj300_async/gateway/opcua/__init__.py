@@ -26,6 +26,7 @@ from ._config import (
     OPCUA_KEYS,
     SECURITY_MODES,
     OpcuaConfig,
+    certificate_error,
     parse_endpoint_url,
     parse_opcua_section,
 )
@@ -59,6 +60,24 @@ class _Spec:
     def endpoints(self, config: object) -> Sequence[tuple[str, Endpoint]]:
         assert isinstance(config, OpcuaConfig)
         return (("endpoint", config.endpoint),)
+
+    def check(self, config: object) -> Sequence[str]:
+        """What a start would make of the certificates (``--check-config``), loading them.
+
+        Raises:
+            GatewayStartError: the error a start would give.
+        """
+        from ._certificate import check_pair, load_trusted
+
+        assert isinstance(config, OpcuaConfig)
+        try:
+            notes = [check_pair(config.certificate, config.private_key)]
+        except (OSError, ValueError) as exc:
+            raise certificate_error(config.certificate, exc) from None
+        if config.trusted_clients is not None:
+            trusted = load_trusted(config.trusted_clients)
+            notes.append(f"{len(trusted)} trusted client certificate(s)")
+        return notes
 
     def create(self, config: object) -> Northbound:
         from ._server import OpcuaServer

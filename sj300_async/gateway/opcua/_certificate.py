@@ -13,6 +13,7 @@ URI.
 
 from __future__ import annotations
 
+import errno
 import logging
 import os
 import socket
@@ -25,7 +26,13 @@ from cryptography import x509
 from cryptography.hazmat.primitives import hashes, serialization
 from cryptography.x509.oid import ExtendedKeyUsageOID
 
-__all__ = ["ServerCertificate", "free_port", "load_or_generate", "load_trusted"]
+__all__ = [
+    "ServerCertificate",
+    "check_pair",
+    "free_port",
+    "load_or_generate",
+    "load_trusted",
+]
 
 _log = logging.getLogger("sj300_async.gateway.opcua")
 
@@ -99,12 +106,60 @@ def load_or_generate(
     generated = not certificate.exists() and not private_key.exists()
     if generated:
         _generate(certificate, private_key, application_uri)
+    return _load_pair(certificate, private_key, application_uri, generated=generated)
+
+
+def _load_pair(
+    certificate: Path, private_key: Path, application_uri: str, *, generated: bool
+) -> ServerCertificate:
     cert = _load(certificate)
     serialization.load_pem_private_key(private_key.read_bytes(), password=None)
     uri = _uri_of(cert) or application_uri
     # OPC UA names a certificate by its SHA-1 thumbprint (what clients show to trust).
     thumbprint = cert.fingerprint(hashes.SHA1()).hex()
     return ServerCertificate(certificate, private_key, uri, generated, thumbprint)
+
+
+def check_pair(certificate: Path, private_key: Path) -> str:
+    """What a start would make of the pair, in words, without generating one
+    (``sj300 gateway --check-config``).
+
+    Raises:
+        OSError: a file cannot be read, or a first start could not write the pair.
+        ValueError: a file is not a certificate or a key.
+    """
+    if certificate.exists() or private_key.exists():  # the parser saw both or neither
+        pair = _load_pair(certificate, private_key, "", generated=False)
+        uri = f" for {pair.application_uri}" if pair.application_uri else ""
+        return f"certificate {certificate}{uri}, thumbprint {pair.thumbprint}"
+    for path in (certificate, private_key):  # in the order _generate writes them
+        refusal = _refusal(path)
+        if refusal is not None:
+            raise refusal
+    return f"certificate {certificate}: none yet, generated at the first start"
+
+
+def _refusal(path: Path) -> OSError | None:
+    """The error writing file *path* would meet, its directory made first as
+    :func:`_generate` makes it (``mkdir(parents=True, exist_ok=True)``); None: none.
+
+    As root every permission is granted; then only a file in the way is found.
+    """
+    directory = path.parent
+    if directory.exists():
+        if not directory.is_dir():
+            return FileExistsError(errno.EEXIST, os.strerror(errno.EEXIST), str(directory))
+        if not os.access(directory, os.W_OK | os.X_OK):
+            return PermissionError(errno.EACCES, os.strerror(errno.EACCES), str(path))
+        return None
+    top, probe = directory, directory.parent
+    while not probe.exists():
+        top, probe = probe, probe.parent
+    if not probe.is_dir():  # the first mkdir meets it: ENOTDIR, naming the directory
+        return NotADirectoryError(errno.ENOTDIR, os.strerror(errno.ENOTDIR), str(directory))
+    if not os.access(probe, os.W_OK | os.X_OK):  # the outermost mkdir is refused
+        return PermissionError(errno.EACCES, os.strerror(errno.EACCES), str(top))
+    return None
 
 
 def free_port(host: str) -> int:

@@ -61,7 +61,15 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Final
 
-from .. import ConfigTable, Endpoint, SectionContext, User, parse_users, unknown_choice
+from .. import (
+    ConfigTable,
+    Endpoint,
+    GatewayStartError,
+    SectionContext,
+    User,
+    parse_users,
+    unknown_choice,
+)
 from ._nodeset import default_cache
 
 __all__ = [
@@ -69,6 +77,7 @@ __all__ = [
     "OPCUA_KEYS",
     "SECURITY_MODES",
     "OpcuaConfig",
+    "certificate_error",
     "parse_endpoint_url",
     "parse_opcua_section",
 ]
@@ -137,6 +146,11 @@ class OpcuaConfig:
     def secure(self) -> bool:
         """Some endpoint encrypts (writes are possible at all)."""
         return "Basic256Sha256_SignAndEncrypt" in self.security
+
+
+def certificate_error(certificate: Path, exc: Exception) -> GatewayStartError:
+    """The start's error for a certificate pair that cannot be used (one line)."""
+    return GatewayStartError("opcua", (), f"cannot use the certificate {certificate}: {exc}")
 
 
 def parse_endpoint_url(text: str) -> tuple[str, int]:

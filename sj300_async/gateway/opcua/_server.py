@@ -56,7 +56,7 @@ from .. import (
 )
 from ._calls import Calls
 from ._certificate import ServerCertificate, free_port, load_or_generate, load_trusted
-from ._config import OpcuaConfig
+from ._config import OpcuaConfig, certificate_error
 from ._defences import Defences
 from ._hooks import (
     follow_watchers,
@@ -163,9 +163,7 @@ class OpcuaServer:
                 f"urn:sj300-async:{gateway.config.gateway_id}",
             )
         except (OSError, ValueError) as exc:
-            raise GatewayStartError(
-                "opcua", (), f"cannot use the certificate {config.certificate}: {exc}"
-            ) from None
+            raise certificate_error(config.certificate, exc) from None
         server = await initialised(
             functools.partial(Server, user_manager=self._users), self.config.nodeset_cache
         )

@@ -118,6 +118,14 @@ class _Spec:
     def endpoints(self, config: object) -> Sequence[tuple[str, Endpoint]]:
         return ()  # a client: it listens on nothing
 
+    def check(self, config: object) -> Sequence[str]:
+        """``--check-config``'s words for it (the broker is not contacted)."""
+        assert isinstance(config, SparkplugConfig)
+        return (
+            f"group {config.group_id} on {config.url} as {config.client_id}, "
+            "not contacted by the check",
+        )
+
     def create(self, config: object) -> Northbound:
         from ._node import EdgeNode
 
