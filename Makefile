@@ -18,9 +18,11 @@ GATEWAY_STAMP := $(VENV)/.installed-gateway
 # Wireshark dissector's test (its debconf question, whether non-root users may capture,
 # takes its default "no" under DEBIAN_FRONTEND=noninteractive), chromium for the
 # workbench page's browser tests (Playwright drives it: its own browser download is
-# never run), openssl for the certificate of the workbench's HTTPS test.
+# never run), openssl for the certificate of the workbench's HTTPS test, systemd for
+# systemd-analyze (the service unit's verify and security checks; no systemd need run).
 SYSTEM_PACKAGES := socat:socat ser2net:ser2net mbpoll:mbpoll mosquitto:mosquitto \
-	mosquitto-clients:mosquitto_sub tshark:tshark chromium:chromium openssl:openssl
+	mosquitto-clients:mosquitto_sub tshark:tshark chromium:chromium openssl:openssl \
+	systemd:systemd-analyze
 
 # The npm packages of the OPC UA tests' independent client (tests/opcua/node: node-opcua,
 # from its package-lock.json; tests/test_readme.py checks README.md against package.json).

@@ -29,7 +29,7 @@ import importlib.util
 import logging
 import signal
 import sys
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from ..bus import protocol_names
 from ..gateway import (
@@ -44,6 +44,9 @@ from ..gateway import (
 from ._demo import DEMO_NODES, DEMO_URL, demo_running
 from ._errors import EXIT_ON_SIGNAL, USAGE, CliError
 from ._install import gateway_install_command
+
+if TYPE_CHECKING:
+    from ..gateway import Gateway, ServiceManager
 
 __all__ = ["DEMO_HTTP", "add_parser"]
 
@@ -293,6 +296,15 @@ def _check(args: argparse.Namespace) -> int:
     return 0
 
 
+def _ready(manager: ServiceManager, gateway: Gateway, announced: list[str]) -> None:
+    """Every northbound listens: tell systemd, and keep its watchdog fed from the loop."""
+    drives = len(gateway.drives)
+    manager.ready(f"{len(gateway.lines)} line(s), {drives} drive(s); " + "; ".join(announced))
+    every = manager.ping_every_s
+    if every is not None:
+        gateway.loop_monitor.keep_alive(manager.alive, every)
+
+
 def _cannot_serve(exc: OSError) -> str:
     """The one line of an error a start meets outside the northbounds (the audit log)."""
     where = f": {exc.filename}" if exc.filename else ""
@@ -302,8 +314,9 @@ def _cannot_serve(exc: OSError) -> str:
 async def _serve(
     config: GatewayConfig, capture: str | None, *, demo: bool = False, tune_collector: bool = True
 ) -> int:
-    from ..gateway import Gateway, GatewayStartError
+    from ..gateway import Gateway, GatewayStartError, ServiceManager
 
+    manager = ServiceManager.from_environment()  # systemd's Type=notify (contrib/systemd)
     loop = asyncio.get_running_loop()
     task = asyncio.current_task()
     assert task is not None
@@ -325,14 +338,20 @@ async def _serve(
     try:
         async with Gateway(config, capture=capture, tune_collector=tune_collector) as gateway:
             starting = False
+            announced = []
             for northbound in gateway.northbounds.values():
                 line = northbound.announce()
                 if line is not None:
                     print(line, flush=True)
+                    announced.append(line)
+            if manager is not None:
+                _ready(manager, gateway, announced)
             simulated = [line.bus for line in gateway.lines if line.bus.simulator is not None]
             async with demo_running(simulated if demo else []):
                 await stop.wait()
             print("stopping", file=sys.stderr, flush=True)
+            if manager is not None:
+                manager.stopping()
     except asyncio.CancelledError:
         if not (starting and stop.is_set()):
             raise

@@ -84,6 +84,7 @@ from ._passwords import (
     parse_users,
     verify_password,
 )
+from ._sdnotify import ServiceManager
 from ._served import DIRECTION_WORDS, Quality, ServedDrive, ServedValues
 from ._toml import COMMAND_LINE, ConfigContext, ConfigTable, GatewayConfigError, unknown_choice
 from ._writes import (
@@ -149,6 +150,7 @@ __all__ = [
     "ServedDrive",
     "ServedLine",
     "ServedValues",
+    "ServiceManager",
     "SetFrequency",
     "Slot",
     "UnitScope",

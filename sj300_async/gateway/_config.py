@@ -224,7 +224,7 @@ def _build(ctx: ConfigContext, data: object, *, base_dir: Path) -> GatewayConfig
     lag_limit_s = gateway.number("loop_lag_limit_s", minimum=0, inclusive=False)
     audit_log = _audit_log(gateway, base_dir)
     gateway_id = _gateway_id(gateway)
-    context = SectionContext(gateway_id, base_dir)
+    context = SectionContext(gateway_id, base_dir, state_directory())
     northbounds: dict[str, object] = {}
     listening: dict[Endpoint, str] = {}
     for section in sections:
@@ -286,6 +286,17 @@ def _borrowed(
     data = root.data[section]
     keys = tuple(data) if isinstance(data, dict) else ()  # the owner checks its own keys
     return parse_borrowed(spec, ConfigTable(ctx, section, data, keys), context)
+
+
+def state_directory() -> Path | None:
+    """systemd's ``StateDirectory=`` (``$STATE_DIRECTORY``, its first path), None: not set.
+
+    The place the gateway keeps what it makes itself (OPC UA's generated certificate,
+    trip records) when the file names no place: under ProtectSystem=strict the
+    configuration's directory is read-only (docs/guide/deploy.md).
+    """
+    first = os.environ.get("STATE_DIRECTORY", "").split(":")[0]
+    return Path(first) if first else None
 
 
 def _audit_log(gateway: ConfigTable, base_dir: Path) -> Path | None:

@@ -28,7 +28,9 @@ Decisions:
   preallocated array (96 KB from the start): a deque of floats grew for ten
   minutes to 384 KB, growth a soak counted after its fifth (issue 44).
 - The monitor also runs :func:`._logflood` 's once-a-second flush, so the
-  gateway has one periodic timer of its own instead of two.
+  gateway has one periodic timer of its own instead of two, and the
+  service manager's watchdog ping (:meth:`LoopMonitor.keep_alive`,
+  :mod:`._sdnotify`): a loop stuck past systemd's ``WatchdogSec`` sends none.
 """
 
 from __future__ import annotations
@@ -106,6 +108,10 @@ class LoopMonitor:
         #: The largest lag since the start.
         self.max_s = 0.0
         self._next_second = 0.0
+        #: The service manager's watchdog ping, and when it is due next (keep_alive).
+        self._alive: Callable[[], object] | None = None
+        self._alive_every_s = 0.0
+        self._next_alive = 0.0
 
     def start(self) -> None:
         """Start probing on the running loop."""
@@ -132,7 +138,15 @@ class LoopMonitor:
             self._next_second = now + 1.0
             if self._every_second is not None:
                 self._every_second()
+        if self._alive is not None and now >= self._next_alive:
+            self._next_alive = now + self._alive_every_s
+            self._alive()
         self._schedule(now)
+
+    def keep_alive(self, ping: Callable[[], object], every_s: float) -> None:
+        """Call *ping* from the probe every *every_s* (a service watchdog: a loop stuck
+        longer than the watchdog's time sends no ping), the first at the next probe."""
+        self._alive, self._alive_every_s, self._next_alive = ping, every_s, 0.0
 
     def record(self, lag: float, now: float) -> None:
         """Count one probe's *lag* (also how the tests feed it)."""

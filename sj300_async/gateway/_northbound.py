@@ -206,6 +206,15 @@ class SectionContext:
     gateway_id: str
     #: Relative paths in the file are relative to this (the file's directory).
     base_dir: Path
+    #: Where a northbound keeps what it makes itself when the file names no place (OPC
+    #: UA's generated certificate): systemd's ``$STATE_DIRECTORY`` when the gateway runs
+    #: as its service (contrib/systemd), else *base_dir*.
+    state_dir: Path | None = None
+
+    @property
+    def state(self) -> Path:
+        """:attr:`state_dir`, else :attr:`base_dir`."""
+        return self.base_dir if self.state_dir is None else self.state_dir
 
 
 class NorthboundSpec(Protocol):

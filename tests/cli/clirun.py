@@ -98,9 +98,11 @@ async def sj300(*args: str, env_url: str | None = None, timeout: float = TIMEOUT
 
 
 @contextlib.asynccontextmanager
-async def running(*args: str) -> AsyncIterator[asyncio.subprocess.Process]:
+async def running(
+    *args: str, extra_env: dict[str, str] | None = None
+) -> AsyncIterator[asyncio.subprocess.Process]:
     """``python -m sj300_async ARGS`` left running: stdin empty, stdout and stderr on
-    pipes; killed if it still runs at the end of the block."""
+    pipes, *extra_env* added to the environment; killed if it still runs at the end."""
     proc = await asyncio.create_subprocess_exec(
         sys.executable,
         "-m",
@@ -109,7 +111,7 @@ async def running(*args: str) -> AsyncIterator[asyncio.subprocess.Process]:
         stdin=asyncio.subprocess.DEVNULL,
         stdout=asyncio.subprocess.PIPE,
         stderr=asyncio.subprocess.PIPE,
-        env=cli_env(),
+        env=cli_env() | (extra_env or {}),
     )
     try:
         yield proc

@@ -229,3 +229,23 @@ def test_as_a_user_runs_it(here: Path) -> None:
     good = asyncio.run(sj300("gateway", "--check-config", str(here / "gateway.toml")))
     assert (good.code, good.err) == (0, "")
     assert good.out.startswith(f"{here}/gateway.toml: the gateway would start\n")
+
+
+def test_under_systemd_the_generated_certificate_goes_to_the_state_directory(
+    here: Path, capsys: pytest.CaptureFixture[str], monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """``$STATE_DIRECTORY`` (StateDirectory=): the default pair is made there, since the
+    configuration's directory is read-only under ProtectSystem=strict; a pair the file
+    names stays relative to the file."""
+    state = here / "state"
+    state.mkdir()
+    monkeypatch.setenv("STATE_DIRECTORY", f"{state}:{here}/second")
+    (here / "gateway.toml").write_text('[opcua]\nendpoint = "opc.tcp://127.0.0.1:0"\n' + _LINE)
+    status, out, _ = _run(capsys, "--check-config", "gateway.toml")
+    assert status == 0
+    assert f"certificate {state}/opcua/cert.der: none yet" in out
+    text = '[opcua]\nendpoint = "opc.tcp://127.0.0.1:0"\ncertificate = "mine/c.der"\n'
+    (here / "gateway.toml").write_text(text + 'private_key = "mine/k.pem"\n' + _LINE)
+    status, out, _ = _run(capsys, "--check-config", "gateway.toml")
+    assert status == 0
+    assert "certificate mine/c.der: none yet" in out

@@ -30,7 +30,9 @@ Decisions:
   ``"None"`` serves reads, never writes (writes need an encrypted channel).
 - **The certificate.** ``certificate`` and ``private_key`` (relative to
   the configuration file) default to ``opcua/cert.der`` and
-  ``opcua/key.pem``. When neither file exists, the first start generates a
+  ``opcua/key.pem`` in the state directory: systemd's ``$STATE_DIRECTORY``
+  when the gateway runs as its service (contrib/systemd), else beside the
+  configuration file. When neither file exists, the first start generates a
   self-signed pair there (RSA 2048, SHA-256, ten years, the application
   URI and the host name in its subject alternative names) and says so;
   when one exists without the other, the configuration is refused. A
@@ -185,7 +187,7 @@ def parse_opcua_section(table: ConfigTable, context: SectionContext) -> OpcuaCon
     except ValueError as exc:
         raise table.error("endpoint", str(exc)) from None
     security = _security(table)
-    certificate, private_key = _key_pair(table, context.base_dir)
+    certificate, private_key = _key_pair(table, context)
     trusted = None
     if (text := table.string("trusted_clients")) is not None:
         trusted = context.base_dir / text
@@ -268,7 +270,9 @@ def _security(table: ConfigTable) -> tuple[str, ...]:
     return tuple(mode for mode in SECURITY_MODES if mode in modes)
 
 
-def _key_pair(table: ConfigTable, base_dir: Path) -> tuple[Path, Path]:
+def _key_pair(table: ConfigTable, context: SectionContext) -> tuple[Path, Path]:
+    """The pair's paths: as given, relative to the file; by default in the state directory
+    (``$STATE_DIRECTORY`` under systemd, else beside the file)."""
     paths = []
     for key, default in (
         ("certificate", DEFAULT_CERTIFICATE),
@@ -277,7 +281,7 @@ def _key_pair(table: ConfigTable, base_dir: Path) -> tuple[Path, Path]:
         text = table.string(key)
         if text is not None and not text.strip():
             raise table.error(key, "expected a file name, got an empty string")
-        paths.append(base_dir / (default if text is None else text))
+        paths.append(context.state / default if text is None else context.base_dir / text)
     certificate, private_key = paths
     if certificate.exists() != private_key.exists():
         missing = "private_key" if certificate.exists() else "certificate"
