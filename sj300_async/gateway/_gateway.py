@@ -22,37 +22,29 @@ logged (the first with its traceback, the next at DEBUG) and counted
 (``sj300_gateway_publish_errors_total``), and the other northbounds, the
 poller, the write that changed the drive and the trip reader go on.
 
-A trip history is not part of the poll cycle (an SJ300's is 446
-characters: most of a 19200-baud cycle). For a protocol whose profile
-reads one, each drive's is read every ``trips_interval_s`` and as soon as
-its status shows a trip. The set frequency is read beside the poll too,
-every ``setpoint_interval_s`` and at least twice per ``stale_after_s`` (so
-what the northbounds serve never goes stale between reads), unless it is
-polled (SJ300 F001 in the line's parameters): SCADA shows the setpoint next to the actual
-frequency, so it is there without configuration, at a cadence that
-costs the line little. A failed read of either is counted
-(``sj300_gateway_read_errors_total``) and tried again when due.
+What is read beside the poll (trip histories, set frequencies) is
+:mod:`._beside`'s. :meth:`Gateway.reload` takes a new configuration while
+it runs (:mod:`._reload` decides what changes, :mod:`._reloader` changes it).
 """
 
 from __future__ import annotations
 
 import asyncio
 import contextlib
-import functools
 import logging
 import time
-from collections.abc import Awaitable, Callable, Iterable, Iterator, Sequence
+from collections.abc import Iterable, Iterator, Sequence
 from dataclasses import dataclass, field
 from types import TracebackType
-from typing import TYPE_CHECKING, Any, TypeVar
+from typing import TYPE_CHECKING, Any
 
 from .. import Poller, Sample
 from ..bus import Bus, CaptureFile, open_bus
-from ..profiles import NEVER, Profile, get_profile
-from ..wire import SJ300Error
+from ..profiles import Profile, get_profile
 from . import _logflood as logflood
 from ._audit import AuditLog
 from ._batch import SnapshotBatch
+from ._beside import read_beside_the_poll
 from ._control import Controller
 from ._drive import GatewayDrive, Lease
 from ._errors import GatewayStartError
@@ -73,7 +65,6 @@ if TYPE_CHECKING:
 __all__ = ["Gateway", "GatewayLine"]
 
 _log = logging.getLogger("sj300_async.gateway")
-_T = TypeVar("_T")
 
 
 @dataclass(slots=True)
@@ -88,6 +79,10 @@ class GatewayLine:
     drives: dict[int, GatewayDrive]
     #: The line's utilisation, measured when a door asks for its health.
     meter: UtilisationMeter = field(default_factory=UtilisationMeter)
+    #: What closes its bus and poller (a reload closes one line alone).
+    stack: contextlib.AsyncExitStack = field(default_factory=contextlib.AsyncExitStack)
+    #: The task reading beside its poll (._beside), once started.
+    reader: asyncio.Task[None] | None = None
 
     def health(self, now: float | None = None) -> LineHealth:
         """The line's link, counters and utilisation at *now* (loop time; default: now).
@@ -135,6 +130,8 @@ class Gateway:
         #: Reads beside the poll that failed, by (line, ``"trips"`` or ``"setpoint"``).
         self.read_errors: dict[tuple[str, str], int] = {}
         self._stack = contextlib.AsyncExitStack()
+        #: Each line's stack (its bus and poller), in the order they were opened.
+        self._line_stacks: list[contextlib.AsyncExitStack] = []
         self._tasks: list[asyncio.Task[None]] = []
         #: The objects alive at start are out of the collector's way (._heap).
         self._frozen = False
@@ -272,9 +269,10 @@ class Gateway:
             if self.capture_path is not None:
                 self._capture = CaptureFile(self.capture_path)
                 self._stack.callback(self._capture.close)
-            buses = await self._open_buses()
-            for config, bus in zip(self.config.lines, buses, strict=True):
-                self.lines.append(self._open_line(config, bus))
+            self._stack.push_async_callback(self._close_lines)
+            buses = await self._open_buses(self.config.lines)
+            for config, (bus, stack) in zip(self.config.lines, buses, strict=True):
+                self.lines.append(self._open_line(config, bus, stack))
             tune = self.tune_collector
             # The northbounds' models: docstring of ._heap.
             with collector_paused() if tune else contextlib.nullcontext():
@@ -286,8 +284,7 @@ class Gateway:
             if tune:
                 self._stack.enter_context(young_collections_raised())
             for line in self.lines:
-                await self._stack.enter_async_context(line.poller)
-                self._tasks.append(asyncio.create_task(self._background_reads(line)))
+                await self._start_line(line)
             # From here: the start (an OPC UA address space built in one go) is not a
             # stall of the gateway serving, and /healthz must not call it one.
             self.loop_monitor.start()
@@ -316,17 +313,22 @@ class Gateway:
     ) -> None:
         await self._shutdown()
 
-    async def _open_buses(self) -> list[Bus[Any, Any]]:
-        """Every line's bus, opened at once: N lines that are down cost one connect time-out.
+    async def _open_buses(
+        self, configs: Sequence[LineConfig]
+    ) -> list[tuple[Bus[Any, Any], contextlib.AsyncExitStack]]:
+        """Each line's bus, opened at once: N lines that are down cost one connect time-out.
 
         A line that cannot connect is opened down (served offline, reconnected
         with its back-off); one whose settings are wrong raises, and the
-        others are closed with the gateway.
+        others are closed with the gateway. Each bus comes with the stack that
+        closes it (the line's: a reload closes one line alone).
         """
-        buses: dict[int, Bus[Any, Any]] = {}
+        buses: dict[int, tuple[Bus[Any, Any], contextlib.AsyncExitStack]] = {}
 
         async def open_one(index: int, config: LineConfig) -> None:
-            bus: Bus[Any, Any] = await self._stack.enter_async_context(
+            stack = contextlib.AsyncExitStack()
+            self._line_stacks.append(stack)  # closed with the gateway whatever happens
+            bus: Bus[Any, Any] = await stack.enter_async_context(
                 open_bus(
                     config.url,
                     protocol=config.protocol,
@@ -335,20 +337,27 @@ class Gateway:
                     connect="background",  # a line down at start is served as one lost later
                 )
             )
-            buses[index] = bus
+            buses[index] = (bus, stack)
             if not bus.connected:
                 _log.warning("line %s: %s is down (%s): its drives are offline until it "
                              "connects", config.name, config.url, bus.link.last_error)  # fmt: skip
 
         try:
             async with asyncio.TaskGroup() as group:
-                for index, config in enumerate(self.config.lines):
+                for index, config in enumerate(configs):
                     group.create_task(open_one(index, config))
         except BaseExceptionGroup as failed:  # the first line's error, as the caller expects
             raise failed.exceptions[0] from None
-        return [buses[index] for index in range(len(self.config.lines))]
+        return [buses[index] for index in range(len(configs))]
 
-    def _open_line(self, config: LineConfig, bus: Bus[Any, Any]) -> GatewayLine:
+    async def _close_lines(self) -> None:
+        """Close every line's poller and bus, the last opened first."""
+        while self._line_stacks:
+            await self._line_stacks.pop().aclose()
+
+    def _open_line(
+        self, config: LineConfig, bus: Bus[Any, Any], stack: contextlib.AsyncExitStack
+    ) -> GatewayLine:
         profile = get_profile(config.protocol)
         poller = Poller(
             interval_s=config.interval_s, reads=config.reads, parameters=config.parameters
@@ -368,14 +377,40 @@ class Gateway:
             config, bus, self.audit, self._changed, polls=poller,
             stalled=self.loop_monitor.stalled,
         )  # fmt: skip
-        line = GatewayLine(config, profile, bus, poller, controller, drives)
+        line = GatewayLine(config, profile, bus, poller, controller, drives, stack=stack)
         poller.on_sample(lambda sample: self._on_sample(line, sample))
         _log.info("line %s: %s, %s %s", config.name, config.url, profile.node_noun,
                   ",".join(map(str, config.nodes)))  # fmt: skip
         return line
 
+    async def _start_line(self, line: GatewayLine) -> None:
+        """Start *line*'s poll and its reads beside it."""
+        await line.stack.enter_async_context(line.poller)
+        line.reader = asyncio.create_task(
+            read_beside_the_poll(
+                line, lambda: self.config.stale_after_s, self._changed, self.read_errors
+            ),
+            name=f"sj300-beside-{line.config.name}",
+        )
+        self._tasks.append(line.reader)
+
+    async def _stop_line(self, line: GatewayLine) -> None:
+        """Close *line*, already out of the gateway's maps: its held leases lapse first
+        (their actions run and are waited for, as on the gateway's stop), then its reads,
+        poller and bus end."""
+        await line.controller.close(list(line.drives.values()))
+        if line.reader is not None:
+            line.reader.cancel()
+            await asyncio.gather(line.reader, return_exceptions=True)
+            self._tasks.remove(line.reader)
+        await line.stack.aclose()
+        if line.stack in self._line_stacks:
+            self._line_stacks.remove(line.stack)
+
     def _on_sample(self, line: GatewayLine, sample: Sample) -> None:
         drive = line.drives[sample.node]
+        if self._by_key.get(drive.key) is not drive:
+            return  # its line is being removed by a reload: served no more
         drive.readings.take(sample, line.profile)
         # The poll ended at sample.timestamp, on the loop's clock: the same instant in Unix time.
         now = asyncio.get_running_loop().time()
@@ -387,6 +422,8 @@ class Gateway:
 
         Never raises: the write or the trip read that called it goes on.
         """
+        if self._by_key.get(drive.key) is not drive:
+            return  # its line was removed by a reload (a lapse's stop ends on its own)
         try:
             drive.rebuild(asyncio.get_running_loop().time())
         except Exception:  # a profile's bug: the last snapshot stays, the caller goes on
@@ -419,76 +456,6 @@ class Gateway:
                     flush()
                 except Exception:  # its own failure: the others go on
                     _log.exception("the %s northbound failed to flush", section)
-
-    async def _background_reads(self, line: GatewayLine) -> None:
-        """What is read beside the poll: each drive's trip history and set frequency, each
-        when due (module docstring); a failed read is counted and tried when due again."""
-        loop = asyncio.get_running_loop()
-        config, profile = line.config, line.profile
-        trips = profile.capabilities.trip_history and config.trips_interval_s > 0
-        setpoint_polled = profile.setpoint_parameter in config.parameters
-        setpoints = config.setpoint_interval_s > 0 and not setpoint_polled
-        # Twice per stale_after_s at least: read once per stale_after_s, the value
-        # aged past it before each read (a 9600-baud line of 8 drives: 11 of 294
-        # samples of register 1003 answered 0x0B with 5 s and 5 s).
-        setpoint_every = min(config.setpoint_interval_s, self.config.stale_after_s / 2)
-        seen_trip: dict[int, bool] = {}
-        # When each read last failed: a failure waits its interval too (no read per cycle).
-        failed_at: dict[tuple[str, int], float] = {}
-
-        def due(what: str, node: int, last_read: float, interval_s: float) -> bool:
-            last = max(last_read, failed_at.get((what, node), NEVER))
-            return loop.time() - last >= interval_s
-
-        while True:
-            await asyncio.sleep(max(config.interval_s, 0.05))
-            for drive in line.drives.values():
-                readings = drive.readings
-                if not readings.online:
-                    continue
-                target = line.bus.drive(drive.node)
-                tripped = bool(readings.status_view is not None and readings.status_view.tripped)
-                new_trip = tripped and not seen_trip.get(drive.node, False)
-                if trips and (
-                    new_trip or due("trips", drive.node, readings.trips_at, config.trips_interval_s)
-                ):
-                    history = await self._read_beside(
-                        line, drive, "trips", functools.partial(profile.read_trips, target)
-                    )
-                    seen_trip[drive.node] = tripped  # a failed read is tried when due
-                    if history is None:
-                        failed_at["trips", drive.node] = loop.time()
-                    else:
-                        readings.set_trips(history, loop.time(), profile)
-                        self._changed(drive)
-                if setpoints and due(
-                    "setpoint", drive.node, readings.set_frequency_at, setpoint_every
-                ):
-                    hz = await self._read_beside(
-                        line,
-                        drive,
-                        "setpoint",
-                        functools.partial(profile.read_set_frequency, target),
-                    )
-                    if hz is None:
-                        failed_at["setpoint", drive.node] = loop.time()
-                    else:
-                        readings.set_frequency(hz, loop.time())
-                        self._changed(drive)
-
-    async def _read_beside(
-        self, line: GatewayLine, drive: GatewayDrive, what: str, read: Callable[[], Awaitable[_T]]
-    ) -> _T | None:
-        """One read beside the poll, after any pending stop; None (counted) if it failed."""
-        try:
-            await line.controller.gate.wait_open()  # a pending stop has the line first
-            return await read()
-        except SJ300Error as exc:
-            key = (line.config.name, what)
-            self.read_errors[key] = self.read_errors.get(key, 0) + 1
-            _log.debug("line %s node %d: %s read failed: %s", line.config.name, drive.node,
-                       what, exc)  # fmt: skip
-            return None
 
     async def _shutdown(self) -> None:
         self._batch.flush()  # every snapshot made so far, before the northbounds close
