@@ -15,7 +15,8 @@ background, the line says where, not that it answered), flushed at once so
 that a script can read the real port when it asked for port 0. SIGINT and
 SIGTERM stop it cleanly (docs/GATEWAY.md: the order, and the one command it
 may send on the way out), also while it is still starting; exit status 0
-after SIGTERM, 130 after SIGINT (Ctrl-C), as every other command. A line
+after SIGTERM, 130 after SIGINT (Ctrl-C), as every other command. SIGHUP
+reads the ``--config`` file again and applies what changed (:mod:`._hangup`). A line
 that cannot connect at start is served down and retried; a northbound that
 cannot listen (its port in use, an address not on this host) is one line
 naming it, exit status 2.
@@ -43,6 +44,7 @@ from ..gateway import (
 )
 from ._demo import DEMO_NODES, DEMO_URL, demo_running
 from ._errors import EXIT_ON_SIGNAL, USAGE, CliError
+from ._hangup import HangupReloads, status_line
 from ._install import gateway_install_command
 
 if TYPE_CHECKING:
@@ -256,7 +258,13 @@ def run(args: argparse.Namespace) -> int:
 
         return decommission(config)
     return asyncio.run(
-        _serve(config, args.capture, demo=args.demo, tune_collector=args.tune_collector)
+        _serve(
+            config,
+            args.capture,
+            demo=args.demo,
+            tune_collector=args.tune_collector,
+            path=args.config,
+        )
     )
 
 
@@ -296,10 +304,9 @@ def _check(args: argparse.Namespace) -> int:
     return 0
 
 
-def _ready(manager: ServiceManager, gateway: Gateway, announced: list[str]) -> None:
+def _ready(manager: ServiceManager, gateway: Gateway) -> None:
     """Every northbound listens: tell systemd, and keep its watchdog fed from the loop."""
-    drives = len(gateway.drives)
-    manager.ready(f"{len(gateway.lines)} line(s), {drives} drive(s); " + "; ".join(announced))
+    manager.ready(status_line(gateway))
     every = manager.ping_every_s
     if every is not None:
         gateway.loop_monitor.keep_alive(manager.alive, every)
@@ -312,11 +319,17 @@ def _cannot_serve(exc: OSError) -> str:
 
 
 async def _serve(
-    config: GatewayConfig, capture: str | None, *, demo: bool = False, tune_collector: bool = True
+    config: GatewayConfig,
+    capture: str | None,
+    *,
+    demo: bool = False,
+    tune_collector: bool = True,
+    path: str | None = None,
 ) -> int:
     from ..gateway import Gateway, GatewayStartError, ServiceManager
 
     manager = ServiceManager.from_environment()  # systemd's Type=notify (contrib/systemd)
+    reloads = HangupReloads(path, manager)
     loop = asyncio.get_running_loop()
     task = asyncio.current_task()
     assert task is not None
@@ -335,20 +348,21 @@ async def _serve(
 
     for sig in EXIT_ON_SIGNAL:
         loop.add_signal_handler(sig, on_signal, sig)
+    loop.add_signal_handler(signal.SIGHUP, reloads.requested)
     try:
         async with Gateway(config, capture=capture, tune_collector=tune_collector) as gateway:
             starting = False
-            announced = []
             for northbound in gateway.northbounds.values():
                 line = northbound.announce()
                 if line is not None:
                     print(line, flush=True)
-                    announced.append(line)
             if manager is not None:
-                _ready(manager, gateway, announced)
+                _ready(manager, gateway)
+            reloads.serving(gateway)
             simulated = [line.bus for line in gateway.lines if line.bus.simulator is not None]
             async with demo_running(simulated if demo else []):
                 await stop.wait()
+            await reloads.close()
             print("stopping", file=sys.stderr, flush=True)
             if manager is not None:
                 manager.stopping()
@@ -362,6 +376,6 @@ async def _serve(
     except OSError as exc:
         raise CliError(_cannot_serve(exc)) from None
     finally:
-        for sig in EXIT_ON_SIGNAL:
+        for sig in (*EXIT_ON_SIGNAL, signal.SIGHUP):
             loop.remove_signal_handler(sig)
     return status

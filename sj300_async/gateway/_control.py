@@ -61,7 +61,7 @@ from __future__ import annotations
 import asyncio
 import logging
 import math
-from collections.abc import Awaitable, Callable
+from collections.abc import Awaitable, Callable, Iterable
 from typing import Any, Final
 
 from ..bus import Bus
@@ -163,6 +163,21 @@ class Controller:
         #: Held for a pending stop from a reconnect until its try ends: writes wait.
         self.gate = LineGate(bus, polls)
         self.lapse = LapseRunner(config, bus, audit, self._lock, changed, self.gate)
+
+    def retune(self, config: LineConfig, drives: Iterable[GatewayDrive]) -> None:
+        """The line's new settings (a reload, :mod:`._reload`): the next request is judged
+        by *config*'s grants. A held lease keeps its holder (its new ``lease_s`` from the
+        next heartbeat), unless its drive lost its control grant: that lease lapses now,
+        its action run, since the holder may no longer command the drive it runs."""
+        self.config = config
+        self.lapse.config = config
+        for drive in drives:
+            drive.line = config
+            drive.lease.duration_s = config.lease_s
+            if drive.lease.holder is not None and not config.control_allowed(drive.node):
+                _log.warning("line %s node %d: the control grant of %s's lease was withdrawn",
+                             config.name, drive.node, drive.lease.holder)  # fmt: skip
+                self._expire(drive)
 
     @property
     def lapses(self) -> int:

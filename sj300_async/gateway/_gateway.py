@@ -32,7 +32,9 @@ from __future__ import annotations
 import asyncio
 import contextlib
 import logging
+import os
 import time
+from collections import Counter
 from collections.abc import Iterable, Iterator, Sequence
 from dataclasses import dataclass, field
 from types import TracebackType
@@ -41,6 +43,7 @@ from typing import TYPE_CHECKING, Any
 from .. import Poller, Sample
 from ..bus import Bus, CaptureFile, open_bus
 from ..profiles import Profile, get_profile
+from ..wire import LocalProtocolError
 from . import _logflood as logflood
 from ._audit import AuditLog
 from ._batch import SnapshotBatch
@@ -56,8 +59,9 @@ from ._looplag import LoopMonitor
 from ._metrics import LineView, drive_view, gateway_metrics, line_problems
 from ._model import GatewayConfig, LineConfig
 from ._northbound import Northbound, get_northbound
+from ._reloader import ReloadOutcome, apply_reload, reload_file
 from ._served import ServedDrive
-from ._writes import WriteRequest, WriteResult
+from ._writes import Refusal, WriteRequest, WriteResult
 
 if TYPE_CHECKING:
     from prometheus_client.core import Metric
@@ -65,6 +69,10 @@ if TYPE_CHECKING:
 __all__ = ["Gateway", "GatewayLine"]
 
 _log = logging.getLogger("sj300_async.gateway")
+#: The answer to a request for a drive a reload removed while it was on its way.
+_GONE = WriteResult(
+    Refusal.UNKNOWN_TARGET, "the drive is not served any more (the configuration was reloaded)"
+)
 
 
 @dataclass(slots=True)
@@ -79,10 +87,11 @@ class GatewayLine:
     drives: dict[int, GatewayDrive]
     #: The line's utilisation, measured when a door asks for its health.
     meter: UtilisationMeter = field(default_factory=UtilisationMeter)
-    #: What closes its bus and poller (a reload closes one line alone).
+    #: What closes its bus (a reload closes one line alone).
     stack: contextlib.AsyncExitStack = field(default_factory=contextlib.AsyncExitStack)
-    #: The task reading beside its poll (._beside), once started.
+    #: The task reading beside its poll (._beside), and the one its poller runs in.
     reader: asyncio.Task[None] | None = None
+    runner: asyncio.Task[None] | None = None
 
     def health(self, now: float | None = None) -> LineHealth:
         """The line's link, counters and utilisation at *now* (loop time; default: now).
@@ -130,11 +139,18 @@ class Gateway:
         #: Reads beside the poll that failed, by (line, ``"trips"`` or ``"setpoint"``).
         self.read_errors: dict[tuple[str, str], int] = {}
         self._stack = contextlib.AsyncExitStack()
+        self._reloading = asyncio.Lock()
         #: Each line's stack (its bus and poller), in the order they were opened.
         self._line_stacks: list[contextlib.AsyncExitStack] = []
         self._tasks: list[asyncio.Task[None]] = []
         #: The objects alive at start are out of the collector's way (._heap).
         self._frozen = False
+        #: Reloads of the configuration (._reloader), by result: applied, refused.
+        self.reloads: Counter[str] = Counter()
+        #: False after a reload refused, until one is applied (a metric, an alert).
+        self.last_reload_ok = True
+        #: Northbounds a reload could not start (their section: why), for /healthz.
+        self.northbound_failures: dict[str, str] = {}
         #: The event loop's lag, measured while the gateway runs (._looplag).
         self.loop_monitor = LoopMonitor(config.loop_lag_limit_s, every_second=_flush_logs)
         #: The log flood limit, while this gateway runs (._logflood).
@@ -160,13 +176,18 @@ class Gateway:
         connection: str | None = None,
     ) -> WriteResult:
         """Judge and carry out *client*'s write through the drive's line (audited there)."""
-        return await self._line_of(drive).controller.write(
-            client, drive, request, connection=connection
-        )
+        line = self._line_of(drive)
+        if line is None:  # a reload removed its line while the request was on its way
+            self.audit.write(client, drive, type(request).__name__, None, None, _GONE)
+            return _GONE
+        return await line.controller.write(client, drive, request, connection=connection)
 
     async def read_parameter_raw(self, drive: GatewayDrive, code: str) -> int:
         """Parameter *code* of *drive* read now, through its line's controller."""
-        return await self._line_of(drive).controller.read_parameter_raw(drive, code)
+        line = self._line_of(drive)
+        if line is None:
+            raise LocalProtocolError(_GONE.detail)
+        return await line.controller.read_parameter_raw(drive, code)
 
     def disconnected(self, connection: str) -> None:
         """*connection* closed: the connection-scoped leases it holds lapse now."""
@@ -206,12 +227,31 @@ class Gateway:
                 read_errors.add_metric([line.config.name, what], count)
         yield errors
         yield read_errors
+        yield from self._reload_metrics()
         yield from self._lapse_metrics()
         yield from self.loop_monitor.metrics()
         if self._flood is not None:
             yield from self._flood.metrics()
         for northbound in self.northbounds.values():
             yield from northbound.metrics()
+
+    def _reload_metrics(self) -> Iterator[Metric]:
+        from prometheus_client.core import CounterMetricFamily, GaugeMetricFamily
+
+        reloads = CounterMetricFamily(
+            "sj300_gateway_config_reloads",
+            "Reloads of the configuration (SIGHUP), by result: applied, or refused (the "
+            "file did not read or check; the gateway runs on the configuration it had).",
+            labels=["result"],
+        )
+        for result in ("applied", "refused"):
+            reloads.add_metric([result], self.reloads[result])
+        yield reloads
+        yield GaugeMetricFamily(
+            "sj300_gateway_config_last_reload_successful",
+            "0 after a reload was refused, until one is applied; 1 otherwise.",
+            int(self.last_reload_ok),
+        )
 
     def _lapse_metrics(self) -> Iterator[Metric]:
         from prometheus_client.core import CounterMetricFamily, GaugeMetricFamily
@@ -250,16 +290,41 @@ class Gateway:
                     f"line {drive.line.name} {drive.profile.node_noun} {drive.node}: the lapsed "
                     f"lease's stop is not confirmed yet (try {drive.lapse_tries}{why})"
                 )
+        problems += [f"[{s}] is not running: {why}" for s, why in self.northbound_failures.items()]
         for northbound in self.northbounds.values():
             # Optional (Northbound's comment): MQTT's refused subscriptions, for one.
             problems += getattr(northbound, "problems", list)()
         return problems
 
+    async def reload(self, config: GatewayConfig) -> ReloadOutcome:
+        """Take *config* (read and checked) while running: what changed changes, and
+        nothing else (:mod:`._reload`); one reload at a time."""
+        async with self._reloading:
+            return await apply_reload(self, config)
+
+    async def reload_file(self, path: str | os.PathLike[str]) -> ReloadOutcome:
+        """Read *path* and take it as :meth:`reload` does; a file that does not parse or
+        check changes nothing (logged, counted: :mod:`._reloader`)."""
+        async with self._reloading:
+            return await reload_file(self, path)
+
+    def _forget_drive(self, drive: GatewayDrive) -> None:
+        """*drive* is served no more (its line is being removed): out of the maps."""
+        self._drives.remove(drive)
+        del self._by_key[drive.key]
+
+    def _reorder_drives(self) -> None:
+        """The drives in their lines' order again (a reload added or removed lines)."""
+        self._drives[:] = [drive for line in self.lines for drive in line.drives.values()]
+
     def _line_views(self) -> list[LineView]:
         return [LineView(line.config.name, line.bus) for line in self.lines]
 
-    def _line_of(self, drive: GatewayDrive) -> GatewayLine:
-        return next(line for line in self.lines if line.config is drive.line)
+    def _line_of(self, drive: GatewayDrive) -> GatewayLine | None:
+        """*drive*'s line, None when a reload removed it (or replaced the drive)."""
+        if self._by_key.get(drive.key) is not drive:
+            return None
+        return next((line for line in self.lines if line.config is drive.line), None)
 
     # -- running -----------------------------------------------------------------
 
@@ -384,8 +449,26 @@ class Gateway:
         return line
 
     async def _start_line(self, line: GatewayLine) -> None:
-        """Start *line*'s poll and its reads beside it."""
-        await line.stack.enter_async_context(line.poller)
+        """Start *line*'s poll and its reads beside it.
+
+        The poller runs in a task of its own, entered and left there: its task group
+        must be left by the task that entered it, and a reload starts and stops lines
+        from its own task.
+        """
+        polling: asyncio.Future[None] = asyncio.get_running_loop().create_future()
+
+        async def run() -> None:
+            async with line.poller:
+                polling.set_result(None)
+                await asyncio.Future()  # until cancelled: leaving stops the poll
+
+        runner = asyncio.create_task(run(), name=f"sj300-poll-{line.config.name}")
+        self._tasks.append(runner)
+        line.runner = runner
+        await asyncio.wait([polling, runner], return_when=asyncio.FIRST_COMPLETED)
+        if not polling.done():
+            polling.cancel()
+            await runner  # its start's error, raised here
         line.reader = asyncio.create_task(
             read_beside_the_poll(
                 line, lambda: self.config.stale_after_s, self._changed, self.read_errors
@@ -399,10 +482,11 @@ class Gateway:
         (their actions run and are waited for, as on the gateway's stop), then its reads,
         poller and bus end."""
         await line.controller.close(list(line.drives.values()))
-        if line.reader is not None:
-            line.reader.cancel()
-            await asyncio.gather(line.reader, return_exceptions=True)
-            self._tasks.remove(line.reader)
+        for task in (line.reader, line.runner):
+            if task is not None:
+                task.cancel()
+                await asyncio.gather(task, return_exceptions=True)
+                self._tasks.remove(task)
         await line.stack.aclose()
         if line.stack in self._line_stacks:
             self._line_stacks.remove(line.stack)

@@ -178,6 +178,16 @@ class Northbound(Protocol):
     # each (MQTT: a subscription the broker refused); the gateway adds them to its own
     # for /healthz. Read through getattr, so a northbound written before it needs no change.
     #
+    # Optional, for a reload (:mod:`._reload`; without them the gateway restarts the
+    # northbound, and its clients reconnect):
+    # ``reconfigure(config) -> Sequence[str]``: its section changed, where it listens did
+    # not: take *config* for the next request (users, tokens, limits) and return the keys
+    # it could not take live (kept as they were until a restart; the gateway says so).
+    # ``async lines_changed(added, removed) -> None``: lines were added to the gateway or
+    # removed from it (``ServedLine`` each, with their drives; a line changed otherwise is
+    # removed and added): serve the new drives, forget the old. No snapshot of a removed
+    # drive is published after it, and none of an added drive before it.
+    #
     # Optional: ``flush() -> None``, called once the batch just published is whole
     # (after every ``publish`` of it): a northbound that sends samples on sends what it
     # gathered now, with no timer of its own (the gateway's batch did the gathering).

@@ -38,7 +38,7 @@ import hashlib
 import hmac
 import secrets
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Collection
 from dataclasses import dataclass, field
 from typing import Final
 
@@ -154,6 +154,12 @@ class Sessions:
     def end(self, session_id: str | None) -> None:
         if session_id:
             self._sessions.pop(session_id, None)
+
+    def end_users(self, users: Collection[str]) -> None:
+        """End every session of *users* (removed, or their password changed)."""
+        for session_id, session in list(self._sessions.items()):
+            if session.user in users:
+                del self._sessions[session_id]
 
 
 @dataclass(slots=True)

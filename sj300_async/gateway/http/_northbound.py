@@ -3,11 +3,12 @@
 from __future__ import annotations
 
 import asyncio
+import dataclasses
 import logging
-from collections.abc import Iterator
+from collections.abc import Iterator, Sequence
 from typing import TYPE_CHECKING
 
-from .. import ConnectionLimit, GatewayView, ServedDrive, listener_families
+from .. import ConnectionLimit, GatewayView, ServedDrive, ServedLine, listener_families
 from . import HttpConfig
 from ._api import make_app
 from ._guards import AddressSlots, PerAddress
@@ -19,6 +20,11 @@ if TYPE_CHECKING:
     from prometheus_client.core import Metric
 
 __all__ = ["HttpNorthbound"]
+
+
+def _fields_of(config: HttpConfig) -> list[str]:
+    return [field.name for field in dataclasses.fields(config)]
+
 
 _log = logging.getLogger("sj300_async.gateway.http")
 
@@ -70,6 +76,32 @@ class HttpNorthbound:
             body_timeout_s=config.body_timeout_s,
         )
         self._ticker = asyncio.create_task(self.workbench.run(), name="sj300-http-lines")
+
+    async def lines_changed(
+        self, added: Sequence[ServedLine], removed: Sequence[ServedLine]
+    ) -> None:
+        """A reload added or removed lines: the workbench's trends and traces follow."""
+        if self.workbench is not None:
+            self.workbench.lines_changed(added, removed)
+
+    def reconfigure(self, config: object) -> list[str]:
+        """A reload changed ``[http]``: users and tokens from the next request (the
+        sessions of a user removed or whose password changed end); the keys it cannot
+        take live are returned (docs/GATEWAY.md, "Reloading")."""
+        assert isinstance(config, HttpConfig)
+        old, kept = self.config, []
+        for key in _fields_of(config):
+            if key in ("users", "tokens") or getattr(old, key) == getattr(config, key):
+                continue
+            kept.append(f"http.{key}")
+        users, tokens = config.users, config.tokens
+        if self.writes is not None:  # nobody named any more: nobody can log in or write
+            self.writes.set_credentials(users, tokens)
+        elif config.authentication:  # the write routes are made only at a start
+            kept.append("http.users and http.tokens (no write routes until a restart)")
+            users, tokens = old.users, old.tokens
+        self.config = dataclasses.replace(old, users=users, tokens=tokens)
+        return kept
 
     @property
     def port(self) -> int:

@@ -26,7 +26,7 @@ from __future__ import annotations
 
 import asyncio
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from typing import Any, Final
 
 from ...profiles import NEVER
@@ -162,6 +162,24 @@ class Workbench:
                 )
             else:
                 line.health(now)  # the utilisation is measured even with no page open
+
+    def lines_changed(self, added: Sequence[ServedLine], removed: Sequence[ServedLine]) -> None:
+        """A reload added or removed lines: their trends and traces made or dropped (a
+        replaced line's are new: what it recorded was of the line as it was)."""
+        for line in removed:
+            trace = self.traces.pop(line.config.name, None)
+            if trace is not None:
+                trace.close()
+            for node in line.drives:
+                key = (line.config.name, node)
+                self.trends.pop(key, None)
+                self._monitor_at.pop(key, None)
+                self._monitor_time.pop(key, None)
+        for line in added:
+            self.traces[line.config.name] = LineTrace(line.traffic())
+            capacity = trend_capacity(self.trend_s, line.config.interval_s)
+            for node in line.drives:
+                self.trends[line.config.name, node] = Trend(capacity)
 
     def close(self) -> None:
         """Stop recording the lines, end the event streams."""

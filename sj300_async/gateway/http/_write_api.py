@@ -115,6 +115,19 @@ class WriteRoutes:
         self.budget = KeyedBudget(LOGIN_BURST, LOGIN_PER_S)
         self.checks = PasswordChecks()
 
+    def set_credentials(self, users: tuple[User, ...], tokens: tuple[ApiToken, ...]) -> None:
+        """Who may write from the next request (a reload): the sessions of a user no
+        longer named, or whose password hash changed, end now."""
+        before = self._users
+        self._users = {user.name: user for user in users}
+        self._tokens = tokens
+        gone = {
+            name for name, user in before.items()
+            if self._users.get(name, None) is None
+            or self._users[name].password_hash != user.password_hash
+        }  # fmt: skip
+        self.sessions.end_users(gone)
+
     def close(self) -> None:
         """Stop the password checks' thread (a check under way finishes in it)."""
         self.checks.close()

@@ -3,15 +3,15 @@
 from __future__ import annotations
 
 import logging
-from collections.abc import Iterator
+from collections.abc import Iterator, Sequence
 from typing import TYPE_CHECKING
 
 from .. import (
     ConnectionLimit,
     Endpoint,
     GatewayView,
-    LineConfig,
     ServedDrive,
+    ServedLine,
     listener_families,
 )
 from . import ModbusConfig
@@ -42,6 +42,7 @@ class ModbusNorthbound:
         self.clients = ClientCounters()
         #: The running servers, the main listener's first: (its endpoint, its server).
         self.servers: list[tuple[Endpoint, ModbusServer]] = []
+        self._gateway: GatewayView | None = None
 
     @property
     def server(self) -> ModbusServer | None:
@@ -49,32 +50,60 @@ class ModbusNorthbound:
         return self.servers[0][1] if self.servers else None
 
     async def start(self, gateway: GatewayView) -> None:
-        config = self.config
-        named = {name for listener in config.listeners for name in listener.lines}
-        groups: list[tuple[Endpoint, set[str]]] = []
-        if config.listen is not None:
-            rest = {line.config.name for line in gateway.lines} - named
-            groups.append((config.listen, rest))
-        groups += [(listener.listen, set(listener.lines)) for listener in config.listeners]
-        maps: dict[int, tuple[LineConfig, RegisterMap]] = {}
+        self._gateway = gateway
         limit: ConnectionLimit | None = None
         try:
-            for endpoint, lines in groups:
-                units = {}
-                for drive in gateway.drives:
-                    line = drive.line
-                    if line.name not in lines:
-                        continue
-                    if id(line) not in maps:
-                        maps[id(line)] = (line, RegisterMap(drive.profile, line.parameters))
-                    units[drive.unit] = Unit(drive, maps[id(line)][1], {})
-                server = ModbusServer(units, gateway, config.limits, self.clients, limit)
+            for endpoint, units in zip(self._endpoints(), self._units(gateway), strict=True):
+                server = ModbusServer(units, gateway, self.config.limits, self.clients, limit)
                 limit = server.limit
                 await server.start(endpoint)
                 self.servers.append((endpoint, server))
         except BaseException:
             await self.close()
             raise
+
+    async def lines_changed(
+        self, added: Sequence[ServedLine], removed: Sequence[ServedLine]
+    ) -> None:
+        """A reload added or removed lines: each listener's units again, its connections
+        kept (a request for a removed drive's unit is answered as for no drive)."""
+        assert self._gateway is not None
+        for (_, server), units in zip(self.servers, self._units(self._gateway), strict=True):
+            server.set_units(units)
+
+    def _endpoints(self) -> list[Endpoint]:
+        config = self.config
+        main = [] if config.listen is None else [config.listen]
+        return main + [listener.listen for listener in config.listeners]
+
+    def _units(self, gateway: GatewayView) -> list[dict[int, Unit]]:
+        """Each listener's units (the main listener's first): the lines no listener names
+        are the main listener's."""
+        config = self.config
+        named = {name for listener in config.listeners for name in listener.lines}
+        groups: list[set[str]] = []
+        if config.listen is not None:
+            groups.append({line.config.name for line in gateway.lines} - named)
+        groups += [set(listener.lines) for listener in config.listeners]
+        known = {
+            id(unit.drive): unit for _, server in self.servers for unit in server.units.values()
+        }
+        maps: dict[int, RegisterMap] = {}
+        out = []
+        for lines in groups:
+            units = {}
+            for drive in gateway.drives:
+                line = drive.line
+                if line.name not in lines:
+                    continue
+                unit = known.get(id(drive))
+                if unit is None:  # a new drive (at start: every one)
+                    if id(line) not in maps:
+                        maps[id(line)] = RegisterMap(drive.profile, line.parameters)
+                    unit = Unit(drive, maps[id(line)], {})
+                units[drive.unit] = unit
+            out.append(units)
+        return out
 
     @property
     def port(self) -> int:

@@ -129,6 +129,11 @@ class ModbusServer:
         self._connections: set[_Connection] = set()
         self._server: Listener | None = None
 
+    def set_units(self, units: dict[int, Unit]) -> None:
+        """The drives it serves from the next request on (a reload changed the lines)."""
+        self.units = units
+        self.summary = Summary({unit_id: unit.drive for unit_id, unit in units.items()})
+
     async def start(self, endpoint: Endpoint) -> None:
         """Listen on *endpoint* (port 0: any free port, then read :attr:`port`).
 

@@ -87,7 +87,7 @@ import json
 import logging
 import math
 import time
-from collections.abc import Callable, Iterator
+from collections.abc import Callable, Iterator, Sequence
 from typing import TYPE_CHECKING, Final
 
 from .. import (
@@ -96,6 +96,7 @@ from .. import (
     GatewayView,
     Refusal,
     ServedDrive,
+    ServedLine,
     WriteResult,
     compact_json,
     excerpt,
@@ -361,14 +362,47 @@ class MqttBridge:
         await client.publish(self.topics.availability, AVAILABLE, qos=qos, retain=True)
         self._client = client
         self._announce()
-        if (self._sweeper is None or not self._sweeper.done) and self._gateway is not None:
-            # Made one at a time: only the topics are kept (see _outbox).
-            made = (t for t, _ in iter_discovery(self.config, self.topics, self._gateway))
-            drives = [drive.key for drive in self._gateway.drives]
-            self._sweeper, sweeping = sweep_and_say(
-                self.config, self.topics, client, made, self.stats, drives
-            )
-            self._sweep = asyncio.create_task(sweeping, name="mqtt sweep")
+        if self._sweeper is None or not self._sweeper.done:
+            self._start_sweep(client)
+
+    def _start_sweep(self, client: Client) -> None:
+        """Clear what this gateway left retained and no longer serves (:mod:`._sweep`)."""
+        if self._gateway is None:
+            return
+        # Made one at a time: only the topics are kept (see _outbox).
+        made = (t for t, _ in iter_discovery(self.config, self.topics, self._gateway))
+        drives = [drive.key for drive in self._gateway.drives]
+        self._sweeper, sweeping = sweep_and_say(
+            self.config, self.topics, client, made, self.stats, drives
+        )
+        self._sweep = asyncio.create_task(sweeping, name="mqtt sweep")
+
+    async def lines_changed(
+        self, added: Sequence[ServedLine], removed: Sequence[ServedLine]
+    ) -> None:
+        """A reload added or removed lines, on the same session: the removed drives'
+        retained state, availability and discovery cleared (a sweep), their commands
+        waiting refused; discovery published again for every drive served now."""
+        for line in removed:
+            for node in line.drives:
+                key = (line.config.name, node)
+                self._latest.pop(key, None)
+                self._availability.pop(key, None)
+                worker = self._workers.pop(key, None)
+                queue = self._commands.pop(key, None)
+                if worker is not None and key not in self._busy:
+                    worker.cancel()  # a write under way ends as the gateway answers it
+                if queue is not None and queue.qsize():
+                    self.stats.discarded += queue.qsize()
+        client = self._client
+        if client is None:  # swept and announced at the next connection
+            self._sweeper = None
+            return
+        if self._sweep is not None:
+            await cancel_and_wait({self._sweep})
+        self._announce()
+        self._start_sweep(client)
+        self._wake.set()
 
     async def _session(self, client: Client, receiver: asyncio.Task[None]) -> None:
         """Publish, and receive (*receiver*), until the connection fails (raises its MqttError)."""

@@ -83,6 +83,9 @@ class Principal(UaUser):  # type: ignore[misc]
     #: The session's number (set when the session is activated): a connection-scoped
     #: lease names the session it was renewed by.
     key: int = 0
+    #: The password hash the session was activated against: a reload that removes the
+    #: user or changes the password makes the session anonymous (read only).
+    credential: str | None = None
 
     @property
     def anonymous(self) -> bool:
@@ -154,6 +157,17 @@ class Users:
         """The password hash of the user *name* (None: no such user)."""
         return self._hashes.get(name)
 
+    def replace(self, users: tuple[User, ...]) -> None:
+        """Who may log in from now on (a reload); activated sessions: :meth:`current`."""
+        self._hashes = {user.name: user.password_hash for user in users}
+
+    def current(self, principal: Principal) -> Principal:
+        """*principal* as the users are now: anonymous (read only) when its user was
+        removed or its password changed since the session was activated."""
+        if principal.name is None or self._hashes.get(principal.name) == principal.credential:
+            return principal
+        return Principal(role=UserRole.Anonymous, name=None, key=principal.key)
+
     def _afford(self) -> bool:
         now = time.monotonic()
         self._budget = min(CHECKS_BURST, self._budget + (now - self._budget_at) * CHECKS_PER_S)
@@ -176,7 +190,9 @@ class Users:
         if accepted is not None:
             _accepted.set(None)  # once: the next activation is judged again
             if accepted == (username, password):
-                return Principal(role=UserRole.User, name=username)
+                return Principal(
+                    role=UserRole.User, name=username, credential=self._hashes.get(username)
+                )
         # Not judged before (the hooks could not reach asyncua's processing): on the
         # loop, within the shared budget.
         if not self._afford():
@@ -189,19 +205,22 @@ class Users:
         if stored is None or not verified:
             self.refusals["password"] += 1
             return None
-        return Principal(role=UserRole.User, name=username)
+        return Principal(role=UserRole.User, name=username, credential=stored)
 
 
 class ChannelRules(PermissionRuleset):  # type: ignore[misc]
     """The permission ruleset of one security mode's endpoints (see the module docstring)."""
 
-    def __init__(self, mode: ua.MessageSecurityMode) -> None:
+    def __init__(self, mode: ua.MessageSecurityMode, users: Users | None = None) -> None:
         self.mode = mode
+        self.users = users
 
     def check_validity(self, user: Any, action_type_id: Any, body: Any) -> bool:
         if action_type_id in _NODE_MANAGEMENT:
             return False
         principal = user if isinstance(user, Principal) else Principal(name=None)
+        if self.users is not None:
+            principal = self.users.current(principal)
         _caller.set(Caller(principal, self.mode, [0]))
         return True
 

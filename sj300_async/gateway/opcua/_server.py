@@ -35,6 +35,7 @@ from __future__ import annotations
 
 import asyncio
 import contextlib
+import dataclasses
 import functools
 import itertools
 import logging
@@ -149,6 +150,21 @@ class OpcuaServer:
 
     # -- the northbound --------------------------------------------------------------
 
+    def reconfigure(self, config: object) -> list[str]:
+        """A reload changed ``[opcua]``: its users from the next request (a session whose
+        user was removed, or whose password changed, reads on as anonymous); the keys it
+        cannot take live are returned."""
+        assert isinstance(config, OpcuaConfig)
+        old = self.config
+        kept = [
+            f"opcua.{f.name}"
+            for f in dataclasses.fields(config)
+            if f.name != "users" and getattr(old, f.name) != getattr(config, f.name)
+        ]
+        self._users.replace(config.users)
+        self.config = dataclasses.replace(old, users=config.users)
+        return kept
+
     async def start(self, gateway: GatewayView) -> None:
         began = time.perf_counter()
         self._gateway = gateway
@@ -197,7 +213,7 @@ class OpcuaServer:
         # unencrypted: a request in that moment can read, never write.
         server.set_security_policy(
             [_POLICIES[mode] for mode in config.security],
-            permission_ruleset=ChannelRules(ua.MessageSecurityMode.None_),
+            permission_ruleset=ChannelRules(ua.MessageSecurityMode.None_, self._users),
         )
         tokens: list[type] = [ua.AnonymousIdentityToken]
         if config.users:
@@ -343,7 +359,9 @@ class OpcuaServer:
         except OSError as exc:
             raise GatewayStartError.of("opcua", (config.endpoint,), exc) from None
         admit = self._admit if config.trusted_clients is not None else None
-        guard_channels(server, ChannelRules, admit, self._defences.discovery)
+        guard_channels(
+            server, lambda mode: ChannelRules(mode, self._users), admit, self._defences.discovery
+        )
 
     def announce(self) -> str | None:
         certificate = self.certificate

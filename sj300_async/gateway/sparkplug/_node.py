@@ -61,12 +61,14 @@ import asyncio
 import logging
 import math
 import time
-from collections.abc import Callable, Iterator
+from collections.abc import Callable, Iterable, Iterator, Sequence
 from typing import TYPE_CHECKING, Final
 
 from .. import (
+    GatewayDrive,
     GatewayView,
     ServedDrive,
+    ServedLine,
     excerpt,
 )
 from ..mqttlink import Subscriptions, cancel_and_wait, keep_connected, new_client, reader
@@ -127,6 +129,10 @@ class EdgeNode:
         self._gateway: GatewayView | None = None
         self._devices: dict[Key, Device] = {}
         self._by_id: dict[str, Device] = {}
+        #: Devices made so far (each new one's ordinal), and those a reload removed whose
+        #: DDEATH is not sent yet.
+        self._ordinals = 0
+        self._gone: list[Device] = []
         self._node_defs: list[MetricDef] = []
         #: The latest sample of each drive, as served (its values at the sample; who
         #: holds the lease, when the message goes out).
@@ -208,13 +214,49 @@ class EdgeNode:
     async def start(self, gateway: GatewayView) -> None:
         self._gateway = gateway
         self.edge_node = gateway.config.gateway_id
-        for ordinal, drive in enumerate(gateway.drives, start=1):
-            device = Device(drive, ordinal)
-            self._devices[drive.key] = device
-            self._by_id[device.id] = device
+        self._add_devices(gateway.drives)
         self._node_defs = node_definitions(gateway.lines)
         if self._task is None:
             self._task = asyncio.get_running_loop().create_task(self._run(), name="sparkplug")
+
+    def _add_devices(self, drives: Iterable[GatewayDrive]) -> None:
+        """Devices for *drives*, their ordinals (so their aliases) after every one so far."""
+        for drive in drives:
+            self._ordinals += 1
+            device = Device(drive, self._ordinals)
+            self._devices[drive.key] = device
+            self._by_id[device.id] = device
+
+    async def lines_changed(
+        self, added: Sequence[ServedLine], removed: Sequence[ServedLine]
+    ) -> None:
+        """A reload added or removed lines: a DDEATH for each removed device the host
+        knows, then NBIRTH (the node's metrics name the lines) and every DBIRTH again on
+        the same session; the devices kept keep their aliases."""
+        for line in removed:
+            for node in line.drives:
+                device = self._devices.pop((line.config.name, node), None)
+                if device is not None:
+                    del self._by_id[device.id]
+                    self._gone.append(device)
+        self._add_devices(drive for line in added for drive in line.drives.values())
+        assert self._gateway is not None
+        self._node_defs = node_definitions(self._gateway.lines)
+        self._rebirth = True
+        self._wake.set()
+
+    def _deaths(self) -> Iterator[tuple[str, bytes]]:
+        """A DDEATH for each removed device the host was told is alive."""
+        gone, self._gone = self._gone, []
+        for device in gone:
+            key = device.drive.key
+            self._latest.pop(key, None)
+            self._dirty.pop(key, None)
+            if self._alive.pop(key, None) is not None:
+                self.stats.published["DDEATH"] += 1
+                stamp = int(time.time() * 1000)
+                payload = encode_payload(stamp, self._next_seq(), (), birth=False)
+                yield self.topic("DDEATH", device.id), payload
 
     def announce(self) -> str | None:
         host = self.config.primary_host_id
@@ -361,6 +403,8 @@ class EdgeNode:
 
     def _outgoing(self) -> Iterator[tuple[str, bytes]]:
         """Everything due now, in order (each with its seq already taken)."""
+        if self._born:
+            yield from self._deaths()
         if not self._born or self._rebirth:
             yield from self._births()
         while self._dirty and not self._rebirth:
