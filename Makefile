@@ -19,10 +19,11 @@ GATEWAY_STAMP := $(VENV)/.installed-gateway
 # takes its default "no" under DEBIAN_FRONTEND=noninteractive), chromium for the
 # workbench page's browser tests (Playwright drives it: its own browser download is
 # never run), openssl for the certificate of the workbench's HTTPS test, systemd for
-# systemd-analyze (the service unit's verify and security checks; no systemd need run).
+# systemd-analyze (the service unit's verify and security checks; no systemd need run),
+# prometheus for Prometheus and promtool (the dashboard's queries, the alerting rules).
 SYSTEM_PACKAGES := socat:socat ser2net:ser2net mbpoll:mbpoll mosquitto:mosquitto \
 	mosquitto-clients:mosquitto_sub tshark:tshark chromium:chromium openssl:openssl \
-	systemd:systemd-analyze
+	systemd:systemd-analyze prometheus:promtool
 
 # The npm packages of the OPC UA tests' independent client (tests/opcua/node: node-opcua,
 # from its package-lock.json; tests/test_readme.py checks README.md against package.json).
