@@ -321,3 +321,35 @@ async def test_a_workbench_user_removed_is_logged_out(tmp_path: Path) -> None:
         status, answer = await page.post("/api/v1/drives/a/1/lease", {"tab": page.tab})
         assert status == 401, answer
         assert (await page.login(PASSWORD))[0] == 401  # alice is no one now
+
+
+async def test_a_northbound_without_the_hook_is_restarted_for_changed_lines(
+    tmp_path: Path,
+) -> None:
+    """A package's northbound written before reloads existed (the tests' JSON-lines
+    writer): started again to serve the changed lines, said in the reload's notes."""
+    from toynorth import JsonlNorthbound
+
+    from sj300_async.gateway import register_northbound, unregister_northbound
+
+    register_northbound("jsonl", "toynorth:NORTHBOUND")
+    try:
+        path = tmp_path / "gw.toml"
+        head = '[jsonl]\npath = "states.jsonl"\n'
+        async with gateway_of(path, _file(_line("a"), head=head)) as gateway:
+            before = gateway.northbounds["jsonl"]
+            path.write_text(_file(_line("a"), _line("b"), head=head))
+            outcome = await gateway.reload_file(path)
+            assert outcome.notes == (
+                "[jsonl] restarted to serve the changed lines (its clients reconnect)",
+            )
+            after = gateway.northbounds["jsonl"]
+            assert isinstance(after, JsonlNorthbound)
+            assert after is not before
+            await polled(gateway)
+            lines = (tmp_path / "states.jsonl").read_text().splitlines()
+            await wait_for(lambda: '"line": "b"' in (tmp_path / "states.jsonl").read_text(),
+                           "a sample of the new line written")  # fmt: skip
+            assert lines
+    finally:
+        unregister_northbound("jsonl")

@@ -9,8 +9,10 @@ from __future__ import annotations
 
 from pathlib import Path
 
+import pytest
 from asyncua import ua
 from asyncua.ua.uaerrors import UaStatusCodeError
+from waiting import wait_for
 
 from sj300_async.gateway import hash_password, parse_config
 
@@ -62,3 +64,60 @@ async def test_users_change_for_the_next_request(tmp_path: Path, client_pair: Pa
                 server.url, pair=client_pair, user=USER, password=NEW_PASSWORD
             ) as again:
                 assert await _stop_status(again, ns) == "Good"
+
+
+def _second_line(nodes: str = "1-2") -> str:
+    return (
+        f'\n[[lines]]\nname = "yard"\nurl = "sim://?nodes={nodes}"\nnodes = "{nodes}"\n'
+        "interval_s = 0.1\nunit_offset = 10\n"
+    )
+
+
+async def test_lines_added_and_removed_on_the_same_session(tmp_path: Path) -> None:
+    """A line added is browsed and read on the session already open, a subscription made
+    before goes on; a line removed is gone, and an item watching it is told so."""
+    text = opcua_toml(tmp_path)
+    async with opcua_gateway(text) as (gateway, server):
+        await polled(gateway)
+        async with connected(server.url) as client:
+            ns = await client.get_namespace_index(NAMESPACE)
+            changes: list[tuple[str, object]] = []
+
+            class Handler:
+                def datachange_notification(
+                    self, node: object, value: object, data: object
+                ) -> None:
+                    changes.append((str(node), data.monitored_item.Value.StatusCode))  # type: ignore[attr-defined]
+
+            subscription = await client.create_subscription(50, Handler())
+            hall = client.get_node(ua.NodeId("hall/Drive1/Online", ns))
+            await subscription.subscribe_data_change(hall)
+            outcome = await gateway.reload(parse_config(text + _second_line(), "test.toml"))
+            assert outcome.plan is not None
+            assert [c.name for c in outcome.plan.added] == ["yard"]
+            assert outcome.notes == ()  # nothing restarted
+            assert gateway.northbounds["opcua"] is server
+            await polled(gateway)
+            lines = client.get_node(ua.NodeId("Lines", ns))
+            names = {(await n.read_browse_name()).Name for n in await lines.get_children()}
+            assert names == {"hall", "yard"}
+            yard = client.get_node(ua.NodeId("yard/Drive2/Online", ns))
+            assert await yard.read_value() is True
+            assert await client.get_node(ua.NodeId("yard/Drive2/Line", ns)).read_value() == "yard"
+            watched = await subscription.subscribe_data_change(yard)
+            # The line removed: its nodes go, the item on one of them is told.
+            changes.clear()
+            outcome = await gateway.reload(parse_config(text, "test.toml"))
+            assert outcome.plan is not None
+            assert outcome.plan.removed == ("yard",)
+            names = {(await n.read_browse_name()).Name for n in await lines.get_children()}
+            assert names == {"hall"}
+            with pytest.raises(UaStatusCodeError) as raised:
+                await yard.read_value()
+            assert raised.value.code == ua.StatusCodes.BadNodeIdUnknown
+            await wait_for(
+                lambda: any("yard/Drive2/Online" in n and not s.is_good() for n, s in changes),  # type: ignore[attr-defined]
+                "the watching item told",
+            )
+            assert await hall.read_value() is True  # the session and the other line go on
+            await subscription.unsubscribe(watched)

@@ -272,6 +272,12 @@ class LazyNodes(MutableMapping[ua.NodeId, NodeData]):
             )
         )
 
+    def forget_line(self, line: str) -> None:
+        """Line *line*'s drives are made no more (a reload removed it: ._relines); the
+        nodes made so far stay until deleted."""
+        for key in [key for key in self._drives if key[0] == line]:
+            del self._drives[key]
+
     def served(self) -> int:
         """Nodes in the namespace, made or not."""
         eager = sum(

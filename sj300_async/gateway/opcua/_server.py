@@ -40,7 +40,7 @@ import functools
 import itertools
 import logging
 import time
-from collections.abc import Iterable
+from collections.abc import Iterable, Sequence
 from typing import TYPE_CHECKING, Any, Final
 
 from asyncua import Server, ua
@@ -54,6 +54,7 @@ from .. import (
     GatewayStartError,
     GatewayView,
     ServedDrive,
+    ServedLine,
 )
 from ._calls import Calls
 from ._certificate import ServerCertificate, free_port, load_or_generate, load_trusted
@@ -66,19 +67,12 @@ from ._hooks import (
     route_writes,
     session_count,
 )
-from ._lazy import LazyNodes, make_shape
-from ._model import (
-    Binding,
-    DriveNodes,
-    LineNodes,
-    build_drive,
-    build_line,
-    drive_identity,
-    shape_key,
-)
+from ._lazy import LazyNodes, Shape
+from ._model import Binding, DriveNodes, LineNodes
 from ._nodeset import initialised
 from ._operations import limit_operations
 from ._quality import GOOD
+from ._relines import add_lines, finish_lines, gather_lines, remove_line
 from ._security import ChannelRules, Principal, Users
 from ._space import SpaceBuilder
 from ._speedups import ENABLED as SPEEDUPS_ENABLED
@@ -147,6 +141,11 @@ class OpcuaServer:
         self._table: LazyNodes | None = None
         #: Each method node's handler, bound when its node is made (lazy only).
         self._handlers: dict[ua.NodeId, Any] = {}
+        #: Drive nodes made when asked for (._lazy), where the speedups were tested.
+        self._lazy = SPEEDUPS_ENABLED
+        #: Lazy: the prototype of each drive shape served (._relines).
+        self._shapes: dict[object, Shape] = {}
+        self._lines_folder: ua.NodeId | None = None
 
     # -- the northbound --------------------------------------------------------------
 
@@ -244,48 +243,16 @@ class OpcuaServer:
             )
 
     async def _build(self, server: Server, gateway: GatewayView) -> None:
-        lazy = SPEEDUPS_ENABLED  # drive nodes made when asked for (._lazy), where tested
         space = SpaceBuilder(self.namespace)
         objects = server.nodes.objects.nodeid
         lines = space.object(objects, "Lines", "Lines", "the gateway's RS-485 lines", folder=True)
-        # Lazy: one drive per shape gathers its nodes (the prototypes), the rest only ids.
-        shapes: dict[object, tuple[list[ua.AddNodesItem], str, ua.NodeId]] = {}
-        drives: list[tuple[object, GatewayDrive, LineNodes]] = []
-        for line in gateway.lines:
-            line_nodes = build_line(space, lines, line)
-            self._lines.append(line_nodes)
-            for drive in line.drives.values():
-                control = line.config.control_allowed(drive.node)
-                own = space
-                if lazy:
-                    key = shape_key(drive, control=control)
-                    own = SpaceBuilder(self.namespace, gather=key not in shapes)
-                    drives.append((key, drive, line_nodes))
-                self._drives[drive.key] = built = build_drive(
-                    own, line_nodes.node, line.config.name, drive, control=control
-                )
-                if own.gather and own is not space:
-                    shapes[key] = (own.items, str(built.node.Identifier), line_nodes.node)
+        self._lines_folder = lines
+        gathered = gather_lines(self, space, lines, gateway.lines)
         await space.commit(server.nodes.objects.session)
-        if lazy:
+        if self._lazy:
             aspace = server.iserver.aspace
-            made = {key: make_shape(aspace, *shape) for key, shape in shapes.items()}
-            self._table = table = LazyNodes.install(aspace, self.namespace, self._bind_node)
-            for shape, drive, line_nodes in drives:
-                identity = functools.partial(drive_identity, drive, line_nodes.line.config.name)
-                table.add_drive(made[shape], identity, line_nodes.node)
-        for line_nodes in self._lines:
-            for name, counter in line_nodes.counters.items():
-                server.set_attribute_value_callback(
-                    counter, self._counters.reader(line_nodes, name)
-                )
-                server.set_attribute_value_setter(counter, _keep)
-        for nodes in self._drives.values():
-            self._bind(server, nodes, lazy=lazy)
-            for node, code in nodes.writable.items():
-                self._writable[node] = (nodes, code)
-            for binding in nodes.bindings:
-                self._bound[binding.node] = binding
+            self._table = LazyNodes.install(aspace, self.namespace, self._bind_node)
+        finish_lines(self, server, gathered)
         follow_watchers(server, self._watch)
         route_writes(server, self.namespace, self._write)
         install_speedups()  # where asyncua is a release they were tested with (logged if not)
@@ -303,6 +270,44 @@ class OpcuaServer:
         )
         refuse_registration(server)
         await limit_operations(server, self._defences.refuse_operations)
+
+    def _bind_counters(self, server: Server, line_nodes: LineNodes) -> None:
+        for name, counter in line_nodes.counters.items():
+            server.set_attribute_value_callback(counter, self._counters.reader(line_nodes, name))
+            server.set_attribute_value_setter(counter, _keep)
+
+    def _bind_drive(self, server: Server, nodes: DriveNodes) -> None:
+        """Serve *nodes*: their values bound, writable parameters and bindings known."""
+        self._bind(server, nodes, lazy=self._lazy)
+        for node, code in nodes.writable.items():
+            self._writable[node] = (nodes, code)
+        for binding in nodes.bindings:
+            self._bound[binding.node] = binding
+
+    def _unbind_drive(self, nodes: DriveNodes) -> None:
+        """Serve *nodes* no more (a reload removed their line)."""
+        for binding in nodes.bindings:
+            self._bound.pop(binding.node, None)
+            self._watched.pop(binding.node, None)
+        for node in nodes.writable:
+            self._writable.pop(node, None)
+        methods = nodes.methods
+        if methods is not None:
+            for node in (methods.take_control, methods.run, methods.stop, methods.set_frequency):
+                self._handlers.pop(node, None)
+
+    async def lines_changed(
+        self, added: Sequence[ServedLine], removed: Sequence[ServedLine]
+    ) -> None:
+        """A reload added or removed lines: the address space follows, on the running
+        server (:mod:`._relines`)."""
+        server = self._server
+        if server is None:
+            return
+        for line in removed:
+            await remove_line(self, server, line.config.name)
+        if added:
+            await add_lines(self, server, added)
 
     def _bind(self, server: Server, nodes: DriveNodes, *, lazy: bool) -> None:
         """Take *nodes*' values; bind their nodes now, or (*lazy*) keep what

@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import math
 import time
+from collections.abc import Iterable
 from typing import Any, Final, cast
 
 from asyncua import ua
@@ -68,6 +69,11 @@ class LineCounters:
         if count > 0:
             self._watched[node] = count
         else:  # no count kept for a node nobody watches (a drive's property, too)
+            self._watched.pop(node, None)
+
+    def forget(self, nodes: Iterable[ua.NodeId]) -> None:
+        """*nodes* are deleted (a reload removed their line): their watch counts go."""
+        for node in nodes:
             self._watched.pop(node, None)
 
     def reader(self, nodes: LineNodes, name: str) -> Any:
