@@ -1,9 +1,10 @@
 """``sj300 gateway`` reloading its file on SIGHUP while its clients work (issue 46).
 
 The real command in a subprocess, a real mosquitto, and clients that keep working
-through every reload: a Modbus master reading every 0.2 s on one connection, an MQTT
-subscriber, an OPC UA session, and a workbench user holding a drive's control lease
-(its page heartbeats). Line ``hall`` is a simulator in this process (the motor's state
+through every reload: a Modbus master reading every 0.2 s on one connection,
+mosquitto_sub on every drive's state, an OPC UA subscription on a running drive's
+frequency, and a workbench user holding that drive's control lease (its page
+heartbeats). Line ``hall`` is a simulator in this process (the motor's state
 is seen here); the lines added and removed are ``sim://``.
 
 The reloads, in order: a user added; a bad file; a line added; that line changed; that
@@ -16,6 +17,7 @@ from __future__ import annotations
 
 import asyncio
 import contextlib
+import itertools
 import re
 import signal
 import struct
@@ -153,6 +155,44 @@ class ModbusReader:
             writer.close()
 
 
+class Notifications:
+    """An OPC UA subscription's handler: values counted, status changes kept."""
+
+    def __init__(self) -> None:
+        self.count = 0
+        self.status_changes: list[object] = []
+
+    def datachange_notification(self, node: object, value: object, data: object) -> None:
+        self.count += 1
+
+    def status_change_notification(self, status: object) -> None:
+        self.status_changes.append(status)
+
+
+@dataclass
+class StateCounts:
+    """mosquitto_sub on every drive's state topic: messages counted by ``line/node``."""
+
+    port: int
+    counts: dict[str, int] = field(default_factory=dict)
+
+    async def run(self) -> None:
+        proc = await asyncio.create_subprocess_exec(
+            "mosquitto_sub", "-h", "127.0.0.1", "-p", str(self.port),
+            "-t", "sj300/gw1/+/+/state", "-F", "%t",
+            stdout=asyncio.subprocess.PIPE, stderr=asyncio.subprocess.DEVNULL,
+        )  # fmt: skip
+        assert proc.stdout is not None
+        try:
+            while line := await proc.stdout.readline():
+                _, _, name, node, _ = line.decode().strip().split("/")
+                key = f"{name}/{node}"
+                self.counts[key] = self.counts.get(key, 0) + 1
+        finally:
+            proc.kill()
+            await proc.wait()
+
+
 @contextlib.asynccontextmanager
 async def gateway_process(config: Path) -> AsyncIterator[tuple[Any, dict[str, str]]]:
     async with running("gateway", "--config", str(config)) as proc:
@@ -219,12 +259,45 @@ async def test_reloads_while_every_client_works(tmp_path: Path, sim_line: SimLin
             assert (await page.login())[0] == 200
             stop_lease = asyncio.Event()
             leasing = asyncio.create_task(_keep_lease(page, "hall", 1, stop_lease))
+            # The hall's drive 1 running, its set frequency changed after every reload.
+            await _until_online(session, base, "hall", 1)
+            for what, body in (
+                ("lease", {}),
+                ("frequency", {"hz": 10}),
+                ("run", {"direction": "forward"}),
+            ):
+                status, answer = await page.post(
+                    f"/api/v1/drives/hall/1/{what}", {"tab": page.tab, **body}
+                )
+                assert status == 200, answer
             client = Client(found["opcua"], timeout=10)
             await client.connect()
             ns = await client.get_namespace_index(NAMESPACE)
             online = client.get_node(ua.NodeId("hall/Drive1/Online", ns))
+            notified = Notifications()
+            subscription = await client.create_subscription(100, notified)
+            hz = client.get_node(ua.NodeId("hall/Drive1/Monitoring/FrequencyCommandValue", ns))
+            await subscription.subscribe_data_change(hz)
+            states = StateCounts(port)
+            subscriber = asyncio.create_task(states.run())
             await wait_for(lambda: modbus.reads >= 3, "Modbus reads", timeout=TIMEOUT)
             connects = await _metric(session, base, "sj300_mqtt_connects_total")
+
+            setpoints = itertools.cycle((20, 30, 40))
+
+            async def all_flowing() -> None:
+                """A new set frequency for the hall's drive 1, through its lease: a new OPC
+                UA value of its read-back, and a new MQTT state."""
+                opc, mqtt = notified.count, states.counts.get("hall/1", 0)
+                body = {"tab": page.tab, "hz": next(setpoints)}
+                status, answer = await page.post("/api/v1/drives/hall/1/frequency", body)
+                assert status == 200, answer
+                await wait_for(lambda: notified.count > opc, "OPC UA values", timeout=TIMEOUT)
+                await wait_for(
+                    lambda: states.counts.get("hall/1", 0) > mqtt, "MQTT states", timeout=TIMEOUT
+                )
+
+            await all_flowing()
 
             # 1. A user added: bob logs in, on the running workbench.
             config.write_text(_config(port, sim_line.url, opcua, bob=True))
@@ -237,6 +310,7 @@ async def test_reloads_while_every_client_works(tmp_path: Path, sim_line: SimLin
             ) as response:
                 assert response.status == 200
             assert await online.read_value() is True  # the same OPC UA session
+            await all_flowing()
 
             # 2. A bad file: refused, said, counted; everything as it was.
             config.write_text(_config(port, sim_line.url, opcua, bob=True, tail="[modbuss]\n"))
@@ -246,6 +320,7 @@ async def test_reloads_while_every_client_works(tmp_path: Path, sim_line: SimLin
             refused = 'sj300_gateway_config_reloads_total{result="refused"}'
             assert await _metric(session, base, refused) == 1
             assert await online.read_value() is True
+            await all_flowing()
 
             # 3. A line added: polled, on every door, the doors' connections kept.
             extra = _line_b("1-2")
@@ -261,6 +336,8 @@ async def test_reloads_while_every_client_works(tmp_path: Path, sim_line: SimLin
             # On the OPC UA session opened before it.
             name = await client.get_node(ua.NodeId("b/Drive2/Line", ns)).read_value()
             assert name == "b"
+            await wait_for(lambda: "b/2" in states.counts, "b/2's MQTT state", timeout=TIMEOUT)
+            await all_flowing()
 
             # 4. That line changed (its nodes): replaced.
             config.write_text(
@@ -270,6 +347,7 @@ async def test_reloads_while_every_client_works(tmp_path: Path, sim_line: SimLin
             assert said == f"reloaded {config}: line b replaced"
             await _until_online(session, base, "b", 3)
             assert await client.get_node(ua.NodeId("b/Drive3/Line", ns)).read_value() == "b"
+            await all_flowing()
 
             # 5. A drive of that line leased and running, then the line removed: line b
             # on a simulator of this process now (its motor is seen stop).
@@ -296,8 +374,12 @@ async def test_reloads_while_every_client_works(tmp_path: Path, sim_line: SimLin
             assert await _metric(session, base, "sj300_mqtt_connects_total") == connects
             async with session.get(base + "/api/v1/drives/hall/1") as response:
                 assert (await response.json())["control"]["holder"] is not None
+            await all_flowing()
             assert await online.read_value() is True  # one OPC UA session throughout
+            assert notified.status_changes == []
             await client.disconnect()
+            subscriber.cancel()
+            await asyncio.gather(subscriber, return_exceptions=True)
             reading.cancel()
             await asyncio.gather(reading, return_exceptions=True)
             proc.send_signal(signal.SIGTERM)
