@@ -12,6 +12,7 @@ gateway started from flags has no file: SIGHUP says so and changes nothing.
 from __future__ import annotations
 
 import asyncio
+import logging
 import sys
 from typing import TYPE_CHECKING
 
@@ -19,6 +20,8 @@ if TYPE_CHECKING:
     from ..gateway import Gateway, ServiceManager
 
 __all__ = ["HangupReloads", "status_line"]
+
+_log = logging.getLogger("sj300_async.gateway")
 
 
 def status_line(gateway: Gateway) -> str:
@@ -72,7 +75,13 @@ class HangupReloads:
             return
         if self._manager is not None:
             self._manager.reloading()
-        outcome = await gateway.reload_file(self._path)
+        try:
+            outcome = await gateway.reload_file(self._path)
+        except Exception:  # a bug of ours: said with its traceback, the gateway serves on
+            _log.exception("reload of %s failed part-way", self._path)
+            if self._manager is not None:
+                self._manager.ready(status_line(gateway))
+            return
         if not outcome.refused:  # a refusal is the gateway's ERROR line already
             assert outcome.plan is not None
             words = outcome.plan.words() or ["nothing changed"]

@@ -389,9 +389,11 @@ class Gateway:
         closes it (the line's: a reload closes one line alone).
         """
         buses: dict[int, tuple[Bus[Any, Any], contextlib.AsyncExitStack]] = {}
+        stacks: list[contextlib.AsyncExitStack] = []
 
         async def open_one(index: int, config: LineConfig) -> None:
             stack = contextlib.AsyncExitStack()
+            stacks.append(stack)
             self._line_stacks.append(stack)  # closed with the gateway whatever happens
             bus: Bus[Any, Any] = await stack.enter_async_context(
                 open_bus(
@@ -412,6 +414,9 @@ class Gateway:
                 for index, config in enumerate(configs):
                     group.create_task(open_one(index, config))
         except BaseExceptionGroup as failed:  # the first line's error, as the caller expects
+            for stack in stacks:  # the others opened here close now (a reload goes on)
+                await stack.aclose()
+                self._line_stacks.remove(stack)
             raise failed.exceptions[0] from None
         return [buses[index] for index in range(len(configs))]
 

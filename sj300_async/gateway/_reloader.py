@@ -7,13 +7,15 @@ section's libraries, ports and files): a file that fails either changes
 nothing, said in one log line and counted
 (``sj300_gateway_config_reloads_total{result="refused"}``,
 ``sj300_gateway_config_last_reload_successful`` 0). Then
-:func:`apply_reload` changes, in this order: the gateway-wide settings; the
+:func:`apply_reload` opens the new lines' buses first (a line whose bus can
+never open, as a start would refuse it, refuses the reload before anything
+changed), and changes, in this order: the gateway-wide settings; the
 retuned lines; the lines removed or replaced (out of the gateway's maps, the
 northbounds told, then their leases lapse and they close); the lines added
 (opened, the northbounds told, then polled); the northbound sections closed,
 reconfigured and started. Each step's failure is its own: logged, said in
-the reload's outcome, and the next step goes on (a line that cannot be
-opened is one a start would serve as down: it is retried the same way).
+the reload's outcome, and the next step goes on (a line whose device is
+down now is opened down, served offline and retried, as at a start).
 
 This module is the gateway's friend: it reaches the :class:`~._gateway.Gateway`'s
 line and northbound primitives (``_open_buses``, ``_stop_line``...), which
@@ -23,6 +25,7 @@ exist for it and for the gateway's own start and stop.
 from __future__ import annotations
 
 import asyncio
+import contextlib
 import dataclasses
 import importlib.util
 import logging
@@ -39,6 +42,7 @@ from ._reload import ReloadPlan, plan_reload
 from ._toml import GatewayConfigError
 
 if TYPE_CHECKING:
+    from ..bus import Bus
     from ._gateway import Gateway, GatewayLine
 
 __all__ = ["ReloadOutcome", "apply_reload", "reload_file"]
@@ -111,6 +115,11 @@ async def apply_reload(
     old = gateway.config
     if plan is None:
         plan = plan_reload(old, config)
+    coming = [*plan.added, *plan.replaced]
+    try:  # first: a line whose bus can never open refuses the reload before any change
+        buses = await gateway._open_buses(coming) if coming else []
+    except Exception as exc:  # what open_bus raises for a URL that cannot work: a start's
+        return _refused(gateway, f"a line cannot be opened: {exc}")
     notes = list(plan.kept)
     _settings(gateway, config)
     for line_config in plan.retuned:
@@ -120,7 +129,6 @@ async def apply_reload(
         line.controller.retune(line_config, line.drives.values())
     names = [*plan.removed, *(c.name for c in plan.replaced)]
     going = [_line(gateway, name) for name in names]
-    coming = [*plan.added, *plan.replaced]
     # The merged configuration: what is kept stays as it was, the rest is the file's.
     sections = {
         section: old.northbounds[section] if section in plan.kept_sections else settings
@@ -129,7 +137,7 @@ async def apply_reload(
     gateway.config = dataclasses.replace(
         config, northbounds=sections, gateway_id=old.gateway_id, audit_log=old.audit_log
     )
-    await _swap_lines(gateway, going, coming, notes)
+    await _swap_lines(gateway, going, coming, buses, notes)
     await _northbound_sections(gateway, plan, notes)
     _order(gateway)
     gateway.reloads["applied"] += 1
@@ -153,20 +161,19 @@ async def _swap_lines(
     gateway: Gateway,
     going: Sequence[GatewayLine],
     coming: Sequence[LineConfig],
+    buses: Sequence[tuple[Bus[Any, Any], contextlib.AsyncExitStack]],
     notes: list[str],
 ) -> None:
-    """Remove *going* and add lines of *coming* (a replaced line is both)."""
+    """Remove *going* and add lines of *coming* on their opened *buses* (a replaced line
+    is both)."""
     for line in going:
         gateway.lines.remove(line)
         for drive in line.drives.values():
             gateway._forget_drive(drive)
     gateway._batch.flush()  # what was gathered before, out now: nothing of them after
-    added: list[GatewayLine] = []
-    if coming:
-        buses = await gateway._open_buses(coming)
-        pairs = zip(coming, buses, strict=True)
-        added = [gateway._open_line(c, bus, stack) for c, (bus, stack) in pairs]
-        gateway.lines.extend(added)
+    pairs = zip(coming, buses, strict=True)
+    added = [gateway._open_line(c, bus, stack) for c, (bus, stack) in pairs]
+    gateway.lines.extend(added)
     if going or added:
         await _tell_northbounds(gateway, added, going, notes)
     # Their leases lapse (stops sent and waited for, as on the gateway's stop), together.
