@@ -547,31 +547,35 @@ class Gateway:
                     _log.exception("the %s northbound failed to flush", section)
 
     async def _shutdown(self) -> None:
-        self._batch.flush()  # every snapshot made so far, before the northbounds close
-        for section in reversed(list(self.northbounds)):
-            northbound = self.northbounds.pop(section)
-            try:
-                await northbound.close()
-            except Exception:  # one northbound's failure must not leave the others running
-                _log.exception("the %s northbound failed to close", section)
-        # Every line's lapses at once: their waits for confirmation do not add up.
-        await asyncio.gather(
-            *(line.controller.close(list(line.drives.values())) for line in self.lines)
-        )
-        for task in self._tasks:
-            task.cancel()
-        await asyncio.gather(*self._tasks, return_exceptions=True)
-        self._tasks.clear()
-        await self._stack.aclose()
-        self._batch.flush()  # made while stopping: to no northbound, and no timer left behind
-        self.audit.close()
-        self.loop_monitor.stop()
-        if self._flood is not None:
-            self._flood = None
-            logflood.uninstall()
-        if self._frozen:
-            self._frozen = False
-            thaw()
+        try:
+            self._batch.flush()  # every snapshot made so far, before the northbounds close
+            for section in reversed(list(self.northbounds)):
+                northbound = self.northbounds.pop(section)
+                try:
+                    await northbound.close()
+                except Exception:  # one northbound's failure must not leave the others running
+                    _log.exception("the %s northbound failed to close", section)
+            # Every line's lapses at once: their waits for confirmation do not add up.
+            await asyncio.gather(
+                *(line.controller.close(list(line.drives.values())) for line in self.lines)
+            )
+            for task in self._tasks:
+                task.cancel()
+            await asyncio.gather(*self._tasks, return_exceptions=True)
+            self._tasks.clear()
+            await self._stack.aclose()
+            self._batch.flush()  # made while stopping: to no northbound, no timer left behind
+        finally:
+            # The process-wide parts, whatever happened above (an error, a cancellation):
+            # left installed, they would outlive this gateway in its process.
+            self.audit.close()
+            self.loop_monitor.stop()
+            if self._flood is not None:
+                self._flood = None
+                logflood.uninstall()
+            if self._frozen:
+                self._frozen = False
+                thaw()
 
     def lines_by_name(self) -> Iterable[tuple[str, GatewayLine]]:
         """``(name, line)`` of every line, in the configuration's order."""

@@ -156,6 +156,8 @@ GATEWAY_NAMES = (
     "unknown_choice", "northbound_extra",
     # where unit ids are held: a Modbus listener each (issue 30)
     "UnitScope",
+    # --check-config, and the service manager's notifications (issue 46)
+    "ConfigCheck", "check_config", "ServiceManager",
 )  # fmt: skip
 GATEWAY_MODBUS_NAMES = (
     "ClientCounters", "DEFAULT_LIMITS", "Exc", "Field", "MAX_CLIENTS", "ModbusConfig",
