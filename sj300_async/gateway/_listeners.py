@@ -288,6 +288,12 @@ class ConnectionLimit:
         self.evicted = 0
         self.log = RateLimitedLog(log)
 
+    def retune(self, limits: ListenerLimits) -> None:
+        """The caps of *limits* from the next connection on (a reload): the connections
+        open now stay, even over a lower cap."""
+        self.max_connections = limits.max_connections
+        self.max_per_address = limits.per_address
+
     def open_from(self, address: str) -> int:
         """Connections open now from *address*."""
         return self._by_address.get(address, 0)

@@ -353,3 +353,30 @@ async def test_a_northbound_without_the_hook_is_restarted_for_changed_lines(
             assert lines
     finally:
         unregister_northbound("jsonl")
+
+
+async def test_listener_limits_change_for_the_next_connection(tmp_path: Path) -> None:
+    """``[modbus]`` limits lowered by a reload: the open connection goes on, the next one
+    over the new cap is closed at once; nothing restarted."""
+    import struct
+
+    path = tmp_path / "gw.toml"
+    head = '[modbus]\nlisten = "127.0.0.1:0"\nmax_connections = 4\n'
+    async with gateway_of(path, _file(_line("a"), head=head)) as gateway:
+        server = gateway.northbounds["modbus"]
+        port = server.port  # type: ignore[attr-defined]
+        reader, writer = await asyncio.open_connection("127.0.0.1", port)
+        request = struct.pack(">HHHBBHH", 1, 0, 6, 1, 3, 0, 2)
+        path.write_text(_file(_line("a"), head=head.replace("= 4", "= 1")))
+        outcome = await gateway.reload_file(path)
+        assert outcome.plan is not None
+        assert outcome.plan.reconfigured == ("modbus",)
+        assert outcome.notes == ()
+        assert gateway.northbounds["modbus"] is server
+        writer.write(request)
+        assert (await reader.readexactly(9))[7] == 3  # the open one answers
+        second_reader, second = await asyncio.open_connection("127.0.0.1", port)
+        second.write(request)
+        assert await second_reader.read() == b""  # over the new cap: closed unanswered
+        second.close()
+        writer.close()

@@ -85,22 +85,36 @@ class HttpNorthbound:
             self.workbench.lines_changed(added, removed)
 
     def reconfigure(self, config: object) -> list[str]:
-        """A reload changed ``[http]``: users and tokens from the next request (the
-        sessions of a user removed or whose password changed end); the keys it cannot
-        take live are returned (docs/GATEWAY.md, "Reloading")."""
+        """A reload changed ``[http]``: users, tokens and limits from the next request
+        (the sessions of a user removed or whose password changed end); the keys it
+        cannot take live are returned (docs/GATEWAY.md, "Reloading")."""
         assert isinstance(config, HttpConfig)
         old, kept = self.config, []
+        live = ("users", "tokens", "limits", "body_timeout_s", "max_streams_per_address")
         for key in _fields_of(config):
-            if key in ("users", "tokens") or getattr(old, key) == getattr(config, key):
+            if key in live or getattr(old, key) == getattr(config, key):
                 continue
             kept.append(f"http.{key}")
+        # The limits from the next connection, request or stream (those open stay).
+        self.limit.retune(config.limits)
+        self.per_address.streams.per_address = config.max_streams_per_address
+        if self.server is not None:
+            self.server.idle_timeout_s = config.limits.idle_timeout_s
+            self.server.body_timeout_s = config.body_timeout_s
         users, tokens = config.users, config.tokens
         if self.writes is not None:  # nobody named any more: nobody can log in or write
             self.writes.set_credentials(users, tokens)
         elif config.authentication:  # the write routes are made only at a start
             kept.append("http.users and http.tokens (no write routes until a restart)")
             users, tokens = old.users, old.tokens
-        self.config = dataclasses.replace(old, users=users, tokens=tokens)
+        self.config = dataclasses.replace(
+            old,
+            users=users,
+            tokens=tokens,
+            limits=config.limits,
+            body_timeout_s=config.body_timeout_s,
+            max_streams_per_address=config.max_streams_per_address,
+        )
         return kept
 
     @property

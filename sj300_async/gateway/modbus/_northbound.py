@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import dataclasses
 import logging
 from collections.abc import Iterator, Sequence
 from typing import TYPE_CHECKING
@@ -70,6 +71,20 @@ class ModbusNorthbound:
         assert self._gateway is not None
         for (_, server), units in zip(self.servers, self._units(self._gateway), strict=True):
             server.set_units(units)
+
+    def reconfigure(self, config: object) -> list[str]:
+        """A reload changed ``[modbus]``, not where it listens: its limits from the next
+        connection (idle time from the next request); which lines a listener serves
+        waits for a restart (returned)."""
+        assert isinstance(config, ModbusConfig)
+        kept = ["modbus.listeners"] if config.listeners != self.config.listeners else []
+        limits = config.limits
+        if self.servers:
+            self.servers[0][1].limit.retune(limits)  # one limit for every listener
+        for _, server in self.servers:
+            server.idle_timeout_s = limits.idle_timeout_s
+        self.config = dataclasses.replace(self.config, limits=limits)
+        return kept
 
     def _endpoints(self) -> list[Endpoint]:
         config = self.config
