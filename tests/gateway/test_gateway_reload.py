@@ -380,3 +380,21 @@ async def test_listener_limits_change_for_the_next_connection(tmp_path: Path) ->
         assert await second_reader.read() == b""  # over the new cap: closed unanswered
         second.close()
         writer.close()
+
+
+async def test_the_mqtt_commands_budget_changes_on_the_same_session(tmp_path: Path) -> None:
+    from cli.clirun import closed_port
+
+    path = tmp_path / "gw.toml"
+    head = f'[mqtt]\nurl = "mqtt://127.0.0.1:{closed_port()}"\ncommand_burst = 20\n'
+    async with gateway_of(path, _file(_line("a"), head=head)) as gateway:
+        bridge = gateway.northbounds["mqtt"]
+        changed = head.replace("command_burst = 20", "command_burst = 2") + 'prefix = "other"\n'
+        path.write_text(_file(_line("a"), head=changed))
+        outcome = await gateway.reload_file(path)
+        assert outcome.plan is not None
+        assert outcome.plan.reconfigured == ("mqtt",)
+        assert outcome.notes == ("[mqtt] mqtt.prefix: as it was until a restart",)
+        assert gateway.northbounds["mqtt"] is bridge
+        assert bridge._intake.commands.burst == 2  # type: ignore[attr-defined]
+        assert bridge.config.prefix == "sj300"  # type: ignore[attr-defined]

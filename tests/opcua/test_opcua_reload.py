@@ -7,6 +7,7 @@ sessions and its subscriptions are the same throughout.
 
 from __future__ import annotations
 
+import contextlib
 from pathlib import Path
 
 import pytest
@@ -121,3 +122,28 @@ async def test_lines_added_and_removed_on_the_same_session(tmp_path: Path) -> No
             )
             assert await hall.read_value() is True  # the session and the other line go on
             await subscription.unsubscribe(watched)
+
+
+async def test_session_and_login_limits_change_for_the_next_session(tmp_path: Path) -> None:
+    """``[opcua]`` limits lowered by a reload: the session open stays, the next one from
+    the same address over the new cap is refused; nothing restarted."""
+    text = opcua_toml(tmp_path, opcua_extra="max_connections_per_address = 4\n")
+    async with opcua_gateway(text) as (gateway, server), connected(server.url) as first:
+        ns = await first.get_namespace_index(NAMESPACE)
+        async with connected(server.url):  # a second one from this address: under the cap
+            pass
+        lowered = text.replace("max_connections_per_address = 4", "max_connections_per_address = 1")
+        changed = lowered.replace("[opcua]\n", "[opcua]\nlogin_burst = 2\n", 1)
+        outcome = await gateway.reload(parse_config(changed, "test.toml"))
+        assert outcome.plan is not None
+        assert outcome.plan.reconfigured == ("opcua",)
+        assert outcome.notes == ()
+        assert gateway.northbounds["opcua"] is server
+        assert await first.get_node(ua.NodeId("hall/Drive1/Online", ns)).read_value() is True
+        refused = server._defences.admission.connections_refused["per_address"]
+        # asyncua's client fails in a way of its own: the server's count says why.
+        with contextlib.suppress(Exception):
+            async with connected(server.url):
+                pytest.fail("a second connection from this address, over the new cap")
+        assert server._defences.admission.connections_refused["per_address"] == refused + 1
+        assert server._defences.door.logins.by_address.burst == 2.0

@@ -83,6 +83,7 @@ from __future__ import annotations
 
 import asyncio
 import contextlib
+import dataclasses
 import json
 import logging
 import math
@@ -220,6 +221,19 @@ class MqttBridge:
         if self._availability.get(key) != available:
             self._availability[key] = available
             self._put(self._availability_out(key), wake=False)
+
+    def reconfigure(self, config: object) -> list[str]:
+        """A reload changed ``[mqtt]``: the commands' budget from the next command; the
+        rest (the broker, topics, discovery) waits for a restart (returned)."""
+        assert isinstance(config, MqttConfig)
+        kept = [
+            f"mqtt.{f.name}"
+            for f in dataclasses.fields(config)
+            if f.name != "commands" and getattr(self.config, f.name) != getattr(config, f.name)
+        ]
+        self._intake.retune(config.commands)
+        self.config = dataclasses.replace(self.config, commands=config.commands)
+        return kept
 
     def flush(self) -> None:
         """The gateway's batch is whole: send what it left in the outbox."""

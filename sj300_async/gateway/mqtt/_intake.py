@@ -80,6 +80,11 @@ class _TwoLevel:
         self._each = KeyedBudget(budget.burst, budget.per_s, clock=clock)
         self._all = KeyedBudget(budget.all_burst, budget.all_per_s, max_keys=4, clock=clock)
 
+    def retune(self, budget: Budget) -> None:
+        """*budget*'s rates from now on; what each key spent is kept."""
+        self._each.burst, self._each.per_s = float(budget.burst), float(budget.per_s)
+        self._all.burst, self._all.per_s = float(budget.all_burst), float(budget.all_per_s)
+
     def spend(self, key: Hashable, group: Hashable = _ALL) -> bool:
         if not self._each.spend(key):
             return False
@@ -109,6 +114,11 @@ class CommandIntake:
         #: Drops not said yet, and when the first of them was.
         self._unsaid = 0
         self._since = 0.0
+
+    def retune(self, commands: Budget) -> None:
+        """The commands' budget of a reload, from the next command."""
+        self.commands = commands
+        self._commands.retune(commands)
 
     def admit(self, drive: tuple[str, int], *, stop: bool, topic: Callable[[], str]) -> bool:
         """Spend a command of *drive*; False (one line now and then): drop it unread.

@@ -108,12 +108,7 @@ class Defences:
     """The door's defences for one server (see the module docstring)."""
 
     def __init__(self, config: OpcuaConfig, users: Users) -> None:
-        limits = SessionLimits(
-            sessions=config.max_connections,
-            max_connections_per_address=config.max_connections_per_address,
-            max_unactivated_per_address=config.max_unactivated_per_address,
-            activate_within_s=config.activate_within_s,
-        )
+        limits = _session_limits(config)
         self.users = users
         #: The ruleset of a channel that may only discover the server (._hooks).
         self.discovery = DiscoveryOnly()
@@ -127,6 +122,14 @@ class Defences:
         self.guarded = False
         #: Requests refused whole, by reason (:mod:`._operations`).
         self.requests_refused: dict[str, int] = dict.fromkeys(_REQUEST_REASONS, 0)
+
+    def retune(self, config: OpcuaConfig) -> None:
+        """A reload's limits from the next connection, session or login (the sessions
+        open stay, even over a lower cap; each address's login budget keeps its use)."""
+        self.admission.limits = _session_limits(config)
+        logins, per_s = self.door.logins, 1.0 / config.login_interval_s
+        logins.by_address.burst, logins.by_address.per_s = float(config.login_burst), per_s
+        logins.by_name.burst, logins.by_name.per_s = 2.0 * config.login_burst, 2 * per_s
 
     def refuse_operations(self) -> None:
         """A request held more operations than one may (:mod:`._operations`)."""
@@ -208,3 +211,12 @@ class Defences:
     def close(self) -> None:
         self.admission.close()
         self.checks.close()
+
+
+def _session_limits(config: OpcuaConfig) -> SessionLimits:
+    return SessionLimits(
+        sessions=config.max_connections,
+        max_connections_per_address=config.max_connections_per_address,
+        max_unactivated_per_address=config.max_unactivated_per_address,
+        activate_within_s=config.activate_within_s,
+    )

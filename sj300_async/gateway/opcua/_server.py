@@ -94,6 +94,11 @@ TICK_S: Final = 1.0
 MAX_MESSAGE_BYTES: Final = 4 * 1024 * 1024
 #: Requests queued per connection while one is served (asyncua's default is 500).
 MAX_PENDING_MESSAGES: Final = 64
+#: The keys of ``[opcua]`` a reload changes on the running server (reconfigure).
+_LIVE_KEYS: Final = (
+    "users", "max_connections", "max_connections_per_address",
+    "max_unactivated_per_address", "activate_within_s", "login_burst", "login_interval_s",
+)  # fmt: skip
 _POLICIES: Final = {
     "Basic256Sha256_SignAndEncrypt": ua.SecurityPolicyType.Basic256Sha256_SignAndEncrypt,
     "Basic256Sha256_Sign": ua.SecurityPolicyType.Basic256Sha256_Sign,
@@ -150,18 +155,19 @@ class OpcuaServer:
     # -- the northbound --------------------------------------------------------------
 
     def reconfigure(self, config: object) -> list[str]:
-        """A reload changed ``[opcua]``: its users from the next request (a session whose
-        user was removed, or whose password changed, reads on as anonymous); the keys it
-        cannot take live are returned."""
+        """A reload changed ``[opcua]``: its users (a session whose user was removed, or
+        whose password changed, reads on as anonymous) and its session and login limits
+        from the next request; the keys it cannot take live are returned."""
         assert isinstance(config, OpcuaConfig)
         old = self.config
         kept = [
             f"opcua.{f.name}"
             for f in dataclasses.fields(config)
-            if f.name != "users" and getattr(old, f.name) != getattr(config, f.name)
+            if f.name not in _LIVE_KEYS and getattr(old, f.name) != getattr(config, f.name)
         ]
         self._users.replace(config.users)
-        self.config = dataclasses.replace(old, users=config.users)
+        self._defences.retune(config)
+        self.config = dataclasses.replace(old, **{key: getattr(config, key) for key in _LIVE_KEYS})
         return kept
 
     async def start(self, gateway: GatewayView) -> None:
