@@ -154,7 +154,7 @@ async def test_without_someone_who_may_write_there_is_no_write_route(
         async with page.session.get(page.base + "/api/v1/gateway") as response:
             assert (await response.json())["writes"] is False
     if grants and not auth:
-        assert any("serves no writes" in r.getMessage() for r in caplog.records)
+        assert any("serves no writes" in r.getMessage() for r in caplog.records), _logging_state()
 
 
 # -- who may write ------------------------------------------------------------------------------
@@ -592,3 +592,21 @@ async def test_the_factory_defaults_the_catalogue_knows(sim_line: SimLine) -> No
     differing = [c for c, d in defaults["parameters"].items() if drive.get(c) != d["raw"]]
     assert differing == ["A001", "A002"]
     assert (drive["A001"], drive["A002"]) == (3, 3)
+
+
+def _logging_state() -> str:
+    """Why a record may not have reached caplog: the HTTP logger's state, the flood limit's."""
+    import logging
+
+    from sj300_async.gateway import _logflood
+
+    http = logging.getLogger("sj300_async.gateway.http")
+    limit = _logflood.installed()
+    return (
+        f"level={http.level} effective={http.getEffectiveLevel()} disabled={http.disabled} "
+        f"propagate={http.propagate} filters={http.filters!r} users={_logflood._users} "
+        f"windows={None if limit is None else len(limit._windows)} "
+        f"root={logging.getLogger().level} root_handlers={logging.getLogger().handlers!r} "
+        f"disable={logging.root.manager.disable}"
+    )
+
