@@ -131,7 +131,8 @@ class FloodLimit(logging.Filter):
         ended = [key for key, w in self._windows.items() if now >= w.start + self.interval_s]
         for key in ended:
             self._announce(self._windows.pop(key))
-        _attach(self)
+        if self is _installed:  # a limit taken off stays off, whoever still holds it
+            _attach(self)
 
     def _announce(self, window: _Window) -> None:
         if window.suppressed:
@@ -201,4 +202,8 @@ def uninstall() -> None:
     for window in windows.values():  # announcing logs, which may add a window
         limit._announce(window)
     for logger in _limited_loggers():
-        logger.removeFilter(limit)
+        # Every flood limit, not only this one: one left on a logger (a full test suite
+        # once found one there after the last gateway stopped) would outlive every
+        # gateway, swallowing a process's repeated lines with no gateway to say so.
+        for stale in [f for f in logger.filters if isinstance(f, FloodLimit)]:
+            logger.removeFilter(stale)

@@ -235,3 +235,19 @@ async def test_the_monitor_sees_a_stall_and_counts_the_one_going_on() -> None:
         assert monitor.problems()
     finally:
         monitor.stop()
+
+
+def test_a_limit_taken_off_never_comes_back_and_the_last_stop_clears_every_one() -> None:
+    """A limit still held by someone after the last gateway stopped (a loop monitor's
+    late flush) does not put itself back on the loggers; and the last stop takes every
+    flood limit off, whatever put it there."""
+    limit = logflood.install()
+    logflood.uninstall()
+    limit.flush()  # late: after its uninstall
+    http = logging.getLogger("sj300_async.gateway.http")
+    assert not any(isinstance(f, FloodLimit) for f in http.filters)
+    stray = FloodLimit()
+    http.addFilter(stray)
+    logflood.install()
+    logflood.uninstall()
+    assert not any(isinstance(f, FloodLimit) for f in http.filters)
