@@ -180,6 +180,7 @@ def install() -> FloodLimit:
     """The process's flood limit, installed on its loggers (counted: :func:`uninstall`)."""
     global _installed, _users
     if _installed is None:
+        _take_off_every_limit()  # none may be on the loggers now: a fresh start
         _installed = FloodLimit()
     _users += 1
     _attach(_installed)
@@ -201,9 +202,13 @@ def uninstall() -> None:
     windows, limit._windows = limit._windows, {}
     for window in windows.values():  # announcing logs, which may add a window
         limit._announce(window)
+    _take_off_every_limit()
+
+
+def _take_off_every_limit() -> None:
+    """Every flood limit off every logger, not only the installed one: one left on a logger
+    (a full test suite once found one there after the last gateway stopped) would outlive
+    every gateway, swallowing a process's repeated lines with no gateway to say so."""
     for logger in _limited_loggers():
-        # Every flood limit, not only this one: one left on a logger (a full test suite
-        # once found one there after the last gateway stopped) would outlive every
-        # gateway, swallowing a process's repeated lines with no gateway to say so.
         for stale in [f for f in logger.filters if isinstance(f, FloodLimit)]:
             logger.removeFilter(stale)

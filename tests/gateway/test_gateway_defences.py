@@ -248,6 +248,8 @@ def test_a_limit_taken_off_never_comes_back_and_the_last_stop_clears_every_one()
     assert not any(isinstance(f, FloodLimit) for f in http.filters)
     stray = FloodLimit()
     http.addFilter(stray)
-    logflood.install()
-    logflood.uninstall()
+    fresh = logflood.install()  # a fresh start clears it at once
+    assert [f for f in http.filters if isinstance(f, FloodLimit)] == [fresh]
+    http.addFilter(stray)
+    logflood.uninstall()  # and so does the last stop
     assert not any(isinstance(f, FloodLimit) for f in http.filters)
