@@ -609,4 +609,3 @@ def _logging_state() -> str:
         f"root={logging.getLogger().level} root_handlers={logging.getLogger().handlers!r} "
         f"disable={logging.root.manager.disable}"
     )
-
