@@ -73,8 +73,7 @@ async def reload_file(gateway: Gateway, path: str | os.PathLike[str]) -> ReloadO
     try:
         config = await asyncio.to_thread(load_config, path)  # a big file: off the loop
         plan = plan_reload(gateway.config, config)
-        _check_started(config, plan)
-    except (GatewayConfigError, GatewayStartError) as exc:
+    except GatewayConfigError as exc:
         return _refused(gateway, str(exc))
     return await apply_reload(gateway, config, plan)
 
@@ -113,8 +112,12 @@ async def apply_reload(
 ) -> ReloadOutcome:
     """Change the running *gateway* to *config* (checked), as *plan* says (module docstring)."""
     old = gateway.config
-    if plan is None:
-        plan = plan_reload(old, config)
+    try:  # here, not in reload_file: Gateway.reload(config) is checked the same
+        if plan is None:
+            plan = plan_reload(old, config)
+        _check_started(config, plan)
+    except (GatewayConfigError, GatewayStartError) as exc:
+        return _refused(gateway, str(exc))
     coming = [*plan.added, *plan.replaced]
     try:  # first: a line whose bus can never open refuses the reload before any change
         buses = await gateway._open_buses(coming) if coming else []

@@ -136,7 +136,8 @@ class ModbusFlood:
     async def __aexit__(self, *exc: object) -> None:
         for task in self._tasks:
             task.cancel()
-        await asyncio.gather(*self._tasks, return_exceptions=True)
+        async with asyncio.timeout(10):  # a flood that ignores its cancel fails, not hangs
+            await asyncio.gather(*self._tasks, return_exceptions=True)
 
     async def _one(self, index: int) -> None:
         reader, writer = await asyncio.open_connection("127.0.0.1", self.port)
@@ -150,9 +151,12 @@ class ModbusFlood:
                     asked.append(unit)
                 await writer.drain()
                 for _ in asked:
-                    head = await asyncio.wait_for(reader.readexactly(8), 5.0)
-                    _, _, length, unit, function = struct.unpack(">HHHBB", head)
-                    await asyncio.wait_for(reader.readexactly(length - 2), 5.0)
+                    # asyncio.timeout, not wait_for: Python 3.11's wait_for loses a cancel
+                    # that lands as the read completes, and this loop then never ends
+                    async with asyncio.timeout(5.0):
+                        head = await reader.readexactly(8)
+                        _, _, length, unit, function = struct.unpack(">HHHBB", head)
+                        await reader.readexactly(length - 2)
                     if function & 0x80:
                         self.refused[unit] = self.refused.get(unit, 0) + 1
                     else:
