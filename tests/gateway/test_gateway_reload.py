@@ -228,7 +228,6 @@ async def test_a_new_section_whose_port_is_taken_is_refused_whole(tmp_path: Path
         assert [line.config.name for line in gateway.lines] == ["a"]  # nothing changed
 
 
-
 async def test_a_config_given_to_reload_is_checked_as_a_file_is(tmp_path: Path) -> None:
     """Gateway.reload(config), the library's path, probes the new section's port too."""
     path = tmp_path / "gw.toml"
@@ -242,6 +241,7 @@ async def test_a_config_given_to_reload_is_checked_as_a_file_is(tmp_path: Path) 
         )
         assert [line.config.name for line in gateway.lines] == ["a"]
         assert gateway.reloads["refused"] == 1
+
 
 @contextlib.contextmanager
 def socket_listening() -> Iterator[int]:
