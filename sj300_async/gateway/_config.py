@@ -92,6 +92,7 @@ from ._toml import (
     type_name,
     unknown_choice,
 )
+from .recorder._settings import RECORDER_KEYS, parse_recorder
 
 __all__ = [
     "GatewayConfigError",
@@ -169,7 +170,7 @@ def parse_config(text: str, source: str) -> GatewayConfig:
         GatewayConfigError: see :func:`load_config`.
     """
     data = parse_toml(text, source)
-    return _build(ConfigContext(source, text), data, base_dir=Path(source).parent)
+    return _build(ConfigContext(source, text), data, base_dir=Path(source).parent, file=True)
 
 
 def config_from_flags(
@@ -206,25 +207,32 @@ def config_from_flags(
             raise LocalProtocolError(f"northbound {section!r} has no command-line flag")
         data[section] = {flag.key: value}
         rename[f"{section}.{flag.key}"] = flag.option
-    return _build(ConfigContext(COMMAND_LINE, rename=rename), data, base_dir=Path())
+    return _build(ConfigContext(COMMAND_LINE, rename=rename), data, base_dir=Path(), file=False)
 
 
 # -- the whole configuration -----------------------------------------------------------------
 
 
-def _build(ctx: ConfigContext, data: object, *, base_dir: Path) -> GatewayConfig:
+def _build(ctx: ConfigContext, data: object, *, base_dir: Path, file: bool) -> GatewayConfig:
     sections = northbound_names()
     aliases = {section: section_aliases(get_northbound(section)) for section in sections}
     # In the order a file is written (and the error's list of keys reads): [gateway], the
     # northbounds' sections (each with the older names it still takes), then the [[lines]].
     names = [name for section in sections for name in (section, *aliases[section])]
-    root = ConfigTable(ctx, "", data, ("gateway", *names, "lines"))
+    root = ConfigTable(ctx, "", data, ("gateway", *names, "recorder", "lines"))
     gateway = ConfigTable(ctx, "gateway", root.data.get("gateway", {}), _GATEWAY_KEYS)
     stale_after_s = gateway.number("stale_after_s", minimum=0, inclusive=False)
     lag_limit_s = gateway.number("loop_lag_limit_s", minimum=0, inclusive=False)
     audit_log = _audit_log(gateway, base_dir)
     gateway_id = _gateway_id(gateway)
     context = SectionContext(gateway_id, base_dir, state_directory())
+    recorder = parse_recorder(
+        ConfigTable(ctx, "recorder", root.data["recorder"], RECORDER_KEYS)
+        if root.has("recorder")
+        else None,
+        base_dir if file else None,
+        context.state_dir,
+    )
     northbounds: dict[str, object] = {}
     listening: dict[Endpoint, str] = {}
     for section in sections:
@@ -273,6 +281,7 @@ def _build(ctx: ConfigContext, data: object, *, base_dir: Path) -> GatewayConfig
         loop_lag_limit_s=or_default(lag_limit_s, DEFAULT_LOOP_LAG_LIMIT_S),
         source=ctx.source,
         gateway_id=gateway_id,
+        recorder=recorder,
     )
 
 

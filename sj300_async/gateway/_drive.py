@@ -11,6 +11,10 @@ lease registers sees it change between samples), ``line`` (its line's
 configuration: write grants), ``profile`` and ``unit``. They never write
 to it: writes go through the gateway (:meth:`~._northbound.GatewayView.write`).
 
+Its ``trend`` (:mod:`._trend`, :mod:`._trend_columns`) is the core's: the
+gateway adds each monitor read to it; the workbench graphs it and a trip
+record (:mod:`.recorder`) keeps the part around the trip.
+
 The lease (:class:`Lease`) and the lapse's progress are plain state here;
 :mod:`._control` takes and renews the lease and :mod:`._lapse` runs the
 lapse action.
@@ -22,9 +26,10 @@ import math
 import time
 from dataclasses import dataclass, field
 
-from ..profiles import DriveReadings, DriveSnapshot, Profile, build_snapshot
+from ..profiles import NEVER, DriveReadings, DriveSnapshot, Profile, build_snapshot
 from ._model import DEFAULT_STALE_AFTER_S, LineConfig
 from ._served import ServedDrive
+from ._trend import Trend
 
 __all__ = ["GatewayDrive", "Lease"]
 
@@ -82,6 +87,11 @@ class GatewayDrive:
     lapse_error: str = ""
     #: Tries of the pending lapse's stop so far.
     lapse_tries: int = 0
+    #: Its recent samples (every polled field), None when nothing needs them (no
+    #: workbench, no recorder): the gateway's, fed on each new monitor read.
+    trend: Trend | None = None
+    #: The loop time of the monitor read the trend's newest sample is.
+    trend_at: float = NEVER
 
     def __post_init__(self) -> None:
         self.snapshot = self._build(now=-math.inf, wall=0.0)

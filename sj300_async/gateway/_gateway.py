@@ -35,14 +35,14 @@ import logging
 import os
 import time
 from collections import Counter
-from collections.abc import Iterable, Iterator, Sequence
+from collections.abc import Callable, Iterable, Iterator, Sequence
 from dataclasses import dataclass, field
 from types import TracebackType
 from typing import TYPE_CHECKING, Any
 
 from .. import Poller, Sample
 from ..bus import Bus, CaptureFile, open_bus
-from ..profiles import Profile, get_profile
+from ..profiles import DriveSnapshot, Profile, get_profile
 from ..wire import LocalProtocolError
 from . import _logflood as logflood
 from ._audit import AuditLog
@@ -51,17 +51,22 @@ from ._beside import read_beside_the_poll
 from ._control import Controller
 from ._drive import GatewayDrive, Lease
 from ._errors import GatewayStartError
+from ._gateway_metrics import all_metrics
 from ._heap import collector_paused, freeze_long_lived, thaw, young_collections_raised
 from ._line_health import LineHealth, UtilisationMeter, line_health
 from ._line_traffic import LineTraffic
 from ._logflood import FloodLimit
 from ._looplag import LoopMonitor
-from ._metrics import LineView, drive_view, gateway_metrics, line_problems
+from ._metrics import LineView, line_problems
 from ._model import GatewayConfig, LineConfig
 from ._northbound import Northbound, get_northbound
 from ._reloader import ReloadOutcome, apply_reload, reload_file
 from ._served import ServedDrive
+from ._trend import Trend, trend_capacity
+from ._trend_columns import columns_of, sample_of
 from ._writes import Refusal, WriteRequest, WriteResult
+from .recorder._recorder import TripRecorder
+from .recorder._store import RecordSummary
 
 if TYPE_CHECKING:
     from prometheus_client.core import Metric
@@ -92,6 +97,8 @@ class GatewayLine:
     #: The task reading beside its poll (._beside), and the one its poller runs in.
     reader: asyncio.Task[None] | None = None
     runner: asyncio.Task[None] | None = None
+    #: What a snapshot gives each trend column (._trend_columns).
+    sample: Callable[[DriveSnapshot], tuple[float | None, ...]] | None = None
 
     def health(self, now: float | None = None) -> LineHealth:
         """The line's link, counters and utilisation at *now* (loop time; default: now).
@@ -155,6 +162,12 @@ class Gateway:
         self.loop_monitor = LoopMonitor(config.loop_lag_limit_s, every_second=_flush_logs)
         #: The log flood limit, while this gateway runs (._logflood).
         self._flood: FloodLimit | None = None
+        #: The trip black box (.recorder), None when ``[recorder] enabled = false``.
+        self.recorder = (
+            TripRecorder(config.recorder, self.audit, config.gateway_id, self._recorded)
+            if config.recorder.enabled
+            else None
+        )
 
     # -- what the northbounds see (GatewayView) --------------------------------------
 
@@ -201,83 +214,8 @@ class Gateway:
         self.audit.write(client, drive, what, None, value, result)
 
     def metrics(self) -> Iterator[Metric]:
-        """The lines' and drives' families, then each northbound's."""
-        now = asyncio.get_running_loop().time()
-        stale = self.config.stale_after_s
-        yield from gateway_metrics(
-            self._line_views(), (drive_view(d.snapshot, now, stale) for d in self._drives)
-        )
-        from prometheus_client.core import CounterMetricFamily
-
-        errors = CounterMetricFamily(
-            "sj300_gateway_publish_errors",
-            "Snapshots a northbound failed to take (its publish raised; logged).",
-            labels=["northbound"],
-        )
-        for section in self.northbounds:
-            errors.add_metric([section], self.publish_errors.get(section, 0))
-        read_errors = CounterMetricFamily(
-            "sj300_gateway_read_errors",
-            "Reads beside the poll (trip history, set frequency) that failed; tried again.",
-            labels=["line", "read"],
-        )
-        for line in self.lines:
-            for what in ("trips", "setpoint"):
-                count = self.read_errors.get((line.config.name, what), 0)
-                read_errors.add_metric([line.config.name, what], count)
-        yield errors
-        yield read_errors
-        yield from self._reload_metrics()
-        yield from self._lapse_metrics()
-        yield from self.loop_monitor.metrics()
-        if self._flood is not None:
-            yield from self._flood.metrics()
-        for northbound in self.northbounds.values():
-            yield from northbound.metrics()
-
-    def _reload_metrics(self) -> Iterator[Metric]:
-        from prometheus_client.core import CounterMetricFamily, GaugeMetricFamily
-
-        reloads = CounterMetricFamily(
-            "sj300_gateway_config_reloads",
-            "Reloads of the configuration (SIGHUP), by result: applied, or refused (the "
-            "file did not read or check; the gateway runs on the configuration it had).",
-            labels=["result"],
-        )
-        for result in ("applied", "refused"):
-            reloads.add_metric([result], self.reloads[result])
-        yield reloads
-        yield GaugeMetricFamily(
-            "sj300_gateway_config_last_reload_successful",
-            "0 after a reload was refused, until one is applied; 1 otherwise.",
-            int(self.last_reload_ok),
-        )
-
-    def _lapse_metrics(self) -> Iterator[Metric]:
-        from prometheus_client.core import CounterMetricFamily, GaugeMetricFamily
-
-        lapses = CounterMetricFamily(
-            "sj300_gateway_lapses",
-            "Control leases that lapsed (their action ran).",
-            labels=["line"],
-        )
-        failed = CounterMetricFamily(
-            "sj300_gateway_lapse_failed_tries",
-            "Tries of a lapse's stop that failed (link down, NAK, time-out) and were retried.",
-            labels=["line"],
-        )
-        pending = GaugeMetricFamily(
-            "sj300_gateway_lapse_pending",
-            "1 while a lapsed lease's stop is not confirmed (being retried).",
-            labels=["line", "node"],
-        )
-        for line in self.lines:
-            name = line.config.name
-            lapses.add_metric([name], line.controller.lapse.lapses)
-            failed.add_metric([name], line.controller.lapse.failed_tries)
-            for node, drive in line.drives.items():
-                pending.add_metric([name, str(node)], int(drive.lapse_pending))
-        yield from (lapses, failed, pending)
+        """The lines' and drives' families, then each northbound's (._gateway_metrics)."""
+        return all_metrics(self)
 
     def problems(self) -> list[str]:
         """Why the gateway is not healthy (empty: every line is up, no lapse is pending)."""
@@ -317,6 +255,17 @@ class Gateway:
         """The drives in their lines' order again (a reload added or removed lines)."""
         self._drives[:] = [drive for line in self.lines for drive in line.drives.values()]
 
+    def trend_window_s(self) -> float:
+        """Seconds each drive's trend covers: the longest any part asks for (a
+        northbound's ``trend_s``, the workbench's; the trip recorder's window), 0 when
+        none does.
+
+        Taken when a line opens: a reload that changes it applies to the lines it
+        adds (docs/GATEWAY.md).
+        """
+        wanted = [float(getattr(s, "trend_s", 0.0)) for s in self.config.northbounds.values()]
+        return max([self.config.recorder.window_s, *wanted])
+
     def _line_views(self) -> list[LineView]:
         return [LineView(line.config.name, line.bus) for line in self.lines]
 
@@ -335,6 +284,8 @@ class Gateway:
                 self._capture = CaptureFile(self.capture_path)
                 self._stack.callback(self._capture.close)
             self._stack.push_async_callback(self._close_lines)
+            if self.recorder is not None:
+                await self.recorder.start()
             buses = await self._open_buses(self.config.lines)
             for config, (bus, stack) in zip(self.config.lines, buses, strict=True):
                 self.lines.append(self._open_line(config, bus, stack))
@@ -440,6 +391,12 @@ class Gateway:
             )
             for node in config.nodes
         }
+        window_s = self.trend_window_s()
+        names = columns_of(config.parameters)
+        if window_s > 0:
+            capacity = trend_capacity(window_s, config.interval_s)
+            for drive in drives.values():
+                drive.trend = Trend(capacity, names)
         for drive in drives.values():
             self._drives.append(drive)
             self._by_key[drive.key] = drive
@@ -448,6 +405,9 @@ class Gateway:
             stalled=self.loop_monitor.stalled,
         )  # fmt: skip
         line = GatewayLine(config, profile, bus, poller, controller, drives, stack=stack)
+        line.sample = sample_of(config.parameters)
+        if self.recorder is not None:
+            self.recorder.add_line(line)
         poller.on_sample(lambda sample: self._on_sample(line, sample))
         _log.info("line %s: %s, %s %s", config.name, config.url, profile.node_noun,
                   ",".join(map(str, config.nodes)))  # fmt: skip
@@ -485,7 +445,9 @@ class Gateway:
     async def _stop_line(self, line: GatewayLine) -> None:
         """Close *line*, already out of the gateway's maps: its held leases lapse first
         (their actions run and are waited for, as on the gateway's stop), then its reads,
-        poller and bus end."""
+        poller and bus end; its pending trip records are taken first."""
+        if self.recorder is not None:
+            self.recorder.remove_line(line)
         await line.controller.close(list(line.drives.values()))
         for task in (line.reader, line.runner):
             if task is not None:
@@ -503,7 +465,16 @@ class Gateway:
         drive.readings.take(sample, line.profile)
         # The poll ended at sample.timestamp, on the loop's clock: the same instant in Unix time.
         now = asyncio.get_running_loop().time()
-        drive.rebuild(sample.timestamp, time.time() - (now - sample.timestamp))
+        snapshot = drive.rebuild(sample.timestamp, time.time() - (now - sample.timestamp))
+        trend = drive.trend
+        if trend is not None and snapshot.monitor_at != drive.trend_at and line.sample:
+            # A new monitor read (._trend_columns). Its Unix time is worked out once, here:
+            # recomputed from a later snapshot, the clocks' drift would move it.
+            drive.trend_at = snapshot.monitor_at
+            trend.add(snapshot.time - (snapshot.taken_at - snapshot.monitor_at),
+                      *line.sample(snapshot))  # fmt: skip
+        if self.recorder is not None:
+            self.recorder.observe(drive, snapshot)
         self._publish(drive.served)
 
     def _changed(self, drive: GatewayDrive) -> None:
@@ -514,7 +485,9 @@ class Gateway:
         if self._by_key.get(drive.key) is not drive:
             return  # its line was removed by a reload (a lapse's stop ends on its own)
         try:
-            drive.rebuild(asyncio.get_running_loop().time())
+            snapshot = drive.rebuild(asyncio.get_running_loop().time())
+            if self.recorder is not None:  # a history read shows a trip, or names it
+                self.recorder.observe(drive, snapshot)
         except Exception:  # a profile's bug: the last snapshot stays, the caller goes on
             _log.exception("line %s node %d: no snapshot after a change", *drive.key)
             return
@@ -524,6 +497,20 @@ class Gateway:
 
     def _publish(self, served: ServedDrive) -> None:
         self._batch.add(served)
+
+    def _recorded(self, summary: RecordSummary, drive: GatewayDrive) -> None:
+        """A trip record was kept: the northbounds that announce one do (optional
+        ``recorded``, ._northbound)."""
+        if self._by_key.get(drive.key) is not drive:
+            return  # its line was removed meanwhile: nobody serves it to announce it
+        for section, northbound in self.northbounds.items():
+            recorded = getattr(northbound, "recorded", None)
+            if recorded is None:
+                continue
+            try:
+                recorded(summary, drive.served)
+            except Exception:  # its own failure: the record is kept, the others announce
+                _log.exception("the %s northbound failed to announce a trip record", section)
 
     def _deliver(self, drives: list[ServedDrive]) -> None:
         """Each northbound takes *drives* (each a snapshot as served) in turn (see ._batch)."""
@@ -549,6 +536,8 @@ class Gateway:
     async def _shutdown(self) -> None:
         try:
             self._batch.flush()  # every snapshot made so far, before the northbounds close
+            if self.recorder is not None:  # its pending records taken and written (bounded)
+                await self.recorder.close()
             for section in reversed(list(self.northbounds)):
                 northbound = self.northbounds.pop(section)
                 try:

@@ -33,7 +33,9 @@ from __future__ import annotations
 
 import asyncio
 import io
+import math
 import time
+from collections.abc import Iterable
 from typing import Any, ClassVar, Final
 
 from ..bus import Bus, CaptureFile, ChunkLog, Kept, LineSniffer, TraceRecord
@@ -55,15 +57,17 @@ class LineTraffic:
     keep_s: ClassVar[float] = KEEP_S
     max_records: ClassVar[int] = MAX_RECORDS
 
-    def __init__(self, name: str, bus: Bus[Any, Any]) -> None:
+    def __init__(self, name: str, bus: Bus[Any, Any], keep_s: float = KEEP_S) -> None:
         self.name = name
         self._bus = bus
         # The bus's recorder, shared (the same traffic), or one of ours until close().
         existing = bus.recorder
         self._own = existing is None
-        self._records = ChunkLog(KEEP_S, MAX_RECORDS) if existing is None else existing
+        self._records = ChunkLog(keep_s, MAX_RECORDS) if existing is None else existing
         if existing is None:
             bus.recorder = self._records
+        else:  # shared: it keeps what the longest-sighted of its readers needs
+            existing.keep_s = max(existing.keep_s, keep_s)
         #: Unix time minus loop time: the records carry the loop's clock.
         self._offset = time.time() - _loop_time()
 
@@ -91,11 +95,20 @@ class LineTraffic:
     def pcapng(self, seconds: float) -> bytes:
         """The last *seconds* of the line as a pcapng file (one interface: this line)."""
         records, start = self.window(seconds)
+        return self.pcapng_of(records, start, math.inf)
+
+    def span(self, start: float, end: float) -> list[Kept]:
+        """The records from loop time *start* to *end*, copied (to write in a thread)."""
+        return [kept for kept in self._records.since(start) if kept[0] <= end]
+
+    def pcapng_of(self, records: Iterable[Kept], start: float, end: float) -> bytes:
+        """*records* from loop time *start* to *end* as a pcapng file; touches nothing of
+        the running line (callable in a thread)."""
         buffer = io.BytesIO()
         capture = CaptureFile(buffer)
         hook = capture.line(self._bus.dialect, self.name, self._bus.line)
         for at, direction, data, _ in records:
-            if at >= start:
+            if start <= at <= end:
                 hook(TraceRecord(at, direction, data))
         capture.close()
         return buffer.getvalue()

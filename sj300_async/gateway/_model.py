@@ -34,6 +34,7 @@ from pathlib import Path
 from typing import Final, Literal, get_args
 
 from ..wire import LocalProtocolError
+from .recorder._settings import RecorderConfig
 
 __all__ = [
     "DEFAULT_LEASE_S",
@@ -178,6 +179,8 @@ class GatewayConfig:
     source: str = field(default="<command line>", compare=False)
     #: The gateway's name to the outside (an MQTT topic level; see the module docstring).
     gateway_id: str = field(default_factory=default_gateway_id)
+    #: The trip recorder (``[recorder]``; :mod:`.recorder`): on, in memory, by default.
+    recorder: RecorderConfig = field(default_factory=RecorderConfig)
 
 
 _HOST: Final = re.compile(r"[A-Za-z0-9_.%:-]+\Z")

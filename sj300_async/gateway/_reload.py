@@ -115,6 +115,8 @@ def plan_reload(old: GatewayConfig, new: GatewayConfig) -> ReloadPlan:
         )
     if new.audit_log != old.audit_log:
         kept.append(f"gateway.audit_log: {old.audit_log} until a restart")
+    if new.recorder != old.recorder:  # the trends it sized, the records pending: its own
+        kept.append("recorder: as it was until a restart")
     settings = tuple(
         name
         for name in ("stale_after_s", "loop_lag_limit_s")

@@ -138,7 +138,11 @@ async def apply_reload(
         for section, settings in config.northbounds.items()
     }
     gateway.config = dataclasses.replace(
-        config, northbounds=sections, gateway_id=old.gateway_id, audit_log=old.audit_log
+        config,
+        northbounds=sections,
+        gateway_id=old.gateway_id,
+        audit_log=old.audit_log,
+        recorder=old.recorder,
     )
     await _swap_lines(gateway, going, coming, buses, notes)
     await _northbound_sections(gateway, plan, notes)

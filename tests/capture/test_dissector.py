@@ -17,14 +17,11 @@ fail the test.
 
 from __future__ import annotations
 
-import os
 import random
-import shutil
-import subprocess
-from collections.abc import Sequence
 from pathlib import Path
 
 import pytest
+from tshark import FR700_FIELDS, SJ300_FIELDS, Row, decode, table
 
 import sj300_async
 from sj300_async import Direction, NakError
@@ -49,72 +46,10 @@ from sj300_async.wire._pcapng import (
     read_pcapng,
 )
 
-DISSECTOR = Path(__file__).resolve().parents[2] / "contrib" / "wireshark" / "sj300_async.lua"
-
-SJ300_FIELDS = (
-    "sj300.type",
-    "sj300.node",
-    "sj300.command",
-    "sj300.kind",
-    "sj300.nak_code",
-    "sj300.bcc_ok",
-    "sj300.request_in",
-    "sj300.response_in",
-)
-FR700_FIELDS = (
-    "fr700.type",
-    "fr700.format",
-    "fr700.station",
-    "fr700.instruction",
-    "fr700.wait",
-    "fr700.nak_code",
-    "fr700.sum_ok",
-    "fr700.request_in",
-    "fr700.response_in",
-    "fr700.reply_in",
-    "fr700.terminator",
-)
-
-Row = dict[str, str]
-
 #: A fixed response time-out far above any reply's (about 10 ms at 19200 baud): a busy
 #: machine must not turn an exchange into a time-out and a retry, which would add packets
 #: to the capture. Not more: after the damaged reply the bus waits out a time-out.
 SLACK_S = 1.0
-
-
-def _tshark() -> str:
-    path = shutil.which("tshark")
-    if path is None:
-        raise RuntimeError("tshark is not installed (make system-packages installs it)")
-    return path
-
-
-def decode(capture: Path, fields: Sequence[str], home: Path) -> list[Row]:
-    """Every packet's *fields* (and its expert messages) as tshark -2 decodes them."""
-    home.mkdir(exist_ok=True)
-    every = ("frame.number", *fields, "_ws.expert.message")
-    result = subprocess.run(
-        [_tshark(), "-2", "-n", "-X", f"lua_script:{DISSECTOR}", "-r", str(capture),
-         "-T", "fields", "-E", "separator=/t", "-E", "aggregator=;", "-E", "quote=n",
-         *(arg for field in every for arg in ("-e", field))],
-        env={**os.environ, "HOME": str(home), "XDG_CONFIG_HOME": str(home / ".config")},
-        capture_output=True,
-        text=True,
-        timeout=60,
-        check=False,
-    )  # fmt: skip
-    assert result.returncode == 0, result.stderr
-    assert "Lua" not in result.stderr, result.stderr
-    rows = [dict(zip(every, line.split("\t"), strict=True)) for line in result.stdout.splitlines()]
-    assert [row["frame.number"] for row in rows] == [str(n) for n in range(1, len(rows) + 1)]
-    for row in rows:
-        assert "Lua Error" not in row["_ws.expert.message"], row
-    return rows
-
-
-def table(rows: list[Row], fields: Sequence[str]) -> list[tuple[str, ...]]:
-    return [tuple(row[field] for field in fields) for row in rows]
 
 
 def check_response_times(rows: list[Row], capture: Path, prefix: str) -> int:

@@ -200,6 +200,11 @@ GATEWAY_HTTP_NAMES = (
     # each drive's trend (its memory is a benchmark's figure)
     "BLOCK", "SAMPLE_BYTES", "Trend", "trend_capacity",
 )  # fmt: skip
+#: The trip black box (issue 45): its settings, its store and its records.
+GATEWAY_RECORDER_NAMES = (
+    "FORMAT", "RECORDER_KEYS", "RECORD_ID", "RecordSummary", "RecorderConfig", "TripRecorder",
+    "TripStore", "record_id", "samples_csv",
+)  # fmt: skip
 GATEWAY_OPCUA_NAMES = (
     "DEFAULT_SECURITY", "NORTHBOUND", "OPCUA_KEYS", "SECURITY_MODES", "OpcuaConfig",
     "parse_endpoint_url",
@@ -221,6 +226,7 @@ PINNED = {
     "sj300_async.gateway.sparkplug": GATEWAY_SPARKPLUG_NAMES,
     "sj300_async.gateway.mqttlink": GATEWAY_MQTTLINK_NAMES,
     "sj300_async.gateway.http": GATEWAY_HTTP_NAMES,
+    "sj300_async.gateway.recorder": GATEWAY_RECORDER_NAMES,
     "sj300_async.gateway.opcua": GATEWAY_OPCUA_NAMES,
 }
 

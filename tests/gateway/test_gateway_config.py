@@ -27,6 +27,7 @@ from sj300_async.gateway.http import HttpConfig
 from sj300_async.gateway.modbus import ModbusConfig
 from sj300_async.gateway.mqtt import MqttConfig
 from sj300_async.gateway.mqtt._intake import Budget
+from sj300_async.gateway.recorder import RecorderConfig
 from sj300_async.wire import LocalProtocolError
 
 FULL = """\
@@ -138,6 +139,7 @@ def test_a_full_file_reaches_every_field(tmp_path: Path) -> None:
         },
         stale_after_s=3.0,
         audit_log=tmp_path / "logs" / "audit.log",
+        recorder=RecorderConfig(directory=tmp_path / "trips"),  # beside the file
     )
     assert config.source == str(path)
     assert config.lines[0].writable_parameters(2) == {"A004", "F001"}
@@ -169,7 +171,8 @@ def test_defaults_of_a_minimal_file() -> None:
                 nodes=(0, 1),
                 unit_offset=100,
             ),
-        )
+        ),
+        recorder=RecorderConfig(directory=Path("trips")),
     )
     assert (dict(config.northbounds), config.audit_log) == ({}, None)
     assert config.source == "gateway.toml"
@@ -902,7 +905,7 @@ def test_a_key_inside_an_inline_table_points_at_its_first_line() -> None:
 
     assert refusal(text) == (
         "gateway.toml:1: x: unknown key 'x' "
-        "(use gateway, modbus, http, metrics, mqtt, sparkplug, opcua, lines)"
+        "(use gateway, modbus, http, metrics, mqtt, sparkplug, opcua, recorder, lines)"
     )
     assert refusal(text[6:]) == (
         "gateway.toml:1: lines[0].nodes: bad node list '40': nodes are 1..32, got '40'"

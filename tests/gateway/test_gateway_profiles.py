@@ -265,7 +265,7 @@ def test_the_jsonl_section_is_its_northbound_s_own(jsonl_registered: None, tmp_p
     assert jsonl_refusal("[jsonl]\n") == "gateway.toml:1: jsonl.path: missing required key 'path'"
     assert jsonl_refusal("x = 1\n") == (
         "gateway.toml:1: x: unknown key 'x' "
-        "(use gateway, modbus, http, metrics, mqtt, sparkplug, opcua, jsonl, lines)"
+        "(use gateway, modbus, http, metrics, mqtt, sparkplug, opcua, jsonl, recorder, lines)"
     )
 
 
@@ -274,7 +274,7 @@ def test_an_unregistered_section_is_an_unknown_key() -> None:
         parse_config('[jsonl]\npath = "states.jsonl"\n' + JSONL_LINE, "gateway.toml")
     assert str(caught.value) == (
         "gateway.toml:1: jsonl: unknown key 'jsonl' "
-        "(use gateway, modbus, http, metrics, mqtt, sparkplug, opcua, lines)"
+        "(use gateway, modbus, http, metrics, mqtt, sparkplug, opcua, recorder, lines)"
     )
 
 

@@ -78,10 +78,8 @@ def snapshot_of(gateway: Gateway, node: int) -> DriveSnapshot:
 
 
 async def until_samples(gateway: Gateway, count: int) -> None:
-    trend = http(gateway).workbench
-    assert trend is not None
     await wait_for(
-        lambda: all(len(t) >= count for t in trend.trends.values()),
+        lambda: all(d.trend is not None and len(d.trend) >= count for d in gateway.drives),
         f"{count} trend samples of every drive",
     )
 

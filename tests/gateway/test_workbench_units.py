@@ -9,14 +9,14 @@ import pytest
 from hypothesis import given
 from hypothesis import strategies as st
 
-from sj300_async.gateway.http._events import EventHub, sse_frame
-from sj300_async.gateway.http._trend import (
+from sj300_async.gateway._trend import (
     BLOCK,
     SAMPLE_BYTES,
     Trend,
     millisecond,
     trend_capacity,
 )
+from sj300_async.gateway.http._events import EventHub, sse_frame
 
 
 def test_the_capacity_covers_the_window_with_a_margin() -> None:

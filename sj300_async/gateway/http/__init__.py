@@ -42,8 +42,8 @@ from .. import (
     named_entries,
     parse_users,
 )
+from .._trend import BLOCK, SAMPLE_BYTES, Trend, trend_capacity
 from ._auth import ApiToken, hash_token, new_token
-from ._trend import BLOCK, SAMPLE_BYTES, Trend, trend_capacity
 
 #: Seconds a request's head and body may take, from its first byte (``_server``): a
 #: 1 MiB backup needs 1.7 Mbit/s, a login or a write a few hundred bytes.

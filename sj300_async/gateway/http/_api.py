@@ -236,14 +236,13 @@ def _since(request: web.Request) -> float | None:
 
 
 async def _trend(request: web.Request) -> web.Response:
-    drive = _find(request)
-    trend = _bench(request).trends[drive.key]
-    return json_reply({"capacity": trend.capacity, **trend.columns(_since(request))})
+    capacity, columns = _bench(request).trend(_find(request), _since(request))
+    return json_reply({"capacity": capacity, **columns})
 
 
 async def _trend_csv(request: web.Request) -> web.Response:
     drive = _find(request)
-    columns = _bench(request).trends[drive.key].columns(_since(request))
+    _, columns = _bench(request).trend(drive, _since(request))
     out = io.StringIO()
     writer = csv.writer(out, lineterminator="\r\n")
     names = ["output_frequency_hz", "output_current_a", "output_voltage_v"]

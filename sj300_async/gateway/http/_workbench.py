@@ -1,15 +1,18 @@
-"""The workbench's state: each drive's trend, the event hub, the lines' counters as JSON.
+"""The workbench's state: the event hub, the lines' counters as JSON, the drives' trends.
 
 One :class:`Workbench` per HTTP northbound. It is fed by the northbound's
-``publish`` (every drive snapshot: the trend keeps its monitor values, the
-open event streams get it encoded once) and by its own ticker, which
+``publish`` (every drive snapshot: the open event streams get it encoded
+once) and by its own ticker, which
 sends every line's counters once per :data:`LINE_EVENT_S`. The API
 (:mod:`._api`) reads it.
 
 Decisions:
 
 - A drive event is encoded only when some stream is open: with no
-  workbench page open, a sample costs the trend's append and nothing else.
+  workbench page open, a sample costs nothing here.
+- A drive's trend is the core's (``GatewayDrive.trend``, which the
+  gateway sizes to cover ``trend_s`` at least): the workbench serves its
+  last ``trend_s`` and its frequency, current and voltage.
 - What a drive is as served comes from the gateway's served view
   (:class:`~sj300_async.gateway.ServedDrive`), never judged here: a pushed
   event carries the values as of the sample (``served.values()``, built once
@@ -29,13 +32,12 @@ import time
 from collections.abc import Callable, Sequence
 from typing import Any, Final
 
-from ...profiles import NEVER
 from ...version import __version__
-from .. import GatewayView, ServedDrive, ServedLine
+from .. import GatewayDrive, GatewayView, ServedDrive, ServedLine
+from .._trend import VALUES, trend_capacity
 from ._events import EventHub, sse_frame
-from ._json import Json, drive_json, monitor_time
+from ._json import Json, drive_json
 from ._linetrace import LineTrace
-from ._trend import Trend, millisecond, trend_capacity
 
 __all__ = ["LINE_EVENT_S", "Workbench"]
 
@@ -60,42 +62,30 @@ class Workbench:
         self.writes = writes
         self.hub = EventHub()
         self._clock = clock or asyncio.get_running_loop().time
-        self.trends: dict[tuple[str, int], Trend] = {
-            drive.key: Trend(trend_capacity(trend_s, drive.line.interval_s))
-            for drive in gateway.drives
-        }
         #: Each line's recent traffic (the line page; kept by the line's bus's recorder).
         self.traces: dict[str, LineTrace] = {
             line.config.name: LineTrace(line.traffic()) for line in gateway.lines
         }
-        #: Each drive's latest monitor read: its loop time, and its Unix time in the trend.
-        self._monitor_at: dict[tuple[str, int], float] = {}
-        self._monitor_time: dict[tuple[str, int], float] = {}
 
     def now(self) -> float:
         return self._clock()
 
     # -- drives ----------------------------------------------------------------------------
 
+    def trend(
+        self, drive: GatewayDrive, since: float | None = None
+    ) -> tuple[int, dict[str, list[float | None]]]:
+        """*drive*'s trend as the workbench serves it: its capacity over ``trend_s``,
+        and the time, frequency, current and voltage of its samples newer than *since*."""
+        capacity = trend_capacity(self.trend_s, drive.line.interval_s)
+        if drive.trend is None:  # a line kept by a reload that added [http]: none kept
+            return capacity, {name: [] for name in ("time", *VALUES)}
+        columns = drive.trend.columns(since, last=capacity)
+        return capacity, {name: columns[name] for name in ("time", *VALUES)}
+
     def publish(self, served: ServedDrive) -> None:
-        """A drive's new snapshot: into its trend, and to every open stream."""
+        """A drive's new snapshot: to every open stream."""
         snapshot = served.snapshot
-        key = (snapshot.line, snapshot.node)
-        trend = self.trends.get(key)
-        if trend is not None and snapshot.monitor_at != self._monitor_at.get(key, NEVER):
-            # A new monitor read (a read-back or a trip read repeats the last one). Its
-            # Unix time is worked out once: recomputed from a later snapshot, the
-            # clocks' drift would move it by microseconds and make it look new.
-            self._monitor_at[key] = snapshot.monitor_at
-            at = monitor_time(snapshot)
-            assert at is not None
-            self._monitor_time[key] = millisecond(at)  # as the trend keeps it
-            trend.add(
-                at,
-                snapshot.output_frequency_hz,
-                snapshot.output_current_a,
-                snapshot.output_voltage_v,
-            )
         if len(self.hub):
             self.hub.publish(
                 f"drive/{snapshot.line}/{snapshot.node}",
@@ -113,10 +103,9 @@ class Workbench:
             "holder": served.lease_holder(now),
             "seconds_left": served.lease_seconds_left(now),
         }
-        key = (snapshot.line, snapshot.node)
-        known = self._monitor_time.get(key)
-        if known is not None and snapshot.monitor_at == self._monitor_at.get(key):
-            data["monitor_time"] = known  # the trend's own time of this read
+        drive = self.gateway.drive(snapshot.line, snapshot.node)
+        if drive is not None and drive.trend is not None and snapshot.monitor_at == drive.trend_at:
+            data["monitor_time"] = drive.trend.last_time  # the trend's own time of this read
         return data
 
     # -- lines -----------------------------------------------------------------------------
@@ -164,22 +153,14 @@ class Workbench:
                 line.health(now)  # the utilisation is measured even with no page open
 
     def lines_changed(self, added: Sequence[ServedLine], removed: Sequence[ServedLine]) -> None:
-        """A reload added or removed lines: their trends and traces made or dropped (a
-        replaced line's are new: what it recorded was of the line as it was)."""
+        """A reload added or removed lines: their traces made or dropped (a replaced
+        line's is new: what it recorded was of the line as it was)."""
         for line in removed:
             trace = self.traces.pop(line.config.name, None)
             if trace is not None:
                 trace.close()
-            for node in line.drives:
-                key = (line.config.name, node)
-                self.trends.pop(key, None)
-                self._monitor_at.pop(key, None)
-                self._monitor_time.pop(key, None)
         for line in added:
             self.traces[line.config.name] = LineTrace(line.traffic())
-            capacity = trend_capacity(self.trend_s, line.config.interval_s)
-            for node in line.drives:
-                self.trends[line.config.name, node] = Trend(capacity)
 
     def close(self) -> None:
         """Stop recording the lines, end the event streams."""

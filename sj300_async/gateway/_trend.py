@@ -1,16 +1,18 @@
-"""Each drive's recent trend: its last monitor samples, for the workbench's graph.
+"""Each drive's recent trend: its last samples, for the workbench's graph and trip records.
 
-Sans-IO. One :class:`Trend` per drive holds the last ``capacity`` monitor
-samples (output frequency, current and voltage, with the Unix time each
-was read), packed: the newest in plain typed arrays, the older ones in
-sealed blocks of :data:`BLOCK` samples. No object is allocated per sample.
+Sans-IO. One :class:`Trend` per drive holds the last ``capacity`` samples
+(the Unix time each was read and a fixed set of named values: the
+workbench's output frequency, current and voltage by default, every
+polled field in the gateway's, :mod:`._trend_columns`), packed: the
+newest as varints, the older ones in sealed blocks of :data:`BLOCK`
+samples. No object is allocated per sample.
 
 Decisions:
 
-- The capacity is the configured window (``trend_s``, 15 min by default)
-  over the line's poll interval, plus one sample in ten: a poll cycle
-  runs a little longer than its interval when the line is busy, and the
-  window must still be covered. So a 0.5 s line keeps 1,980 samples.
+- The capacity is a window over the line's poll interval, plus one
+  sample in ten: a poll cycle runs a little longer than its interval when
+  the line is busy, and the window must still be covered. So 15 minutes
+  of a 0.5 s line keep 1,980 samples.
 - **Integers of what the drive reports.** Times to the millisecond, as the
   CSV download and the event streams give them (:func:`millisecond`);
   values in thousandths (a drive reports 0.01 Hz, 0.01 or 0.1 A, 0.1 V:
@@ -18,7 +20,8 @@ Decisions:
   not report (or past 2 million) is :data:`NOT_REPORTED`, served as null.
 - **Steps, as varints, sealed in blocks.** Each sample is written as it
   comes: each column as its step from the sample before (a poll's
-  interval, a ramp's slope: small numbers, mostly repeated), zigzagged
+  interval, a ramp's slope, a flag that did not change: small numbers,
+  mostly repeated or zero), zigzagged
   and in LEB128 varints (two bytes for a 1 s interval, one for most value
   steps), into one ``bytearray``. Each :data:`BLOCK` samples are sealed:
   zlib level 6 of them (kept as they are if that is not smaller),
@@ -49,15 +52,15 @@ from typing import Final
 
 __all__ = ["BLOCK", "NOT_REPORTED", "SAMPLE_BYTES", "Trend", "millisecond", "trend_capacity"]
 
-#: Bytes a sample takes held plainly (a 32-bit time and three 32-bit values): what the
-#: trend's memory is measured against.
+#: Bytes a sample of the workbench's three values takes held plainly (a 32-bit time and
+#: three 32-bit values): what the trend's memory is measured against.
 SAMPLE_BYTES: Final = 4 + 3 * 4
 #: Samples per sealed block.
 BLOCK: Final = 64
 #: A value not reported (or beyond what 32 bits of thousandths hold), served as null.
 NOT_REPORTED: Final = -(2**31)
 _LARGEST: Final = 2**31 - 1
-#: The value columns, in the order a block holds them after the time.
+#: The workbench's value columns (a trend's default), in the order a block holds them.
 VALUES: Final = ("output_frequency_hz", "output_current_a", "output_voltage_v")
 
 
@@ -92,9 +95,9 @@ def _put(out: bytearray, value: int) -> None:
     out.append(wide)
 
 
-def _samples(data: bytes | bytearray | memoryview) -> list[list[int]]:
-    """A block's samples (its varints, four to a sample, each a step from the one
-    before, the first from zero), as its four columns of values."""
+def _samples(data: bytes | bytearray | memoryview, width: int) -> list[list[int]]:
+    """A block's samples (its varints, *width* to a sample, each a step from the one
+    before, the first from zero), as its *width* columns of values."""
     steps: list[int] = []
     wide = shift = 0
     for byte in data:
@@ -104,23 +107,21 @@ def _samples(data: bytes | bytearray | memoryview) -> list[list[int]]:
         else:
             steps.append(wide >> 1 ^ -(wide & 1))
             wide = shift = 0
-    return [list(itertools.accumulate(steps[column::4])) for column in range(4)]
-
-
-#: The zeros a block's first sample steps from.
-_ORIGIN: Final = (0, 0, 0, 0)
+    return [list(itertools.accumulate(steps[column::width])) for column in range(width)]
 
 
 class Trend:
     """The last *capacity* samples of one drive (see the module docstring)."""
 
-    __slots__ = ("_count", "_in_blocks", "_last", "_last_ms", "_live", "_sealed", "_sizes",
-                 "capacity")  # fmt: skip
+    __slots__ = ("_count", "_in_blocks", "_last", "_last_ms", "_live", "_origin", "_sealed",
+                 "_sizes", "capacity", "names")  # fmt: skip
 
-    def __init__(self, capacity: int) -> None:
+    def __init__(self, capacity: int, names: tuple[str, ...] = VALUES) -> None:
         if capacity < 1:
             raise ValueError(f"a trend holds at least one sample, got {capacity}")
         self.capacity = capacity
+        #: The value columns' names, in the order :meth:`add` takes them.
+        self.names = names
         #: The sealed blocks, oldest first, one after the other.
         self._sealed = bytearray()
         #: Each sealed block's size in bytes << 1, | 1 when zlib-packed.
@@ -129,8 +130,9 @@ class Trend:
         #: The newest samples' varints, and how many samples they are.
         self._live = bytearray()
         self._count = 0
-        #: The newest sample's integers (the origin at a block's start).
-        self._last = _ORIGIN
+        #: The newest sample's integers (the zeros at a block's start).
+        self._origin = (0,) * (1 + len(names))
+        self._last = self._origin
         self._last_ms: int | None = None
 
     def __len__(self) -> int:
@@ -146,25 +148,16 @@ class Trend:
         """The time of the newest sample, None when empty."""
         return None if self._last_ms is None else self._last_ms / 1000
 
-    def add(
-        self,
-        time: float,
-        frequency_hz: float | None,
-        current_a: float | None,
-        voltage_v: float | None,
-    ) -> bool:
-        """Keep a sample read at Unix *time* (kept to the millisecond); False (nothing
-        kept) unless newer than the last."""
+    def add(self, time: float, *values: float | None) -> bool:
+        """Keep a sample read at Unix *time* (kept to the millisecond), one value per
+        name; False (nothing kept) unless newer than the last."""
         stamp = round(time * 1000)
         if self._last_ms is not None and stamp <= self._last_ms:
             return False
+        if len(values) != len(self.names):
+            raise ValueError(f"a sample of {self.names} takes {len(self.names)} values")
         self._last_ms = stamp
-        sample = (
-            stamp,
-            _thousandths(frequency_hz),
-            _thousandths(current_a),
-            _thousandths(voltage_v),
-        )
+        sample = (stamp, *map(_thousandths, values))
         live = self._live
         for value, last in zip(sample, self._last, strict=True):
             _put(live, value - last)
@@ -186,37 +179,44 @@ class Trend:
         self._in_blocks += self._count
         self._live = bytearray()
         self._count = 0
-        self._last = _ORIGIN
+        self._last = self._origin
         # Whole blocks go once the rest still holds the capacity.
         while self._sizes and self._in_blocks - BLOCK >= self.capacity:
             del self._sealed[: self._sizes[0] >> 1]
             del self._sizes[0]
             self._in_blocks -= BLOCK
 
-    def columns(self, since: float | None = None) -> dict[str, list[float | None]]:
-        """The samples newer than *since* (all when None), oldest first, as columns.
+    def columns(
+        self, since: float | None = None, *, until: float | None = None, last: int | None = None
+    ) -> dict[str, list[float | None]]:
+        """The samples newer than *since* and not newer than *until* (all when None) of
+        the *last* held (all when None), oldest first, as columns.
 
-        ``{"time": [...], "output_frequency_hz": [...], "output_current_a": [...],
-        "output_voltage_v": [...]}``: the shape a chart takes, and JSON's (null: a value
-        not reported).
+        ``{"time": [...], "output_frequency_hz": [...], ...}``, a list per name: the
+        shape a chart takes, and JSON's (null: a value not reported).
         """
-        held: list[list[int]] = [[], [], [], []]
+        width = 1 + len(self.names)
+        held: list[list[int]] = [[] for _ in range(width)]
         at = 0
         with memoryview(self._sealed) as sealed:
             for size in self._sizes:
                 block = sealed[at : at + (size >> 1)]
                 at += size >> 1
                 unpacked = zlib.decompress(block) if size & 1 else block
-                for column, values in zip(held, _samples(unpacked), strict=True):
+                for column, values in zip(held, _samples(unpacked, width), strict=True):
                     column += values
-        for column, values in zip(held, _samples(self._live), strict=True):
+        for column, values in zip(held, _samples(self._live, width), strict=True):
             column += values
         times = held[0]
-        first = max(0, len(times) - self.capacity)
+        first = max(0, len(times) - min(self.capacity, self.capacity if last is None else last))
+        end = len(times)
         if since is not None:  # compared as served: a client gives back a time it was given
-            while first < len(times) and times[first] / 1000 <= since:
+            while first < end and times[first] / 1000 <= since:
                 first += 1
-        out: dict[str, list[float | None]] = {"time": [t / 1000 for t in times[first:]]}
-        for name, column in zip(VALUES, held[1:], strict=True):
-            out[name] = [_value(v) for v in column[first:]]
+        if until is not None:
+            while end > first and times[end - 1] / 1000 > until:
+                end -= 1
+        out: dict[str, list[float | None]] = {"time": [t / 1000 for t in times[first:end]]}
+        for name, column in zip(self.names, held[1:], strict=True):
+            out[name] = [_value(v) for v in column[first:end]]
         return out

@@ -1,0 +1,129 @@
+"""A trip record's content: its JSON object, its id, and its samples as CSV.
+
+A record is one JSON object (``format`` :data:`~._store.FORMAT`, ``version``
+1) with the drive's name, the trip (code, meaning, the values the drive
+kept at it), the samples around it, the writes to the drive in its window,
+and the name of its pcapng. docs/guide/trips.md shows one whole.
+
+Decisions:
+
+- **The id says what it is**: the trip's UTC time to the millisecond, the
+  line and the node (``20261204T153012.345Z-hall-3``): sortable, readable
+  in a file listing, safe in a URL and a file name (a line name is
+  letters, digits, ``_``, ``.`` and ``-``).
+- ``trip_sample`` is the index of the first sample at or after the trip's
+  instant: the one a chart marks.
+- The CSV is the samples, one row each, in the trend download's shape
+  (``time_utc``, ``time_unix``, then every column), empty for null.
+"""
+
+from __future__ import annotations
+
+import csv
+import io
+from collections.abc import Mapping, Sequence
+from datetime import UTC, datetime
+from typing import Any, Final
+
+from ...profiles import Trip
+from ._store import FORMAT
+
+__all__ = ["VERSION", "record_id", "samples_csv", "trip_fields"]
+
+VERSION: Final = 1
+
+
+def record_id(unix: float, line: str, node: int) -> str:
+    """The id of a record of a trip at Unix time *unix* on *line*, *node*."""
+    at = datetime.fromtimestamp(round(unix, 3), UTC)
+    return f"{at:%Y%m%dT%H%M%S}.{at.microsecond // 1000:03d}Z-{line}-{node}"
+
+
+def utc_text(unix: float) -> str:
+    return datetime.fromtimestamp(unix, UTC).isoformat(timespec="milliseconds")
+
+
+def trip_fields(trip: Trip | None) -> dict[str, Any] | None:
+    """The trip as a record keeps it: its code and meaning, the values the drive kept."""
+    if trip is None:
+        return None
+    return {
+        "code": trip.code,
+        "number": trip.number,
+        "name": trip.name,
+        "meaning": trip.meaning,
+        "output_frequency_hz": trip.output_frequency_hz,
+        "output_current_a": trip.output_current_a,
+        "output_voltage_v": trip.output_voltage_v,
+        "run_time_h": trip.run_time_h,
+        "power_on_time_h": trip.power_on_time_h,
+        "details": dict(trip.details),
+    }
+
+
+def new_record(
+    *,
+    record: str,
+    gateway: str,
+    line: str,
+    node: int,
+    unit: int,
+    protocol: str,
+    unix: float,
+    seen_by: str,
+    interval_s: float,
+    before_s: float,
+    after_s: float,
+    trip: Trip | None,
+    samples: Mapping[str, Sequence[object]],
+    writes: Sequence[Mapping[str, object]],
+) -> dict[str, Any]:
+    """A record's JSON object (see the module docstring)."""
+    times = samples.get("time", [])
+    first = next((i for i, t in enumerate(times) if isinstance(t, float) and t >= unix), None)
+    return {
+        "format": FORMAT,
+        "version": VERSION,
+        "id": record,
+        "gateway": gateway,
+        "line": line,
+        "node": node,
+        "unit": unit,
+        "protocol": protocol,
+        "time": unix,
+        "time_utc": utc_text(unix),
+        "seen_by": seen_by,
+        "interval_s": interval_s,
+        "before_s": before_s,
+        "after_s": after_s,
+        "trip": trip_fields(trip),
+        "trip_sample": first,
+        "samples": dict(samples),
+        "writes": list(writes),
+        "frames": f"{record}.pcapng",
+    }
+
+
+def samples_csv(record: Mapping[str, Any]) -> str:
+    """A record's samples as CSV (see the module docstring).
+
+    Raises:
+        ValueError: the record has no samples of the shape it should.
+    """
+    samples = record.get("samples")
+    if not isinstance(samples, dict) or not isinstance(samples.get("time"), list):
+        raise ValueError("the record has no samples")
+    names = [name for name in samples if name != "time"]
+    out = io.StringIO()
+    writer = csv.writer(out, lineterminator="\r\n")
+    writer.writerow(["time_utc", "time_unix", *names])
+    for row, at in enumerate(samples["time"]):
+        if not isinstance(at, int | float):
+            raise ValueError(f"sample {row}: its time is not a number")
+        values = []
+        for name in names:
+            column = samples[name]
+            value = column[row] if isinstance(column, list) and row < len(column) else None
+            values.append("" if value is None else value)
+        writer.writerow([utc_text(at), f"{at:.3f}", *values])
+    return out.getvalue()
