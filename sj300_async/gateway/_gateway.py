@@ -66,7 +66,7 @@ from ._trend import Trend, trend_capacity
 from ._trend_columns import columns_of, sample_of
 from ._writes import Refusal, WriteRequest, WriteResult
 from .recorder._recorder import TripRecorder
-from .recorder._store import RecordSummary
+from .recorder._store import RecordSummary, TripStore
 
 if TYPE_CHECKING:
     from prometheus_client.core import Metric
@@ -179,6 +179,11 @@ class Gateway:
     def drive(self, line: str, node: int) -> GatewayDrive | None:
         """The drive *node* of line *line*, or None."""
         return self._by_key.get((line, node))
+
+    @property
+    def trip_records(self) -> TripStore | None:
+        """The trip records kept, None when the recorder is off."""
+        return None if self.recorder is None else self.recorder.store
 
     async def write(
         self,

@@ -55,6 +55,7 @@ if TYPE_CHECKING:
     from ._line_health import LineHealth
     from ._line_traffic import LineTraffic
     from ._model import LineConfig
+    from .recorder._store import TripStore
 
 __all__ = [
     "Flag",
@@ -107,6 +108,10 @@ class GatewayView(Protocol):
     @property
     def audit(self) -> AuditLog:
         """The audit log of every write, whichever door it came through."""
+
+    @property
+    def trip_records(self) -> TripStore | None:
+        """The trip records kept (.recorder), None when the recorder is off."""
 
     @property
     def lines(self) -> Sequence[ServedLine]:

@@ -246,3 +246,60 @@ async def test_a_store_in_memory_prunes_by_bytes_and_keeps_the_newest() -> None:
     assert kept[0].id == record_id(1_764_763_204.0, "hall", 1)
     assert await store.read(kept[0].id) is not None
     assert await store.frames(record_id(1_764_763_200.0, "hall", 1)) is None  # pruned
+
+
+# -- served over HTTP ----------------------------------------------------------------------
+
+
+async def test_the_http_api_lists_and_serves_a_record(tmp_path: Path) -> None:
+    import aiohttp
+
+    path = tmp_path / "gw.toml"
+    path.write_text('[http]\nlisten = "127.0.0.1:0"\n' + _text("fr700"))
+    async with gateway_of(path) as gateway, aiohttp.ClientSession() as client:
+        await _run(gateway, 2)
+        await _trip(gateway, 2, 0x31)
+        summary = await _record(gateway)
+        port = gateway.northbounds["http"].port  # type: ignore[attr-defined]
+        base = f"http://127.0.0.1:{port}/api/v1/trips"
+
+        async def get(url: str, status: int = 200) -> aiohttp.ClientResponse:
+            async with client.get(url) as answer:
+                await answer.read()
+                assert answer.status == status, (url, await answer.text())
+                return answer
+
+        async with client.get(base) as answer:
+            listed = await answer.json()
+        assert listed == {"recording": True, "trips": [summary.as_json()]}
+        async with client.get(f"{base}?line=hall&node=1") as answer:
+            assert (await answer.json())["trips"] == []
+        async with client.get(f"{base}/{summary.id}") as answer:
+            record = await answer.json()
+        assert (record["id"], record["node"], record["trip"]["code"]) == (
+            summary.id, 2, summary.code,
+        )  # fmt: skip
+        async with client.get(f"{base}/{summary.id}/frames.pcapng") as answer:
+            frames = await answer.read()
+        assert frames[:4] == b"\x0a\x0d\x0d\x0a"  # a pcapng section header block
+        async with client.get(f"{base}/{summary.id}.csv") as answer:
+            rows = (await answer.text()).splitlines()
+        assert rows[0].startswith("time_utc,time_unix,output_frequency_hz,")
+        assert len(rows) == 1 + len(record["samples"]["time"])
+        await get(f"{base}/../../etc/passwd", 404)
+        await get(f"{base}/20260101T000000.000Z-hall-9", 404)
+        await get(f"{base}/20260101T000000.000Z-hall-9.csv", 404)
+        await get(f"{base}?node=x", 400)
+        await get(f"{base}?limit=0", 400)
+
+
+async def test_a_gateway_without_the_recorder_says_so(tmp_path: Path) -> None:
+    import aiohttp
+
+    path = tmp_path / "gw.toml"
+    path.write_text('[http]\nlisten = "127.0.0.1:0"\n' + _text("sj300", "enabled = false"))
+    async with gateway_of(path) as gateway, aiohttp.ClientSession() as client:
+        assert gateway.recorder is None
+        port = gateway.northbounds["http"].port  # type: ignore[attr-defined]
+        async with client.get(f"http://127.0.0.1:{port}/api/v1/trips") as answer:
+            assert await answer.json() == {"recording": False, "trips": []}

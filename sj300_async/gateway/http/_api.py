@@ -50,6 +50,7 @@ from ._server import (
     metrics_response,
     serve_app,
 )
+from ._trip_api import TripRoutes
 from ._workbench import Workbench
 from ._write_api import WriteRoutes
 
@@ -107,6 +108,7 @@ def make_app(
     app[_WORKBENCH] = workbench
     app[_PER_ADDRESS] = per_address = PerAddress() if per_address is None else per_address
     ParameterRoutes(workbench.gateway, per_address).add_to(app)
+    TripRoutes(workbench.gateway).add_to(app)
     if writes is not None:
         writes.add_to(app)
     app.router.add_get("/", _index)
