@@ -158,19 +158,21 @@ def load_config(path: str | os.PathLike[str]) -> GatewayConfig:
             valid configuration; the message names the file, line and key.
     """
     text, source = read_toml(path)
-    return parse_config(text, source)
+    return parse_config(text, source, file=True)
 
 
-def parse_config(text: str, source: str) -> GatewayConfig:
+def parse_config(text: str, source: str, *, file: bool = False) -> GatewayConfig:
     """Validate the TOML configuration *text*; *source* names it in errors.
 
-    A relative ``audit_log`` is taken relative to *source*'s directory.
+    A relative ``audit_log`` is taken relative to *source*'s directory. *file*: *text*
+    was read from the file *source* (the trip recorder keeps its records beside it;
+    text that is no file keeps them in memory unless it names a directory).
 
     Raises:
         GatewayConfigError: see :func:`load_config`.
     """
     data = parse_toml(text, source)
-    return _build(ConfigContext(source, text), data, base_dir=Path(source).parent, file=True)
+    return _build(ConfigContext(source, text), data, base_dir=Path(source).parent, file=file)
 
 
 def config_from_flags(
@@ -230,8 +232,9 @@ def _build(ctx: ConfigContext, data: object, *, base_dir: Path, file: bool) -> G
         ConfigTable(ctx, "recorder", root.data["recorder"], RECORDER_KEYS)
         if root.has("recorder")
         else None,
-        base_dir if file else None,
+        base_dir,
         context.state_dir,
+        file=file,
     )
     northbounds: dict[str, object] = {}
     listening: dict[Endpoint, str] = {}

@@ -172,7 +172,7 @@ def test_defaults_of_a_minimal_file() -> None:
                 unit_offset=100,
             ),
         ),
-        recorder=RecorderConfig(directory=Path("trips")),
+        recorder=RecorderConfig(),  # text, not a file: in memory
     )
     assert (dict(config.northbounds), config.audit_log) == ({}, None)
     assert config.source == "gateway.toml"

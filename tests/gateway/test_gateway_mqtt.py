@@ -82,9 +82,10 @@ GRANTS = """
     control = true
     """
 #: Discovery configs of gateway_toml's line with GRANTS: the gateway's connectivity
-#: sensor; 7 sensors and an event entity per SJ300 drive; per drive with control a number
-#: (set frequency), a select and 4 buttons, and a number for its granted parameter (A004).
-CONFIGS = 1 + 4 * (7 + 1) + 2 * (6 + 1)
+#: sensor; 7 sensors and two event entities (its events, its trip records) per SJ300
+#: drive; per drive with control a number (set frequency), a select and 4 buttons, and a
+#: number for its granted parameter (A004).
+CONFIGS = 1 + 4 * (7 + 2) + 2 * (6 + 1)
 #: The entities of a drive with GRANTS beyond its sensors (their object ids).
 CONTROLS = ("set_frequency", "direction", "run_forward", "run_reverse", "stop", "lease",
             "parameter_A004")  # fmt: skip
@@ -287,7 +288,7 @@ async def test_discovery_configs_are_retained_json_with_every_required_key(
     # Control only where the configuration grants it: nodes 1 and 2.
     controls = {(t.split("/")[2], t.split("/")[3]) for t in found if t.split("/")[1] != "sensor"}
     assert controls == {("sj300_gw1", "connectivity")} | {
-        (f"sj300_gw1_hall_{node}", "events") for node in range(1, 5)
+        (f"sj300_gw1_hall_{node}", what) for node in range(1, 5) for what in ("events", "trips")
     } | {(f"sj300_gw1_hall_{node}", what) for node in (1, 2) for what in CONTROLS}
     number = found["homeassistant/number/sj300_gw1_hall_1/set_frequency/config"]
     assert number["command_topic"] == topics.command("hall", 1, "frequency_hz")

@@ -179,6 +179,7 @@ async def test_a_toy_line_is_published_on_mqtt(toy_registered: None, broker: Bro
     unit_2 = {t: b for t, b in found.items() if "/sj300_gwt_toys_2/" in t}
     assert {b["name"] for b in unit_2.values()} == {
         "Output frequency", "Output current", "Output voltage", "Status", "Events",
+        "Trip records",
     }  # fmt: skip
     device = next(iter(unit_2.values()))["device"]
     assert (device["name"], device["model"], device["manufacturer"]) == (

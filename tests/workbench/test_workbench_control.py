@@ -56,6 +56,7 @@ from sj300_async.gateway import (
 )
 from sj300_async.gateway.http import hash_password
 from sj300_async.gateway.http._northbound import HttpNorthbound
+from sj300_async.gateway.recorder import TripStore
 from sj300_async.simulator import RunState, serve_tcp
 from sj300_async.simulator.sj300 import SimulatedBus
 from workbench.browser import BrowserPage
@@ -148,6 +149,10 @@ class Timestamped:
     @property
     def audit(self) -> AuditLog:
         return self._gateway.audit
+
+    @property
+    def trip_records(self) -> TripStore | None:
+        return self._gateway.trip_records
 
     @property
     def lines(self) -> Sequence[GatewayLine]:

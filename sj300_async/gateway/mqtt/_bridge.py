@@ -108,7 +108,7 @@ from ._births import Rediscovery
 from ._commands import MAX_PAYLOAD_BYTES, error_text, oversized, parse_command
 from ._config import MqttConfig
 from ._discovery import FrequencyLimits, iter_discovery
-from ._drive_events import DriveEvents, refused_event
+from ._drive_events import DriveEvents, refused_event, trip_record_event
 from ._intake import CommandIntake
 from ._messages import state_payload
 from ._outbox import MAX_IN_FLIGHT, Key, Out, Outbox
@@ -119,6 +119,8 @@ from ._topics import AVAILABLE, UNAVAILABLE, Topics
 
 if TYPE_CHECKING:
     from prometheus_client.core import Metric
+
+    from ..recorder import RecordSummary
 
 __all__ = ["CLIENT", "MqttBridge"]
 
@@ -221,6 +223,12 @@ class MqttBridge:
         if self._availability.get(key) != available:
             self._availability[key] = available
             self._put(self._availability_out(key), wake=False)
+
+    def recorded(self, summary: RecordSummary, served: ServedDrive) -> None:
+        """A trip record was kept: its message on ``…/trip``, not retained."""
+        if not self._closing:
+            payload = json.dumps(trip_record_event(summary)).encode()
+            self._put_error(Out(self.topics.trip(summary.line, summary.node), payload, False))
 
     def reconfigure(self, config: object) -> list[str]:
         """A reload changed ``[mqtt]``: the commands' budget from the next command; the

@@ -6,7 +6,8 @@ gateway is a device of its own (a connectivity sensor); each drive is a
 device naming the gateway as ``via_device``, with sensors for what its
 profile measures, a status sensor (the state in words), a trip sensor when
 its profile reads trip histories, an event entity (refused, tripped,
-lapsed: :mod:`._drive_events`), a number per parameter its configuration
+lapsed: :mod:`._drive_events`), another for its trip records when the
+gateway keeps them (``…/trip``), a number per parameter its configuration
 grants, and, for a drive whose configuration grants control, a number
 (set frequency), a select (direction) and buttons (run forward, run
 reverse, stop, the lease heartbeat).
@@ -38,7 +39,7 @@ from ... import __version__
 from ...profiles import ParameterSpec, get_profile
 from .. import GatewayDrive, GatewayView, LineConfig, ServedDrive
 from ._config import MqttConfig
-from ._drive_events import EVENT_TYPES
+from ._drive_events import EVENT_TYPES, TRIP_EVENT_TYPES
 from ._topics import AVAILABLE, UNAVAILABLE, Topics
 
 __all__ = [
@@ -106,8 +107,10 @@ def discovery(
     lines: Sequence[LineConfig],
     *,
     limits: Mapping[tuple[str, int], float] | None = None,
+    trips: bool = False,
 ) -> Iterator[tuple[str, dict[str, Any]]]:
-    """Every Home Assistant discovery config: ``(topic, payload)``.
+    """Every Home Assistant discovery config: ``(topic, payload)``; *trips*: the
+    gateway keeps trip records (each drive has an event entity for them).
 
     The gateway is a device of its own (a connectivity sensor: what its
     availability says), and each drive's device names it as ``via_device``.
@@ -141,11 +144,19 @@ def discovery(
     known = {} if limits is None else limits
     for line in lines:
         for node in line.nodes:
-            yield from drive_discovery(config, topics, line, node, known.get((line.name, node)))
+            yield from drive_discovery(
+                config, topics, line, node, known.get((line.name, node)), trips=trips
+            )
 
 
 def drive_discovery(
-    config: MqttConfig, topics: Topics, line: LineConfig, node: int, max_hz: float | None = None
+    config: MqttConfig,
+    topics: Topics,
+    line: LineConfig,
+    node: int,
+    max_hz: float | None = None,
+    *,
+    trips: bool = False,
 ) -> Iterator[tuple[str, dict[str, Any]]]:
     """One drive's discovery configs (:func:`discovery`); *max_hz*: the set frequency's
     maximum, the drive's own once known (else the protocol's highest)."""
@@ -215,6 +226,14 @@ def drive_discovery(
         state_topic=topics.event(line.name, node),
         event_types=list(EVENT_TYPES),
     )
+    if trips:
+        yield entity(
+            "event",
+            "trips",
+            "Trip records",
+            state_topic=topics.trip(line.name, node),
+            event_types=list(TRIP_EVENT_TYPES),
+        )
     for code in sorted(line.writable_parameters(node)):
         spec = profile.parameters.spec(code)
         yield entity(
@@ -311,7 +330,8 @@ def iter_discovery(
     if not config.discovery or gateway is None:
         return
     lines = list(dict.fromkeys(drive.line for drive in gateway.drives))
-    yield from discovery(config, topics, lines, limits=limits)
+    trips = gateway.trip_records is not None
+    yield from discovery(config, topics, lines, limits=limits, trips=trips)
 
 
 def served_discovery(

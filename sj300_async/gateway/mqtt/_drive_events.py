@@ -17,6 +17,12 @@ what else there is to say, which HA keeps as the event's attributes.
 - **lapsed**: a lapsed lease's stop began (``lapse_pending`` turned true;
   a line with ``on_lapse = "hold"`` lapses without one, and says nothing).
 
+A trip record kept (the gateway's recorder, :mod:`sj300_async.gateway.recorder`)
+is a message of its own on ``…/<line>/<node>/trip`` (:func:`trip_record_event`,
+``event_type`` ``trip``): the code, the meaning and the record's id, which
+``GET /api/v1/trips/ID`` serves. It comes ``after_s`` after the trip, once the
+record is written: the ``tripped`` event above is the trip's moment.
+
 A drive's first sample is no transition: a drive tripped when the gateway
 starts shows it on its trip sensor, not as an event. Events are not
 retained: one that happened while Home Assistant was away is not news
@@ -30,11 +36,28 @@ from typing import TYPE_CHECKING, Any, Final
 
 if TYPE_CHECKING:
     from .. import ServedDrive
+    from ..recorder import RecordSummary
 
-__all__ = ["EVENT_TYPES", "DriveEvents", "refused_event"]
+__all__ = ["EVENT_TYPES", "TRIP_EVENT_TYPES", "DriveEvents", "refused_event", "trip_record_event"]
 
 #: Every ``event_type`` published (the event entity's ``event_types``).
 EVENT_TYPES: Final = ("refused", "tripped", "lapsed")
+
+
+#: The ``event_type`` of ``…/trip`` (the trips' event entity's ``event_types``).
+TRIP_EVENT_TYPES: Final = ("trip",)
+
+
+def trip_record_event(summary: RecordSummary) -> dict[str, Any]:
+    """A trip record kept, as the message on ``…/trip``."""
+    return {
+        "event_type": "trip",
+        "code": summary.code,
+        "meaning": summary.meaning,
+        "record": summary.id,
+        "seen_by": summary.seen_by,
+        "time": summary.time,
+    }
 
 
 def refused_event(command: str, payload: str, error: str, reason: str | None) -> dict[str, Any]:

@@ -88,6 +88,10 @@ class Topics:
         """The drive's events (:mod:`._drive_events`), not retained."""
         return f"{self.drive(line, node)}/event"
 
+    def trip(self, line: str, node: int) -> str:
+        """The drive's trip records as they are kept (:mod:`._drive_events`), not retained."""
+        return f"{self.drive(line, node)}/trip"
+
     @property
     def command_filter(self) -> str:
         """What the bridge subscribes to for commands."""

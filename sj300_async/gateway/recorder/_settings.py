@@ -17,6 +17,9 @@ Decisions:
 - **How many.** At most ``max_records`` (1,000) and ``max_bytes``
   (256 MiB, JSON and pcapng together), the oldest pruned first: an edge
   box's disk is not the recorder's to fill.
+- A configuration given as text (``parse_config``, not ``load_config``)
+  is no file: its records are kept in memory unless it names a
+  ``directory`` (taken relative to its source's directory).
 - A reload keeps the recorder as it was (its settings are said as needing
   a restart): the trends it sized and the records pending belong to it.
 """
@@ -70,30 +73,28 @@ class RecorderConfig:
 
 
 def parse_recorder(
-    table: ConfigTable | None, base_dir: Path | None, state_dir: Path | None
+    table: ConfigTable | None, base_dir: Path, state_dir: Path | None, *, file: bool
 ) -> RecorderConfig:
-    """The ``[recorder]`` *table* (None: not given) of a file in *base_dir* (None: no
-    file: the records are kept in memory)."""
+    """The ``[recorder]`` *table* (None: not given) of a configuration whose directory
+    is *base_dir*; *file*: it was read from a file (else, without a ``directory``, the
+    records are kept in memory)."""
+    text = None if table is None else table.string("directory")
+    if table is not None and text is not None and not text.strip():
+        raise table.error("directory", "expected a directory, got an empty string")
+    if text is not None:
+        directory: Path | None = base_dir / text  # an absolute path stays as it is
+    elif file:
+        directory = (state_dir or base_dir) / "trips"
+    else:
+        directory = None  # flags, --demo, a text: memory
     if table is None:
-        directory = None if base_dir is None else (state_dir or base_dir) / "trips"
         return RecorderConfig(directory=directory)
     enabled = table.boolean("enabled")
-    text = table.string("directory")
-    if text is not None and not text.strip():
-        raise table.error("directory", "expected a directory, got an empty string")
-    if base_dir is None:
-        directory = None  # no file: memory, whatever a section of flags said
-    elif text is not None:
-        directory = base_dir / text  # an absolute path stays as it is
-    else:
-        directory = (state_dir or base_dir) / "trips"
-    before_s = _seconds(table, "before_s", DEFAULT_BEFORE_S)
-    after_s = _seconds(table, "after_s", DEFAULT_AFTER_S)
     return RecorderConfig(
         enabled=True if enabled is None else enabled,
         directory=directory,
-        before_s=before_s,
-        after_s=after_s,
+        before_s=_seconds(table, "before_s", DEFAULT_BEFORE_S),
+        after_s=_seconds(table, "after_s", DEFAULT_AFTER_S),
         max_records=_count(table, "max_records", DEFAULT_MAX_RECORDS),
         max_bytes=_count(table, "max_bytes", DEFAULT_MAX_BYTES),
     )
