@@ -39,6 +39,7 @@ from waiting import wait_for
 
 from sj300_async import Direction
 from sj300_async.gateway import Gateway, GatewayDrive
+from sj300_async.gateway.opcua._server import OpcuaServer
 from sj300_async.simulator import serve_tcp
 from sj300_async.simulator.sj300 import SimulatedBus
 
@@ -750,3 +751,44 @@ def _der(pem_or_der: bytes) -> bytes:
     if pem_or_der.lstrip().startswith(b"-----BEGIN"):
         return x509.load_pem_x509_certificate(pem_or_der).public_bytes(serialization.Encoding.DER)
     return pem_or_der
+
+
+def _events_watched(server: OpcuaServer) -> bool:
+    """Some subscription monitors events (asyncua's own tables: a test's look only)."""
+    asyncua_server = server._server
+    if asyncua_server is None:
+        return False
+    subscriptions = asyncua_server.iserver.subscription_service.subscriptions.values()
+    return any(s.monitored_item_srv._monitored_events for s in subscriptions)
+
+
+async def test_a_trip_record_reaches_node_opcua_as_an_event_of_the_server_object(
+    tmp_path: Path, node_pki: Path
+) -> None:
+    text = opcua_toml(tmp_path) + "\n[recorder]\nbefore_s = 1\nafter_s = 0.5\n"
+    fields = ["SourceName", "Message", "Severity", "TripCode", "RecordId"]
+    async with opcua_gateway(text) as (gateway, server):
+        await polled(gateway)
+        client = node_client(server.url, node_pki)
+        steps: list[Json] = [
+            {"op": "subscribe", "id": "trips", "background": True, "nodeId": "i=2253",
+             "events": fields, "until": {"count": 1}, "timeoutMs": 20000},
+            {"op": "wait", "id": "trips"},
+        ]  # fmt: skip
+        run = asyncio.create_task(client.steps(steps))
+        await wait_for(lambda: _events_watched(server) or run.done(), "the event item", timeout=30)
+        simulator = gateway.lines[0].bus.simulator
+        assert simulator.drives[4].trip(7, now=asyncio.get_running_loop().time())
+        _, waited = await run
+        assert gateway.trip_records is not None
+        summary = gateway.trip_records.summaries()[0]
+    assert waited["reason"] == "count"
+    assert waited["notifications"] == [
+        {
+            "SourceName": "hall/4",
+            "Message": {"locale": None, "text": f"hall/4 tripped: {summary.meaning} (E07)"},
+            "Severity": 800,
+            "TripCode": "E07",
+            "RecordId": summary.id,
+        }
+    ]

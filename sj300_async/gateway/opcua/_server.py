@@ -74,15 +74,19 @@ from ._operations import limit_operations
 from ._quality import GOOD
 from ._relines import add_lines, finish_lines, gather_lines, remove_line
 from ._security import ChannelRules, Principal, Users
+from ._server_metrics import server_metrics
 from ._space import SpaceBuilder
 from ._speedups import ENABLED as SPEEDUPS_ENABLED
 from ._speedups import install as install_speedups
 from ._speedups import push_frozen
 from ._subscriptions import bound_subscriptions
+from ._trip_events import TripEvents
 from ._values import LineCounters, drive_datavalue
 
 if TYPE_CHECKING:
     from prometheus_client.core import Metric
+
+    from ..recorder import RecordSummary
 
 __all__ = ["OpcuaServer"]
 
@@ -151,6 +155,8 @@ class OpcuaServer:
         #: Lazy: the prototype of each drive shape served (._relines).
         self._shapes: dict[object, Shape] = {}
         self._lines_folder: ua.NodeId | None = None
+        #: Each trip record as an event (._trip_events), None when none are kept.
+        self._trip_events: TripEvents | None = None
 
     # -- the northbound --------------------------------------------------------------
 
@@ -203,6 +209,8 @@ class OpcuaServer:
             loop.create_task(self._push(), name="opcua push"),
             loop.create_task(self._tick(), name="opcua tick"),
         ]
+        if self._trip_events is not None:
+            self._tasks.append(loop.create_task(self._trip_events.run(), name="opcua trips"))
         self.startup_s = time.perf_counter() - began
 
     async def _configure(self, server: Server, gateway: GatewayView) -> None:
@@ -255,6 +263,8 @@ class OpcuaServer:
         self._lines_folder = lines
         gathered = gather_lines(self, space, lines, gateway.lines)
         await space.commit(server.nodes.objects.session)
+        if gateway.trip_records is not None:
+            self._trip_events = await TripEvents.install(server, self.namespace)
         if self._lazy:
             aspace = server.iserver.aspace
             self._table = LazyNodes.install(aspace, self.namespace, self._bind_node)
@@ -403,33 +413,19 @@ class OpcuaServer:
                 value_status = status if binding.value is not None else binding.status(now)
                 self._stage(binding, value_status)  # pushed at the batch's flush
 
+    def recorded(self, summary: RecordSummary, served: ServedDrive) -> None:
+        """A trip record was kept: its event, from the Server object (._trip_events)."""
+        nodes = self._drives.get((summary.line, summary.node))
+        if nodes is not None and self._trip_events is not None:
+            self._trip_events.announce(summary, nodes.node)
+
     def flush(self) -> None:
         """The gateway's batch is whole: push what it changed to the subscriptions."""
         if self._outbox:
             self._wake.set()
 
     def metrics(self) -> Iterable[Metric]:
-        from prometheus_client.core import CounterMetricFamily, GaugeMetricFamily
-
-        sessions = GaugeMetricFamily(
-            "sj300_opcua_sessions", "OPC UA sessions open (asyncua's external sessions)."
-        )
-        sessions.add_metric([], self.session_count)
-        yield sessions
-        results = CounterMetricFamily(
-            "sj300_opcua_writes",
-            "Method calls and variable writes, by the status code answered.",
-            labels=["status"],
-        )
-        for status, count in sorted((self._calls.results if self._calls else {}).items()):
-            results.add_metric([status], count)
-        yield results
-        pushed = CounterMetricFamily(
-            "sj300_opcua_values_pushed", "Changed values pushed to subscriptions."
-        )
-        pushed.add_metric([], self.pushed)
-        yield pushed
-        yield from self._defences.metrics()
+        return server_metrics(self, self._calls, self._trip_events, self._defences)
 
     async def close(self) -> None:
         tasks, self._tasks = self._tasks, []
@@ -468,16 +464,26 @@ class OpcuaServer:
         return self._table
 
     @property
+    def event_type_nodes(self) -> int:
+        """The namespace's nodes of the trip event's type (._trip_events): not a line's."""
+        return 0 if self._trip_events is None else self._trip_events.type_nodes
+
+    @property
     def node_count(self) -> int:
+        """The nodes of the gateway's namespace serving its lines and drives, made or not."""
         server = self._server
         if server is None:
             return 0
+        own = self.event_type_nodes
         if self._table is not None:
-            return self._table.served()
-        return sum(
-            1
-            for node in server.iserver.aspace.keys()  # noqa: SIM118 - it has no __iter__
-            if node.NamespaceIndex == self.namespace
+            return self._table.served() - own
+        return (
+            sum(
+                1
+                for node in server.iserver.aspace.keys()  # noqa: SIM118 - it has no __iter__
+                if node.NamespaceIndex == self.namespace
+            )
+            - own
         )
 
     # -- values ----------------------------------------------------------------------

@@ -57,6 +57,13 @@
 //       once the monitored item exists, and a later {"op": "wait", "id": "f"} returns the
 //       notifications; the steps in between run meanwhile.
 //   {"op": "wait", "id": "f"}              -> as "subscribe"
+//   {"op": "subscribe", "nodeId": "i=2253", "events": ["SourceName", "Message", ...], ...}
+//                                          -> events instead of values: the item monitors
+//                                              the node's EventNotifier with an event filter
+//                                              selecting those fields (browse names from
+//                                              BaseEventType's, a subtype's by their name
+//                                              too); each notification is {field: value},
+//                                              "until": {"count": N} only
 //
 // A dataValue: {statusCode, value, dataType, sourceTimestamp, serverTimestamp} (the status
 // code's and the variant's data type's names). A value: numbers, strings, booleans as such; NaN and infinities as the strings "NaN",
@@ -93,6 +100,7 @@ const {
     Variant,
     VariantArrayType,
     coerceNodeId,
+    constructEventFilter,
     makeBrowsePath,
 } = opcua;
 
@@ -293,14 +301,23 @@ class Runner {
         const done = new Promise((resolve) => {
             finish = resolve;
         });
+        const events = step.events ?? null;
         const item = ClientMonitoredItem.create(
             subscription,
-            { nodeId, attributeId: AttributeIds[step.attribute ?? "Value"] },
-            { samplingInterval: step.samplingInterval ?? 0, discardOldest: true, queueSize: step.queueSize ?? 100 },
+            { nodeId, attributeId: events ? AttributeIds.EventNotifier : AttributeIds[step.attribute ?? "Value"] },
+            {
+                samplingInterval: step.samplingInterval ?? 0,
+                discardOldest: true,
+                queueSize: step.queueSize ?? 100,
+                ...(events ? { filter: constructEventFilter(events) } : {}),
+            },
             TimestampsToReturn.Both,
         );
         item.on("changed", (dv) => {
-            const notification = dataValue(dv, new Date().toISOString());
+            // An event's fields come as an array of variants, in the filter's order.
+            const notification = events
+                ? Object.fromEntries(events.map((name, i) => [name, variantValue(dv[i])]))
+                : dataValue(dv, new Date().toISOString());
             notifications.push(notification);
             if (condition && holds(until, notification)) finish("until");
             else if (until.count !== undefined && notifications.length >= until.count) finish("count");
