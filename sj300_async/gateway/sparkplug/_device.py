@@ -21,6 +21,9 @@ Control/Lease               Boolean          yes: true takes or renews the lease
 Control/Stop                Boolean          yes: true stops (control; no lease needed)
 Control/Last Refusal        String           (where something is writable: the latest
 Control/Refusals            UInt64            refusal in words, and how many so far)
+Trip Record/Code            String           (where the gateway keeps trip records: the
+Trip Record/Id              String            latest record's trip code and id, sent in a
+                                              DDATA when it is kept; null before one)
 Info/Protocol, Info/Line    String
 Info/Node                   UInt32
 ==========================  ========  =====  =========================================
@@ -53,6 +56,7 @@ from ._payload import BOOLEAN, DOUBLE, STRING, UINT32, UINT64, MetricDef, Proper
 __all__ = [
     "DIRECTION_WORDS",
     "LAST_REFUSAL",
+    "TRIP_RECORD",
     "Device",
     "DeviceFlags",
     "DeviceMetric",
@@ -63,6 +67,8 @@ __all__ = [
 #: Direction's words, as read and as written: the gateway's own (stop, forward, reverse).
 DIRECTION_WORDS: Final = tuple(SERVED_DIRECTION_WORDS.values())
 LAST_REFUSAL: Final = "Control/Last Refusal"
+#: The first of the two trip record metrics (its code, then its id).
+TRIP_RECORD: Final = "Trip Record/Code"
 
 
 @dataclass(frozen=True, slots=True)
@@ -197,7 +203,7 @@ def _indices(names: tuple[str, ...]) -> Mapping[str, int]:
 class Device:
     """One drive as a device (see the module docstring)."""
 
-    def __init__(self, drive: GatewayDrive, ordinal: int) -> None:
+    def __init__(self, drive: GatewayDrive, ordinal: int, *, trips: bool = False) -> None:
         self.drive = drive
         self.id = device_id(*drive.key)
         line, node, profile = drive.line, drive.node, drive.profile
@@ -259,6 +265,9 @@ class Device:
         if self.writable:
             rows.append((LAST_REFUSAL, STRING, (), _constant(None), None, None))
             rows.append(("Control/Refusals", UINT64, (), _constant(0), None, None))
+        if trips:  # the gateway keeps trip records: the latest one's, when one is kept
+            rows.append((TRIP_RECORD, STRING, (), _constant(None), None, None))
+            rows.append(("Trip Record/Id", STRING, (), _constant(None), None, None))
         rows += [
             ("Info/Protocol", STRING, (), _constant(drive.profile.name), None, None),
             ("Info/Line", STRING, (), _constant(line.name), None, None),
@@ -286,9 +295,11 @@ class Device:
         )
         self._base = base
         self._indices = _indices(tuple(m.definition.name for m in self.metrics))
-        self._refusal_index = next(
-            (i for i, m in enumerate(self.metrics) if m.definition.name == LAST_REFUSAL), None
-        )
+        self._refusal_index = self._index(LAST_REFUSAL)
+        self._record_index = self._index(TRIP_RECORD)
+
+    def _index(self, name: str) -> int | None:
+        return next((i for i, m in enumerate(self.metrics) if m.definition.name == name), None)
 
     def by_alias(self, alias: int) -> DeviceMetric | None:
         """The metric of alias *alias*, None: none of this device's."""
@@ -301,12 +312,17 @@ class Device:
         return None if index is None else self.metrics[index]
 
     def values(
-        self, values: ServedValues, flags: DeviceFlags, refusal: tuple[str, int] | None
+        self,
+        values: ServedValues,
+        flags: DeviceFlags,
+        refusal: tuple[str, int] | None,
+        record: tuple[str | None, str] | None = None,
     ) -> list[object]:
         """Every metric's value in the served *values*, in the metrics' order.
 
         *flags*: the lease and a pending lapse; *refusal*: the latest refusal in
-        words and the count so far (None: none yet).
+        words and the count so far (None: none yet); *record*: the latest trip
+        record's code and id (None: none yet).
         """
         out = self._template.copy()
         for i, value in zip(self._field_index, self._pick(values), strict=False):  # not online
@@ -315,4 +331,6 @@ class Device:
             out[i] = read(values, flags)
         if self._refusal_index is not None and refusal is not None:
             out[self._refusal_index], out[self._refusal_index + 1] = refusal
+        if self._record_index is not None and record is not None:
+            out[self._record_index], out[self._record_index + 1] = record
         return out

@@ -94,6 +94,8 @@ from ._workers import CLIENT, MAX_COMMAND_BYTES, DeviceCommands
 if TYPE_CHECKING:
     from prometheus_client.core import Metric
 
+    from ..recorder import RecordSummary
+
 __all__ = ["NAMESPACE", "EdgeNode"]
 
 _log = logging.getLogger("sj300_async.gateway.sparkplug")
@@ -137,6 +139,8 @@ class EdgeNode:
         #: The latest sample of each drive, as served (its values at the sample; who
         #: holds the lease, when the message goes out).
         self._latest: dict[Key, ServedDrive] = {}
+        #: Each device's latest trip record: its code and id (Trip Record/*).
+        self._records: dict[Key, tuple[str | None, str]] = {}
         #: Drives with a sample not yet turned into a message, in arrival order.
         self._dirty: dict[Key, None] = {}
         #: What the host was last told of each live device (its values, in metric order).
@@ -223,7 +227,8 @@ class EdgeNode:
         """Devices for *drives*, their ordinals (so their aliases) after every one so far."""
         for drive in drives:
             self._ordinals += 1
-            device = Device(drive, self._ordinals)
+            trips = self._gateway is not None and self._gateway.trip_records is not None
+            device = Device(drive, self._ordinals, trips=trips)
             self._devices[drive.key] = device
             self._by_id[device.id] = device
 
@@ -236,6 +241,7 @@ class EdgeNode:
         for line in removed:
             for node in line.drives:
                 device = self._devices.pop((line.config.name, node), None)
+                self._records.pop((line.config.name, node), None)
                 if device is not None:
                     del self._by_id[device.id]
                     self._gone.append(device)
@@ -282,6 +288,13 @@ class EdgeNode:
         if not sample:  # a sample goes out at the batch's flush
             self._wake.set()
 
+    def recorded(self, summary: RecordSummary, served: ServedDrive) -> None:
+        """A trip record was kept: its code and id go out in the device's next DDATA."""
+        key = (summary.line, summary.node)
+        if key in self._devices and not self._closing:
+            self._records[key] = (summary.code, summary.id)
+            self._mark(key, self._latest.get(key, served), sample=False)
+
     def flush(self) -> None:
         """The gateway's batch is whole: send the devices it changed."""
         if self._dirty:
@@ -314,8 +327,9 @@ class EdgeNode:
         """The device's metrics: the values served at the sample, the lease as it is now."""
         lease = served.lease_holder(asyncio.get_running_loop().time()) == CLIENT
         flags = DeviceFlags(lease=lease, lapse_pending=served.lapse_pending)
-        refusal = self._commands.refusals.get(device.drive.key)
-        return device.values(served.values(), flags, refusal)
+        key = device.drive.key
+        refusal = self._commands.refusals.get(key)
+        return device.values(served.values(), flags, refusal, self._records.get(key))
 
     # -- turning samples into messages (the edge node's task) -----------------------------
 
