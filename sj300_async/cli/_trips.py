@@ -34,6 +34,7 @@ from ._common import (
 )
 from ._output import Column, jsonable, print_json, print_table
 from ._session import run_async
+from ._trip_record import add_record_options, record
 
 __all__ = ["add_parser"]
 
@@ -44,7 +45,9 @@ def add_parser(subparsers: Any) -> None:
         "trips",
         help="trip history",
         description="Read the trip count and the latest trips (SJ300: command 05, six "
-        "records), each with its meaning; --codes lists every trip code the reference gives.",
+        "records), each with its meaning; --codes lists every trip code the reference gives; "
+        "--record DIR watches the line and keeps a record of every new trip (the seconds "
+        "before and after it, the line's frames) in DIR.",
     )
     p.add_argument(
         "--codes", action="store_true", help="list the trip codes and their meanings (no drive)"
@@ -52,6 +55,7 @@ def add_parser(subparsers: Any) -> None:
     add_node_option(p)
     add_json_option(p)
     add_bus_options(p)
+    add_record_options(p)
     p.set_defaults(run=run)
 
 
@@ -59,6 +63,8 @@ def run(args: argparse.Namespace) -> int:
     """Print the trip history (or with ``--codes`` the code table); return 0."""
     if args.codes:
         return _codes(args)
+    if args.record is not None:
+        return record(args)
     return run_async(_trips(args))
 
 

@@ -35,6 +35,7 @@ Decisions:
 from __future__ import annotations
 
 import asyncio
+import functools
 import logging
 from collections.abc import Callable
 from dataclasses import dataclass, field
@@ -109,6 +110,8 @@ class TripRecorder:
         self._writing: set[asyncio.Task[None]] = set()
         #: Trips seen, by what saw them; records dropped (too many pending).
         self.counts: dict[str, int] = {"poll": 0, "trip history": 0, "dropped": 0}
+        #: Told of each record kept, after the doors (``sj300 trips --record`` prints it).
+        self.listeners: list[Callable[[RecordSummary], None]] = []
 
     async def start(self) -> None:
         """Read the records kept before (a directory's)."""
@@ -249,10 +252,13 @@ class TripRecorder:
         if summary is None:
             return
         _log.info("trip record %s kept (%d bytes)", summary.id, summary.size)
-        try:
-            self._recorded(summary, drive)
-        except Exception:  # a door's failure to announce it: the record is kept
-            _log.exception("trip record %s: announcing it failed", summary.id)
+        tells = [functools.partial(self._recorded, summary, drive)]
+        tells += [functools.partial(listener, summary) for listener in self.listeners]
+        for tell in tells:
+            try:
+                tell()
+            except Exception:  # a door's failure to announce it: the record is kept
+                _log.exception("trip record %s: announcing it failed", summary.id)
 
     async def close(self) -> None:
         """Take every pending record now, and wait (bounded) for them to be written."""
