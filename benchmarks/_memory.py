@@ -319,6 +319,18 @@ def memory_rows(children: Mapping[str, Any], heap: Mapping[str, Heap] | None) ->
             as_multiple=True,
         )
     ]
+    if "all-without-recorder" in children:
+        rows.append(
+            Result(  # issue 45: the recorder reads the trends and line logs already kept
+                "plant: RSS per drive, every northbound on, with the trip recorder",
+                children["all"].rss_bytes / drives / _KIB,
+                children["all-without-recorder"].rss_bytes / drives / _KIB,
+                "KiB",
+                higher_is_better=False,
+                against="without it",
+                as_multiple=True,
+            )
+        )
     if heap is not None and "all" in heap and "bare" in heap:
         rows.append(
             Result(

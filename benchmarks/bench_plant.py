@@ -141,17 +141,19 @@ USES_EVENT_LOOP = True
 CONFIGURATIONS: Final = (
     *("bare", "mqtt", "sparkplug", "mqtt+sparkplug", "opcua", "http", "modbus", "all"),
     "all-per-unit",
+    "all-without-recorder",
 )
 #: The configurations of one northbound or two, reported against the bare poll.
 ALONE: Final = ("mqtt", "sparkplug", "mqtt+sparkplug", "opcua", "http", "modbus")
 #: The configurations with every northbound and its clients: the masters read the
 #: listeners' summaries (``all``, the goal's) or each unit (``all-per-unit``).
-WITH_CLIENTS: Final = ("all", "all-per-unit")
+WITH_CLIENTS: Final = ("all", "all-per-unit", "all-without-recorder")
 #: The gateway's id (the JSON topics' level, the Sparkplug edge node) and Sparkplug group.
 GATEWAY_ID: Final = "plant"
 GROUP: Final = "plant"
-#: The northbounds of ``all``.
-EVERY: Final = frozenset({"mqtt", "sparkplug", "opcua", "http", "modbus"})
+#: The northbounds of ``all``, and the trip recorder (on by default: issue 45); every
+#: other configuration runs with ``[recorder] enabled = false`` (the bare poll is the poll).
+EVERY: Final = frozenset({"mqtt", "sparkplug", "opcua", "http", "modbus", "recorder"})
 LINES: Final = 64
 DRIVES_PER_LINE: Final = 32
 QUICK_LINES: Final = 2
@@ -208,7 +210,11 @@ def _toml(
     """The configuration of *which*: lines ``l<first_line>`` on, *lines* of them, polled
     every *interval_s*; the workbench's trends *trend_s* long (None: its default)."""
     parts = EVERY if which in WITH_CLIENTS else set(which.split("+")) - {"bare"}
+    if which == "all-without-recorder":
+        parts = EVERY - {"recorder"}
     text = f'[gateway]\nid = "{gateway_id}"\n'
+    if "recorder" not in parts:
+        text += "[recorder]\nenabled = false\n"
     if "mqtt" in parts:
         text += f'[mqtt]\nurl = "mqtt://127.0.0.1:{broker}"\n'
     if "sparkplug" in parts:
@@ -292,7 +298,8 @@ async def _child(args: argparse.Namespace) -> dict[str, Any]:
             await _start_drives(gateway)  # the OPC UA benchmark's ramp: 50 Hz over 300 s
             # Started now that every server listens; read beside the warm-up.
             if args.which in WITH_CLIENTS:
-                clients = await _Clients.start(gateway, args.broker, summary=args.which == "all")
+                summary = args.which != "all-per-unit"
+                clients = await _Clients.start(gateway, args.broker, summary=summary)
             await asyncio.sleep(args.warm_up)
             watcher.cancel()  # what was not visible by now is not (the report says so)
             if clients is not None:
@@ -444,7 +451,7 @@ def main(argv: Sequence[str] | None = None) -> None:
     text = _toml(args.which, args.lines, args.per_line, args.broker, Path(args.directory))
 
     async def clients(gateway: Any) -> _Clients:  # all's, as the timed child starts them
-        return await _Clients.start(gateway, args.broker, summary=args.which == "all")
+        return await _Clients.start(gateway, args.broker, summary=args.which != "all-per-unit")
 
     start = clients if args.which in WITH_CLIENTS else None
     body = asyncio.run(heap_child(args.which, text, args.warm_up, start, args.settle))
@@ -728,6 +735,20 @@ def report(
             as_multiple=True,
         )
     ]
+    if "all-without-recorder" in children:
+        # Issue 45: what the trip recorder adds with every northbound on (their trends and
+        # line logs are the ones it reads), same run.
+        results.append(
+            Result(
+                "plant: every northbound, the trip recorder's share of the CPU per drive sample",
+                children["all"].best_cpu_s * us,
+                children["all-without-recorder"].best_cpu_s * us,
+                "µs",
+                higher_is_better=False,
+                against="without it",
+                as_multiple=True,
+            )
+        )
     if "all-per-unit" in children:
         results.append(
             Result(

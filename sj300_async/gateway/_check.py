@@ -37,8 +37,9 @@ from ..bus import parse_bus_url
 from ._errors import GatewayStartError
 from ._model import Endpoint, GatewayConfig, LineConfig
 from ._northbound import get_northbound
+from .recorder._settings import RecorderConfig
 
-__all__ = ["ConfigCheck", "check_config", "probe_endpoint"]
+__all__ = ["ConfigCheck", "check_config", "check_recorder", "probe_endpoint"]
 
 
 @dataclass(frozen=True, slots=True)
@@ -85,7 +86,35 @@ def check_config(config: GatewayConfig, *, ports: bool = True) -> ConfigCheck:
     if config.audit_log is not None:
         _check_writable(config.audit_log)
         summary.append(f"audit log: {config.audit_log}")
+    summary.append(check_recorder(config.recorder))
     return ConfigCheck(tuple(summary), tuple(warnings))
+
+
+def check_recorder(recorder: RecorderConfig) -> str:
+    """The recorder's summary line, its directory checked (it is made at the first record):
+    what a start checks too.
+
+    Raises:
+        OSError: the directory is a file, or no directory can be made there.
+    """
+    if not recorder.enabled:
+        return "recorder: off"
+    where = "in memory" if recorder.directory is None else f"in {recorder.directory}"
+    if recorder.directory is not None:
+        directory = recorder.directory
+        if directory.exists():
+            if not directory.is_dir():
+                raise NotADirectoryError(errno.ENOTDIR, os.strerror(errno.ENOTDIR), str(directory))
+            _check_writable(directory / ".probe")
+        else:
+            nearest = next(p for p in directory.parents if p.exists())
+            if not nearest.is_dir():
+                raise NotADirectoryError(errno.ENOTDIR, os.strerror(errno.ENOTDIR), str(nearest))
+            _check_writable(nearest / ".probe")
+    return (
+        f"recorder: trip records {where}, {recorder.before_s:g} s before and "
+        f"{recorder.after_s:g} s after each, at most {recorder.max_records}"
+    )
 
 
 def probe_endpoint(endpoint: Endpoint) -> None:

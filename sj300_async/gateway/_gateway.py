@@ -48,6 +48,7 @@ from . import _logflood as logflood
 from ._audit import AuditLog
 from ._batch import SnapshotBatch
 from ._beside import read_beside_the_poll
+from ._check import check_recorder
 from ._control import Controller
 from ._drive import GatewayDrive, Lease
 from ._errors import GatewayStartError
@@ -290,6 +291,7 @@ class Gateway:
                 self._stack.callback(self._capture.close)
             self._stack.push_async_callback(self._close_lines)
             if self.recorder is not None:
+                check_recorder(self.config.recorder)  # a file where its directory goes
                 await self.recorder.start()
             buses = await self._open_buses(self.config.lines)
             for config, (bus, stack) in zip(self.config.lines, buses, strict=True):

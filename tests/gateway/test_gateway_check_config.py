@@ -138,6 +138,15 @@ def test_an_audit_log_that_cannot_be_written(
     assert line == "cannot serve: No such file or directory: missing/audit.jsonl"
 
 
+def test_a_file_where_the_trip_records_would_go(
+    here: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    (here / "trips").write_text("not a directory")
+    (here / "gateway.toml").write_text('[http]\nlisten = "127.0.0.1:0"\n' + _LINE)
+    line = _same_as_a_start(capsys, "gateway.toml")
+    assert line == "cannot serve: Not a directory: trips"
+
+
 def test_a_good_file_is_summarised_and_nothing_is_left_behind(
     here: Path, capsys: pytest.CaptureFixture[str]
 ) -> None:
@@ -183,6 +192,7 @@ def test_a_good_file_is_summarised_and_nothing_is_left_behind(
         "  opcua: listens on 127.0.0.1:0; certificate opcua/cert.der: none yet, "
         "generated at the first start",
         "  audit log: audit.jsonl",
+        "  recorder: trip records in trips, 60 s before and 10 s after each, at most 1000",
     ]
     assert err == (
         f"warning: line l1: {here}/ttyUSB-not-here does not exist now: the gateway would "

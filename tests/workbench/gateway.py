@@ -120,14 +120,17 @@ class Bench:
         assert self.sim(line, node).reset(now=asyncio.get_running_loop().time())
 
 
-def _config(urls: Mapping[str, str], nodes: Mapping[str, range]) -> str:
-    text = textwrap.dedent(
-        f"""
+def _config(urls: Mapping[str, str], nodes: Mapping[str, range], extra: str = "") -> str:
+    text = (
+        textwrap.dedent(
+            f"""
         [gateway]
         id = "{GATEWAY_ID}"
         [http]
         listen = "127.0.0.1:0"
         """
+        )
+        + extra
     )
     for index, (name, url) in enumerate(urls.items()):
         span = nodes[name]
@@ -145,8 +148,9 @@ def _config(urls: Mapping[str, str], nodes: Mapping[str, range]) -> str:
 
 
 @contextlib.asynccontextmanager
-async def workbench_gateway(lines: Mapping[str, range]) -> AsyncIterator[Bench]:
-    """A gateway serving the workbench on simulated *lines* (name: nodes), stopped on exit."""
+async def workbench_gateway(lines: Mapping[str, range], extra: str = "") -> AsyncIterator[Bench]:
+    """A gateway serving the workbench on simulated *lines* (name: nodes), stopped on exit;
+    *extra*: sections added to its configuration (``[recorder]``)."""
     async with contextlib.AsyncExitStack() as stack:
         sims: dict[str, SimulatedBus] = {}
         urls: dict[str, str] = {}
@@ -157,7 +161,7 @@ async def workbench_gateway(lines: Mapping[str, range]) -> AsyncIterator[Bench]:
             urls[name] = f"tcp://127.0.0.1:{server.port}"
         session = await stack.enter_async_context(aiohttp.ClientSession())
         gateway = await stack.enter_async_context(
-            Gateway(parse_config(_config(urls, lines), "workbench.toml"))
+            Gateway(parse_config(_config(urls, lines, extra), "workbench.toml"))
         )
         bench = Bench(gateway, sims, session)
         northbound = gateway.northbounds["http"]

@@ -5,7 +5,8 @@
 // licence), for the trend. Every value from the gateway is put into the page as
 // text (textContent), never as markup.
 //
-// Routes (the part after #): "/" the overview, "/drive/LINE/NODE" a drive.
+// Routes (the part after #): "/" the overview, "/drive/LINE/NODE" a drive, the
+// pages other scripts register (window.sj300Pages: trips.js's "/trips" and "/trip/ID").
 // The event stream sends everything once when it opens, then each change; the
 // page keeps the latest of each line and drive and redraws what is on screen
 // once per animation frame.
@@ -265,6 +266,7 @@
     const field = (name) => $(main, `[data-field="${name}"]`);
     field("title").textContent = `${line} · node ${node}`;
     field("csv").href = `${base}/trend.csv`;
+    field("trip-records").href = `#/trips/${encodeURIComponent(line)}/${node}`;
     const chartBox = $(main, '[data-testid="trend"]');
     const data = [[], [], [], []];
     let capacity = 2000;
@@ -836,7 +838,10 @@
     if (view) view.close();
     const drive = /^#\/drive\/([^/]+)\/(\d+)$/.exec(location.hash);
     const line = /^#\/line\/([^/]+)$/.exec(location.hash);
-    if (drive) view = drivePage(main, decodeURIComponent(drive[1]), Number(drive[2]));
+    const util = { $, cell, text, API, SERIES };
+    const other = (window.sj300Pages || []).map((p) => [p, p.pattern.exec(location.hash)]).find(([, m]) => m);
+    if (other) view = other[0].page(main, util, other[1]);
+    else if (drive) view = drivePage(main, decodeURIComponent(drive[1]), Number(drive[2]));
     else if (line) view = linePage(main, decodeURIComponent(line[1]));
     else if (location.hash === "#/login") view = loginPage(main);
     else if (location.hash === "#/audit") view = auditPage(main);
