@@ -197,6 +197,10 @@ class Northbound(Protocol):
     # (after every ``publish`` of it): a northbound that sends samples on sends what it
     # gathered now, with no timer of its own (the gateway's batch did the gathering).
     # Must not block. Read through getattr, as ``problems``.
+    #
+    # Optional: ``recorded(summary, drive) -> None``, a trip record was kept (.recorder:
+    # a ``RecordSummary``, and the drive as served now): announce it on the door's wire
+    # (MQTT's …/trip, Sparkplug's Trip Record metrics, an OPC UA event). Must not block.
 
 
 @dataclass(frozen=True, slots=True)

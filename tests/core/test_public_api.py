@@ -203,7 +203,7 @@ GATEWAY_HTTP_NAMES = (
 #: The trip black box (issue 45): its settings, its store and its records.
 GATEWAY_RECORDER_NAMES = (
     "FORMAT", "RECORDER_KEYS", "RECORD_ID", "RecordSummary", "RecorderConfig", "TripRecorder",
-    "TripStore", "record_id", "samples_csv",
+    "TripStore", "record_id", "samples_csv", "trip_fields",
 )  # fmt: skip
 GATEWAY_OPCUA_NAMES = (
     "DEFAULT_SECURITY", "NORTHBOUND", "OPCUA_KEYS", "SECURITY_MODES", "OpcuaConfig",

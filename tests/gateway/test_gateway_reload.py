@@ -215,31 +215,25 @@ async def test_a_bad_file_changes_nothing(tmp_path: Path, caplog: pytest.LogCapt
         assert (gateway.reloads["applied"], gateway.last_reload_ok) == (1, True)
 
 
-async def test_a_new_section_whose_port_is_taken_is_refused_whole(tmp_path: Path) -> None:
+@pytest.mark.parametrize("given", ["file", "config"])
+async def test_a_new_section_whose_port_is_taken_is_refused_whole(
+    tmp_path: Path, given: str
+) -> None:
+    """Through the file (SIGHUP's path) or a configuration (``Gateway.reload``, the
+    library's): the new section's port is probed first, and nothing changes."""
     path = tmp_path / "gw.toml"
     async with gateway_of(path, _file(_line("a"))) as gateway:
         with socket_listening() as port:
             head = f'[modbus]\nlisten = "127.0.0.1:{port}"\n'
             path.write_text(_file(_line("a"), _line("b", extra="unit_offset = 10"), head=head))
-            outcome = await gateway.reload_file(path)
+            if given == "file":
+                outcome = await gateway.reload_file(path)
+            else:
+                outcome = await gateway.reload(load_config(path))
         assert outcome.refusal == (
             f"modbus: cannot listen on 127.0.0.1:{port}: Address already in use"
         )
         assert [line.config.name for line in gateway.lines] == ["a"]  # nothing changed
-
-
-async def test_a_config_given_to_reload_is_checked_as_a_file_is(tmp_path: Path) -> None:
-    """Gateway.reload(config), the library's path, probes the new section's port too."""
-    path = tmp_path / "gw.toml"
-    async with gateway_of(path, _file(_line("a"))) as gateway:
-        with socket_listening() as port:
-            head = f'[modbus]\nlisten = "127.0.0.1:{port}"\n'
-            path.write_text(_file(_line("a"), _line("b", extra="unit_offset = 10"), head=head))
-            outcome = await gateway.reload(load_config(path))
-        assert outcome.refusal == (
-            f"modbus: cannot listen on 127.0.0.1:{port}: Address already in use"
-        )
-        assert [line.config.name for line in gateway.lines] == ["a"]
         assert gateway.reloads["refused"] == 1
 
 

@@ -25,6 +25,7 @@ from typing import Any
 
 from ...profiles import NEVER, DriveSnapshot, Trip, TripLog
 from .. import ServedValues
+from ..recorder import trip_fields
 
 __all__ = ["drive_json", "monitor_time", "trip_json", "trip_log_json", "unix_time"]
 
@@ -44,19 +45,11 @@ def monitor_time(snapshot: DriveSnapshot) -> float | None:
 
 
 def trip_json(trip: Trip) -> Json:
-    """One trip with its meaning and the drive's values at the trip."""
-    return {
-        "code": trip.code,
-        "number": trip.number,
-        "name": trip.name,
-        "meaning": trip.meaning,
-        "output_frequency_hz": trip.output_frequency_hz,
-        "output_current_a": trip.output_current_a,
-        "output_voltage_v": trip.output_voltage_v,
-        "run_time_h": trip.run_time_h,
-        "power_on_time_h": trip.power_on_time_h,
-        "details": [{"name": name, "value": value} for name, value in trip.details],
-    }
+    """One trip with its meaning and the drive's values at the trip (as a trip record
+    keeps it)."""
+    fields = trip_fields(trip)
+    assert fields is not None
+    return fields
 
 
 def trip_log_json(log: TripLog | None, time: float | None) -> Json:

@@ -9,7 +9,7 @@ docs/guide/trips.md is the user's guide.
 
 from __future__ import annotations
 
-from ._record import record_id, samples_csv
+from ._record import record_id, samples_csv, trip_fields
 from ._recorder import TripRecorder
 from ._settings import RECORDER_KEYS, RecorderConfig
 from ._store import FORMAT, RECORD_ID, RecordSummary, TripStore
@@ -24,4 +24,5 @@ __all__ = [
     "TripStore",
     "record_id",
     "samples_csv",
+    "trip_fields",
 ]

@@ -44,7 +44,8 @@ def utc_text(unix: float) -> str:
 
 
 def trip_fields(trip: Trip | None) -> dict[str, Any] | None:
-    """The trip as a record keeps it: its code and meaning, the values the drive kept."""
+    """The trip as a record keeps it, and the HTTP API serves one: its code and meaning,
+    the values the drive kept, the protocol's own details."""
     if trip is None:
         return None
     return {
@@ -57,7 +58,7 @@ def trip_fields(trip: Trip | None) -> dict[str, Any] | None:
         "output_voltage_v": trip.output_voltage_v,
         "run_time_h": trip.run_time_h,
         "power_on_time_h": trip.power_on_time_h,
-        "details": dict(trip.details),
+        "details": [{"name": name, "value": value} for name, value in trip.details],
     }
 
 
