@@ -303,3 +303,42 @@ async def test_a_gateway_without_the_recorder_says_so(tmp_path: Path) -> None:
         port = gateway.northbounds["http"].port  # type: ignore[attr-defined]
         async with client.get(f"http://127.0.0.1:{port}/api/v1/trips") as answer:
             assert await answer.json() == {"recording": False, "trips": []}
+
+
+async def test_a_line_replaced_by_a_reload_keeps_its_pending_record_and_records_on(
+    tmp_path: Path,
+) -> None:
+    """A reload that replaces the line (its URL changed) while a record waits for its
+    after_s: the record is kept at once, with the old line's frames; the new line's next
+    trip has its own frames (the new line's traffic is recorded, not let go)."""
+    path = tmp_path / "gw.toml"
+    longer = _text("sj300").replace(f"after_s = {AFTER_S}", "after_s = 30")
+    path.write_text(longer)
+    async with gateway_of(path) as gateway:
+        await _run(gateway, 1)
+        await _trip(gateway, 1, 7)
+        recorder = gateway.recorder
+        assert recorder is not None
+        await wait_for(lambda: recorder.pending == 1, "the record pending")
+        path.write_text(longer.replace("sim://?nodes=1-2", "sim://?nodes=1-3"))
+        outcome = await gateway.reload_file(path)
+        assert outcome.plan is not None
+        assert [c.name for c in outcome.plan.replaced] == ["hall"]
+        first = await _record(gateway)  # taken at the replacement, not 30 s later
+        await wait_for(
+            lambda: all(d.readings.last_ok is not None for d in gateway.drives), "new polls"
+        )
+        frames = await recorder.store.frames(first.id)
+        assert frames is not None
+        assert len(frames) > 1000  # the old line's polls before the trip
+        await _run(gateway, 2)
+        await _trip(gateway, 2, 7)
+        await wait_for(lambda: recorder.pending == 1, "the second record pending")
+        await gateway.reload_file(path)  # nothing changes: the pending record stays pending
+        assert recorder.pending == 1
+    assert recorder.store.counts["written"] == 2  # the stop took the second one
+    second = recorder.store.summaries()[0]
+    assert second.node == 2
+    frames = await recorder.store.frames(second.id)
+    assert frames is not None
+    assert len(frames) > 1000  # the new line's polls: its traffic was kept

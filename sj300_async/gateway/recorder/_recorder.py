@@ -105,7 +105,8 @@ class TripRecorder:
         self._gateway_id = gateway_id
         self._recorded = recorded
         self._watch: dict[tuple[str, int], _Watch] = {}
-        self._traffic: dict[str, LineTraffic] = {}
+        #: Each line's traffic, by name, with the line it is of.
+        self._traffic: dict[str, tuple[GatewayLine, LineTraffic]] = {}
         self._pending: dict[tuple[str, int], _Pending] = {}
         self._writing: set[asyncio.Task[None]] = set()
         #: Trips seen, by what saw them; records dropped (too many pending).
@@ -121,19 +122,26 @@ class TripRecorder:
 
     def add_line(self, line: GatewayLine) -> None:
         """Watch *line* from now: its traffic kept for the records' frames."""
+        name = line.config.name
+        if name in self._traffic:  # a reload replaces the line: the old one's records first
+            self._retire(name)
         keep_s = self.config.before_s + self.config.after_s + 2 * LEAD_S
-        self._traffic[line.config.name] = LineTraffic(line.config.name, line.bus, keep_s)
+        self._traffic[name] = (line, LineTraffic(name, line.bus, keep_s))
 
     def remove_line(self, line: GatewayLine) -> None:
-        """*line* goes (a reload): its pending records are taken now, its traffic let go."""
-        name = line.config.name
+        """*line* goes (a reload): its pending records are taken now, its traffic let go
+        (already, when the line that replaces it came first)."""
+        entry = self._traffic.get(line.config.name)
+        if entry is not None and entry[0] is line:
+            self._retire(line.config.name)
+
+    def _retire(self, name: str) -> None:
         for key in [key for key in self._pending if key[0] == name]:
             self._take(self._pending[key])
-        for node in line.drives:
-            self._watch.pop((name, node), None)
-        traffic = self._traffic.pop(name, None)
-        if traffic is not None:
-            traffic.close()
+        for key in [key for key in self._watch if key[0] == name]:
+            del self._watch[key]
+        _, traffic = self._traffic.pop(name)
+        traffic.close()
 
     def observe(self, drive: GatewayDrive, snapshot: DriveSnapshot) -> None:
         """*drive*'s new *snapshot* (a sample's, a write's, a history read's)."""
@@ -222,7 +230,8 @@ class TripRecorder:
             samples=served_columns(columns),
             writes=writes,
         )
-        traffic = self._traffic.get(line.name)
+        entry = self._traffic.get(line.name)
+        traffic = None if entry is None else entry[1]
         start, stop = pending.at - config.before_s, pending.at + config.after_s
         chunks = [] if traffic is None else traffic.span(start - LEAD_S, stop)
         task = asyncio.create_task(
@@ -271,7 +280,7 @@ class TripRecorder:
                            len(left), CLOSE_S)  # fmt: skip
                 for task in left:
                     task.cancel()
-        for traffic in self._traffic.values():
+        for _, traffic in self._traffic.values():
             traffic.close()
         self._traffic.clear()
 
