@@ -138,6 +138,8 @@ _MIN_INTERVAL_S: Final = 0.05
 _WILDCARD_HOSTS: Final = frozenset({"0.0.0.0", "::"})
 #: A topic level: what a gateway id and a line name may hold.
 _NAME: Final = re.compile(r"[A-Za-z0-9_.-]+")
+#: The longest line name (a trip record's id holds it: recorder/_store.py RECORD_ID).
+MAX_LINE_NAME: Final = 64
 #: The defaults of a line, read from the model rather than repeated here.
 _DEFAULT_LINE: Final = LineConfig(name="line1", url="sim://", protocol=DEFAULT_PROTOCOL, nodes=(1,))
 
@@ -421,6 +423,9 @@ def _line_name(table: ConfigTable, index: int, claims: _Claims) -> str:
     name = or_default(table.string("name"), f"line{index + 1}")
     if not valid_name(name):  # a topic level on MQTT (see the module docstring)
         raise table.error("name", f"a line name is letters, digits, '_', '.' and '-', got {name!r}")
+    if len(name) > MAX_LINE_NAME:  # in every trip record's id and file name, and in HA's ids
+        raise table.error("name", f"a line name is at most {MAX_LINE_NAME} characters, "
+                                  f"got {len(name)}")  # fmt: skip
     if name in claims.names:
         raise table.error("name", f"duplicate line name {name!r} (also {claims.names[name]})")
     # Home Assistant's entity ids are lower case with '_' for anything else, and its

@@ -89,7 +89,8 @@ class TripRoutes:
                 raise _missing(record_id)
             try:
                 text = await asyncio.to_thread(_csv_of, data)
-            except ValueError as exc:  # a file changed since the start: not a record now
+            except (ValueError, OverflowError, OSError) as exc:  # a file changed since the
+                # start (another JSON, a time no date holds): not a record now
                 raise json_error(404, f"trip record {record_id!r} does not read: {exc}") from None
         return web.Response(
             text=text,
@@ -108,7 +109,10 @@ class TripRoutes:
 def _csv_of(data: bytes) -> str:
     import orjson
 
-    return samples_csv(orjson.loads(data))
+    record = orjson.loads(data)
+    if not isinstance(record, dict):
+        raise ValueError("not a record")
+    return samples_csv(record)
 
 
 def _missing(record_id: str) -> web.HTTPException:
@@ -119,6 +123,9 @@ def _number(request: web.Request, key: str, low: int, high: int, default: int | 
     text = request.query.get(key)
     if text is None:
         return default
-    if not (text.isascii() and text.isdigit() and low <= int(text[:6]) <= high):
+    # Digits only, leading zeros dropped, no longer than the bound: what is checked is
+    # what is used (int() of 5,000 digits raises, and "0001000" is 1000).
+    digits = text.lstrip("0") or "0" if text.isascii() and text.isdigit() else ""
+    if not digits or len(digits) > len(str(high)) or not low <= int(digits) <= high:
         raise json_error(400, f"{key}: expected {low}..{high}, got {text[:32]!r}")
-    return int(text)
+    return int(digits)

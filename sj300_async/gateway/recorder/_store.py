@@ -220,24 +220,24 @@ class TripStore:
             return None
 
     async def _prune(self) -> None:
-        going: list[str] = []
-        ids = list(self._summaries)  # oldest first
-        total = self.size
-        while len(ids) - len(going) > 1 and (
-            len(ids) - len(going) > self.max_records or total > self.max_bytes
-        ):
-            oldest = ids[len(going)]
-            going.append(oldest)
-            total -= self._summaries[oldest].size
-        if not going:
-            return
-        async with self._lock:
+        async with self._lock:  # chosen and counted under the lock: each record once
+            going: list[str] = []
+            ids = list(self._summaries)  # oldest first
+            total = self.size
+            while len(ids) - len(going) > 1 and (
+                len(ids) - len(going) > self.max_records or total > self.max_bytes
+            ):
+                oldest = ids[len(going)]
+                going.append(oldest)
+                total -= self._summaries[oldest].size
+            if not going:
+                return
             for record_id in going:
-                self._summaries.pop(record_id, None)
+                del self._summaries[record_id]
                 self._memory.pop(record_id, None)
             if self.directory is not None:
                 await asyncio.to_thread(_remove, self.directory, going)
-        self.counts["pruned"] += len(going)
+            self.counts["pruned"] += len(going)
         _log.debug("trip records: pruned %d, the oldest (%s)", len(going), going[0])
 
 
@@ -301,8 +301,12 @@ def _write(directory: Path, record_id: str, data: bytes, frames: bytes) -> None:
 
 def _atomic(path: Path, data: bytes) -> None:
     temporary = path.with_name(f".{path.name}.tmp")
+    with contextlib.suppress(FileNotFoundError):  # one left by a write that never ended
+        temporary.unlink()
     try:
-        with temporary.open("wb") as file:
+        # Made new, never through a link planted there (the gateway may run as root).
+        fd = os.open(temporary, os.O_WRONLY | os.O_CREAT | os.O_EXCL | os.O_NOFOLLOW, 0o644)
+        with os.fdopen(fd, "wb") as file:
             file.write(data)
             file.flush()
             os.fsync(file.fileno())
