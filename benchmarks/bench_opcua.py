@@ -335,6 +335,7 @@ class _Counts:
             str(node.Identifier)
             for node in aspace.keys()  # noqa: SIM118 - it has no __iter__
             if node.NamespaceIndex == opcua.namespace
+            and isinstance(node.Identifier, str)  # not the trip event type's properties
             and str(node.Identifier) not in known
             and aspace[node].attributes[ua.AttributeIds.NodeClass].value.Value.Value
             == ua.NodeClass.Variable

@@ -6,7 +6,8 @@ A *unit* is a package of ``sj300_async``: the root (its own modules,
 northbound package under it (``gateway.modbus``, ``gateway.mqtt``,
 ``gateway.http``), ``cli``. The simulator's protocol packages
 (``simulator.sj300``, ``simulator.fr700``) are the simulator's own modules:
-they belong to its unit. A module may import its own unit's private
+they belong to its unit; the gateway's ``recorder`` package is the gateway
+core's own in the same way. A module may import its own unit's private
 modules (a path component starting with ``_``: ``sj300_async.bus._arbiter``);
 any other unit only through its public face (``sj300_async.bus``, whose
 ``__init__`` exports what other packages use). Code outside the package
@@ -29,7 +30,10 @@ from typing import Final
 ROOT: Final = Path(__file__).resolve().parents[1]
 PACKAGE: Final = "sj300_async"
 #: Packages that are part of their parent's unit.
-MERGED: Final = frozenset({"sj300_async.simulator.sj300", "sj300_async.simulator.fr700"})
+#: The gateway's trip recorder is the core's own (its records, its store), kept together.
+MERGED: Final = frozenset(
+    {"sj300_async.simulator.sj300", "sj300_async.simulator.fr700", "sj300_async.gateway.recorder"}
+)
 
 
 @dataclass(frozen=True, slots=True)

@@ -87,6 +87,10 @@ from ._passwords import (
 from ._sdnotify import ServiceManager
 from ._served import DIRECTION_WORDS, Quality, ServedDrive, ServedValues
 from ._toml import COMMAND_LINE, ConfigContext, ConfigTable, GatewayConfigError, unknown_choice
+from ._trend import BLOCK as TREND_BLOCK
+from ._trend import SAMPLE_BYTES as TREND_SAMPLE_BYTES
+from ._trend import VALUES as TREND_VALUES
+from ._trend import Trend, trend_capacity
 from ._writes import (
     DROPPED_BY_STOP,
     Heartbeat,
@@ -109,6 +113,9 @@ __all__ = [
     "LAPSE_ACTIONS",
     "LIMIT_KEYS",
     "POLL_READS",
+    "TREND_BLOCK",
+    "TREND_SAMPLE_BYTES",
+    "TREND_VALUES",
     "UNIT_RANGE",
     "AuditLog",
     "ConfigCheck",
@@ -153,6 +160,7 @@ __all__ = [
     "ServiceManager",
     "SetFrequency",
     "Slot",
+    "Trend",
     "UnitScope",
     "User",
     "WriteGrant",
@@ -182,6 +190,7 @@ __all__ = [
     "parse_password_hash",
     "parse_users",
     "register_northbound",
+    "trend_capacity",
     "unknown_choice",
     "unregister_northbound",
     "valid_name",

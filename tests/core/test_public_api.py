@@ -128,6 +128,8 @@ GATEWAY_NAMES = (
     "KeyedBudget", "PasswordChecks", "Slot",
     # a drive as served, decided once for every northbound (issue 42)
     "DIRECTION_WORDS", "Quality", "ServedDrive", "ServedValues",
+    # each drive's trend, the core's since the trip recorder reads it too (issue 45)
+    "TREND_BLOCK", "TREND_SAMPLE_BYTES", "TREND_VALUES", "Trend", "trend_capacity",
     # what a northbound sees of a line: never its bus (issue 42)
     "LineTraffic", "ServedLine",
     # the doors' shared write checks, the core's since Sparkplug rides no other door (issue 42)

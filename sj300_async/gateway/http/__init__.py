@@ -37,12 +37,15 @@ from .. import (
     ListenerLimits,
     Northbound,
     SectionContext,
+    Trend,
     User,
     hash_password,
     named_entries,
     parse_users,
+    trend_capacity,
 )
-from .._trend import BLOCK, SAMPLE_BYTES, Trend, trend_capacity
+from .. import TREND_BLOCK as BLOCK
+from .. import TREND_SAMPLE_BYTES as SAMPLE_BYTES
 from ._auth import ApiToken, hash_token, new_token
 
 #: Seconds a request's head and body may take, from its first byte (``_server``): a

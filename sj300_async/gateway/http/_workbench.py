@@ -33,8 +33,8 @@ from collections.abc import Callable, Sequence
 from typing import Any, Final
 
 from ...version import __version__
-from .. import GatewayDrive, GatewayView, ServedDrive, ServedLine
-from .._trend import VALUES, trend_capacity
+from .. import TREND_VALUES as VALUES
+from .. import GatewayDrive, GatewayView, ServedDrive, ServedLine, trend_capacity
 from ._events import EventHub, sse_frame
 from ._json import Json, drive_json
 from ._linetrace import LineTrace
