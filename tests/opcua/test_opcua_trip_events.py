@@ -53,3 +53,82 @@ async def test_a_trip_record_is_an_event_of_the_server_object(tmp_path: Path) ->
     assert summary.meaning
     assert event.Message == ua.LocalizedText(f"hall/3 tripped: {summary.meaning} (E07)")
     assert abs(event.Time.timestamp() - summary.time) < 0.002
+
+
+def _where(elements: int) -> ua.ContentFilter:
+    """A where clause of *elements* elements: Or chained down to one comparison."""
+    clause = ua.ContentFilter()
+    for index in range(elements - 1):
+        element = ua.ContentFilterElement(FilterOperator=ua.FilterOperator.Or)
+        element.FilterOperands = [ua.ElementOperand(Index=index + 1)] * 2
+        clause.Elements.append(element)
+    severity = ua.SimpleAttributeOperand(
+        TypeDefinitionId=ua.NodeId(ua.ObjectIds.BaseEventType),
+        BrowsePath=[ua.QualifiedName("Severity", 0)],
+        AttributeId=ua.AttributeIds.Value,
+    )
+    last = ua.ContentFilterElement(FilterOperator=ua.FilterOperator.Equals)
+    last.FilterOperands = [
+        severity,
+        ua.LiteralOperand(Value=ua.Variant(800, ua.VariantType.UInt16)),
+    ]
+    clause.Elements.append(last)
+    return clause
+
+
+def _names(results: list[Any]) -> list[str]:
+    """asyncua's answers to CreateMonitoredItems: an item's handle (made) or its status."""
+    return [r.name if isinstance(r, ua.StatusCode) else "Good" for r in results]
+
+
+def _event_item(client: Any, handle: int, event_filter: ua.EventFilter) -> Any:
+    parameters = ua.MonitoringParameters(ClientHandle=handle, QueueSize=1, Filter=event_filter)
+    return ua.MonitoredItemCreateRequest(
+        ItemToMonitor=ua.ReadValueId(
+            NodeId=client.nodes.server.nodeid, AttributeId=ua.AttributeIds.EventNotifier
+        ),
+        MonitoringMode=ua.MonitoringMode.Reporting,
+        RequestedParameters=parameters,
+    )
+
+
+async def test_an_anonymous_session_s_event_items_are_bounded(tmp_path: Path) -> None:
+    """asyncua evaluates each event item's where clause at each event, on the loop: a
+    filter past MAX_WHERE_ELEMENTS is refused, and a session holds at most
+    EVENT_ITEMS_PER_SESSION event items; trips go on being announced, the loop at pace."""
+    from asyncua.common.events import get_filter_from_event_type
+
+    from sj300_async.gateway.opcua._subscriptions import (
+        EVENT_ITEMS_PER_SESSION,
+        MAX_WHERE_ELEMENTS,
+    )
+
+    text = opcua_toml(tmp_path) + RECORDER
+    async with opcua_gateway(text) as (gateway, server), connected(server.url) as client:
+        await polled(gateway)
+        events = Events()
+        subscription = await client.create_subscription(100, events)
+        base = await get_filter_from_event_type([client.nodes.base_event_type])
+        big = ua.EventFilter(SelectClauses=base.SelectClauses, WhereClause=_where(900))
+        fits = ua.EventFilter(
+            SelectClauses=base.SelectClauses, WhereClause=_where(MAX_WHERE_ELEMENTS)
+        )
+        refused = await subscription.create_monitored_items(
+            [_event_item(client, 1, big), _event_item(client, 2, fits)]
+        )
+        assert _names(refused) == ["BadEventFilterInvalid", "Good"]
+        many = await subscription.create_monitored_items(
+            [_event_item(client, 10 + i, fits) for i in range(2 * EVENT_ITEMS_PER_SESSION)]
+        )
+        statuses = _names(many)
+        assert statuses.count("Good") == EVENT_ITEMS_PER_SESSION - 1  # one made above
+        assert set(statuses[EVENT_ITEMS_PER_SESSION - 1 :]) == {"BadTooManyMonitoredItems"}
+        mark = gateway.loop_monitor.mark()
+        simulator = gateway.lines[0].bus.simulator
+        for node in (1, 2, 3, 4):
+            assert simulator.drives[node].trip(7, now=asyncio.get_running_loop().time())
+        store = gateway.trip_records
+        assert store is not None
+        await wait_for(lambda: len(store) == 4, "four records", timeout=10)
+        await wait_for(lambda: events.received, "their events", timeout=10)
+        assert gateway.loop_monitor.since(mark).max_s < 0.1

@@ -23,6 +23,16 @@ turn of the loop) and the publishing at 10 ms. So, on the one server:
   answered ``BadTooManyMonitoredItems``, the others created.
 - **A request's items a slice at a time** (:data:`ITEMS_PER_TURN`): the
   loop serves the poll and the leases between slices.
+- **Event filters of a bounded size** (:data:`MAX_WHERE_ELEMENTS`,
+  :data:`MAX_SELECT_CLAUSES`): asyncua evaluates every event item's where
+  clause for each event, on the loop, recursively. An anonymous session's
+  60 items of 900 nested elements held the loop 0.37 s for four trips'
+  events (issue 45's probe; 2,000 elements raise RecursionError in asyncua
+  at each event). A larger filter is answered ``BadEventFilterInvalid``
+  (created or modified), the item not made; an alarm list's filter is a
+  handful of elements. And **event items per session**
+  (:data:`EVENT_ITEMS_PER_SESSION`): 1,000 of 16 elements each held the
+  loop 0.24 s for four trips' events; an alarm list uses one or two.
 
 The rest are constants, not ``[opcua]`` keys: no client needs them
 moved. This is private
@@ -44,7 +54,10 @@ from asyncua import Server, ua
 from asyncua.common.utils import ServiceError
 
 __all__ = [
+    "EVENT_ITEMS_PER_SESSION",
     "ITEMS_PER_TURN",
+    "MAX_SELECT_CLAUSES",
+    "MAX_WHERE_ELEMENTS",
     "MIN_PUBLISHING_INTERVAL_MS",
     "SUBSCRIPTIONS_PER_SESSION",
     "bound_subscriptions",
@@ -54,6 +67,11 @@ __all__ = [
 MIN_PUBLISHING_INTERVAL_MS: Final = 100.0
 #: Subscriptions one session may hold (a client uses one or two).
 SUBSCRIPTIONS_PER_SESSION: Final = 10
+#: An event filter's where-clause elements and select clauses, at most.
+MAX_WHERE_ELEMENTS: Final = 16
+MAX_SELECT_CLAUSES: Final = 64
+#: Event monitored items one session may hold (its subscriptions together).
+EVENT_ITEMS_PER_SESSION: Final = 10
 # The monitored items' caps are [opcua] keys (_config.py). 16 anonymous sessions of 500
 # items on one variable from one address (8,000: a change of it is 8,000 notifications in
 # one turn of the loop) held the loop p99 48-59 ms, max 52-367 ms on the loaded 2-core
@@ -104,6 +122,35 @@ class _Bounds:
         )
 
 
+def _oversized(filter_: object) -> bool:
+    """An event filter past :data:`MAX_WHERE_ELEMENTS` or :data:`MAX_SELECT_CLAUSES`."""
+    if not isinstance(filter_, ua.EventFilter):
+        return False
+    where = filter_.WhereClause
+    elements = 0 if where is None else len(where.Elements or ())
+    return elements > MAX_WHERE_ELEMENTS or len(filter_.SelectClauses or ()) > MAX_SELECT_CLAUSES
+
+
+def _is_event(item: ua.MonitoredItemCreateRequest) -> bool:
+    return bool(item.ItemToMonitor.AttributeId == ua.AttributeIds.EventNotifier)
+
+
+def _event_items(service: Any, session_id: Any) -> int:
+    """The event monitored items *session_id*'s subscriptions hold (asyncua's tables)."""
+    return sum(
+        len(mids)
+        for subscription in service.subscriptions.values()
+        if subscription.session_id == session_id
+        for mids in subscription.monitored_item_srv._monitored_events.values()
+    )
+
+
+def _refused_filter() -> ua.MonitoredItemCreateResult:
+    return ua.MonitoredItemCreateResult(
+        StatusCode=ua.StatusCode(ua.StatusCodes.BadEventFilterInvalid)
+    )
+
+
 def bound_subscriptions(server: Server, *, items_per_session: int, items_per_address: int) -> None:
     """Bound the subscriptions of *server*'s sessions (module docstring). Runs after
     :func:`._hooks.guard_sessions`, whose session creation it wraps."""
@@ -137,7 +184,14 @@ def bound_subscriptions(server: Server, *, items_per_session: int, items_per_add
     async def items_created(
         params: ua.CreateMonitoredItemsParameters,
     ) -> list[ua.MonitoredItemCreateResult]:
+        if any(_oversized(item.RequestedParameters.Filter) for item in params.ItemsToCreate):
+            return await _without_oversized(params)
         subscription = service.subscriptions.get(params.SubscriptionId)
+        if subscription is not None and subscription.session_id in bounds.sessions:
+            room = EVENT_ITEMS_PER_SESSION - _event_items(service, subscription.session_id)
+            events = [i for i, item in enumerate(params.ItemsToCreate) if _is_event(item)]
+            if len(events) > room:
+                return await _past_events(params, set(events[max(room, 0) :]))
         session = None if subscription is None else bounds.sessions.get(subscription.session_id)
         if session is None:  # no such subscription (asyncua answers), or the server's own
             result: list[ua.MonitoredItemCreateResult] = await create_items(params)
@@ -176,9 +230,61 @@ def bound_subscriptions(server: Server, *, items_per_session: int, items_per_add
             )
         return results
 
+    async def _without_oversized(
+        params: ua.CreateMonitoredItemsParameters,
+    ) -> list[ua.MonitoredItemCreateResult]:
+        """The items of a bounded filter created (bounded as any), the others refused."""
+        items = params.ItemsToCreate
+        fit = [item for item in items if not _oversized(item.RequestedParameters.Filter)]
+        made = iter(
+            await items_created(
+                ua.CreateMonitoredItemsParameters(
+                    SubscriptionId=params.SubscriptionId,
+                    TimestampsToReturn=params.TimestampsToReturn,
+                    ItemsToCreate=fit,
+                )
+            )
+            if fit
+            else []
+        )
+        return [
+            _refused_filter() if _oversized(item.RequestedParameters.Filter) else next(made)
+            for item in items
+        ]
+
+    async def _past_events(
+        params: ua.CreateMonitoredItemsParameters, refused: set[int]
+    ) -> list[ua.MonitoredItemCreateResult]:
+        """The items but the *refused* event items created, those answered as too many."""
+        items = params.ItemsToCreate
+        kept = [item for i, item in enumerate(items) if i not in refused]
+        made = iter(
+            await items_created(
+                ua.CreateMonitoredItemsParameters(
+                    SubscriptionId=params.SubscriptionId,
+                    TimestampsToReturn=params.TimestampsToReturn,
+                    ItemsToCreate=kept,
+                )
+            )
+            if kept
+            else []
+        )
+        too_many = ua.StatusCode(ua.StatusCodes.BadTooManyMonitoredItems)
+        return [
+            ua.MonitoredItemCreateResult(StatusCode=too_many) if i in refused else next(made)
+            for i in range(len(items))
+        ]
+
     def items_modified(
         params: ua.ModifyMonitoredItemsParameters,
     ) -> list[ua.MonitoredItemModifyResult]:
+        if any(_oversized(item.RequestedParameters.Filter) for item in params.ItemsToModify):
+            return [
+                ua.MonitoredItemModifyResult(
+                    StatusCode=ua.StatusCode(ua.StatusCodes.BadEventFilterInvalid)
+                )
+                for _ in params.ItemsToModify
+            ]  # the whole request refused: nothing changed, nothing half-applied
         results: list[ua.MonitoredItemModifyResult] = modify_items(params)
         for result in results:  # asyncua grants the requested interval as it is
             result.RevisedSamplingInterval = _interval(result.RevisedSamplingInterval)
