@@ -69,6 +69,9 @@ def gateway_toml(broker: Broker, gateway: str, lines: str) -> str:
         stale_after_s = 2
         [mqtt]
         url = "{broker.url}"
+        [recorder]
+        before_s = 2
+        after_s = 0.5
         """
     return textwrap.dedent(head) + textwrap.dedent(lines)
 
@@ -127,10 +130,10 @@ async def retained_configs(broker: Broker) -> dict[str, dict[str, Any]]:
     return {c["default_entity_id"]: c for c in configs}
 
 
-#: gw1's configs: its own, 15 for each SJ300 drive it may run (7 sensors, the events,
-#: the set frequency, the direction, 4 buttons, A004), 6 for the FR-700 (it measures no
-#: torque or power); gw2's: its own, 8 for its drive (read only).
-CONFIGS = 1 + 2 * 15 + 6 + 1 + 8
+#: gw1's configs: its own, 16 for each SJ300 drive it may run (7 sensors, the events,
+#: the trip records, the set frequency, the direction, 4 buttons, A004), 7 for the
+#: FR-700 (it measures no torque or power); gw2's: its own, 9 for its drive (read only).
+CONFIGS = 1 + 2 * 16 + 7 + 1 + 9
 
 
 async def polled(fetch: Callable[[], Awaitable[T]], done: Callable[[T], bool], what: str) -> T:
@@ -286,6 +289,20 @@ async def test_home_assistant_shows_every_drive_and_carries_out_its_commands(
             assert event["attributes"]["command"] == "command"
             assert simulator(gw1, 0).drives[2].run_command is Direction.STOP
             assert gw1.lines[0].controller.release("scada", other)
+
+            # -- a trip record, as an event of the drive's "Trip records" entity ------------
+            assert simulator(gw1, 0).drives[2].trip(7, now=loop.time())
+            record = await until_state(
+                socket,
+                "event.sj300_gw1_hall_2_trips",
+                lambda s: s["attributes"].get("event_type") == "trip",
+                "the trip record",
+            )
+            assert gw1.trip_records is not None
+            kept = gw1.trip_records.summaries()[0]
+            assert record["attributes"]["record"] == kept.id
+            assert (record["attributes"]["code"], kept.code) == ("E07", "E07")
+            assert record["attributes"]["meaning"] == kept.meaning
 
             # -- a drive off the line: unavailable in HA, and back ------------------------
             silenced = loop.time()
