@@ -508,8 +508,10 @@ class Gateway:
     def _recorded(self, summary: RecordSummary, drive: GatewayDrive) -> None:
         """A trip record was kept: the northbounds that announce one do (optional
         ``recorded``, ._northbound)."""
-        if self._by_key.get(drive.key) is not drive:
-            return  # its line was removed meanwhile: nobody serves it to announce it
+        if self._by_key.get(drive.key) is not drive:  # its line removed meanwhile: no door
+            _log.debug("trip record %s kept, not announced: line %s is served no more",
+                       summary.id, summary.line)  # fmt: skip
+            return
         for section, northbound in self.northbounds.items():
             recorded = getattr(northbound, "recorded", None)
             if recorded is None:

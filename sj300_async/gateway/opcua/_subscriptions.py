@@ -145,12 +145,6 @@ def _event_items(service: Any, session_id: Any) -> int:
     )
 
 
-def _refused_filter() -> ua.MonitoredItemCreateResult:
-    return ua.MonitoredItemCreateResult(
-        StatusCode=ua.StatusCode(ua.StatusCodes.BadEventFilterInvalid)
-    )
-
-
 def bound_subscriptions(server: Server, *, items_per_session: int, items_per_address: int) -> None:
     """Bound the subscriptions of *server*'s sessions (module docstring). Runs after
     :func:`._hooks.guard_sessions`, whose session creation it wraps."""
@@ -184,14 +178,20 @@ def bound_subscriptions(server: Server, *, items_per_session: int, items_per_add
     async def items_created(
         params: ua.CreateMonitoredItemsParameters,
     ) -> list[ua.MonitoredItemCreateResult]:
-        if any(_oversized(item.RequestedParameters.Filter) for item in params.ItemsToCreate):
-            return await _without_oversized(params)
+        oversized = {
+            i: ua.StatusCodes.BadEventFilterInvalid
+            for i, item in enumerate(params.ItemsToCreate)
+            if _oversized(item.RequestedParameters.Filter)
+        }
+        if oversized:  # the others created, bounded as any
+            return await _all_but(params, oversized)
         subscription = service.subscriptions.get(params.SubscriptionId)
         if subscription is not None and subscription.session_id in bounds.sessions:
             room = EVENT_ITEMS_PER_SESSION - _event_items(service, subscription.session_id)
             events = [i for i, item in enumerate(params.ItemsToCreate) if _is_event(item)]
             if len(events) > room:
-                return await _past_events(params, set(events[max(room, 0) :]))
+                too_many = ua.StatusCodes.BadTooManyMonitoredItems
+                return await _all_but(params, dict.fromkeys(events[max(room, 0) :], too_many))
         session = None if subscription is None else bounds.sessions.get(subscription.session_id)
         if session is None:  # no such subscription (asyncua answers), or the server's own
             result: list[ua.MonitoredItemCreateResult] = await create_items(params)
@@ -230,32 +230,10 @@ def bound_subscriptions(server: Server, *, items_per_session: int, items_per_add
             )
         return results
 
-    async def _without_oversized(
-        params: ua.CreateMonitoredItemsParameters,
+    async def _all_but(
+        params: ua.CreateMonitoredItemsParameters, refused: dict[int, int]
     ) -> list[ua.MonitoredItemCreateResult]:
-        """The items of a bounded filter created (bounded as any), the others refused."""
-        items = params.ItemsToCreate
-        fit = [item for item in items if not _oversized(item.RequestedParameters.Filter)]
-        made = iter(
-            await items_created(
-                ua.CreateMonitoredItemsParameters(
-                    SubscriptionId=params.SubscriptionId,
-                    TimestampsToReturn=params.TimestampsToReturn,
-                    ItemsToCreate=fit,
-                )
-            )
-            if fit
-            else []
-        )
-        return [
-            _refused_filter() if _oversized(item.RequestedParameters.Filter) else next(made)
-            for item in items
-        ]
-
-    async def _past_events(
-        params: ua.CreateMonitoredItemsParameters, refused: set[int]
-    ) -> list[ua.MonitoredItemCreateResult]:
-        """The items but the *refused* event items created, those answered as too many."""
+        """The items created but the *refused* ones (index: the status they are answered)."""
         items = params.ItemsToCreate
         kept = [item for i, item in enumerate(items) if i not in refused]
         made = iter(
@@ -269,9 +247,10 @@ def bound_subscriptions(server: Server, *, items_per_session: int, items_per_add
             if kept
             else []
         )
-        too_many = ua.StatusCode(ua.StatusCodes.BadTooManyMonitoredItems)
         return [
-            ua.MonitoredItemCreateResult(StatusCode=too_many) if i in refused else next(made)
+            ua.MonitoredItemCreateResult(StatusCode=ua.StatusCode(refused[i]))
+            if i in refused
+            else next(made)
             for i in range(len(items))
         ]
 

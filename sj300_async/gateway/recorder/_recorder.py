@@ -280,6 +280,7 @@ class TripRecorder:
                            len(left), CLOSE_S)  # fmt: skip
                 for task in left:
                     task.cancel()
+                await asyncio.gather(*left, return_exceptions=True)  # ended, not left behind
         for _, traffic in self._traffic.values():
             traffic.close()
         self._traffic.clear()
