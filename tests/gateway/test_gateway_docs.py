@@ -10,7 +10,8 @@ from pathlib import Path
 import pytest
 
 from sj300_async.gateway import Gateway, get_northbound, northbound_names, parse_config
-from sj300_async.gateway._config import _GATEWAY_KEYS, _GRANT_KEYS, _LINE_KEYS
+from sj300_async.gateway._config import _GATEWAY_KEYS
+from sj300_async.gateway._config_lines import _GRANT_KEYS, _LINE_KEYS
 from sj300_async.gateway.modbus import describe
 from sj300_async.profiles import get_profile
 
