@@ -324,7 +324,11 @@ async def opcua(
             created += await subscription.subscribe_data_change(
                 nodes[start : start + limit], sampling_interval=0.0
             )
-        tally.errors += sum(1 for item in created if isinstance(item, ua.StatusCode))
+        refused = [item for item in created if isinstance(item, ua.StatusCode)]
+        if refused:  # the run would load OPC UA less than it says: it fails (in the notes)
+            tally.errors += len(refused)
+            raise RuntimeError(f"{len(refused)} of {len(nodes)} monitored items refused: "
+                               f"{refused[0]}")  # fmt: skip
         ready.set()
         await asyncio.Event().wait()  # until cancelled: the handler does the work
 
