@@ -202,10 +202,11 @@ GATEWAY_HTTP_NAMES = (
     # each drive's trend (its memory is a benchmark's figure)
     "BLOCK", "SAMPLE_BYTES", "Trend", "trend_capacity",
 )  # fmt: skip
-#: The trip black box (issue 45): its settings, its store and its records.
+#: The trip black box (issue 45): its settings, its store and its records (a record's
+#: CSV made in a child process: CsvFailed, record_csv).
 GATEWAY_RECORDER_NAMES = (
-    "FORMAT", "RECORDER_KEYS", "RECORD_ID", "RecordSummary", "RecorderConfig", "TripRecorder",
-    "TripStore", "record_id", "samples_csv", "trip_fields",
+    "FORMAT", "RECORDER_KEYS", "RECORD_ID", "CsvFailed", "RecordSummary", "RecorderConfig",
+    "TripRecorder", "TripStore", "record_csv", "record_id", "samples_csv", "trip_fields",
 )  # fmt: skip
 GATEWAY_OPCUA_NAMES = (
     "DEFAULT_SECURITY", "NORTHBOUND", "OPCUA_KEYS", "SECURITY_MODES", "OpcuaConfig",

@@ -15,6 +15,7 @@ import asyncio
 import itertools
 import json
 import logging
+import sys
 import textwrap
 from collections.abc import AsyncIterator
 from contextlib import asynccontextmanager
@@ -251,7 +252,9 @@ async def test_a_store_in_memory_prunes_by_bytes_and_keeps_the_newest() -> None:
 # -- served over HTTP ----------------------------------------------------------------------
 
 
-async def test_the_http_api_lists_and_serves_a_record(tmp_path: Path) -> None:
+async def test_the_http_api_lists_and_serves_a_record(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
     import aiohttp
 
     path = tmp_path / "gw.toml"
@@ -284,6 +287,7 @@ async def test_the_http_api_lists_and_serves_a_record(tmp_path: Path) -> None:
         assert frames[:4] == b"\x0a\x0d\x0d\x0a"  # a pcapng section header block
         async with client.get(f"{base}/{summary.id}.csv") as answer:
             rows = (await answer.text()).splitlines()
+            assert answer.headers["Content-Type"] == "text/csv; charset=utf-8"
         assert rows[0].startswith("time_utc,time_unix,output_frequency_hz,")
         assert len(rows) == 1 + len(record["samples"]["time"])
         await get(f"{base}/../../etc/passwd", 404)
@@ -291,6 +295,11 @@ async def test_the_http_api_lists_and_serves_a_record(tmp_path: Path) -> None:
         await get(f"{base}/20260101T000000.000Z-hall-9.csv", 404)
         await get(f"{base}?node=x", 400)
         await get(f"{base}?limit=0", 400)
+        # A CSV whose child cannot run is 503, said: the record may be fine.
+        failing = (sys.executable, "-c", "import sys; sys.exit(9)")
+        monkeypatch.setattr("sj300_async.gateway.recorder._csv_process.CHILD", failing)
+        answer = await get(f"{base}/{summary.id}.csv", 503)
+        assert "status 9" in (await answer.json())["error"]
 
 
 async def test_a_gateway_without_the_recorder_says_so(tmp_path: Path) -> None:

@@ -15,23 +15,29 @@ Decisions:
 - An id that is not a record id's shape is 404 without a look at the
   disk; a record whose file went missing or does not read (a disk that
   failed since the start) is 404 too, its cause logged by the store.
-- A record's file is read in a thread, and its CSV made in one: at most
-  :data:`READERS` at once, whoever asks, so that a client asking for
-  records in a loop costs the loop nothing and the disk a few reads.
+- A record's file is read in a thread, and its CSV made in a child
+  process (:func:`~sj300_async.gateway.recorder.record_csv`: a big
+  record's parse would hold the GIL): at most :data:`READERS` at once,
+  whoever asks, so that a client asking for records in a loop costs the
+  loop nothing and the disk a few reads. A CSV the child could not make
+  is 503, said in the log.
 """
 
 from __future__ import annotations
 
 import asyncio
+import logging
 from typing import Final
 
 from aiohttp import web
 
 from .. import GatewayView
-from ..recorder import RECORD_ID, TripStore, samples_csv
+from ..recorder import RECORD_ID, CsvFailed, TripStore, record_csv
 from ._replies import json_error, json_reply
 
 __all__ = ["READERS", "TripRoutes"]
+
+_log = logging.getLogger(__name__)
 
 #: Record files read (or turned into CSV) at once, at most.
 READERS: Final = 4
@@ -88,13 +94,17 @@ class TripRoutes:
             if data is None:
                 raise _missing(record_id)
             try:
-                text = await asyncio.to_thread(_csv_of, data)
-            except (ValueError, OverflowError, OSError) as exc:  # a file changed since the
-                # start (another JSON, a time no date holds): not a record now
+                csv = await record_csv(data)
+            except ValueError as exc:  # a file changed since the start (another JSON, a
+                # time no date holds): not a record now
                 raise json_error(404, f"trip record {record_id!r} does not read: {exc}") from None
+            except CsvFailed as exc:
+                _log.warning("trip record %s: %s", record_id, exc)
+                raise json_error(503, f"trip record {record_id!r}: {exc}") from None
         return web.Response(
-            text=text,
+            body=csv,
             content_type="text/csv",
+            charset="utf-8",
             headers={"Content-Disposition": f'attachment; filename="{record_id}.csv"'},
         )
 
@@ -104,15 +114,6 @@ class TripRoutes:
         if store is None or not RECORD_ID.fullmatch(record_id):
             raise _missing(record_id)
         return store, record_id
-
-
-def _csv_of(data: bytes) -> str:
-    import orjson
-
-    record = orjson.loads(data)
-    if not isinstance(record, dict):
-        raise ValueError("not a record")
-    return samples_csv(record)
 
 
 def _missing(record_id: str) -> web.HTTPException:

@@ -1,4 +1,4 @@
-"""A trip record's content: its JSON object, its id, and its samples as CSV.
+"""A trip record's content: its JSON object and its id (its CSV: :mod:`._csv`).
 
 A record is one JSON object (``format`` :data:`~._store.FORMAT`, ``version``
 1) with the drive's name, the trip (code, meaning, the values the drive
@@ -13,22 +13,19 @@ Decisions:
   letters, digits, ``_``, ``.`` and ``-``).
 - ``trip_sample`` is the index of the first sample at or after the trip's
   instant: the one a chart marks.
-- The CSV is the samples, one row each, in the trend download's shape
-  (``time_utc``, ``time_unix``, then every column), empty for null.
 """
 
 from __future__ import annotations
 
-import csv
-import io
 from collections.abc import Mapping, Sequence
 from datetime import UTC, datetime
 from typing import Any, Final
 
 from ...profiles import Trip
+from ._samples_csv import utc_text
 from ._store import FORMAT
 
-__all__ = ["VERSION", "record_id", "samples_csv", "trip_fields"]
+__all__ = ["VERSION", "record_id", "trip_fields"]
 
 VERSION: Final = 1
 
@@ -37,10 +34,6 @@ def record_id(unix: float, line: str, node: int) -> str:
     """The id of a record of a trip at Unix time *unix* on *line*, *node*."""
     at = datetime.fromtimestamp(round(unix, 3), UTC)
     return f"{at:%Y%m%dT%H%M%S}.{at.microsecond // 1000:03d}Z-{line}-{node}"
-
-
-def utc_text(unix: float) -> str:
-    return datetime.fromtimestamp(unix, UTC).isoformat(timespec="milliseconds")
 
 
 def trip_fields(trip: Trip | None) -> dict[str, Any] | None:
@@ -103,28 +96,3 @@ def new_record(
         "writes": list(writes),
         "frames": f"{record}.pcapng",
     }
-
-
-def samples_csv(record: Mapping[str, Any]) -> str:
-    """A record's samples as CSV (see the module docstring).
-
-    Raises:
-        ValueError: the record has no samples of the shape it should.
-    """
-    samples = record.get("samples")
-    if not isinstance(samples, dict) or not isinstance(samples.get("time"), list):
-        raise ValueError("the record has no samples")
-    names = [name for name in samples if name != "time"]
-    out = io.StringIO()
-    writer = csv.writer(out, lineterminator="\r\n")
-    writer.writerow(["time_utc", "time_unix", *names])
-    for row, at in enumerate(samples["time"]):
-        if not isinstance(at, int | float):
-            raise ValueError(f"sample {row}: its time is not a number")
-        values = []
-        for name in names:
-            column = samples[name]
-            value = column[row] if isinstance(column, list) and row < len(column) else None
-            values.append("" if value is None else value)
-        writer.writerow([utc_text(at), f"{at:.3f}", *values])
-    return out.getvalue()
