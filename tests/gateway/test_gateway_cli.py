@@ -72,10 +72,13 @@ async def stop(proc: asyncio.subprocess.Process) -> Result:
 
 
 async def http_get(port: int, path: str) -> tuple[int, str]:
-    """One ``GET`` (the server closes the connection after its answer): status and body."""
+    """One ``GET``, the connection closed by the server after its answer (asked to: an
+    HTTP/1.1 server keeps it open, and this read to the end waited out its 5 s keep-alive
+    at every call): status and body."""
     reader, writer = await asyncio.open_connection("127.0.0.1", port)
     try:
-        writer.write(f"GET {path} HTTP/1.1\r\nHost: 127.0.0.1\r\n\r\n".encode())
+        request = f"GET {path} HTTP/1.1\r\nHost: 127.0.0.1\r\nConnection: close\r\n\r\n"
+        writer.write(request.encode())
         await writer.drain()
         async with asyncio.timeout(TIMEOUT):
             data = await reader.read()
