@@ -11,9 +11,19 @@ slow state does not spin the CPU.
 from __future__ import annotations
 
 import asyncio
+import os
 from collections.abc import Callable
 
-__all__ = ["wait_for"]
+__all__ = ["process_gone", "wait_for"]
+
+
+def process_gone(pid: int) -> bool:
+    """No process *pid* is left (ended and reaped): the state a killed child must reach."""
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return True
+    return False
 
 
 async def wait_for(

@@ -6,13 +6,12 @@ running, whether it overran or its caller was cancelled."""
 from __future__ import annotations
 
 import asyncio
-import os
 import sys
 from pathlib import Path
 
 import orjson
 import pytest
-from waiting import wait_for
+from waiting import process_gone, wait_for
 
 from sj300_async.gateway.recorder import CsvFailed, record_csv, samples_csv
 from sj300_async.gateway.recorder._record import new_record, record_id
@@ -29,14 +28,6 @@ def _record(samples: int) -> dict[str, object]:
                       unit=3, protocol="sj300", unix=unix, seen_by="poll", interval_s=0.05,
                       before_s=1, after_s=1, trip=None, samples=columns,
                       writes=[])  # fmt: skip
-
-
-def _gone(pid: int) -> bool:
-    try:
-        os.kill(pid, 0)
-    except ProcessLookupError:
-        return True
-    return False
 
 
 def _sleeper(pid_file: Path) -> tuple[str, ...]:
@@ -87,7 +78,7 @@ async def test_a_child_past_its_time_is_killed(tmp_path: Path) -> None:
     pid_file = tmp_path / "pid"
     with pytest.raises(CsvFailed, match=r"more than 0\.5 s"):
         await record_csv(b"{}", timeout_s=0.5, child=_sleeper(pid_file))
-    assert _gone(int(pid_file.read_text()))
+    assert process_gone(int(pid_file.read_text()))
 
 
 async def test_a_cancelled_caller_leaves_no_child(tmp_path: Path) -> None:
@@ -97,4 +88,4 @@ async def test_a_cancelled_caller_leaves_no_child(tmp_path: Path) -> None:
     task.cancel()
     with pytest.raises(asyncio.CancelledError):
         await task
-    assert _gone(int(pid_file.read_text()))
+    assert process_gone(int(pid_file.read_text()))

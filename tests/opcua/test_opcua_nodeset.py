@@ -10,7 +10,7 @@ from pathlib import Path
 
 import pytest
 from asyncua import Server, ua
-from waiting import wait_for
+from waiting import process_gone, wait_for
 
 from sj300_async.gateway.opcua._nodeset import (
     SHELF_NAME,
@@ -157,14 +157,6 @@ def _sleeping_child(tmp_path: Path) -> tuple[Path, Path]:
     return script, pid_file
 
 
-def _gone(pid: int) -> bool:
-    try:
-        os.kill(pid, 0)
-    except ProcessLookupError:
-        return True
-    return False
-
-
 async def test_a_start_cancelled_while_the_child_works_leaves_no_child(
     tmp_path: Path, monkeypatch: pytest.MonkeyPatch
 ) -> None:
@@ -177,7 +169,7 @@ async def test_a_start_cancelled_while_the_child_works_leaves_no_child(
     start.cancel()
     with pytest.raises(asyncio.CancelledError):
         await start
-    assert _gone(pid)  # killed and reaped before the cancellation went on
+    assert process_gone(pid)  # killed and reaped before the cancellation went on
 
 
 async def test_a_child_past_its_time_is_killed_and_the_nodes_built_here(
@@ -190,5 +182,5 @@ async def test_a_child_past_its_time_is_killed_and_the_nodes_built_here(
     server, table = await _start(tmp_path / "cache")
     assert table is dict
     await _reads_the_standard(server)
-    assert _gone(int(pid_file.read_text()))
+    assert process_gone(int(pid_file.read_text()))
     assert any("child timed out after 0.5 s" in r.getMessage() for r in caplog.records)
