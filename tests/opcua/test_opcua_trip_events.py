@@ -8,6 +8,7 @@ from pathlib import Path
 from typing import Any
 
 from asyncua import ua
+from host_pauses import LoopLag
 from waiting import wait_for
 
 from sj300_async.gateway.opcua._trip_events import EVENT_TYPE, SEVERITY
@@ -123,12 +124,14 @@ async def test_an_anonymous_session_s_event_items_are_bounded(tmp_path: Path) ->
         statuses = _names(many)
         assert statuses.count("Good") == EVENT_ITEMS_PER_SESSION - 1  # one made above
         assert set(statuses[EVENT_ITEMS_PER_SESSION - 1 :]) == {"BadTooManyMonitoredItems"}
-        mark = gateway.loop_monitor.mark()
-        simulator = gateway.lines[0].bus.simulator
-        for node in (1, 2, 3, 4):
-            assert simulator.drives[node].trip(7, now=asyncio.get_running_loop().time())
-        store = gateway.trip_records
-        assert store is not None
-        await wait_for(lambda: len(store) == 4, "four records", timeout=10)
-        await wait_for(lambda: events.received, "their events", timeout=10)
-        assert gateway.loop_monitor.since(mark).max_s < 0.1
+        # The loop's own work, not the clock's lateness (host_pauses.LoopLag): on the
+        # clock, a suite's other worker took this process's core for 0.24 s in a clean run.
+        with LoopLag() as probe:
+            simulator = gateway.lines[0].bus.simulator
+            for node in (1, 2, 3, 4):
+                assert simulator.drives[node].trip(7, now=asyncio.get_running_loop().time())
+            store = gateway.trip_records
+            assert store is not None
+            await wait_for(lambda: len(store) == 4, "four records", timeout=10)
+            await wait_for(lambda: events.received, "their events", timeout=10)
+        assert probe.close() < 0.1, probe.describe()
