@@ -31,7 +31,9 @@ def _record(samples: int) -> dict[str, object]:
 
 
 def _sleeper(pid_file: Path) -> tuple[str, ...]:
-    """A child that says its pid and then never answers."""
+    """A child that says its pid and then never answers: a hung child, its sleep the
+    hang itself (the test waits on the pid file and the timeout, never on the sleep,
+    and the child is killed long before it ends)."""
     code = f"import os, time; open({str(pid_file)!r}, 'w').write(str(os.getpid())); time.sleep(600)"
     return (sys.executable, "-c", code)
 

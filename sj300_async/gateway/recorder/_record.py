@@ -1,4 +1,4 @@
-"""A trip record's content: its JSON object and its id (its CSV: :mod:`._csv`).
+"""A trip record's content: its JSON object and its id (its CSV: :mod:`._samples_csv`).
 
 A record is one JSON object (``format`` :data:`~._store.FORMAT`, ``version``
 1) with the drive's name, the trip (code, meaning, the values the drive
