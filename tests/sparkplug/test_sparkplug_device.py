@@ -3,7 +3,9 @@
 Device.values reads the served values' fields in one call and starts from
 its constants (it runs at every sample); whatever the drive as served, it
 must say what reading each metric one by one says, the latest refusal in
-its two metrics.
+its two metrics. A constant metric's value is the device's own: its metrics
+are shared by every device built alike (issue 44), so their readers do not
+carry it.
 """
 
 from __future__ import annotations
@@ -12,7 +14,13 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from sj300_async.gateway import GatewayDrive, Lease, LineConfig, ServedValues, WriteGrant
-from sj300_async.gateway.sparkplug import LAST_REFUSAL, Device, DeviceFlags
+from sj300_async.gateway.sparkplug import (
+    LAST_REFUSAL,
+    Device,
+    DeviceFlags,
+    decode_payload,
+    encode_payload,
+)
 from sj300_async.profiles import ParameterReading, Trip, get_profile
 
 LINES = {
@@ -72,9 +80,64 @@ def test_values_are_each_metric_s_own_reading(
 ) -> None:
     config = LINES[line]
     device = Device(GatewayDrive(config, 1, get_profile(config.protocol), Lease(5.0)), 3)
-    expected = [metric.read(values, flags) for metric in device.metrics]
+    constants = {
+        "Info/Protocol": config.protocol,
+        "Info/Line": "l",
+        "Info/Node": 1,
+        "Control/Refusals": 0,
+        LAST_REFUSAL: None,
+    }
     names = [metric.definition.name for metric in device.metrics]
+    expected = [
+        constants[name] if name in constants else metric.read(values, flags)
+        for name, metric in zip(names, device.metrics, strict=True)
+    ]
     if refusal is not None and LAST_REFUSAL in names:
         at = names.index(LAST_REFUSAL)
         expected[at : at + 2] = refusal
     assert device.values(values, flags, refusal) == expected
+
+
+def test_devices_built_alike_share_their_metrics_each_numbering_them_from_its_base() -> None:
+    """One set of metrics for every device of a line's grants and parameters (issue 44);
+    each device's aliases are its own all the same: in its births and in what it finds."""
+    config = LineConfig("l", "sim://", "sj300", (1, 2), parameters=("A004",))
+    profile = get_profile("sj300")
+    first, second = (Device(GatewayDrive(config, n, profile, Lease(5.0)), n + 2) for n in (1, 2))
+    assert first.metrics is second.metrics
+    assert (first.alias_base, second.alias_base) == (3 << 16, 4 << 16)
+    values = ServedValues(
+        online=True,
+        sample_age_s=0.0,
+        state=None,
+        running=None,
+        tripped=None,
+        status_fields=None,
+        direction=None,
+        output_frequency_hz=12.5,
+        output_current_a=None,
+        output_voltage_v=None,
+        output_torque_percent=None,
+        power_kw=None,
+        set_frequency_hz=None,
+        trip=None,
+        parameters={},
+    )
+    for device, node in ((first, 1), (second, 2)):
+        births = decode_payload(
+            encode_payload(
+                1,
+                0,
+                zip(device.definitions, device.values(values, DeviceFlags(), None), strict=True),
+                birth=True,
+                alias_base=device.alias_base,
+            )
+        )
+        aliases = [metric.alias for metric in births.metrics]
+        assert aliases == [device.alias_base + i for i in range(len(device.metrics))]
+        by_name = {metric.name: metric.value for metric in births.metrics}
+        assert (by_name["Info/Node"], by_name["Output Frequency"]) == (node, 12.5)
+        fifth = device.by_alias(device.alias_base + 5)
+        assert fifth is not None
+        assert fifth.definition.name == births.metrics[5].name
+    assert first.by_alias(second.alias_base + 5) is None

@@ -194,10 +194,55 @@ def _properties(unit: str, low: float, high: float, name: str) -> tuple[Property
     )
 
 
-@functools.cache
-def _indices(names: tuple[str, ...]) -> Mapping[str, int]:
-    """Each metric's index by name: one mapping for every device of these metrics."""
-    return MappingProxyType({name: index for index, name in enumerate(names)})
+#: A metric as a device is built of it: name, datatype, properties, reader, write, code.
+_Row = tuple[str, int, tuple[Property, ...], Reader, str | None, str | None]
+#: The reader of every constant metric in a layout (each device keeps its own values).
+_CONSTANT: Final = _Constant(None)
+#: Layouts kept: one per distinct set of metrics (a profile, its grants and parameters);
+#: a plant has a handful, a reload may add some.
+_LAYOUTS: Final = 64
+
+
+@dataclass(frozen=True, slots=True)
+class _Layout:
+    """The metrics of every device built of the same rows, made once and shared."""
+
+    #: Aliases counted from 0: a device adds its own base.
+    metrics: tuple[DeviceMetric, ...]
+    definitions: tuple[MetricDef, ...]
+    #: values() reads the served fields in one call (the attrgetter of their names, each
+    #: value kept with its metric's index), the constants are the device's template, and
+    #: only the rest is called one by one.
+    field_index: tuple[int, ...]
+    pick: Callable[[ServedValues], tuple[object, ...]]
+    called: tuple[tuple[int, Reader], ...]
+    indices: Mapping[str, int]
+    refusal_index: int | None
+    record_index: int | None
+
+
+@functools.lru_cache(maxsize=_LAYOUTS)
+def _layout(rows: tuple[_Row, ...]) -> _Layout:
+    metrics = tuple(
+        DeviceMetric(MetricDef(name, i, datatype, properties), read, write, code)
+        for i, (name, datatype, properties, read, write, code) in enumerate(rows)
+    )
+    fields = [(i, m.read) for i, m in enumerate(metrics) if isinstance(m.read, _Field)]
+    names = [m.definition.name for m in metrics]
+    return _Layout(
+        metrics=metrics,
+        definitions=tuple(m.definition for m in metrics),
+        field_index=tuple(i for i, _ in fields),
+        pick=operator.attrgetter(*(f.name for _, f in fields), "online"),  # 2 at least
+        called=tuple(
+            (i, m.read)
+            for i, m in enumerate(metrics)
+            if not isinstance(m.read, (_Field, _Constant))
+        ),
+        indices=MappingProxyType({name: index for index, name in enumerate(names)}),
+        refusal_index=names.index(LAST_REFUSAL) if LAST_REFUSAL in names else None,
+        record_index=names.index(TRIP_RECORD) if TRIP_RECORD in names else None,
+    )
 
 
 class Device:
@@ -210,7 +255,7 @@ class Device:
         control = line.control_allowed(node)
         granted = line.writable_parameters(node)
         measures = profile.capabilities.measures
-        rows: list[tuple[str, int, tuple[Property, ...], Reader, str | None, str | None]] = [
+        rows: list[_Row] = [
             ("Output Frequency", DOUBLE, _unit("Hz"), _field("output_frequency_hz"), None, None),
             (
                 "Frequency Command",
@@ -273,43 +318,44 @@ class Device:
             ("Info/Line", STRING, (), _constant(line.name), None, None),
             ("Info/Node", UINT32, (), _constant(node), None, None),
         ]
-        base = ordinal << 16
-        self.metrics: Sequence[DeviceMetric] = tuple(
-            DeviceMetric(MetricDef(name, base + i, datatype, properties), read, write, code)
-            for i, (name, datatype, properties, read, write, code) in enumerate(rows)
-        )
-        self.definitions: Sequence[MetricDef] = tuple(m.definition for m in self.metrics)
-        # values() runs at every sample: the served fields are read in one call (the
-        # attrgetter of their names, each value kept with its metric's index), the
-        # constants are a template, and only the rest is called one by one.
-        fields = [(i, m.read) for i, m in enumerate(self.metrics) if isinstance(m.read, _Field)]
-        self._field_index = tuple(i for i, _ in fields)
-        self._pick = operator.attrgetter(*(f.name for _, f in fields), "online")  # 2 at least
+        self._base = ordinal << 16
+        # The metrics themselves are the layout's, shared by every device built alike: a
+        # device keeps its alias base and its constants' values (issue 44: a device's own
+        # 18 metrics, their definitions and aliases took 2.8 KiB a drive).
+        self._layout = _layout(tuple(
+            (name, datatype, properties, _CONSTANT if isinstance(read, _Constant) else read,
+             write, code)
+            for name, datatype, properties, read, write, code in rows
+        ))  # fmt: skip
         self._template: list[object] = [
-            m.read.value if isinstance(m.read, _Constant) else None for m in self.metrics
+            read.value if isinstance(read, _Constant) else None for _, _, _, read, _, _ in rows
         ]
-        self._called = tuple(
-            (i, m.read)
-            for i, m in enumerate(self.metrics)
-            if not isinstance(m.read, (_Field, _Constant))
-        )
-        self._base = base
-        self._indices = _indices(tuple(m.definition.name for m in self.metrics))
-        self._refusal_index = self._index(LAST_REFUSAL)
-        self._record_index = self._index(TRIP_RECORD)
 
-    def _index(self, name: str) -> int | None:
-        return next((i for i, m in enumerate(self.metrics) if m.definition.name == name), None)
+    @property
+    def metrics(self) -> Sequence[DeviceMetric]:
+        """Its metrics, in alias order (a definition's alias is from :attr:`alias_base`)."""
+        return self._layout.metrics
+
+    @property
+    def definitions(self) -> Sequence[MetricDef]:
+        """What its births say of its metrics (aliases from :attr:`alias_base`)."""
+        return self._layout.definitions
+
+    @property
+    def alias_base(self) -> int:
+        """What its metrics' aliases count from: ``ordinal << 16``."""
+        return self._base
 
     def by_alias(self, alias: int) -> DeviceMetric | None:
         """The metric of alias *alias*, None: none of this device's."""
         index = alias - self._base
-        return self.metrics[index] if 0 <= index < len(self.metrics) else None
+        metrics = self._layout.metrics
+        return metrics[index] if 0 <= index < len(metrics) else None
 
     def by_name(self, name: str) -> DeviceMetric | None:
         """The metric named *name*, None: none of this device's."""
-        index = self._indices.get(name)
-        return None if index is None else self.metrics[index]
+        index = self._layout.indices.get(name)
+        return None if index is None else self._layout.metrics[index]
 
     def values(
         self,
@@ -324,13 +370,14 @@ class Device:
         words and the count so far (None: none yet); *record*: the latest trip
         record's code and id (None: none yet).
         """
+        layout = self._layout
         out = self._template.copy()
-        for i, value in zip(self._field_index, self._pick(values), strict=False):  # not online
+        for i, value in zip(layout.field_index, layout.pick(values), strict=False):  # not online
             out[i] = value
-        for i, read in self._called:
+        for i, read in layout.called:
             out[i] = read(values, flags)
-        if self._refusal_index is not None and refusal is not None:
-            out[self._refusal_index], out[self._refusal_index + 1] = refusal
-        if self._record_index is not None and record is not None:
-            out[self._record_index], out[self._record_index + 1] = record
+        if layout.refusal_index is not None and refusal is not None:
+            out[layout.refusal_index], out[layout.refusal_index + 1] = refusal
+        if layout.record_index is not None and record is not None:
+            out[layout.record_index], out[layout.record_index + 1] = record
         return out

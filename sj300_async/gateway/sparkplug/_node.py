@@ -366,6 +366,7 @@ class EdgeNode:
             self._next_seq(),
             zip(device.definitions, values, strict=True),
             birth=True,
+            alias_base=device.alias_base,
         )
 
     def _device_message(self, key: Key) -> tuple[str, bytes] | None:
@@ -391,7 +392,7 @@ class EdgeNode:
         self._alive[key] = values
         self.stats.published["DDATA"] += 1
         return self.topic("DDATA", device.id), encode_payload(
-            stamp, self._next_seq(), changed, birth=False
+            stamp, self._next_seq(), changed, birth=False, alias_base=device.alias_base
         )
 
     def _node_data(self) -> tuple[str, bytes] | None:

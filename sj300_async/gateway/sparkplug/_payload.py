@@ -107,11 +107,14 @@ def encode_payload(
     *,
     birth: bool,
     metric_timestamp_ms: int | None = None,
+    alias_base: int = 0,
 ) -> bytes:
     """A payload of *metrics* (each with its value, None for null).
 
     *seq* None leaves the sequence number out (NDEATH). Every metric's
-    timestamp is *metric_timestamp_ms* (default: *timestamp_ms*).
+    timestamp is *metric_timestamp_ms* (default: *timestamp_ms*). A metric's
+    alias is its definition's plus *alias_base* (a device's metrics are shared
+    by every device built alike, each numbering them from its own base).
     """
     payload = Payload()
     payload.timestamp = timestamp_ms
@@ -123,7 +126,7 @@ def encode_payload(
         if birth or definition.alias is None:
             metric.name = definition.name
         if definition.alias is not None:
-            metric.alias = definition.alias
+            metric.alias = alias_base + definition.alias
         metric.timestamp = stamp
         if birth:
             metric.datatype = definition.datatype
