@@ -456,8 +456,18 @@ async def test_a_cancelled_subscribe_keeps_its_identifier_until_answered() -> No
                 await c.subscribe("x", qos=1)
         assert len(subacks) == 1
         taken = int.from_bytes(subacks[0], "big")
-        c._ids = iter([taken, taken + 1])  # type: ignore[assignment]
+        c._last_id = taken - 1  # the next one is taken: the one after it is given
         assert c._next_id() == taken + 1
+
+
+async def test_packet_identifiers_wrap_from_65535_to_1_past_those_in_flight() -> None:
+    """One counter, nothing kept per identifier given (itertools.cycle kept all 65,535)."""
+    c = Client("h", identifier="c")
+    c._last_id = 0xFFFE
+    assert c._next_id() == 0xFFFF
+    c._inflight[1] = c._inflight[2] = object()  # type: ignore[assignment]
+    assert c._next_id() == 3
+    assert c._next_id() == 4
 
 
 async def test_one_task_reads_the_messages() -> None:

@@ -57,7 +57,6 @@ from __future__ import annotations
 
 import asyncio
 import collections
-import itertools
 import logging
 import math
 import ssl
@@ -202,7 +201,10 @@ class Client:
         self._slot: asyncio.Future[None] | None = None  # a waiter for an in-flight slot
         self._inflight: dict[int, _Batch] = {}
         self._acks: dict[int, Request[asyncio.Future[tuple[int, ...]]]] = {}
-        self._ids = itertools.cycle(range(1, 0x10000))
+        # The last packet identifier given (the next is one more, 65535 wraps to 1): a
+        # counter, not itertools.cycle, which keeps every value of its first pass (a list
+        # and 65,535 ints, 2.5 MiB a client after as many QoS 1 messages; issue 44).
+        self._last_id = 0
         self._messages: collections.deque[Message] = collections.deque()
         self._message_waiter: asyncio.Future[None] | None = None
         self._reading_paused = False
@@ -345,8 +347,11 @@ class Client:
             await batch.future
 
     def _next_id(self) -> int:
-        for packet_id in itertools.islice(self._ids, 0xFFFF):
+        packet_id = self._last_id
+        for _ in range(0xFFFF):
+            packet_id = packet_id % 0xFFFF + 1
             if packet_id not in self._inflight and packet_id not in self._acks:
+                self._last_id = packet_id
                 return packet_id
         # Only subscriptions never acknowledged, past the in-flight cap, get here.
         raise MqttError("every packet identifier is waiting for an acknowledgement")
