@@ -451,3 +451,34 @@ async def test_a_group_watched_again_takes_the_next_sample(tmp_path: Path) -> No
         server.publish(served(dataclasses.replace(online, taken_at=online.taken_at + 2)))
         assert trips.quality(now) is Quality.GOOD
         assert trips.status(now) == ua.StatusCodes.Good
+
+
+async def test_a_variable_is_taken_when_first_read_never_at_start(tmp_path: Path) -> None:
+    """Issue 44: a value taken at start was kept by every variable nobody reads, and with
+    it the start's served view of its drive (its snapshot and values: some 2 KiB a drive).
+    Now nothing is taken until a read, a monitored item or a judgement asks; what a read
+    is served is the drive's latest, as before."""
+    async with (
+        opcua_gateway(opcua_toml(tmp_path)) as (gateway, server),
+        connected(server.url) as client,
+    ):
+        await polled(gateway)
+        drive = gateway.drive("hall", 1)
+        assert drive is not None
+        nodes = server._drives["hall", 1]
+        assert all(b.served is None and b.value is None for b in nodes.bindings)
+        ns = await client.get_namespace_index(NAMESPACE)
+        read = await client.get_node(
+            ua.NodeId("hall/Drive1/Monitoring/ConverterOutputVoltage", ns)
+        ).read_data_value()
+        by_name = {b.name: b for b in nodes.bindings}
+        voltage = by_name["Monitoring/ConverterOutputVoltage"]
+        assert voltage.served is not None
+        assert read.StatusCode.is_good()
+        assert read.Value.Value == voltage.value is not None
+        assert [b.name for b in nodes.bindings if b.served is not None] == [voltage.name]
+        # Judged before it was ever taken (as the tick would): it takes the latest first.
+        running = by_name["Monitoring/Running"]
+        assert running.status(asyncio.get_running_loop().time()) == ua.StatusCodes.Good
+        assert running.served is drive.served
+        assert running.value is drive.snapshot.running is not None

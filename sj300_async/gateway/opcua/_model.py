@@ -156,10 +156,13 @@ class Binding:
     node: ua.NodeId
     vtype: ua.VariantType
     read: Reader
-    #: The drive as served its value was taken from (its judge).
-    served: ServedDrive
     #: The drive's object it is a variable of (a tuple of both per node cost 1 KiB a drive).
     owner: DriveNodes = field(repr=False)
+    #: The drive as served its value was taken from (its judge); None: not taken yet.
+    #: Taken when first read, watched or judged, never at start: a value taken then was
+    #: kept by every variable nobody reads, with the start's served view of its drive
+    #: (its snapshot and its values: some 2 KiB a drive; issue 44).
+    served: ServedDrive | None = None
     #: Its path below the drive object (``Monitoring/State``): the audit log's name.
     name: str = ""
     #: The read group its value is one of: the served view judges it by that group.
@@ -197,9 +200,14 @@ class Binding:
         self.until = _until(served, self.read_group, self.parameter) if until is None else until
 
     def quality(self, now: float) -> Quality:
-        """Its quality at loop time *now* (see the module docstring)."""
+        """Its quality at loop time *now* (see the module docstring); not taken yet, it
+        takes its drive's latest served view first."""
+        served = self.served
+        if served is None:
+            served = self.owner.drive.served
+            self.take(served)
         present = self.value is not None
-        return _judge(self.served, self.read_group, self.parameter, now, present)
+        return _judge(served, self.read_group, self.parameter, now, present)
 
     def status(self, now: float) -> int:
         """Its status code at loop time *now*."""
@@ -438,9 +446,8 @@ class _DriveBuilder:
             node,
             vtype,
             read,
-            self.nodes.drive.served,
             self.nodes,
-            relative,
+            name=relative,
             read_group=read_group,
             parameter=parameter,
             array=array,

@@ -326,12 +326,12 @@ class OpcuaServer:
             await add_lines(self, server, added)
 
     def _bind(self, server: Server, nodes: DriveNodes, *, lazy: bool) -> None:
-        """Take *nodes*' values; bind their nodes now, or (*lazy*) keep what
-        :meth:`_bind_node` binds a node with when it is made."""
+        """Bind *nodes* now, or (*lazy*) keep what :meth:`_bind_node` binds a node with
+        when it is made. Their values are taken when first read or watched
+        (:attr:`Binding.served`)."""
         drive = nodes.drive
-        for binding in nodes.bindings:
-            binding.take(drive.served)
-            if not lazy:
+        if not lazy:
+            for binding in nodes.bindings:
                 server.set_attribute_value_callback(binding.node, self._reader(binding, drive))
                 server.set_attribute_value_setter(binding.node, _keep)
         calls = self._calls
