@@ -425,7 +425,7 @@ def _binding(source: Source, served: ServedDrive, parameter: str | None = None) 
     read, _, read_group = source
     owner = cast(DriveNodes, None)  # its drive's object: not looked at by a judgement
     binding = Binding(
-        ua.NodeId(1, 2), ua.VariantType.Double, read, served, owner, read_group=read_group,
+        ua.NodeId(1, 2), ua.VariantType.Double, read, owner, read_group=read_group,
         parameter=parameter,
     )  # fmt: skip
     binding.take(served)
