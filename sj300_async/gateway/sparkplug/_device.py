@@ -101,6 +101,8 @@ class DeviceMetric:
     """One metric of a device: its definition, how it is read, and what writing it does."""
 
     definition: MetricDef
+    #: How its value is read. A constant metric's reader is the layout's shared marker:
+    #: its value is the device's own (``Device.values``), not this reader's.
     read: Reader
     #: What a DCMD writing it asks for (a :class:`Writes` word), None: read-only.
     write: str | None = None
