@@ -17,16 +17,15 @@ from asyncua import Client, ua
 from waiting import wait_for
 
 from sj300_async.gateway import GatewayDrive, Quality, ServedDrive
-from sj300_async.gateway.opcua._model import (
-    _ONLINE,
-    _SETPOINT,
-    _TRIP_COUNT,
-    Binding,
-    DriveNodes,
-    Source,
-    _parameter,
-)
+from sj300_async.gateway.opcua._model import Binding, DriveNodes
 from sj300_async.gateway.opcua._quality import QUALITY_STATUS
+from sj300_async.gateway.opcua._sources import (
+    ONLINE,
+    SETPOINT,
+    TRIP_COUNT,
+    Source,
+    parameter_source,
+)
 from sj300_async.profiles import DriveSnapshot, ParameterReading, TripLog
 from sj300_async.simulator.sj300 import SimulatedBus
 
@@ -444,10 +443,10 @@ def test_a_value_s_deadline_is_its_group_s_as_served() -> None:
         parameters={"A004": ParameterReading("A004", 6000, 60.0, "Hz", 97.0)},
     )  # fmt: skip
     served = ServedDrive(snapshot, stale_after_s=5.0, trips_interval_s=60.0)
-    setpoint = _binding(_SETPOINT, served)
-    trips = _binding(_TRIP_COUNT, served)
-    online = _binding(_ONLINE, served)
-    parameter = _binding(_parameter("A004"), served, "A004")
+    setpoint = _binding(SETPOINT, served)
+    trips = _binding(TRIP_COUNT, served)
+    online = _binding(ONLINE, served)
+    parameter = _binding(parameter_source("A004"), served, "A004")
     assert (setpoint.until, trips.until, online.until, parameter.until) == (95, 115, 105, 102)
     assert setpoint.quality(95.0) is Quality.GOOD
     assert setpoint.quality(100.0) is Quality.STALE

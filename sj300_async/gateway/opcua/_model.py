@@ -51,18 +51,37 @@ counters (:mod:`._values`) are Good whenever the line has a value for them.
 
 from __future__ import annotations
 
-import functools
 import math
 import sys
-from collections.abc import Callable, Sequence
+from collections.abc import Sequence
 from dataclasses import dataclass, field
 from typing import Final
 
 from asyncua import ua
 
-from ...profiles import DriveSnapshot, ParameterSpec, ReadGroup, Trip
+from ...profiles import ParameterSpec, ReadGroup
 from .. import GatewayDrive, Quality, ServedDrive, ServedLine
 from ._quality import QUALITY_STATUS
+from ._sources import (
+    ACTIVE_TRIP,
+    CURRENT,
+    DIRECTION,
+    FREQUENCY,
+    ONLINE,
+    POWER,
+    RUNNING,
+    SETPOINT,
+    STATE,
+    TORQUE,
+    TRIP_COUNT,
+    TRIP_SOURCES,
+    TRIPPED,
+    VOLTAGE,
+    Reader,
+    Source,
+    Stamp,
+    parameter_source,
+)
 from ._space import Argument, SpaceBuilder
 
 __all__ = [
@@ -87,34 +106,6 @@ __all__ = [
 #: when a drive trips. One array per field says the same to a client.
 #: ShaftTurningDirection's states, indexed by :class:`~sj300_async.Direction`.
 DIRECTION_STATES: Final = ("stopped", "forward", "reverse")
-
-Reader = Callable[[DriveSnapshot], tuple[object, float]]
-#: What changes when a group's values were read again (a read time, or a pair of them).
-Stamp = Callable[[DriveSnapshot], object]
-#: How a variable is read: its reader, its group's stamp, and the read group whose
-#: served quality is its own (None: a parameter's, or the verdict's own rule).
-Source = tuple[Reader, Stamp, ReadGroup | None]
-
-
-def _status_at(s: DriveSnapshot) -> object:
-    return s.status_at
-
-
-def _status_or_trips_at(s: DriveSnapshot) -> object:
-    # The state in words and the active trip name the trip the history read found.
-    return s.status_at, s.trips_at
-
-
-def _monitor_at(s: DriveSnapshot) -> object:
-    return s.monitor_at
-
-
-def _trips_at(s: DriveSnapshot) -> object:
-    return s.trips_at
-
-
-def _sample_at(s: DriveSnapshot) -> object:
-    return s.taken_at
 
 
 def _judge(
@@ -317,99 +308,6 @@ LINE_COUNTERS: Final[tuple[tuple[str, ua.VariantType, str, str], ...]] = (
 )
 
 
-def _status(get: Callable[[DriveSnapshot], object]) -> Source:
-    return (lambda s: (get(s), s.status_at)), _status_at, "status"
-
-
-def _monitor(get: Callable[[DriveSnapshot], object]) -> Source:
-    return (lambda s: (get(s), s.monitor_at)), _monitor_at, "monitor"
-
-
-def _trip_field(get: Callable[[Trip], object]) -> Source:
-    """One field of every trip record, newest first (None until the history is read)."""
-
-    def read(s: DriveSnapshot) -> tuple[object, float]:
-        if s.trips is None:
-            return None, s.trips_at
-        return [get(record) for record in s.trips.records], s.trips_at
-
-    return read, _trips_at, "trips"
-
-
-@functools.cache  # one per code, for every drive (see _FREQUENCY)
-def _parameter(code: str) -> Source:
-    def read(s: DriveSnapshot) -> tuple[object, float]:
-        reading = s.parameters.get(code)
-        if reading is not None:
-            return reading.value, reading.at
-        if code in s.unavailable_parameters:
-            return None, s.taken_at
-        return None, -math.inf
-
-    # Its group is the parameter itself (the binding says which).
-    return read, lambda s: read(s)[1], None
-
-
-def _read_direction(s: DriveSnapshot) -> tuple[object, float]:
-    direction: int | None = None if s.direction is None else int(s.direction)
-    return direction, s.direction_at
-
-
-def _read_active_trip(s: DriveSnapshot) -> tuple[object, float]:
-    if s.tripped is None:
-        return None, s.status_at
-    return (str(s.trip) if s.tripped and s.trip is not None else ""), s.status_at
-
-
-#: The trip history's arrays: name, element type, a record's value, unit, description.
-_TRIP_FIELDS: Final[
-    tuple[tuple[str, ua.VariantType, Callable[[Trip], object], str, str], ...]
-] = (
-    ("TripCodes", ua.VariantType.String, lambda t: t.code, "",
-     "each trip's code, newest first"),
-    ("TripMeanings", ua.VariantType.String, lambda t: t.meaning, "",
-     "what each trip means, newest first (null: a code the manual does not list)"),
-    ("TripOutputFrequencies", ua.VariantType.Double, lambda t: t.output_frequency_hz, "Hz",
-     "the output frequency at each trip, newest first (NaN: not recorded)"),
-    ("TripOutputCurrents", ua.VariantType.Double, lambda t: t.output_current_a, "A",
-     "the output current at each trip, newest first (NaN: not recorded)"),
-    ("TripOutputVoltages", ua.VariantType.Double, lambda t: t.output_voltage_v, "V",
-     "the output voltage at each trip, newest first (NaN: not recorded)"),
-)  # fmt: skip
-_DIRECTION: Final[Source] = (_read_direction, lambda s: s.direction_at, "direction")
-# The state in words and the active trip: read with the status, judged by it.
-_ACTIVE_TRIP: Final[Source] = (_read_active_trip, _status_or_trips_at, "status")
-_STATE: Final[Source] = (
-    (lambda s: (s.state_text(), s.status_at)),
-    _status_or_trips_at,
-    "status",
-)
-_ONLINE: Final[Source] = ((lambda s: (s.online, s.taken_at)), _sample_at, None)
-_SETPOINT: Final[Source] = (
-    (lambda s: (s.set_frequency_hz, s.set_frequency_at)),
-    lambda s: s.set_frequency_at,
-    "set_frequency",
-)
-# Every drive's variables read through the same functions: made once, not per drive
-# (a closure each, and a lambda each, was 2.4 KiB a drive, 5 MiB at 2,048).
-_FREQUENCY: Final = _monitor(lambda s: s.output_frequency_hz)
-_CURRENT: Final = _monitor(lambda s: s.output_current_a)
-_VOLTAGE: Final = _monitor(lambda s: s.output_voltage_v)
-_POWER: Final = _monitor(lambda s: s.power_kw)
-_TORQUE: Final = _monitor(lambda s: s.output_torque_percent)
-_RUNNING: Final = _status(lambda s: s.running)
-_TRIPPED: Final = _status(lambda s: s.tripped)
-_TRIP_SOURCES: Final = tuple(
-    (name, vtype, _trip_field(get), unit, description)
-    for name, vtype, get, unit, description in _TRIP_FIELDS
-)
-_TRIP_COUNT: Final[Source] = (
-    (lambda s: (s.trips.total_count if s.trips else None, s.trips_at)),
-    _trips_at,
-    "trips",
-)
-
-
 class _DriveBuilder:
     """Adds one drive's nodes to a :class:`SpaceBuilder` and binds its variables."""
 
@@ -526,7 +424,7 @@ def build_drive(
     b = _DriveBuilder(space, nodes, path)
     for name, value, vtype in identity.properties:
         space.property(node, f"{path}/{name}", name, value, vtype)
-    b.var(node, path, "Online", ua.VariantType.Boolean, _ONLINE,
+    b.var(node, path, "Online", ua.VariantType.Boolean, ONLINE,
           description="the poller hears the drive")  # fmt: skip
 
     hz_range = (0.0, float(profile.max_frequency_hz))
@@ -534,41 +432,41 @@ def build_drive(
     folder = space.object(node, monitoring, "Monitoring", folder=True, component=True)
     double, boolean = ua.VariantType.Double, ua.VariantType.Boolean
     b.var(folder, monitoring, "ConverterOutputFrequency", double,
-          _FREQUENCY, unit="Hz", value_range=hz_range,
+          FREQUENCY, unit="Hz", value_range=hz_range,
           description="output frequency")  # fmt: skip
     b.var(folder, monitoring, "FrequencyCommandValue", double,
-          _SETPOINT, unit="Hz", value_range=hz_range,
+          SETPOINT, unit="Hz", value_range=hz_range,
           description="the set frequency, as read back from the drive")  # fmt: skip
     b.var(folder, monitoring, "ConverterOutputCurrent", double,
-          _CURRENT, unit="A",
+          CURRENT, unit="A",
           description="output current")  # fmt: skip
     b.var(folder, monitoring, "ConverterOutputVoltage", double,
-          _VOLTAGE, unit="V",
+          VOLTAGE, unit="V",
           description="output voltage")  # fmt: skip
     measures = profile.capabilities.measures
     if "power_kw" in measures:
         b.var(folder, monitoring, "ConverterOutputPower", double,
-              _POWER, unit="kW", description="output power")  # fmt: skip
+              POWER, unit="kW", description="output power")  # fmt: skip
     if "output_torque_percent" in measures:
         b.var(folder, monitoring, "OutputTorque", double,
-              _TORQUE, unit="%",
+              TORQUE, unit="%",
               description="output torque, percent of the motor's rated torque")  # fmt: skip
-    b.var(folder, monitoring, "ShaftTurningDirection", ua.VariantType.UInt16, _DIRECTION,
+    b.var(folder, monitoring, "ShaftTurningDirection", ua.VariantType.UInt16, DIRECTION,
           states=DIRECTION_STATES, description="0 stopped, 1 forward, 2 reverse")  # fmt: skip
-    b.var(folder, monitoring, "Running", boolean, _RUNNING,
+    b.var(folder, monitoring, "Running", boolean, RUNNING,
           description="the drive runs (accelerating, at speed or decelerating)")  # fmt: skip
-    b.var(folder, monitoring, "Tripped", boolean, _TRIPPED,
+    b.var(folder, monitoring, "Tripped", boolean, TRIPPED,
           description="the drive is tripped (a fault stopped it)")  # fmt: skip
-    b.var(folder, monitoring, "State", ua.VariantType.String, _STATE,
+    b.var(folder, monitoring, "State", ua.VariantType.String, STATE,
           description="the state in words, the trip named")  # fmt: skip
 
     logbook = f"{path}/Logbook"
     folder = space.object(node, logbook, "Logbook", "the trip history", folder=True, component=True)
-    b.var(folder, logbook, "ActiveTrip", ua.VariantType.String, _ACTIVE_TRIP,
+    b.var(folder, logbook, "ActiveTrip", ua.VariantType.String, ACTIVE_TRIP,
           description="the trip the drive is in, code and meaning (empty: none)")  # fmt: skip
-    b.var(folder, logbook, "TripCount", ua.VariantType.UInt32, _TRIP_COUNT,
+    b.var(folder, logbook, "TripCount", ua.VariantType.UInt32, TRIP_COUNT,
           description="trips since the counter was cleared")  # fmt: skip
-    for field_name, vtype, source, unit, description in _TRIP_SOURCES:
+    for field_name, vtype, source, unit, description in TRIP_SOURCES:
         b.var(folder, logbook, field_name, vtype, source, unit=unit,
               description=description, array=True)  # fmt: skip
 
@@ -581,7 +479,7 @@ def build_drive(
             spec: ParameterSpec = profile.parameters.spec(code)
             writable = code in granted
             variable = b.var(
-                folder, parameters, code, double, _parameter(code), parameter=code,
+                folder, parameters, code, double, parameter_source(code), parameter=code,
                 unit=spec.unit,
                 value_range=(float(spec.minimum), float(spec.maximum)),
                 description=spec.name, writable=writable,
